@@ -1,0 +1,50 @@
+"""``python -m device_sim --serve pty|tcp:HOST:PORT``: run a simulated camera in its own process.
+
+The first line on stdout is the URL a host opens. Runs until SIGINT or SIGTERM, then exits 0.
+"""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+from .camera import SimulatedCamera
+from .serve import PtyServer, TcpServer
+
+
+def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
+    if spec == "pty":
+        return PtyServer(sim)
+    if spec.startswith("tcp:"):
+        host, _, port = spec[4:].rpartition(":")
+        if not host or not port.isdigit():
+            raise SystemExit(f"--serve tcp:HOST:PORT expected, got {spec!r}")
+        return TcpServer(sim, host, int(port))
+    raise SystemExit(f"--serve takes 'pty' or 'tcp:HOST:PORT', got {spec!r}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m device_sim", description=__doc__.splitlines()[0])
+    ap.add_argument("--serve", required=True, metavar="pty|tcp:HOST:PORT")
+    ap.add_argument("--seed", type=int, default=0, help="which simulated unit")
+    ap.add_argument("--serial", default=None, help="serial number (default derived from the seed)")
+    args = ap.parse_args(argv)
+    sim = SimulatedCamera(serial=args.serial, seed=args.seed)
+    server = build_server(args.serve, sim)
+
+    def stop(signum, frame):  # noqa: ARG001
+        server.shutdown()
+
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    print(server.url, flush=True)
+    try:
+        server.serve_forever()
+    finally:
+        server.close()
+        sim.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,275 @@
+"""The simulated firmware: decodes requests, dispatches them, streams captures.
+
+Bytes in through ``receive``; bytes out through the sink given to ``attach``. Every transport
+(in-process, pty, TCP, USB) drives this one object, so they all run the same firmware.
+"""
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from protocol import messages as m
+from protocol.errors import ErrorCode, ProtocolError
+from protocol.framing import FLAG_RESEND, MAX_PAYLOAD, Decoder, Packet
+from protocol.params import BY_NAME, Output, TriggerMode
+
+from .capture import CaptureEngine, CaptureRequest
+from .clock import DeviceClock
+from .config_store import ConfigStore
+from .matching import Matcher, MatchParams
+from .sensor import SENSOR_H, SENSOR_W, SensorRig
+from .trigger import TriggerLine
+
+MODEL = "STOC-SIM"
+FIRMWARE_VERSION = "1.0.0"
+CHUNK = 128 * 1024  # FRAME_DATA payload bytes per message
+CAPABILITIES = 0x0F  # disparity | software trigger | external trigger | time sync
+RESEND_CACHE = 64
+GROUND_TRUTH_KEEP = 16
+
+Sink = Callable[[bytes], None]
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """What the simulator knows about one capture."""
+
+    sequence: int
+    host_monotonic: float  # the exposure instant on the host's monotonic clock
+    depth_m: np.ndarray  # left camera z, inf where nothing was hit
+    disparity_px: np.ndarray  # f * B / z, 0 where nothing was hit
+
+
+class SimulatedCamera:
+    """One simulated STOC-class unit (firmware + sensor rig)."""
+
+    def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: TriggerLine | None = None):
+        self.seed = seed
+        self.serial = serial or f"SIM{seed:05d}"
+        self.model = MODEL
+        self.firmware_version = FIRMWARE_VERSION
+        self.clock = DeviceClock(seed)
+        self.config = ConfigStore()
+        self.rig = SensorRig(seed)
+        self.decoder = Decoder()
+        self.counters: collections.Counter[str] = collections.Counter()
+        self._sink: Sink | None = None
+        self._sink_lock = threading.Lock()
+        self._rx_lock = threading.Lock()
+        self._replies: collections.OrderedDict[int, bytes] = collections.OrderedDict()
+        self._truth: collections.OrderedDict[int, GroundTruth] = collections.OrderedDict()
+        self._matcher: Matcher | None = None
+        self._last_rx = time.monotonic()
+        self._soft_triggers = 0
+        self.engine = CaptureEngine(self._produce, self._watchdog)
+        self.trigger_line = trigger_line
+        if trigger_line is not None:
+            trigger_line.attach(self._on_pulse)
+        self._handlers: dict[int, Callable[[m.Message], m.Message]] = {
+            m.MsgType.GET_INFO: self._get_info, m.MsgType.GET_CONFIG: self._get_config,
+            m.MsgType.SET_CONFIG: self._set_config, m.MsgType.TRIGGER: self._trigger,
+            m.MsgType.START: self._start, m.MsgType.STOP: self._stop,
+            m.MsgType.HEARTBEAT: self._heartbeat, m.MsgType.TIME_SYNC: self._time_sync,
+        }
+
+    # -- byte interface ---------------------------------------------------------------------
+    def attach(self, sink: Sink) -> None:
+        """Send all further output to ``sink`` (called from device threads; may block)."""
+        with self._sink_lock:
+            self._sink = sink
+        self._last_rx = time.monotonic()
+
+    def detach(self) -> None:
+        """The host link is gone: output is discarded and streaming stops."""
+        with self._sink_lock:
+            self._sink = None
+        self.engine.stop()
+
+    def receive(self, data: bytes) -> None:
+        """Bytes from the host; replies go to the sink before this returns."""
+        with self._rx_lock:
+            packets = self.decoder.feed(data)
+            for packet in packets:
+                self._last_rx = time.monotonic()
+                wire = self._dispatch(packet)
+                with self._sink_lock:
+                    self._emit(wire)
+
+    def close(self) -> None:
+        self.engine.close()
+        if self.trigger_line is not None:
+            self.trigger_line.detach(self._on_pulse)
+        with self._sink_lock:
+            self._sink = None
+
+    def __enter__(self) -> "SimulatedCamera":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- dispatch ---------------------------------------------------------------------------
+    def _dispatch(self, packet: Packet) -> bytes:
+        rid = packet.request_id
+        if packet.flags & FLAG_RESEND and rid in self._replies:
+            self.counters["resends_replayed"] += 1
+            return self._replies[rid]
+        handler = self._handlers.get(packet.msg_type)
+        if handler is None:
+            reply: m.Message = self._nack(packet.msg_type, ErrorCode.UNKNOWN_TYPE,
+                                          f"unknown request type 0x{packet.msg_type:04x}")
+        else:
+            try:
+                reply = handler(m.decode_packet(packet))
+            except ProtocolError as exc:
+                reply = self._nack(packet.msg_type, ErrorCode.BAD_PAYLOAD, str(exc))
+        wire = m.encode(reply, rid)
+        self._replies[rid] = wire
+        while len(self._replies) > RESEND_CACHE:
+            self._replies.popitem(last=False)
+        return wire
+
+    def _nack(self, request_type: int, code: ErrorCode, text: str, param_id: int = 0) -> m.Nack:
+        self.counters["nacks"] += 1
+        return m.Nack(request_type, code, param_id, text)
+
+    def _emit(self, wire: bytes) -> bool:
+        """Write under ``_sink_lock``; a failing sink means the link is gone: detach and stop."""
+        if self._sink is None:
+            return False
+        try:
+            self._sink(wire)
+            return True
+        except OSError:
+            self._sink = None
+            self.engine.stop()
+            return False
+
+    # -- handlers ---------------------------------------------------------------------------
+    def _get_info(self, _: m.Message) -> m.Info:
+        return m.Info(self.model, self.serial, self.firmware_version, (1, 0), CAPABILITIES,
+                      SENSOR_W, SENSOR_H, MAX_PAYLOAD, BY_NAME["width"].hi, BY_NAME["height"].hi)
+
+    def _get_config(self, _: m.Message) -> m.Config:
+        return m.Config(self.config.by_id())
+
+    def _set_config(self, msg: m.SetConfig) -> m.Message:
+        rej = self.config.apply(msg.values, self.engine.streaming)
+        if rej:
+            return self._nack(msg.TYPE, rej.code, rej.message, rej.param_id)
+        self.engine.set_rate(self.config.snapshot()["fps"])
+        return m.ConfigApplied(self.config.by_id())
+
+    def _trigger(self, msg: m.Trigger) -> m.Message:
+        cfg = self.config.snapshot()
+        if cfg["trigger_mode"] != TriggerMode.SOFTWARE or not self.engine.streaming:
+            return self._nack(msg.TYPE, ErrorCode.BAD_STATE, "software trigger needs trigger_mode=software and a "
+                              "started stream", BY_NAME["trigger_mode"].pid)
+        req = self.engine.trigger(self._soft_triggers + 1, TriggerMode.SOFTWARE)
+        if req is None:
+            return self._nack(msg.TYPE, ErrorCode.BUSY, "trigger queue full; previous captures still pending")
+        self._soft_triggers += 1
+        self.counters["triggers"] += 1
+        return m.Triggered(req.trigger_id, req.sequence)
+
+    def _on_pulse(self, trigger_id: int) -> None:
+        if self.config.snapshot()["trigger_mode"] == TriggerMode.EXTERNAL and self.engine.streaming:
+            self.counters["triggers"] += 1
+            self.engine.trigger(trigger_id, TriggerMode.EXTERNAL)
+
+    def _start(self, _: m.Message) -> m.Started:
+        cfg = self.config.snapshot()
+        if not self.engine.streaming:
+            self.engine.start(TriggerMode(cfg["trigger_mode"]), cfg["fps"])
+        return m.Started()
+
+    def _stop(self, _: m.Message) -> m.Stopped:
+        self.engine.stop()
+        return m.Stopped()
+
+    def _heartbeat(self, _: m.Message) -> m.Status:
+        return m.Status(self.clock.uptime_us(), self.engine.streaming,
+                        self.config.snapshot()["trigger_mode"], self.status_counters())
+
+    def _time_sync(self, _: m.Message) -> m.Time:
+        return m.Time(self.clock.now_us())
+
+    def status_counters(self) -> dict[str, int]:
+        st = self.decoder.stats
+        c = dict(self.counters)
+        c.update(frames_captured=self.engine.captured, frames_dropped=self.engine.dropped,
+                 rx_bytes=st.bytes_in, rx_packets=st.packets, rx_garbage_bytes=st.garbage_bytes,
+                 rx_header_crc_errors=st.header_crc_errors + st.bad_headers,
+                 rx_payload_crc_errors=st.payload_crc_errors, rx_oversize=st.oversize,
+                 rx_unsupported_version=st.unsupported_version)
+        return c
+
+    # -- streaming --------------------------------------------------------------------------
+    def _watchdog(self) -> None:
+        timeout_ms = self.config.snapshot()["heartbeat_timeout_ms"]
+        if self.engine.streaming and timeout_ms and time.monotonic() - self._last_rx > timeout_ms / 1000:
+            self.counters["heartbeat_timeouts"] += 1
+            self.engine.stop()
+
+    def _match_params(self, cfg: dict[str, int]) -> MatchParams:
+        return MatchParams(
+            num_disparities=cfg["num_disparities"], block_size=cfg["block_size"],
+            min_disparity=cfg["min_disparity"],
+            pre_filter_type="normalized" if cfg["pre_filter_type"] else "xsobel",
+            pre_filter_size=cfg["pre_filter_size"], pre_filter_cap=cfg["pre_filter_cap"],
+            texture_threshold=cfg["texture_threshold"], uniqueness_ratio=cfg["uniqueness_ratio"],
+            speckle_window_size=cfg["speckle_window_size"], speckle_range=cfg["speckle_range"],
+            disp12_max_diff=cfg["disp12_max_diff"])
+
+    def _disparity(self, cfg: dict[str, int], left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        params = self._match_params(cfg)
+        if self._matcher is None or self._matcher.params != params or self._matcher.shape != left.shape:
+            self._matcher = Matcher(left.shape, params)
+        return self._matcher.match(left, right)
+
+    def _produce(self, req: CaptureRequest) -> None:
+        cfg = self.config.snapshot()
+        w, h = cfg["width"], cfg["height"]
+        self.rig.set_format(w, h)
+        t = req.time - self.clock.boot
+        left, right, depth = self.rig.capture(t, cfg["scene"], cfg["exposure_us"], cfg["gain"],
+                                              req.sequence ^ (self.seed << 20))
+        outputs = Output(cfg["outputs"])
+        disp = self._disparity(cfg, left, right) if Output.DISPARITY in outputs else None
+        g = self.rig.geometry
+        with np.errstate(divide="ignore"):
+            gt_disp = np.where(np.isfinite(depth), g.focal_px * g.baseline_m / depth, 0).astype(np.float32)
+        self._truth[req.sequence] = GroundTruth(req.sequence, req.time, depth, gt_disp)
+        while len(self._truth) > GROUND_TRUTH_KEEP:
+            self._truth.popitem(last=False)
+        begin = m.FrameBegin(
+            req.sequence, req.trigger_id, self.clock.at(req.time), cfg["exposure_us"], cfg["gain"], w, h,
+            int(outputs), m.FRAME_RECTIFIED, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
+            cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, 0, g.focal_px, g.cx, g.cy, g.baseline_m)
+        planes = [(Output.LEFT, left), (Output.RIGHT, right), (Output.DISPARITY, disp)]
+        sizes = {}
+        with self._sink_lock:
+            if not self._emit(m.encode(begin)):
+                return
+            for plane, img in planes:
+                sizes[plane] = 0
+                if plane not in outputs:
+                    continue
+                raw = memoryview(np.ascontiguousarray(img, dtype=img.dtype.newbyteorder("<"))).cast("B")
+                for off in range(0, len(raw), CHUNK):
+                    if not self._emit(m.encode(m.FrameData(req.sequence, int(plane), off, raw[off:off + CHUNK]))):
+                        return
+                sizes[plane] = len(raw)
+            if not self._emit(m.encode(m.FrameEnd(req.sequence, m.FRAME_OK, sizes[Output.LEFT],
+                                                  sizes[Output.RIGHT], sizes[Output.DISPARITY]))):
+                return
+        self.counters["frames_sent"] += 1
+
+    def ground_truth(self, sequence: int) -> GroundTruth | None:
+        """Truth for one of the last few captures (None once it has aged out)."""
+        return self._truth.get(sequence)

@@ -1,0 +1,134 @@
+"""Trigger and capture timing: free-run at a frame rate, software triggers, external line pulses.
+
+One worker thread per device. Every exposure the sensor makes gets the next sequence number, so
+an exposure the pipeline could not deliver leaves a visible gap (and counts as dropped).
+"""
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+from protocol.params import TriggerMode
+
+TRIGGER_QUEUE_DEPTH = 2
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class CaptureRequest:
+    sequence: int
+    trigger_id: int
+    time: float  # host monotonic instant of the exposure
+
+
+class CaptureEngine:
+    """Decides when exposures happen and hands each to ``produce`` on the worker thread."""
+
+    def __init__(self, produce: Callable[[CaptureRequest], None], watchdog: Callable[[], None]):
+        self._produce = produce
+        self._watchdog = watchdog
+        self._cond = threading.Condition()
+        self._queue: collections.deque[CaptureRequest] = collections.deque()
+        self._streaming = False
+        self._mode = TriggerMode.FREE_RUN
+        self._period = 1 / 30
+        self._next = 0.0
+        self._closed = False
+        self.sequence = 0
+        self.dropped = 0
+        self.captured = 0
+        self._thread: threading.Thread | None = None  # started by the first start()
+
+    @property
+    def streaming(self) -> bool:
+        return self._streaming
+
+    def start(self, mode: TriggerMode, fps: int) -> None:
+        with self._cond:
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="capture", daemon=True)
+                self._thread.start()
+            self._mode = TriggerMode(mode)
+            self._period = 1.0 / fps
+            self._next = time.monotonic()
+            self._queue.clear()
+            self._streaming = True
+            self._cond.notify_all()
+
+    def set_rate(self, fps: int) -> None:
+        with self._cond:
+            self._period = 1.0 / fps
+
+    def stop(self) -> None:
+        with self._cond:
+            self._streaming = False
+            self._queue.clear()
+            self._cond.notify_all()
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._streaming = False
+            self._cond.notify_all()
+        if self._thread is not None and threading.current_thread() is not self._thread:
+            self._thread.join(timeout=5)
+
+    def trigger(self, trigger_id: int, source: TriggerMode) -> CaptureRequest | None:
+        """Queue one exposure for a trigger from ``source``; None if not accepted.
+
+        A pulse that finds the queue full still consumes a sequence number (it is a real missed
+        exposure, counted as dropped); a software trigger is refused instead so the host knows.
+        """
+        with self._cond:
+            if not self._streaming or self._mode != source:
+                return None
+            if len(self._queue) >= TRIGGER_QUEUE_DEPTH:
+                if source == TriggerMode.EXTERNAL:
+                    self.sequence += 1
+                    self.dropped += 1
+                return None
+            self.sequence += 1
+            req = CaptureRequest(self.sequence, trigger_id, time.monotonic())
+            self._queue.append(req)
+            self._cond.notify_all()
+            return req
+
+    def _next_request(self) -> CaptureRequest | None:
+        with self._cond:
+            if self._closed:
+                return None
+            if not self._streaming:
+                self._cond.wait(0.05)
+                return None
+            if self._mode != TriggerMode.FREE_RUN:
+                if not self._queue:
+                    self._cond.wait(0.05)
+                return self._queue.popleft() if self._queue else None
+            now = time.monotonic()
+            if now < self._next:
+                self._cond.wait(min(self._next - now, 0.05))
+                return None
+            missed = int((now - self._next) / self._period)  # exposures the pipeline was too busy for
+            self.sequence += missed
+            self.dropped += missed
+            t = self._next + missed * self._period
+            self._next = t + self._period
+            self.sequence += 1
+            return CaptureRequest(self.sequence, 0, t)
+
+    def _run(self) -> None:
+        while not self._closed:
+            self._watchdog()
+            req = self._next_request()
+            if req is None:
+                continue
+            self.captured += 1
+            try:
+                self._produce(req)
+            except Exception:  # a firmware bug must not kill the capture thread: log, count, go on
+                log.exception("capture %d failed", req.sequence)
+                self.dropped += 1

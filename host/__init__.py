@@ -1,0 +1,14 @@
+"""Host SDK: ``host.open(url)`` gives a Camera; frames, errors and transports live here."""
+from protocol.errors import (CameraTimeoutError, ConfigError, DeviceError, DisconnectedError, ErrorCode,
+                             ProtocolError, StereoCamError, TransportError, VersionMismatchError)
+from protocol.params import Output, TriggerMode
+
+from .camera import Camera, DeviceInfo, DeviceStatus, open
+from .frames import DisparityFormat, Frame, FrameStatus, StereoGeometry
+from .pointcloud import write_ply
+
+__all__ = [
+    "open", "Camera", "DeviceInfo", "DeviceStatus", "Frame", "FrameStatus", "DisparityFormat", "StereoGeometry",
+    "TriggerMode", "Output", "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError",
+    "DeviceError", "ConfigError", "ErrorCode", "TransportError", "DisconnectedError", "CameraTimeoutError",
+]

@@ -1,0 +1,214 @@
+"""The Camera API: what a user of the SDK holds."""
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from dataclasses import dataclass
+from typing import Iterator
+
+from protocol import messages as m
+from protocol.errors import CameraTimeoutError, ConfigError, StereoCamError, VersionMismatchError
+from protocol.framing import VERSION_MAJOR
+from protocol.params import BY_ID, BY_NAME, TriggerMode
+
+from .clock import ClockMap, SyncSample
+from .frames import AssemblyStats, Frame, FrameAssembler
+from .link import Link, LinkStats
+from .transports import Transport, open_transport
+
+SYNC_SAMPLES = 8
+SYNC_PERIOD = 5.0  # seconds between background time-sync samples
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    model: str
+    serial: str
+    firmware_version: str
+    protocol_version: tuple[int, int]
+    capabilities: int
+    sensor_width: int
+    sensor_height: int
+    max_payload: int
+
+
+@dataclass(frozen=True)
+class DeviceStatus:
+    uptime_us: int
+    streaming: bool
+    trigger_mode: TriggerMode
+    counters: dict[str, int]
+
+
+class Camera:
+    """One connected camera. Use ``host.open(url)``; close it (or use ``with``) when done."""
+
+    def __init__(self, transport: Transport, *, timeout: float = 1.0, retries: int = 2,
+                 heartbeat_interval: float = 0.5, queue_depth: int = 8):
+        self.url = transport.url
+        self.timeout = timeout
+        self.clock = ClockMap()
+        self.assembler = FrameAssembler(self.clock, queue_depth)
+        self.link = Link(transport, timeout=timeout, retries=retries, on_event=self.assembler.on_message)
+        self._closed = threading.Event()
+        self._last_sync = 0.0
+        self.last_status: DeviceStatus | None = None
+        try:
+            self._info = self._fetch_info()
+            self.request(m.Stop())  # a known state: no stale stream from a previous session
+            self.sync_clock(SYNC_SAMPLES)
+        except BaseException:
+            self.link.close()
+            raise
+        self._heartbeat_interval = heartbeat_interval
+        self._heartbeat = threading.Thread(target=self._heartbeat_loop, name="stereocam-heartbeat", daemon=True)
+        self._heartbeat.start()
+
+    # -- plumbing ---------------------------------------------------------------------------
+    def request(self, msg: m.Message, timeout: float | None = None) -> m.Message:
+        return self.link.request(msg, timeout)
+
+    def _fetch_info(self) -> DeviceInfo:
+        r = self.request(m.GetInfo())
+        assert isinstance(r, m.Info)
+        if r.protocol_version[0] != VERSION_MAJOR:
+            raise VersionMismatchError(f"device speaks protocol {r.protocol_version[0]}.{r.protocol_version[1]}, "
+                                       f"this host speaks {VERSION_MAJOR}.x")
+        return DeviceInfo(r.model, r.serial, r.firmware_version, r.protocol_version, r.capabilities,
+                          r.sensor_width, r.sensor_height, r.max_payload)
+
+    def sync_clock(self, samples: int = 1) -> None:
+        """Take ``samples`` time-sync round trips into the device→host clock map."""
+        for _ in range(samples):
+            t0 = time.monotonic()
+            r = self.request(m.TimeSync())
+            t1 = time.monotonic()
+            assert isinstance(r, m.Time)
+            self.clock.add(SyncSample(t0, r.device_time_us, t1))
+        self._last_sync = time.monotonic()
+
+    def _heartbeat_loop(self) -> None:
+        while not self._closed.wait(self._heartbeat_interval):
+            try:
+                self.last_status = self.status()
+                if time.monotonic() - self._last_sync > SYNC_PERIOD:
+                    self.sync_clock(1)
+            except StereoCamError:
+                if not self.link.alive:
+                    return
+
+    # -- API --------------------------------------------------------------------------------
+    def info(self) -> DeviceInfo:
+        return self._info
+
+    def config(self) -> dict[str, int]:
+        r = self.request(m.GetConfig())
+        return _names(r.values)  # type: ignore[attr-defined]
+
+    def configure(self, **params: int) -> dict[str, int]:
+        """Change parameters by name (protocol/params.py); returns the whole new configuration.
+
+        All or nothing: the device checks the whole set and a refusal changes nothing.
+        """
+        update = {}
+        for name, value in params.items():
+            p = BY_NAME.get(name)
+            if p is None:
+                raise ConfigError(f"unknown parameter {name!r}; known: {', '.join(BY_NAME)}")
+            if isinstance(value, bool) or not isinstance(value, int):
+                if isinstance(value, TriggerMode) or (isinstance(value, float) and value.is_integer()):
+                    value = int(value)
+                else:
+                    raise ConfigError(f"{name} must be an integer, got {value!r}")
+            update[p.pid] = int(value)
+        r = self.request(m.SetConfig(update))
+        return _names(r.values)  # type: ignore[attr-defined]
+
+    def set_trigger_mode(self, mode: TriggerMode | str) -> None:
+        if isinstance(mode, str):
+            try:
+                mode = TriggerMode[mode.upper().replace("-", "_")]
+            except KeyError as exc:
+                raise ConfigError(f"unknown trigger mode {mode!r}; known: free_run, software, external") from exc
+        self.configure(trigger_mode=int(mode))
+
+    def trigger(self) -> int:
+        """Software trigger; returns the trigger id the resulting frame will carry."""
+        r = self.request(m.Trigger())
+        assert isinstance(r, m.Triggered)
+        return r.trigger_id
+
+    def start(self) -> None:
+        self.assembler.reset_sequence()
+        self.request(m.Start())
+
+    def stop(self) -> None:
+        self.request(m.Stop())
+
+    def status(self) -> DeviceStatus:
+        r = self.request(m.Heartbeat())
+        assert isinstance(r, m.Status)
+        return DeviceStatus(r.uptime_us, r.streaming, TriggerMode(r.trigger_mode), r.counters)
+
+    def get_frame(self, timeout: float | None = None) -> Frame:
+        """The next complete frame; CameraTimeoutError (a TimeoutError) if none within ``timeout``."""
+        timeout = self.timeout if timeout is None else timeout
+        deadline = time.monotonic() + timeout
+        while True:
+            self.link.check_alive()
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise CameraTimeoutError(f"no frame from {self.url} within {timeout:.3g} s")
+            try:
+                return self.assembler.frames.get(timeout=min(left, 0.1))
+            except queue.Empty:
+                continue
+
+    def __iter__(self) -> Iterator[Frame]:
+        """Frames as they come, until the link fails or frames stop for ``timeout`` seconds."""
+        while True:
+            try:
+                yield self.get_frame()
+            except CameraTimeoutError:
+                return
+
+    @property
+    def stats(self) -> dict[str, int]:
+        """Host-side counters: decoder, link and frame assembly."""
+        out = self.link.decoder.stats.as_dict()
+        out.update(_fields(self.link.stats))
+        out.update(_fields(self.assembler.stats))
+        out["frames_dropped"] = self.assembler.stats.dropped
+        return out
+
+    def close(self) -> None:
+        if self._closed.is_set():
+            return
+        self._closed.set()
+        if self.link.alive:
+            try:
+                self.request(m.Stop(), timeout=0.5)
+            except StereoCamError:
+                pass
+        self._heartbeat.join(timeout=2)
+        self.link.close()
+
+    def __enter__(self) -> "Camera":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _names(values: dict[int, int]) -> dict[str, int]:
+    return {BY_ID[k].name if k in BY_ID else f"param_{k}": v for k, v in values.items()}
+
+
+def _fields(obj: LinkStats | AssemblyStats) -> dict[str, int]:
+    return {k: getattr(obj, k) for k in obj.__dataclass_fields__}
+
+
+def open(url: str, timeout: float = 1.0, **kwargs) -> Camera:  # noqa: A001 - mirrors serial_for_url
+    """Open the camera at ``url`` (sim://, usb://, socket://host:port, a device path, ...)."""
+    return Camera(open_transport(url, timeout), timeout=timeout, **kwargs)

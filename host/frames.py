@@ -1,0 +1,207 @@
+"""Frames: the typed capture a user gets, and the assembler that builds them from the stream.
+
+FRAME_BEGIN opens a capture, FRAME_DATA chunks fill its planes, FRAME_END closes it. A capture
+with a missing chunk, a chunk outside its plane or a byte count that disagrees with the trailer is
+dropped and counted by reason; a gap in sequence numbers is counted as lost. Nothing is hidden.
+"""
+from __future__ import annotations
+
+import collections
+import enum
+import queue
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from protocol import messages as m
+from protocol.params import Output
+
+
+class FrameStatus(enum.Enum):
+    COMPLETE = "complete"
+    MISSING_DATA = "missing data"
+    SIZE_MISMATCH = "size mismatch"
+
+
+@dataclass(frozen=True)
+class DisparityFormat:
+    """How to read ``Frame.disparity``: value = disparity * subpixel; ``invalid`` marks no match."""
+
+    subpixel: int
+    min_disparity: int
+    num_disparities: int
+    invalid: int
+
+
+@dataclass(frozen=True)
+class StereoGeometry:
+    """Rectified geometry that turns disparity (px) into depth (m): Z = f * B / d."""
+
+    focal_px: float
+    cx: float
+    cy: float
+    baseline_m: float
+    calibration_id: int = 0
+
+    @property
+    def Q(self) -> np.ndarray:
+        """OpenCV's 4x4 reprojection matrix (cv2.reprojectImageTo3D), both principal points equal."""
+        return np.array([[1, 0, 0, -self.cx], [0, 1, 0, -self.cy], [0, 0, 0, self.focal_px],
+                         [0, 0, 1.0 / self.baseline_m, 0]], dtype=np.float64)
+
+
+@dataclass
+class Frame:
+    """One capture: both images and the disparity share one sequence number."""
+
+    sequence: int
+    trigger_id: int
+    device_time_us: int
+    host_time: float  # device time mapped to the host's time.monotonic() clock
+    left: np.ndarray | None
+    right: np.ndarray | None
+    disparity: np.ndarray | None  # int16, disparity * 16, invalid = (min_disparity - 1) * 16
+    exposure_us: int
+    gain: int
+    rectified: bool
+    disparity_format: DisparityFormat
+    geometry: StereoGeometry
+    status: FrameStatus = FrameStatus.COMPLETE
+
+    def disparity_px(self) -> np.ndarray:
+        """Disparity in pixels, float32, NaN where invalid."""
+        if self.disparity is None:
+            raise ValueError("this frame carries no disparity (outputs config excludes it)")
+        d = self.disparity.astype(np.float32) / self.disparity_format.subpixel
+        d[self.disparity == self.disparity_format.invalid] = np.nan
+        return d
+
+    def depth(self) -> np.ndarray:
+        """Depth along the optical axis in metres, float32, NaN where unknown."""
+        d = self.disparity_px()
+        g = self.geometry
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = (g.focal_px * g.baseline_m) / d
+        z[~(d > 0)] = np.nan
+        return z
+
+    def points(self) -> tuple[np.ndarray, np.ndarray]:
+        """Valid 3-D points (N x 3, metres, left camera frame) and their grey levels (N,)."""
+        z = self.depth()
+        h, w = z.shape
+        g = self.geometry
+        ys, xs = np.nonzero(np.isfinite(z))
+        zz = z[ys, xs]
+        pts = np.stack([(xs - g.cx) * zz / g.focal_px, (ys - g.cy) * zz / g.focal_px, zz], axis=1)
+        grey = self.left[ys, xs] if self.left is not None else np.full(len(zz), 255, np.uint8)
+        return pts.astype(np.float32), grey
+
+
+@dataclass
+class AssemblyStats:
+    frames: int = 0
+    incomplete: int = 0  # dropped: a chunk never arrived or the capture was cut off
+    size_mismatch: int = 0  # dropped: chunk outside its plane or trailer disagrees
+    orphan_chunks: int = 0  # chunks of a capture whose leader was lost
+    lost: int = 0  # sequence numbers never seen (dropped on the device or on the link)
+    queue_overflow: int = 0  # delivered frames discarded because the user did not keep up
+
+    @property
+    def dropped(self) -> int:
+        return self.incomplete + self.size_mismatch + self.lost + self.queue_overflow
+
+
+_PLANES = {Output.LEFT: (np.uint8, 1), Output.RIGHT: (np.uint8, 1), Output.DISPARITY: (np.dtype("<i2"), 2)}
+
+
+@dataclass
+class _Building:
+    begin: m.FrameBegin
+    buffers: dict[int, bytearray]
+    received: dict[int, int] = field(default_factory=lambda: collections.defaultdict(int))
+    bad: bool = False
+
+
+class FrameAssembler:
+    """Consumes frame messages in order; puts complete Frames on a bounded queue (oldest dropped)."""
+
+    def __init__(self, clock_map, depth: int = 8):
+        self.frames: queue.Queue[Frame] = queue.Queue(maxsize=depth)
+        self.stats = AssemblyStats()
+        self._clock_map = clock_map
+        self._cur: _Building | None = None
+        self._last_seq: int | None = None
+
+    def reset_sequence(self) -> None:
+        """Forget the last sequence (after a stop/start the gap is not a loss)."""
+        self._last_seq = None
+
+    def on_message(self, msg: m.Message) -> None:
+        if isinstance(msg, m.FrameBegin):
+            self._begin(msg)
+        elif isinstance(msg, m.FrameData):
+            self._data(msg)
+        elif isinstance(msg, m.FrameEnd):
+            self._end(msg)
+
+    def _begin(self, b: m.FrameBegin) -> None:
+        if self._cur is not None:
+            self.stats.incomplete += 1  # its FRAME_END never came
+        if self._last_seq is not None and b.sequence > self._last_seq + 1:
+            self.stats.lost += b.sequence - self._last_seq - 1
+        self._last_seq = b.sequence
+        n = b.width * b.height
+        self._cur = _Building(b, {p: bytearray(n * size) for p, (_, size) in _PLANES.items() if b.planes & p})
+
+    def _data(self, d: m.FrameData) -> None:
+        cur = self._cur
+        if cur is None or cur.begin.sequence != d.sequence:
+            self.stats.orphan_chunks += 1
+            return
+        buf = cur.buffers.get(d.plane)
+        if buf is None or d.offset + len(d.data) > len(buf):
+            cur.bad = True
+            return
+        buf[d.offset:d.offset + len(d.data)] = d.data
+        cur.received[d.plane] += len(d.data)
+
+    def _end(self, e: m.FrameEnd) -> None:
+        cur, self._cur = self._cur, None
+        if cur is None or cur.begin.sequence != e.sequence:
+            if cur is not None:
+                self.stats.incomplete += 1
+            return
+        sent = {Output.LEFT: e.left_bytes, Output.RIGHT: e.right_bytes, Output.DISPARITY: e.disparity_bytes}
+        if cur.bad or any(sent[p] != len(buf) for p, buf in cur.buffers.items()):
+            self.stats.size_mismatch += 1
+            return
+        if any(cur.received[p] != len(buf) for p, buf in cur.buffers.items()):
+            self.stats.incomplete += 1
+            return
+        self._deliver(self._frame(cur))
+
+    def _frame(self, cur: _Building) -> Frame:
+        b = cur.begin
+        planes = {p: np.frombuffer(buf, dtype=_PLANES[p][0]).reshape(b.height, b.width)
+                  for p, buf in cur.buffers.items()}
+        disp = planes.get(Output.DISPARITY)
+        return Frame(
+            b.sequence, b.trigger_id, b.device_time_us, self._clock_map.to_host(b.device_time_us),
+            planes.get(Output.LEFT), planes.get(Output.RIGHT),
+            disp.astype(np.int16, copy=False) if disp is not None else None, b.exposure_us, b.gain,
+            bool(b.flags & m.FRAME_RECTIFIED),
+            DisparityFormat(b.subpixel, b.min_disparity, b.num_disparities, b.invalid_disparity),
+            StereoGeometry(b.focal_px, b.cx, b.cy, b.baseline_m, b.calibration_id))
+
+    def _deliver(self, frame: Frame) -> None:
+        self.stats.frames += 1
+        while True:
+            try:
+                self.frames.put_nowait(frame)
+                return
+            except queue.Full:
+                try:
+                    self.frames.get_nowait()
+                    self.stats.queue_overflow += 1
+                except queue.Empty:
+                    pass

@@ -1,0 +1,174 @@
+"""The link layer, written once for every transport: request ids, retries, timeouts, reader thread.
+
+A reader thread feeds the shared protocol decoder; replies wake the request waiting on their
+request id, frame messages go to a listener (the frame assembler). Timeouts are float seconds on
+the monotonic clock. A retry carries FLAG_RESEND so the device replays instead of re-applying.
+"""
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from typing import Callable
+
+from protocol import messages as m
+from protocol.errors import (CameraTimeoutError, DeviceError, DisconnectedError, ProtocolError, StereoCamError,
+                             TransportError)
+from protocol.framing import FLAG_RESEND, Decoder, Packet
+from protocol.params import BY_ID
+
+from .transports.base import Transport
+
+READ_CHUNK = 1 << 20
+
+
+@dataclass
+class LinkStats:
+    requests: int = 0
+    retries: int = 0
+    timeouts: int = 0
+    stray_replies: int = 0  # replies nobody waited for (late answers to timed-out requests)
+    undecodable: int = 0  # packets with a valid CRC but an unknown type or malformed payload
+
+
+@dataclass
+class _Pending:
+    expect: int
+    event: threading.Event = field(default_factory=threading.Event)
+    reply: m.Message | None = None
+    error: StereoCamError | None = None
+
+
+class Link:
+    """Request/reply over a Transport, plus a stream of unsolicited device messages."""
+
+    def __init__(self, transport: Transport, *, timeout: float = 1.0, retries: int = 2,
+                 on_event: Callable[[m.Message], None] | None = None, first_request_id: int = 1):
+        self.transport = transport
+        self.timeout = timeout
+        self.retries = retries
+        self.decoder = Decoder()
+        self.stats = LinkStats()
+        self._on_event = on_event
+        self._lock = threading.Lock()
+        self._write_lock = threading.Lock()
+        self._pending: dict[int, _Pending] = {}
+        self._next_id = first_request_id
+        self._closed = threading.Event()
+        self.error: StereoCamError | None = None  # why the link died, once it has
+        self._reader = threading.Thread(target=self._read_loop, name="stereocam-link", daemon=True)
+        self._reader.start()
+
+    # -- requests -------------------------------------------------------------------------------
+    def _allocate_id(self) -> int:
+        with self._lock:
+            rid = self._next_id
+            self._next_id = self._next_id % 0xFFFF + 1  # 1..65535, wraps and skips 0
+            return rid
+
+    def request(self, msg: m.Message, timeout: float | None = None, retries: int | None = None) -> m.Message:
+        """Send ``msg``, return the device's reply; DeviceError on NACK, CameraTimeoutError after retries."""
+        timeout = self.timeout if timeout is None else timeout
+        retries = self.retries if retries is None else retries
+        self.check_alive()
+        rid = self._allocate_id()
+        pending = _Pending(m.reply_type(msg.TYPE))
+        with self._lock:
+            self._pending[rid] = pending
+        self.stats.requests += 1
+        try:
+            for attempt in range(retries + 1):
+                self._write(m.encode(msg, rid, FLAG_RESEND if attempt else 0))
+                if pending.event.wait(timeout):
+                    break
+                self.check_alive()
+                if attempt < retries:
+                    self.stats.retries += 1
+            else:
+                self.stats.timeouts += 1
+                raise CameraTimeoutError(f"no reply to {type(msg).__name__} (request id {rid}) after "
+                                         f"{retries + 1} tries of {timeout:.3g} s")
+        finally:
+            with self._lock:
+                self._pending.pop(rid, None)
+        if pending.error is not None:
+            raise pending.error
+        assert pending.reply is not None
+        return pending.reply
+
+    def _write(self, data: bytes) -> None:
+        with self._write_lock:
+            try:
+                self.transport.write(data)
+            except StereoCamError as exc:
+                self._die(exc)
+                raise
+            except OSError as exc:
+                err = DisconnectedError(f"write to {self.transport.url} failed: {exc}")
+                self._die(err)
+                raise err from exc
+
+    def check_alive(self) -> None:
+        if self.error is not None:
+            raise self.error
+        if self._closed.is_set():
+            raise TransportError("link closed")
+
+    # -- reader ---------------------------------------------------------------------------------
+    def _read_loop(self) -> None:
+        while not self._closed.is_set():
+            try:
+                data = self.transport.read(READ_CHUNK, 0.05)
+            except StereoCamError as exc:
+                self._die(exc)
+                return
+            except OSError as exc:
+                self._die(DisconnectedError(f"read from {self.transport.url} failed: {exc}"))
+                return
+            if data:
+                for packet in self.decoder.feed(data):
+                    self._dispatch(packet)
+
+    def _dispatch(self, packet: Packet) -> None:
+        try:
+            msg = m.decode_packet(packet)
+        except ProtocolError:
+            self.stats.undecodable += 1
+            return
+        if packet.msg_type & m.REPLY_BIT:
+            with self._lock:
+                pending = self._pending.get(packet.request_id)
+            if pending is None or pending.event.is_set():
+                self.stats.stray_replies += 1
+                return
+            if isinstance(msg, m.Nack):
+                param = BY_ID[msg.param_id].name if msg.param_id in BY_ID else None
+                pending.error = DeviceError(msg.code, msg.message, param, msg.request_type)
+            elif packet.msg_type != pending.expect:
+                pending.error = ProtocolError(f"reply type 0x{packet.msg_type:04x} to a request expecting "
+                                              f"0x{pending.expect:04x}")
+            else:
+                pending.reply = msg
+            pending.event.set()
+        elif self._on_event is not None:
+            self._on_event(msg)
+
+    def _die(self, error: StereoCamError) -> None:
+        if self.error is None:
+            self.error = error
+        with self._lock:
+            waiting = list(self._pending.values())
+        for p in waiting:
+            p.error = error
+            p.event.set()
+
+    @property
+    def alive(self) -> bool:
+        return self.error is None and not self._closed.is_set()
+
+    def close(self) -> None:
+        if self._closed.is_set():
+            return
+        self._closed.set()
+        if threading.current_thread() is not self._reader:
+            self._reader.join(timeout=2)
+        self.transport.close()

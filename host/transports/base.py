@@ -1,0 +1,33 @@
+"""The one interface every transport implements: a bidirectional byte pipe."""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+
+class Transport(ABC):
+    """A byte pipe to one device. The link layer (host/link.py) does everything else.
+
+    ``read`` returns whatever bytes are available (at most ``max_bytes``), waiting up to
+    ``timeout`` seconds for the first one; it returns ``b""`` on timeout and raises
+    ``DisconnectedError`` when the device is gone. ``write`` sends all of ``data`` or raises.
+    """
+
+    url: str = ""
+
+    @abstractmethod
+    def write(self, data: bytes) -> None:
+        """Send all bytes."""
+
+    @abstractmethod
+    def read(self, max_bytes: int, timeout: float) -> bytes:
+        """Up to ``max_bytes`` available bytes; ``b""`` after ``timeout`` seconds with none."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the link; idempotent."""
+
+    def __enter__(self) -> "Transport":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

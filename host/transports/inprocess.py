@@ -1,0 +1,94 @@
+"""``sim://`` — a fresh simulated camera in this process, joined by an in-memory byte pipe.
+
+``sim://?seed=N&serial=S`` picks the unit. Host writes go straight into the firmware's
+``receive``; the firmware's output lands in a bounded FIFO the host reads (a full FIFO blocks
+the device, as a full USB or TCP buffer would).
+"""
+from __future__ import annotations
+
+import threading
+from urllib.parse import parse_qs, urlsplit
+
+from protocol.errors import ConfigError, DisconnectedError
+
+from .base import Transport
+
+FIFO_BYTES = 8 << 20
+
+
+class ByteFifo:
+    """Bounded byte FIFO between threads."""
+
+    def __init__(self, capacity: int = FIFO_BYTES):
+        self._buf = bytearray()
+        self._cond = threading.Condition()
+        self._capacity = capacity
+        self.closed = False
+
+    def put(self, data: bytes) -> None:
+        with self._cond:
+            while len(self._buf) >= self._capacity and not self.closed:
+                self._cond.wait(0.1)
+            if self.closed:
+                raise BrokenPipeError("reader gone")
+            self._buf += data
+            self._cond.notify_all()
+
+    def get(self, max_bytes: int, timeout: float) -> bytes:
+        with self._cond:
+            if not self._buf and not self.closed:
+                self._cond.wait(timeout)
+            out = bytes(self._buf[:max_bytes])
+            del self._buf[:max_bytes]
+            self._cond.notify_all()
+            return out
+
+    def close(self) -> None:
+        with self._cond:
+            self.closed = True
+            self._cond.notify_all()
+
+
+class InProcessTransport(Transport):
+    """Byte pipe to a SimulatedCamera living in this process."""
+
+    def __init__(self, sim, url: str = "sim://", owns: bool = True):
+        self.sim = sim
+        self.url = url
+        self._owns = owns
+        self._fifo = ByteFifo()
+        sim.attach(self._fifo.put)
+
+    def write(self, data: bytes) -> None:
+        if self._fifo.closed:
+            raise DisconnectedError(f"{self.url} is closed")
+        self.sim.receive(data)
+
+    def read(self, max_bytes: int, timeout: float) -> bytes:
+        data = self._fifo.get(max_bytes, timeout)
+        if not data and self._fifo.closed:
+            raise DisconnectedError(f"{self.url} is closed")
+        return data
+
+    def close(self) -> None:
+        if self._fifo.closed:
+            return
+        self._fifo.close()
+        self.sim.detach()
+        if self._owns:
+            self.sim.close()
+
+
+def open_transport(url: str, timeout: float) -> InProcessTransport:
+    from device_sim import SimulatedCamera  # the simulator is only needed for sim:// URLs
+
+    query = parse_qs(urlsplit(url).query)
+    unknown = set(query) - {"seed", "serial"}
+    if unknown:
+        raise ConfigError(f"sim:// URL: unknown option(s) {sorted(unknown)}; known: seed, serial")
+    try:
+        seed = int(query.get("seed", ["0"])[0])
+    except ValueError as exc:
+        raise ConfigError(f"sim:// URL: seed must be an integer, got {query['seed'][0]!r}") from exc
+    serial = query.get("serial", [None])[0]
+    return InProcessTransport(SimulatedCamera(serial=serial, seed=seed), url)

@@ -1,0 +1,47 @@
+"""Anything pyserial opens: device paths (a pty, /dev/ttyACM0), ``socket://``, ``rfc2217://``, ``loop://``."""
+from __future__ import annotations
+
+import serial
+
+from protocol.errors import DisconnectedError, TransportError
+
+from .base import Transport
+
+
+class SerialTransport(Transport):
+    """A pyserial port as a byte pipe."""
+
+    def __init__(self, port: serial.SerialBase, url: str):
+        self.port = port
+        self.url = url
+
+    def write(self, data: bytes) -> None:
+        try:
+            self.port.write(data)
+        except (serial.SerialException, OSError) as exc:
+            raise DisconnectedError(f"write to {self.url} failed: {exc}") from exc
+
+    def read(self, max_bytes: int, timeout: float) -> bytes:
+        try:
+            waiting = self.port.in_waiting
+            if not waiting:
+                self.port.timeout = timeout
+                first = self.port.read(1)
+                if not first:
+                    return b""
+                waiting = self.port.in_waiting
+                return first + (self.port.read(min(waiting, max_bytes - 1)) if waiting else b"")
+            return self.port.read(min(waiting, max_bytes))
+        except (serial.SerialException, OSError) as exc:
+            raise DisconnectedError(f"read from {self.url} failed: {exc}") from exc
+
+    def close(self) -> None:
+        self.port.close()
+
+
+def open_transport(url: str, timeout: float) -> SerialTransport:
+    try:
+        port = serial.serial_for_url(url, baudrate=921600, timeout=timeout, write_timeout=max(timeout, 5.0))
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise TransportError(f"cannot open {url}: {exc}") from exc
+    return SerialTransport(port, url)

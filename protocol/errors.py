@@ -1,0 +1,61 @@
+"""The one exception tree of the stack, shared by host, device simulator and tools."""
+from __future__ import annotations
+
+import enum
+
+
+class StereoCamError(Exception):
+    """Root of every error this stack raises on purpose."""
+
+
+class ProtocolError(StereoCamError):
+    """Bytes that do not form a valid message (bad payload layout, wrong reply type, ...)."""
+
+
+class VersionMismatchError(ProtocolError):
+    """The peer speaks a protocol major version this code does not implement."""
+
+
+class ErrorCode(enum.IntEnum):
+    """Error codes carried by a NACK (protocol/SPEC.md, "Error codes")."""
+
+    UNKNOWN_TYPE = 1
+    BAD_PAYLOAD = 2
+    UNKNOWN_PARAM = 3
+    OUT_OF_RANGE = 4
+    BAD_STATE = 5
+    BUSY = 6
+    INTERNAL = 7
+    UNSUPPORTED_VERSION = 8
+
+
+class DeviceError(StereoCamError):
+    """The device refused a command (NACK). Carries the device's code, parameter and text."""
+
+    def __init__(self, code: int, message: str, param: str | None = None, request_type: int = 0):
+        try:
+            self.code: ErrorCode | int = ErrorCode(code)
+        except ValueError:
+            self.code = code
+        self.param = param
+        self.device_message = message
+        self.request_type = request_type
+        name = self.code.name if isinstance(self.code, ErrorCode) else f"code {code}"
+        where = f" [{param}]" if param else ""
+        super().__init__(f"device refused request 0x{request_type:04x}: {name}{where}: {message}")
+
+
+class ConfigError(StereoCamError, ValueError):
+    """A configuration request that cannot be expressed (unknown parameter name, wrong type)."""
+
+
+class TransportError(StereoCamError):
+    """The link to the device failed (I/O error, cannot open)."""
+
+
+class DisconnectedError(TransportError):
+    """The device went away (cable pulled, process ended, socket closed)."""
+
+
+class CameraTimeoutError(StereoCamError, TimeoutError):
+    """No answer or frame within the deadline; also a builtin TimeoutError."""

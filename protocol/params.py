@@ -1,0 +1,77 @@
+"""The configuration parameter table: wire id, name, range, default (protocol/SPEC.md §5).
+
+Every parameter is an int32 on the wire. The device validates against this table; the host uses it
+to map names to ids. One table, shared by both sides.
+"""
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+
+class TriggerMode(enum.IntEnum):
+    FREE_RUN = 0
+    SOFTWARE = 1
+    EXTERNAL = 2
+
+
+class Output(enum.IntFlag):
+    """Planes a frame can carry; also the plane ids of FRAME_DATA."""
+
+    LEFT = 1
+    RIGHT = 2
+    DISPARITY = 4
+
+
+@dataclass(frozen=True)
+class Param:
+    pid: int
+    name: str
+    default: int
+    lo: int
+    hi: int
+    step: int = 1  # value must be lo + k*step ... or: see ``odd``
+    odd: bool = False
+    unit: str = ""
+    live: bool = True  # may change while streaming
+
+    def check(self, value: int) -> str | None:
+        """None if ``value`` is acceptable on its own, else the reason."""
+        if not self.lo <= value <= self.hi:
+            return f"{self.name}={value} outside {self.lo}..{self.hi}"
+        if self.odd and value % 2 == 0:
+            return f"{self.name}={value} must be odd"
+        if self.step > 1 and value % self.step:
+            return f"{self.name}={value} must be a multiple of {self.step}"
+        return None
+
+
+PARAMS: tuple[Param, ...] = (
+    Param(1, "width", 640, 64, 1280, step=16, unit="px", live=False),
+    Param(2, "height", 480, 48, 960, step=8, unit="px", live=False),
+    Param(3, "fps", 30, 1, 120, unit="Hz"),
+    Param(4, "exposure_us", 4000, 10, 1_000_000, unit="us"),
+    Param(5, "gain", 0, 0, 240, unit="0.1 dB"),
+    Param(6, "trigger_mode", TriggerMode.FREE_RUN, 0, 2, live=False),
+    Param(7, "outputs", Output.LEFT | Output.RIGHT | Output.DISPARITY, 1, 7),
+    Param(8, "num_disparities", 64, 16, 256, step=16, unit="px"),
+    Param(9, "block_size", 15, 5, 255, odd=True, unit="px"),
+    Param(10, "min_disparity", 0, -256, 256, unit="px"),
+    Param(11, "pre_filter_type", 0, 0, 1),  # 0 xsobel, 1 normalized response
+    Param(12, "pre_filter_size", 9, 5, 255, odd=True, unit="px"),
+    Param(13, "pre_filter_cap", 31, 1, 63),
+    Param(14, "texture_threshold", 10, 0, 1 << 20),
+    Param(15, "uniqueness_ratio", 15, 0, 100, unit="%"),
+    Param(16, "speckle_window_size", 0, 0, 10_000, unit="px"),
+    Param(17, "speckle_range", 0, 0, 1 << 14, unit="1/16 px"),
+    Param(18, "disp12_max_diff", -1, -1, 1 << 14, unit="px"),
+    Param(19, "heartbeat_timeout_ms", 3000, 0, 600_000, unit="ms"),  # 0: never time out
+    Param(20, "scene", 0, 0, 1),  # 0 animated lab, 1 textured wall at 1.5 m
+)
+
+BY_ID: dict[int, Param] = {p.pid: p for p in PARAMS}
+BY_NAME: dict[str, Param] = {p.name: p for p in PARAMS}
+
+
+def defaults() -> dict[str, int]:
+    return {p.name: int(p.default) for p in PARAMS}
