@@ -254,7 +254,7 @@ class SimulatedCamera:
         planes = [(Output.LEFT, left), (Output.RIGHT, right), (Output.DISPARITY, disp)]
         sizes = {}
         with self._sink_lock:
-            if not self._emit(m.encode(begin)):
+            if not self.engine.current(req) or not self._emit(m.encode(begin)):
                 return
             for plane, img in planes:
                 sizes[plane] = 0

@@ -23,6 +23,7 @@ class CaptureRequest:
     sequence: int
     trigger_id: int
     time: float  # host monotonic instant of the exposure
+    epoch: int  # which start() this capture belongs to
 
 
 class CaptureEngine:
@@ -38,6 +39,7 @@ class CaptureEngine:
         self._period = 1 / 30
         self._next = 0.0
         self._closed = False
+        self.epoch = 0  # bumped by every start/stop: captures of an older epoch are never sent
         self.sequence = 0
         self.dropped = 0
         self.captured = 0
@@ -57,6 +59,7 @@ class CaptureEngine:
             self._next = time.monotonic()
             self._queue.clear()
             self._streaming = True
+            self.epoch += 1
             self._cond.notify_all()
 
     def set_rate(self, fps: int) -> None:
@@ -66,6 +69,7 @@ class CaptureEngine:
     def stop(self) -> None:
         with self._cond:
             self._streaming = False
+            self.epoch += 1
             self._queue.clear()
             self._cond.notify_all()
 
@@ -92,7 +96,7 @@ class CaptureEngine:
                     self.dropped += 1
                 return None
             self.sequence += 1
-            req = CaptureRequest(self.sequence, trigger_id, time.monotonic())
+            req = CaptureRequest(self.sequence, trigger_id, time.monotonic(), self.epoch)
             self._queue.append(req)
             self._cond.notify_all()
             return req
@@ -118,7 +122,11 @@ class CaptureEngine:
             t = self._next + missed * self._period
             self._next = t + self._period
             self.sequence += 1
-            return CaptureRequest(self.sequence, 0, t)
+            return CaptureRequest(self.sequence, 0, t, self.epoch)
+
+    def current(self, req: CaptureRequest) -> bool:
+        """Whether ``req`` still belongs to the running stream (not stopped or restarted since)."""
+        return self._streaming and req.epoch == self.epoch
 
     def _run(self) -> None:
         while not self._closed:

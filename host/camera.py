@@ -140,7 +140,8 @@ class Camera:
         return r.trigger_id
 
     def start(self) -> None:
-        self.assembler.reset_sequence()
+        """Start streaming; frames still queued from an earlier stream are discarded."""
+        self.assembler.reset()
         self.request(m.Start())
 
     def stop(self) -> None:

@@ -132,9 +132,14 @@ class FrameAssembler:
         self._cur: _Building | None = None
         self._last_seq: int | None = None
 
-    def reset_sequence(self) -> None:
-        """Forget the last sequence (after a stop/start the gap is not a loss)."""
+    def reset(self) -> None:
+        """Before a new stream: forget the last sequence (a gap across start is no loss), empty the queue."""
         self._last_seq = None
+        while True:
+            try:
+                self.frames.get_nowait()
+            except queue.Empty:
+                return
 
     def on_message(self, msg: m.Message) -> None:
         if isinstance(msg, m.FrameBegin):

@@ -66,8 +66,8 @@ class DecoderStats:
     header_crc_errors: int = 0
     bad_headers: int = 0  # header CRC fine but fields impossible (header_len)
     payload_crc_errors: int = 0
-    oversize: int = 0  # valid header announcing more than max_payload: skipped unbuffered
-    unsupported_version: int = 0  # valid header of another major version: skipped
+    oversize: int = 0  # valid header announcing more than max_payload: rescanned, never buffered
+    unsupported_version: int = 0  # valid header of another major version: rescanned
 
     @property
     def dropped(self) -> int:
@@ -89,7 +89,6 @@ class Decoder:
     max_payload: int = MAX_PAYLOAD
     stats: DecoderStats = field(default_factory=DecoderStats)
     _buf: bytearray = field(default_factory=bytearray, repr=False)
-    _skip: int = 0  # bytes of an oversize/foreign frame still to discard
 
     def __post_init__(self) -> None:
         if not 0 <= self.max_payload <= MAX_PAYLOAD:
@@ -102,10 +101,6 @@ class Decoder:
     def feed(self, data: bytes | bytearray | memoryview) -> list[Packet]:
         """Consume ``data``; return the packets completed by it (possibly none)."""
         self.stats.bytes_in += len(data)
-        if self._skip:
-            n = min(self._skip, len(data))
-            self._skip -= n
-            data = memoryview(data)[n:]
         self._buf += data
         out: list[Packet] = []
         buf = self._buf
@@ -133,19 +128,16 @@ class Decoder:
                 st.bad_headers += 1
                 pos += 1
                 continue
-            total = hlen + plen + TRAILER_LEN
             if major != VERSION_MAJOR or plen > self.max_payload:
+                # never buffer what we will not accept: count it and rescan from the next byte,
+                # so a stray valid-looking header cannot blind the decoder for a megabyte
                 if major != VERSION_MAJOR:
                     st.unsupported_version += 1
                 else:
                     st.oversize += 1
-                avail = end - pos
-                if avail >= total:
-                    pos += total
-                    continue
-                self._skip = total - avail
-                pos = end
-                break
+                pos += 1
+                continue
+            total = hlen + plen + TRAILER_LEN
             if end - pos < total:
                 break
             body = memoryview(buf)[pos + HEADER_LEN:pos + hlen + plen]

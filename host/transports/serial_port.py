@@ -21,17 +21,22 @@ class SerialTransport(Transport):
         except (serial.SerialException, OSError) as exc:
             raise DisconnectedError(f"write to {self.url} failed: {exc}") from exc
 
+    def _timeout(self, seconds: float) -> None:
+        if self.port.timeout != seconds:  # reconfiguring a tty costs syscalls: only on change
+            self.port.timeout = seconds
+
     def read(self, max_bytes: int, timeout: float) -> bytes:
+        """Wait up to ``timeout`` for one byte, then take whatever else is ready without waiting.
+
+        (``in_waiting`` is no help here: for ``socket://`` pyserial reports it as 0 or 1.)
+        """
         try:
-            waiting = self.port.in_waiting
-            if not waiting:
-                self.port.timeout = timeout
-                first = self.port.read(1)
-                if not first:
-                    return b""
-                waiting = self.port.in_waiting
-                return first + (self.port.read(min(waiting, max_bytes - 1)) if waiting else b"")
-            return self.port.read(min(waiting, max_bytes))
+            self._timeout(timeout)
+            first = self.port.read(1)
+            if not first:
+                return b""
+            self._timeout(0)
+            return first + self.port.read(max_bytes - 1)
         except (serial.SerialException, OSError) as exc:
             raise DisconnectedError(f"read from {self.url} failed: {exc}") from exc
 

@@ -1,0 +1,88 @@
+"""Shared fixtures: the same integration tests run over every transport, or against ``--device URL``.
+
+Without ``--device`` each test runs back-to-back over: an in-process simulator (sim://), a
+simulator in a second process behind a real pseudo-terminal opened by pyserial, and one behind a
+real TCP socket (pyserial's socket://).
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+TRANSPORTS = ("sim", "pty", "tcp")
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--device", action="store", default=None, metavar="URL",
+                     help="run the integration tests against this camera URL instead of simulators")
+
+
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
+    if "device_url" in metafunc.fixturenames:
+        url = metafunc.config.getoption("--device")
+        metafunc.parametrize("device_url", [url] if url else list(TRANSPORTS), indirect=True)
+
+
+class ServedSimulator:
+    """``python -m device_sim --serve SPEC`` in a child process; its first stdout line is the URL."""
+
+    def __init__(self, spec: str, seed: int = 7):
+        self.proc = subprocess.Popen([sys.executable, "-m", "device_sim", "--serve", spec, "--seed", str(seed)],
+                                     cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        self.url = self.proc.stdout.readline().strip()
+        if not self.url:
+            raise RuntimeError(f"simulator did not start: {self.proc.stderr.read()}")
+
+    def stop(self) -> int:
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            return self.proc.wait(timeout=10)
+        finally:
+            if self.proc.poll() is None:
+                self.proc.kill()
+
+
+@pytest.fixture(scope="session")
+def served():
+    """Lazily started child-process simulators, one per served transport, for the whole session."""
+    servers: dict[str, ServedSimulator] = {}
+
+    def get(kind: str) -> ServedSimulator:
+        if kind not in servers:
+            servers[kind] = ServedSimulator("pty" if kind == "pty" else "tcp:127.0.0.1:0")
+        return servers[kind]
+
+    yield get
+    for s in servers.values():
+        s.stop()
+
+
+@pytest.fixture
+def device_url(request, served) -> str:
+    kind = request.param
+    if kind == "sim":
+        return "sim://?seed=7"
+    if kind in ("pty", "tcp"):
+        return served(kind).url
+    return kind  # an external device URL from --device
+
+
+@pytest.fixture
+def cam(device_url):
+    """An open camera in its default configuration, at a small format so tests run fast."""
+    import host
+    from protocol.params import defaults
+
+    camera = host.open(device_url, timeout=2.0)
+    try:
+        camera.configure(**{**defaults(), "width": 320, "height": 240, "num_disparities": 32, "block_size": 11})
+        yield camera
+    finally:
+        camera.close()
