@@ -6,6 +6,7 @@ Bytes in through ``receive``; bytes out through the sink given to ``attach``. Ev
 from __future__ import annotations
 
 import collections
+import logging
 import threading
 import time
 from dataclasses import dataclass
@@ -33,6 +34,7 @@ RESEND_CACHE = 64
 GROUND_TRUTH_KEEP = 16
 
 Sink = Callable[[bytes], None]
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -61,7 +63,7 @@ class SimulatedCamera:
         self._sink: Sink | None = None
         self._sink_lock = threading.Lock()
         self._rx_lock = threading.Lock()
-        self._replies: collections.OrderedDict[int, bytes] = collections.OrderedDict()
+        self._replies: collections.OrderedDict[int, tuple[int, bytes]] = collections.OrderedDict()
         self._truth: collections.OrderedDict[int, GroundTruth] = collections.OrderedDict()
         self._matcher: Matcher | None = None
         self._last_rx = time.monotonic()
@@ -82,6 +84,9 @@ class SimulatedCamera:
         """Send all further output to ``sink`` (called from device threads; may block)."""
         with self._sink_lock:
             self._sink = sink
+        with self._rx_lock:  # a new host: its request ids say nothing about the last one's
+            self._replies.clear()
+            self.decoder = Decoder(stats=self.decoder.stats)
         self._last_rx = time.monotonic()
 
     def detach(self) -> None:
@@ -116,9 +121,10 @@ class SimulatedCamera:
     # -- dispatch ---------------------------------------------------------------------------
     def _dispatch(self, packet: Packet) -> bytes:
         rid = packet.request_id
-        if packet.flags & FLAG_RESEND and rid in self._replies:
+        cached = self._replies.get(rid)
+        if packet.flags & FLAG_RESEND and cached is not None and cached[0] == packet.msg_type:
             self.counters["resends_replayed"] += 1
-            return self._replies[rid]
+            return cached[1]
         handler = self._handlers.get(packet.msg_type)
         if handler is None:
             reply: m.Message = self._nack(packet.msg_type, ErrorCode.UNKNOWN_TYPE,
@@ -128,8 +134,12 @@ class SimulatedCamera:
                 reply = handler(m.decode_packet(packet))
             except ProtocolError as exc:
                 reply = self._nack(packet.msg_type, ErrorCode.BAD_PAYLOAD, str(exc))
+            except Exception as exc:  # a firmware bug still answers, so the host never just times out
+                log.exception("handler for 0x%04x failed", packet.msg_type)
+                reply = self._nack(packet.msg_type, ErrorCode.INTERNAL, f"{type(exc).__name__}: {exc}")
         wire = m.encode(reply, rid)
-        self._replies[rid] = wire
+        self._replies[rid] = (packet.msg_type, wire)
+        self._replies.move_to_end(rid)
         while len(self._replies) > RESEND_CACHE:
             self._replies.popitem(last=False)
         return wire
@@ -167,9 +177,11 @@ class SimulatedCamera:
 
     def _trigger(self, msg: m.Trigger) -> m.Message:
         cfg = self.config.snapshot()
-        if cfg["trigger_mode"] != TriggerMode.SOFTWARE or not self.engine.streaming:
-            return self._nack(msg.TYPE, ErrorCode.BAD_STATE, "software trigger needs trigger_mode=software and a "
-                              "started stream", BY_NAME["trigger_mode"].pid)
+        if cfg["trigger_mode"] != TriggerMode.SOFTWARE:
+            return self._nack(msg.TYPE, ErrorCode.BAD_STATE, "software trigger needs trigger_mode=software",
+                              BY_NAME["trigger_mode"].pid)
+        if not self.engine.streaming:
+            return self._nack(msg.TYPE, ErrorCode.BAD_STATE, "software trigger needs a started stream")
         req = self.engine.trigger(self._soft_triggers + 1, TriggerMode.SOFTWARE)
         if req is None:
             return self._nack(msg.TYPE, ErrorCode.BUSY, "trigger queue full; previous captures still pending")

@@ -68,7 +68,7 @@ def _cross_check(c: dict[str, int], update: dict[int, int]) -> Rejection | None:
         return Rejection(ErrorCode.OUT_OF_RANGE, blame("pre_filter_size", "width", "height"),
                          f"pre_filter_size={c['pre_filter_size']} larger than the image")
     span = c["min_disparity"] + c["num_disparities"] + c["block_size"] // 2
-    if c["min_disparity"] < 0 and -c["min_disparity"] >= c["width"] or span >= c["width"]:
+    if span >= c["width"] or -c["min_disparity"] >= c["width"]:
         return Rejection(ErrorCode.OUT_OF_RANGE, blame("num_disparities", "min_disparity", "width"),
                          f"disparity range {c['min_disparity']}..{c['min_disparity'] + c['num_disparities']}"
                          f" does not fit in width {c['width']}")

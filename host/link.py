@@ -130,17 +130,20 @@ class Link:
 
     def _dispatch(self, packet: Packet) -> None:
         try:
-            msg = m.decode_packet(packet)
-        except ProtocolError:
+            msg: m.Message | None = m.decode_packet(packet)
+            bad = None
+        except ProtocolError as exc:
             self.stats.undecodable += 1
-            return
+            msg, bad = None, exc
         if packet.msg_type & m.REPLY_BIT:
             with self._lock:
                 pending = self._pending.get(packet.request_id)
             if pending is None or pending.event.is_set():
                 self.stats.stray_replies += 1
                 return
-            if isinstance(msg, m.Nack):
+            if bad is not None:  # the answer came but cannot be read: fail now, do not wait
+                pending.error = bad
+            elif isinstance(msg, m.Nack):
                 param = BY_ID[msg.param_id].name if msg.param_id in BY_ID else None
                 pending.error = DeviceError(msg.code, msg.message, param, msg.request_type)
             elif packet.msg_type != pending.expect:
@@ -149,7 +152,7 @@ class Link:
             else:
                 pending.reply = msg
             pending.event.set()
-        elif self._on_event is not None:
+        elif msg is not None and self._on_event is not None:
             self._on_event(msg)
 
     def _die(self, error: StereoCamError) -> None:

@@ -6,15 +6,10 @@ real TCP socket (pyserial's socket://).
 """
 from __future__ import annotations
 
-import os
-import signal
-import subprocess
-import sys
-from pathlib import Path
-
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from device_sim.process import ServedSimulator
+
 TRANSPORTS = ("sim", "pty", "tcp")
 
 
@@ -27,26 +22,6 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
     if "device_url" in metafunc.fixturenames:
         url = metafunc.config.getoption("--device")
         metafunc.parametrize("device_url", [url] if url else list(TRANSPORTS), indirect=True)
-
-
-class ServedSimulator:
-    """``python -m device_sim --serve SPEC`` in a child process; its first stdout line is the URL."""
-
-    def __init__(self, spec: str, seed: int = 7):
-        self.proc = subprocess.Popen([sys.executable, "-m", "device_sim", "--serve", spec, "--seed", str(seed)],
-                                     cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                     env={**os.environ, "PYTHONUNBUFFERED": "1"})
-        self.url = self.proc.stdout.readline().strip()
-        if not self.url:
-            raise RuntimeError(f"simulator did not start: {self.proc.stderr.read()}")
-
-    def stop(self) -> int:
-        self.proc.send_signal(signal.SIGTERM)
-        try:
-            return self.proc.wait(timeout=10)
-        finally:
-            if self.proc.poll() is None:
-                self.proc.kill()
 
 
 @pytest.fixture(scope="session")

@@ -1,0 +1,1 @@
+"""Metric camera support: calibration model, per-unit truth, rays, rectification, flash store."""

@@ -1,0 +1,166 @@
+"""Chessboard calibration target: spec, varied poses, and ray-cast rendering of raw views.
+
+Board frame: origin at the first inner corner, x along a row of `cols` inner corners, y along the
+`rows` direction, z = 0 on the printed face. Inner corner (i, j) sits at (i·s, j·s, 0) — the order
+of board_object_points() and of cv2.findChessboardCorners for pattern size (cols, rows). The board
+has (cols+1)×(rows+1) squares, the corner ones black, inside a white margin of `margin_squares`.
+A pose (R, t) maps board to camera: X_cam = R @ X_board + t (the convention of cv2.solvePnP).
+"""
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from .model import StereoCalibration
+from .rays import pixel_rays, project_points
+from .truth import rodrigues
+
+
+@dataclass(frozen=True)
+class BoardSpec:
+    """Chessboard with cols×rows inner corners and square side square_m metres."""
+
+    cols: int
+    rows: int
+    square_m: float
+    margin_squares: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.cols < 2 or self.rows < 2 or self.square_m <= 0 or self.margin_squares < 0:
+            raise ValueError(f"bad board {self.cols}x{self.rows} square {self.square_m} m")
+
+    def object_points(self) -> np.ndarray:
+        """Inner corners in the board frame, (cols*rows, 3) float32, x fastest."""
+        j, i = np.mgrid[0:self.rows, 0:self.cols]
+        pts = np.column_stack([i.ravel(), j.ravel(), np.zeros(i.size)]) * self.square_m
+        return pts.astype(np.float32)
+
+    def outline(self) -> np.ndarray:
+        """The 4 corners of the board's white margin in the board frame, (4, 3)."""
+        lo = -(1.0 + self.margin_squares) * self.square_m
+        hx = (self.cols + self.margin_squares) * self.square_m
+        hy = (self.rows + self.margin_squares) * self.square_m
+        return np.array([[lo, lo, 0.0], [hx, lo, 0.0], [hx, hy, 0.0], [lo, hy, 0.0]])
+
+
+@dataclass(frozen=True)
+class BoardPose:
+    """Board-to-left-camera transform: X_cam = R @ X_board + t (metres)."""
+
+    R: np.ndarray
+    t: np.ndarray
+
+
+@numba.njit(parallel=True, nogil=True, cache=True)
+def _render(rays: np.ndarray, R: np.ndarray, t: np.ndarray, cols: int, rows: int, sq: float,
+            margin: float, s: int, black: float, white: float, background: float) -> np.ndarray:
+    h, w = rays.shape[0] // s, rays.shape[1] // s
+    n0, n1, n2 = R[0, 2], R[1, 2], R[2, 2]
+    nt = n0 * t[0] + n1 * t[1] + n2 * t[2]
+    lo, hx, hy = -sq - margin, cols * sq + margin, rows * sq + margin
+    out = np.empty((h, w), dtype=np.float32)
+    for j in numba.prange(h):
+        for i in range(w):
+            acc = 0.0
+            for a in range(s):
+                for b in range(s):
+                    d = rays[j * s + a, i * s + b]
+                    den = n0 * d[0] + n1 * d[1] + n2 * d[2]
+                    lam = nt / den if den != 0.0 else -1.0
+                    if lam <= 0.0:
+                        acc += background
+                        continue
+                    px, py, pz = lam * d[0] - t[0], lam * d[1] - t[1], lam * d[2] - t[2]
+                    u = R[0, 0] * px + R[1, 0] * py + R[2, 0] * pz
+                    v = R[0, 1] * px + R[1, 1] * py + R[2, 1] * pz
+                    if u < lo or u >= hx or v < lo or v >= hy:
+                        acc += background
+                    elif -sq <= u < cols * sq and -sq <= v < rows * sq:
+                        parity = (int(np.floor(u / sq)) + int(np.floor(v / sq))) & 1
+                        acc += black if parity == 0 else white
+                    else:
+                        acc += white
+            out[j, i] = acc / (s * s)
+    return out
+
+
+def render_board_view(rays: np.ndarray, R_board: np.ndarray, t_board: np.ndarray, board: BoardSpec,
+                      supersample: int = 1, noise_sigma: float = 1.0, rng: np.random.Generator | None = None,
+                      black: float = 30.0, white: float = 220.0, background: float = 110.0) -> np.ndarray:
+    """Raw u8 view of the board at pose (R_board, t_board) in this camera's frame.
+
+    `rays` come from pixel_rays(..., supersample=supersample): each output pixel is the box-filtered
+    mean of its s×s sub-pixel samples, then Gaussian noise of `noise_sigma` DN is added.
+    """
+    if rays.ndim != 3 or rays.shape[2] != 3 or rays.shape[0] % supersample or rays.shape[1] % supersample:
+        raise ValueError(f"rays of shape {rays.shape} do not fit supersample {supersample}")
+    img = _render(rays, np.asarray(R_board, np.float64), np.asarray(t_board, np.float64).reshape(3),
+                  board.cols, board.rows, board.square_m, board.margin_squares * board.square_m,
+                  supersample, black, white, background)
+    if noise_sigma > 0:
+        img += (rng or np.random.default_rng()).normal(0.0, noise_sigma, img.shape).astype(np.float32)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+def _visible(calib: StereoCalibration, pose: BoardPose, board: BoardSpec, border_px: float) -> bool:
+    w, h = calib.image_size
+    outline = board.outline() @ pose.R.T + pose.t
+    for K, D, pts in ((calib.K_left, calib.D_left, outline),
+                      (calib.K_right, calib.D_right, outline @ calib.R.T + calib.T)):
+        if np.any(pts[:, 2] <= 0.05):
+            return False
+        uv = project_points(K, D, pts)
+        if np.any(uv < border_px) or np.any(uv[:, 0] > w - 1 - border_px) or np.any(uv[:, 1] > h - 1 - border_px):
+            return False
+    return True
+
+
+def board_poses(seed: int, n: int, board: BoardSpec, calib: StereoCalibration,
+                distance_m: tuple[float, float] = (0.4, 1.5), max_tilt_deg: float = 40.0,
+                max_roll_deg: float = 20.0, border_px: float = 4.0) -> Iterator[BoardPose]:
+    """n varied poses, reproducible from the seed, with the whole board inside both images.
+
+    Each pose: board centre at a uniform image position of the left camera at a distance drawn
+    from `distance_m`, tilted by up to `max_tilt_deg` about a random in-plane axis and rolled by
+    up to `max_roll_deg`. Poses where the board would leave either image are redrawn.
+    """
+    rng = np.random.default_rng([0xB0A2D, int(seed)])
+    w, h = calib.image_size
+    centre = np.array([(board.cols - 1) / 2, (board.rows - 1) / 2, 0.0]) * board.square_m
+    K_inv = np.linalg.inv(calib.K_left)
+    made = 0
+    for _ in range(2000 * max(n, 1)):
+        if made == n:
+            return
+        z = rng.uniform(*distance_m)
+        pixel = np.array([rng.uniform(0, w - 1), rng.uniform(0, h - 1), 1.0])
+        phi = rng.uniform(0, 2 * np.pi)
+        tilt = np.deg2rad(rng.uniform(0, max_tilt_deg)) * np.array([np.cos(phi), np.sin(phi), 0.0])
+        roll = np.deg2rad(rng.uniform(-max_roll_deg, max_roll_deg))
+        R = rodrigues(tilt) @ rodrigues(np.array([0.0, 0.0, roll]))
+        pose = BoardPose(R, z * (K_inv @ pixel) - R @ centre)
+        if _visible(calib, pose, board, border_px):
+            made += 1
+            yield pose
+    raise ValueError(f"board {board.cols}x{board.rows} x {board.square_m} m does not fit the "
+                     f"{w}x{h} view at {distance_m} m often enough")
+
+
+class StereoBoardRenderer:
+    """Renders raw (left, right) views of a board through a stereo head's true calibration."""
+
+    def __init__(self, calib: StereoCalibration, board: BoardSpec, supersample: int = 2) -> None:
+        w, h = calib.image_size
+        self.calib, self.board, self.supersample = calib, board, supersample
+        self._rays = [pixel_rays(K, D, w, h, supersample)
+                      for K, D in ((calib.K_left, calib.D_left), (calib.K_right, calib.D_right))]
+
+    def render(self, pose: BoardPose, rng: np.random.Generator | None = None,
+               noise_sigma: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """(left, right) u8 views of the board at `pose` (given in the left camera frame)."""
+        right_R, right_t = self.calib.R @ pose.R, self.calib.R @ pose.t + self.calib.T
+        return (render_board_view(self._rays[0], pose.R, pose.t, self.board, self.supersample, noise_sigma, rng),
+                render_board_view(self._rays[1], right_R, right_t, self.board, self.supersample, noise_sigma, rng))

@@ -1,0 +1,114 @@
+"""StereoBM prefilters (XSOBEL and NORMALIZED_RESPONSE), bit-exact with OpenCV.
+
+Both map a uint8 image to uint8 values in [0, 2*cap], with ``cap`` meaning "zero response".
+"""
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+_JIT = dict(nogil=True, cache=True, boundscheck=False)
+
+
+@nb.njit(**_JIT)
+def _clip(v: int, cap: int) -> int:
+    if v < -cap:
+        return 0
+    if v > cap:
+        return 2 * cap
+    return v + cap
+
+
+@nb.njit(parallel=True, **_JIT)
+def xsobel(src: np.ndarray, dst: np.ndarray, cap: int) -> None:
+    """P = clip(d[y-1] + 2 d[y] + d[y+1]) with d = I[x+1] - I[x-1]; OpenCV's border rules."""
+    h, w = src.shape
+    npairs = h // 2
+    for k in nb.prange(npairs):
+        y = 2 * k
+        r1 = y
+        r0 = y - 1 if y > 0 else (y + 1 if h > 1 else y)
+        r2 = y + 1
+        r3 = y + 2 if y < h - 2 else y
+        s0, s1, s2, s3 = src[r0], src[r1], src[r2], src[r3]
+        o0, o1 = dst[y], dst[y + 1]
+        o0[0] = cap
+        o0[w - 1] = cap
+        o1[0] = cap
+        o1[w - 1] = cap
+        for x in range(1, w - 1):
+            d0 = np.int32(s0[x + 1]) - np.int32(s0[x - 1])
+            d1 = np.int32(s1[x + 1]) - np.int32(s1[x - 1])
+            d2 = np.int32(s2[x + 1]) - np.int32(s2[x - 1])
+            d3 = np.int32(s3[x + 1]) - np.int32(s3[x - 1])
+            v0 = min(max(d0 + 2 * d1 + d2, -cap), cap) + cap
+            v1 = min(max(d1 + 2 * d2 + d3, -cap), cap) + cap
+            o0[x] = np.uint8(v0)
+            o1[x] = np.uint8(v1)
+    if h % 2 == 1:
+        dst[h - 1, :] = cap
+
+
+@nb.njit(**_JIT)
+def _normalized_rows(src: np.ndarray, dst: np.ndarray, winsize: int, cap: int,
+                     vsum: np.ndarray) -> None:
+    h, w = src.shape
+    r = winsize // 2
+    scale_g = winsize * winsize // 8
+    scale_s = (1024 + scale_g) // (scale_g * 2)
+    scale_g *= scale_s
+    off = r + 1  # vsum[off + x] holds column x; pads of r + 1 on both sides
+    for x in range(w):
+        vsum[off + x] = np.int32(src[0, x]) * (r + 2)
+    for y in range(1, r):
+        for x in range(w):
+            vsum[off + x] += src[y, x]
+    for y in range(h):
+        top = src[max(y - r - 1, 0)]
+        bottom = src[min(y + r, h - 1)]
+        prev = src[max(y - 1, 0)]
+        curr = src[y]
+        nxt = src[min(y + 1, h - 1)]
+        out = dst[y]
+        for x in range(w):
+            vsum[off + x] += np.int32(bottom[x]) - np.int32(top[x])
+        for x in range(r + 1):
+            vsum[off - x - 1] = vsum[off]
+            vsum[off + w + x] = vsum[off + w - 1]
+        s = vsum[off] * (r + 1)
+        for x in range(1, r + 1):
+            s += vsum[off + x]
+        c5 = (np.int32(curr[0]) * 5 + np.int32(curr[1]) + np.int32(prev[0])
+              + np.int32(nxt[0]))
+        out[0] = np.uint8(_clip((c5 * scale_g - s * scale_s) >> 10, cap))
+        for x in range(1, w - 1):
+            s += vsum[off + x + r] - vsum[off + x - r - 1]
+            c5 = (np.int32(curr[x]) * 4 + np.int32(curr[x - 1]) + np.int32(curr[x + 1])
+                  + np.int32(prev[x]) + np.int32(nxt[x]))
+            out[x] = np.uint8(_clip((c5 * scale_g - s * scale_s) >> 10, cap))
+        x = w - 1
+        s += vsum[off + x + r] - vsum[off + x - r - 1]
+        c5 = (np.int32(curr[x]) * 5 + np.int32(curr[x - 1]) + np.int32(prev[x])
+              + np.int32(nxt[x]))
+        out[x] = np.uint8(_clip((c5 * scale_g - s * scale_s) >> 10, cap))
+
+
+@nb.njit(parallel=True, **_JIT)
+def normalized_pair(left: np.ndarray, right: np.ndarray, dst_l: np.ndarray,
+                    dst_r: np.ndarray, winsize: int, cap: int, vsum: np.ndarray) -> None:
+    """NORMALIZED_RESPONSE on both images (one per thread); vsum: int32 (2, w + winsize + 2)."""
+    for i in nb.prange(2):
+        if i == 0:
+            _normalized_rows(left, dst_l, winsize, cap, vsum[0])
+        else:
+            _normalized_rows(right, dst_r, winsize, cap, vsum[1])
+
+
+def prefilter_pair(left: np.ndarray, right: np.ndarray, dst_l: np.ndarray, dst_r: np.ndarray,
+                   kind: str, winsize: int, cap: int, vsum: np.ndarray) -> None:
+    """Apply the chosen prefilter to both images into dst_l / dst_r."""
+    if kind == "xsobel":
+        xsobel(left, dst_l, cap)
+        xsobel(right, dst_r, cap)
+    else:
+        normalized_pair(left, right, dst_l, dst_r, winsize, cap, vsum)

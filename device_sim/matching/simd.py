@@ -1,0 +1,211 @@
+"""Explicit-width vector operations over the cost axis, as numba intrinsics.
+
+Each intrinsic walks the ``nd`` cost indices of one pixel in chunks of 32 lanes (plus one
+16-lane tail when nd % 32 == 16) of the arrays' element type (int16 or int32). Writing the
+vector IR directly keeps LLVM's per-call runtime alias checks, horizontal reductions per chunk
+and unpredictable branches out of the per-pixel path. Callers guarantee indices are in range.
+"""
+from __future__ import annotations
+
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba.extending import intrinsic
+
+_BIG, _TAIL = 32, 16
+_I32 = ir.IntType(32)
+_I64 = ir.IntType(64)
+
+
+def _ptr(context, builder, aryty, ary, inds):
+    arr = context.make_array(aryty)(context, builder, ary)
+    return cgutils.get_item_pointer(context, builder, aryty, arr, inds, wraparound=False)
+
+
+def _vload(builder, ptr, vty):
+    return builder.load(builder.bitcast(ptr, vty.as_pointer()), align=1)
+
+
+def _vstore(builder, val, ptr):
+    builder.store(val, builder.bitcast(ptr, val.type.as_pointer()), align=1)
+
+
+def _call(builder, name, ret, args):
+    fnty = ir.FunctionType(ret, [a.type for a in args])
+    return builder.call(cgutils.get_or_insert_function(builder.module, fnty, name), args)
+
+
+def _splat(builder, scalar, vty):
+    v = builder.insert_element(ir.Constant(vty, ir.Undefined), scalar, ir.Constant(_I32, 0))
+    return builder.shuffle_vector(v, ir.Constant(vty, ir.Undefined),
+                                  ir.Constant(ir.VectorType(_I32, vty.count), None))
+
+
+def _smin(builder, a, b):
+    return builder.select(builder.icmp_signed("<", a, b), a, b)
+
+
+def _reduce_min(builder, vec):
+    name = f"llvm.vector.reduce.smin.v{vec.type.count}i{vec.type.element.width}"
+    return _call(builder, name, vec.type.element, [vec])
+
+
+def _absdiff_u8(builder, scalar, vec):
+    """|scalar - vec| lane-wise on uint8 (exact), as <n x i8>."""
+    splat = _splat(builder, scalar, vec.type)
+    gt = builder.icmp_unsigned(">", splat, vec)
+    return builder.sub(builder.select(gt, splat, vec), builder.select(gt, vec, splat))
+
+
+def _chunked(builder, nd, body):
+    """Emit body(j0, lanes) for j0 = 0, 32, ... < nd - nd % 32, then a 16-lane tail."""
+    nd32 = builder.and_(nd, ir.Constant(nd.type, ~(_BIG - 1)))
+    with cgutils.for_range_slice(builder, ir.Constant(nd.type, 0), nd32,
+                                 ir.Constant(nd.type, _BIG)) as (j0, _):
+        body(j0, _BIG)
+    with builder.if_then(builder.icmp_signed("<", nd32, nd)):
+        body(nd32, _TAIL)
+
+
+def _acc_ok(vs, sad) -> bool:
+    return (isinstance(vs, types.Array) and isinstance(sad, types.Array) and vs.ndim == 2
+            and sad.ndim == 1 and vs.dtype == sad.dtype and vs.dtype in (types.int16, types.int32))
+
+
+def _ix(context, builder, sig, args, i):
+    return context.cast(builder, args[i], sig.args[i], types.intp)
+
+
+@intrinsic
+def slide_all(typingctx, vs, ci, cu, sad, pr, ya, ys, b, a, s, nd):
+    """One column step for all nd cost indices j; returns min_j of the new sad:
+
+        vs[ci, j] += |a - pr[ya, b+j]| - |s - pr[ys, b+j]|   (vertical window slides down)
+        sad[j]    += vs[ci, j] - vs[cu, j]                   (horizontal window slides right)
+    """
+    if not _acc_ok(vs, sad) or pr.dtype != types.uint8 or a != types.uint8 or s != types.uint8:
+        return None
+    acc = vs.dtype
+
+    def codegen(context, builder, sig, args):
+        aty = context.get_value_type(acc)
+        st = sig.args
+        ndv = _ix(context, builder, sig, args, 10)
+        civ, cuv = _ix(context, builder, sig, args, 1), _ix(context, builder, sig, args, 2)
+        yav, ysv = _ix(context, builder, sig, args, 5), _ix(context, builder, sig, args, 6)
+        bv = _ix(context, builder, sig, args, 7)
+        best = {n: cgutils.alloca_once_value(builder, _splat(builder, ir.Constant(aty, -1)
+                                                             .lshr if False else
+                                                             ir.Constant(aty, (1 << (aty.width - 1)) - 1),
+                                                             ir.VectorType(aty, n)))
+                for n in (_BIG, _TAIL)}
+
+        def body(j0, n):
+            vty, bty = ir.VectorType(aty, n), ir.VectorType(ir.IntType(8), n)
+            bj = builder.add(bv, j0)
+            ra = _vload(builder, _ptr(context, builder, st[4], args[4], [yav, bj]), bty)
+            rs = _vload(builder, _ptr(context, builder, st[4], args[4], [ysv, bj]), bty)
+            da = builder.zext(_absdiff_u8(builder, args[8], ra), vty)
+            ds = builder.zext(_absdiff_u8(builder, args[9], rs), vty)
+            pv = _ptr(context, builder, st[0], args[0], [civ, j0])
+            pu = _ptr(context, builder, st[0], args[0], [cuv, j0])
+            ps = _ptr(context, builder, st[3], args[3], [j0])
+            v = builder.add(_vload(builder, pv, vty), builder.sub(da, ds))
+            _vstore(builder, v, pv)
+            t = builder.add(_vload(builder, ps, vty), builder.sub(v, _vload(builder, pu, vty)))
+            _vstore(builder, t, ps)
+            builder.store(_smin(builder, builder.load(best[n]), t), best[n])
+
+        _chunked(builder, ndv, body)
+        return _smin(builder, _reduce_min(builder, builder.load(best[_BIG])),
+                     _reduce_min(builder, builder.load(best[_TAIL])))
+
+    return acc(vs, ci, cu, sad, pr, ya, ys, b, a, s, nd), codegen
+
+
+@intrinsic
+def step_all(typingctx, vs, ci, cu, sad, nd):
+    """sad[j] += vs[ci, j] - vs[cu, j] for all nd cost indices; returns min_j sad[j]."""
+    if not _acc_ok(vs, sad):
+        return None
+    acc = vs.dtype
+
+    def codegen(context, builder, sig, args):
+        aty = context.get_value_type(acc)
+        st = sig.args
+        ndv = _ix(context, builder, sig, args, 4)
+        civ, cuv = _ix(context, builder, sig, args, 1), _ix(context, builder, sig, args, 2)
+        top = ir.Constant(aty, (1 << (aty.width - 1)) - 1)
+        best = {n: cgutils.alloca_once_value(builder, _splat(builder, top, ir.VectorType(aty, n)))
+                for n in (_BIG, _TAIL)}
+
+        def body(j0, n):
+            vty = ir.VectorType(aty, n)
+            pv = _ptr(context, builder, st[0], args[0], [civ, j0])
+            pu = _ptr(context, builder, st[0], args[0], [cuv, j0])
+            ps = _ptr(context, builder, st[3], args[3], [j0])
+            t = builder.add(_vload(builder, ps, vty),
+                            builder.sub(_vload(builder, pv, vty), _vload(builder, pu, vty)))
+            _vstore(builder, t, ps)
+            builder.store(_smin(builder, builder.load(best[n]), t), best[n])
+
+        _chunked(builder, ndv, body)
+        return _smin(builder, _reduce_min(builder, builder.load(best[_BIG])),
+                     _reduce_min(builder, builder.load(best[_TAIL])))
+
+    return acc(vs, ci, cu, sad, nd), codegen
+
+
+@intrinsic
+def first_eq_all(typingctx, sad, nd, value):
+    """Smallest j < nd with sad[j] == value (nd if none), without data-dependent branches."""
+    if not (isinstance(sad, types.Array) and sad.ndim == 1 and value == sad.dtype
+            and sad.dtype in (types.int16, types.int32)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        aty = context.get_value_type(sad.dtype)
+        ndv = _ix(context, builder, sig, args, 1)
+        res = cgutils.alloca_once_value(builder, ndv)
+
+        def body(j0, n):
+            vty = ir.VectorType(aty, n)
+            x = _vload(builder, _ptr(context, builder, sig.args[0], args[0], [j0]), vty)
+            mask = builder.bitcast(builder.icmp_signed("==", x, _splat(builder, args[2], vty)),
+                                   ir.IntType(n))
+            k = builder.zext(_call(builder, f"llvm.cttz.i{n}", ir.IntType(n),
+                                   [mask, ir.Constant(ir.IntType(1), 0)]), _I64)
+            cur = builder.load(res)
+            hit = builder.and_(builder.icmp_unsigned("<", k, ir.Constant(_I64, n)),
+                               builder.icmp_signed("==", cur, ndv))
+            builder.store(builder.select(hit, builder.add(j0, k), cur), res)
+
+        _chunked(builder, ndv, body)
+        return builder.load(res)
+
+    return types.int64(sad, nd, value), codegen
+
+
+@intrinsic
+def count_le_all(typingctx, sad, nd, value):
+    """Number of j < nd with sad[j] <= value."""
+    if not (isinstance(sad, types.Array) and sad.ndim == 1 and value == sad.dtype
+            and sad.dtype in (types.int16, types.int32)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        aty = context.get_value_type(sad.dtype)
+        ndv = _ix(context, builder, sig, args, 1)
+        res = cgutils.alloca_once_value(builder, ir.Constant(_I64, 0))
+
+        def body(j0, n):
+            vty = ir.VectorType(aty, n)
+            x = _vload(builder, _ptr(context, builder, sig.args[0], args[0], [j0]), vty)
+            mask = builder.bitcast(builder.icmp_signed("<=", x, _splat(builder, args[2], vty)),
+                                   ir.IntType(n))
+            c = builder.zext(_call(builder, f"llvm.ctpop.i{n}", ir.IntType(n), [mask]), _I64)
+            builder.store(builder.add(builder.load(res), c), res)
+
+        _chunked(builder, ndv, body)
+        return builder.load(res)
+
+    return types.int64(sad, nd, value), codegen

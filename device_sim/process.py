@@ -1,0 +1,33 @@
+"""A simulator in a child process (``python -m device_sim --serve SPEC``), for tests and benches."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+
+
+class ServedSimulator:
+    """Starts the child and reads the URL it prints first; ``stop`` sends SIGTERM and waits."""
+
+    def __init__(self, spec: str, seed: int = 7):
+        self.proc = subprocess.Popen([sys.executable, "-m", "device_sim", "--serve", spec, "--seed", str(seed)],
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        self.url = self.proc.stdout.readline().strip()
+        if not self.url:
+            raise RuntimeError(f"simulator did not start: {self.proc.stderr.read()}")
+
+    def stop(self) -> int:
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            return self.proc.wait(timeout=10)
+        finally:
+            if self.proc.poll() is None:
+                self.proc.kill()
+
+    def __enter__(self) -> "ServedSimulator":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

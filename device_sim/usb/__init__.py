@@ -1,0 +1,51 @@
+"""Simulated USB: a bus that simulated cameras plug into and out of at run time, seen by pyusb.
+
+    import usb.core, device_sim.usb as simusb
+    handle = simusb.plug(SimulatedCamera(serial="SC0001"))
+    dev = usb.core.find(backend=simusb.get_backend(), idVendor=simusb.VENDOR_ID)
+    ...
+    handle.unplug()
+
+Every device has full USB 2.0 high-speed descriptors (VID:PID 0x1209:0x0001, bcdDevice =
+firmware version, manufacturer/product/serial strings), one configuration and one
+vendor-specific interface with bulk OUT 0x01 and bulk IN 0x81 (512-byte packets). ``pipes``
+documents the transfer rules (packets, ZLP, timeouts); errors are libusb1's (``errors``).
+"""
+from __future__ import annotations
+
+from .backend import SimBackend
+from .bus import SimUsbBus
+from .descriptors import (EP_IN, EP_OUT, INTERFACE_NUMBER, MAX_PACKET_SIZE, PRODUCT_ID,
+                          VENDOR_ID, bcd_version)
+from .device import SimHandle, SimUsbDevice, UsbFunction
+from .errors import LibusbError, usb_error
+
+BUS = SimUsbBus(number=1)
+"""The process-wide bus that ``plug()`` uses and ``host.transports.usb`` scans."""
+
+
+def plug(sim: UsbFunction, **options: object) -> SimUsbDevice:
+    """Plug ``sim`` into the default bus; ``handle.unplug()`` pulls it out again.
+    ``options`` go to ``SimUsbBus.plug`` (serial, product, firmware_version, zlp, ...)."""
+    return BUS.plug(sim, **options)  # type: ignore[arg-type]
+
+
+def get_backend() -> SimBackend:
+    """The pyusb backend of the default bus."""
+    return BUS.backend
+
+
+def plugged_devices() -> list[SimUsbDevice]:
+    """Devices on the default bus now."""
+    return BUS.devices
+
+
+def unplug_all() -> None:
+    """Unplug everything from the default bus."""
+    BUS.unplug_all()
+
+
+__all__ = ["BUS", "plug", "get_backend", "plugged_devices", "unplug_all", "SimUsbBus",
+           "SimUsbDevice", "SimHandle", "SimBackend", "UsbFunction", "LibusbError", "usb_error",
+           "VENDOR_ID", "PRODUCT_ID", "EP_IN", "EP_OUT", "INTERFACE_NUMBER", "MAX_PACKET_SIZE",
+           "bcd_version"]

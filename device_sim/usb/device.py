@@ -1,0 +1,275 @@
+"""One simulated USB device: descriptors, endpoint 0 requests, bulk pipes, and its firmware thread.
+
+The device wraps any byte-level firmware object (``UsbFunction``: ``attach(sink)``,
+``detach()``, ``receive(data)``, e.g. ``device_sim.SimulatedCamera``). Bulk OUT transfers are
+handed to ``receive`` in order on the device's own firmware thread (so a host write never waits
+for the firmware to finish a command, as on real hardware); whatever the firmware passes to the
+sink is queued on the bulk IN pipe (see ``pipes`` for the packet rules).
+"""
+from __future__ import annotations
+
+import itertools
+import logging
+import struct
+import threading
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Callable, Protocol
+
+from .descriptors import (CONFIGURATION_VALUE, DT_CONFIG, DT_DEVICE, DT_STRING, EP_IN, EP_OUT,
+                          INTERFACE_NUMBER, MAX_PACKET_SIZE, DescriptorSet)
+from .errors import LibusbError, usb_error
+from .pipes import InPipe, OutPipe
+
+if TYPE_CHECKING:
+    from .bus import SimUsbBus
+
+_log = logging.getLogger(__name__)
+
+# Standard requests (USB 2.0 table 9-4).
+GET_STATUS, CLEAR_FEATURE, SET_FEATURE = 0x00, 0x01, 0x03
+GET_DESCRIPTOR, GET_CONFIGURATION, SET_CONFIGURATION = 0x06, 0x08, 0x09
+GET_INTERFACE, SET_INTERFACE = 0x0A, 0x0B
+FEATURE_ENDPOINT_HALT = 0
+DEFAULT_IN_CAPACITY = 4 * 1024 * 1024
+DEFAULT_OUT_CAPACITY = 64 * 1024
+
+
+class UsbFunction(Protocol):
+    """What a firmware must offer to be plugged into the simulated bus."""
+
+    def attach(self, sink: Callable[[bytes], None]) -> None: ...
+
+    def detach(self) -> None: ...
+
+    def receive(self, data: bytes) -> None: ...
+
+
+_handle_ids = itertools.count(1)
+
+
+@dataclass(eq=False)
+class SimHandle:
+    """An open device handle (what ``libusb_open`` returns)."""
+
+    device: "SimUsbDevice"
+    id: int = field(default_factory=lambda: next(_handle_ids))
+    closed: bool = False
+
+    def check(self) -> None:
+        """Raise the pyusb error for I/O on this handle now (closed handle or unplugged)."""
+        if not self.device.plugged:
+            raise usb_error(LibusbError.NO_DEVICE)
+        if self.closed:
+            raise usb_error(LibusbError.IO, "device handle closed")
+
+
+class SimUsbDevice:
+    """A device plugged into a ``SimUsbBus``; ``bus.plug()`` returns it. ``unplug()`` pulls the
+    cable: pending and later I/O fail with ENODEV, the firmware is detached, and blocked
+    firmware writers get ``BrokenPipeError``."""
+
+    def __init__(self, bus: "SimUsbBus", sim: UsbFunction, descriptors: DescriptorSet,
+                 port: int, address: int, zlp: bool = True,
+                 in_capacity: int = DEFAULT_IN_CAPACITY,
+                 out_capacity: int = DEFAULT_OUT_CAPACITY) -> None:
+        self.bus = bus
+        self.sim = sim
+        self.descriptors = descriptors
+        self.port = port
+        self.address = address
+        self.plugged = True
+        self.configuration = CONFIGURATION_VALUE  # the OS configures a device on enumeration
+        self.claims: dict[int, SimHandle] = {}
+        self.in_pipe = InPipe(EP_IN, MAX_PACKET_SIZE, in_capacity, zlp=zlp)
+        self.out_pipe = OutPipe(EP_OUT, out_capacity)
+        self._lock = threading.RLock()
+        self._handles: set[SimHandle] = set()
+        self._thread = threading.Thread(target=self._firmware_loop, daemon=True,
+                                        name=f"usb-sim-{bus.number}-{address}")
+        sim.attach(self.in_pipe.push)
+        self._thread.start()
+
+    def __repr__(self) -> str:
+        state = "plugged" if self.plugged else "unplugged"
+        return (f"<SimUsbDevice bus {self.bus.number} address {self.address} "
+                f"serial {self.serial!r} {state}>")
+
+    @property
+    def serial(self) -> str:
+        return self.descriptors.strings.get(self.descriptors.device.iSerialNumber, "")
+
+    # -- cable -------------------------------------------------------------------------------
+
+    def unplug(self) -> None:
+        """Pull the cable; idempotent. Never blocks on the firmware for more than ~2 s."""
+        with self._lock:
+            if not self.plugged:
+                return
+            self.plugged = False
+            self.claims.clear()
+        self.bus._remove(self)
+        self.in_pipe.close()
+        self.out_pipe.close()
+        try:
+            self.sim.detach()
+        except Exception:  # a firmware bug must not stop the unplug
+            _log.exception("detach() of %r failed", self.sim)
+        if self._thread is not threading.current_thread():
+            self._thread.join(2.0)
+            if self._thread.is_alive():
+                _log.warning("firmware of %r still busy 2 s after unplug", self)
+
+    def halt(self, endpoint: int) -> None:
+        """Fault injection: STALL ``endpoint`` as firmware does on a protocol error."""
+        self._pipe(endpoint).halt()
+
+    def _firmware_loop(self) -> None:
+        while (chunk := self.out_pipe.take()) is not None:
+            try:
+                self.sim.receive(chunk)
+            except OSError:  # the sink is gone (unplugged mid-reply)
+                break
+            except Exception:  # keep running, like firmware with a fault handler
+                _log.exception("firmware receive() failed on %r", self)
+
+    # -- handles and interface claims (libusb_open, libusb_claim_interface) ---------------
+
+    def open(self) -> SimHandle:
+        with self._lock:
+            if not self.plugged:
+                raise usb_error(LibusbError.NO_DEVICE)
+            handle = SimHandle(self)
+            self._handles.add(handle)
+            return handle
+
+    def close(self, handle: SimHandle) -> None:
+        with self._lock:
+            handle.closed = True
+            self._handles.discard(handle)
+            for intf in [i for i, h in self.claims.items() if h is handle]:
+                del self.claims[intf]
+        self.in_pipe.wake()
+        self.out_pipe.wake()
+
+    def claim(self, handle: SimHandle, intf: int) -> None:
+        with self._lock:
+            handle.check()
+            if self.configuration == 0 or intf != INTERFACE_NUMBER:
+                raise usb_error(LibusbError.NOT_FOUND, f"no interface {intf}")
+            owner = self.claims.get(intf)
+            if owner is not None and owner is not handle:
+                raise usb_error(LibusbError.BUSY, f"interface {intf} claimed by another handle")
+            self.claims[intf] = handle
+
+    def release(self, handle: SimHandle, intf: int) -> None:
+        with self._lock:
+            handle.check()
+            if self.claims.get(intf) is not handle:
+                raise usb_error(LibusbError.NOT_FOUND, f"interface {intf} not claimed")
+            del self.claims[intf]
+
+    def set_configuration(self, handle: SimHandle, value: int) -> None:
+        with self._lock:
+            handle.check()
+            if value not in (0, CONFIGURATION_VALUE) and value != -1:
+                raise usb_error(LibusbError.NOT_FOUND, f"no configuration {value}")
+            if any(h is not handle for h in self.claims.values()):
+                raise usb_error(LibusbError.BUSY, "an interface is claimed by another handle")
+            self.configuration = max(value, 0)
+        for pipe in (self.in_pipe, self.out_pipe):
+            pipe.clear_halt()
+
+    def reset(self, handle: SimHandle) -> None:
+        """Port reset: endpoint state and queued data are lost; handles and claims survive."""
+        handle.check()
+        for pipe in (self.in_pipe, self.out_pipe):
+            pipe.flush()
+            pipe.clear_halt()
+
+    # -- bulk transfers --------------------------------------------------------------------
+
+    def _pipe(self, endpoint: int) -> InPipe | OutPipe:
+        if endpoint == EP_IN:
+            return self.in_pipe
+        if endpoint == EP_OUT:
+            return self.out_pipe
+        raise usb_error(LibusbError.NOT_FOUND, f"no endpoint 0x{endpoint:02x}")
+
+    def _prepare_io(self, handle: SimHandle, endpoint: int) -> InPipe | OutPipe:
+        """Checks before a transfer; like usbfs, an unclaimed interface is claimed implicitly."""
+        handle.check()
+        if self.configuration == 0:
+            raise usb_error(LibusbError.NOT_FOUND, "device not configured")
+        pipe = self._pipe(endpoint)
+        if self.claims.get(INTERFACE_NUMBER) is not handle:
+            self.claim(handle, INTERFACE_NUMBER)
+        return pipe
+
+    def bulk_read(self, handle: SimHandle, endpoint: int, out: memoryview, timeout_ms: int) -> int:
+        pipe = self._prepare_io(handle, endpoint)
+        if not isinstance(pipe, InPipe):
+            raise usb_error(LibusbError.INVALID_PARAM, f"0x{endpoint:02x} is an OUT endpoint")
+        return pipe.read_transfer(out, timeout_ms, handle.check)
+
+    def bulk_write(self, handle: SimHandle, endpoint: int, data: memoryview, timeout_ms: int) -> int:
+        pipe = self._prepare_io(handle, endpoint)
+        if not isinstance(pipe, OutPipe):
+            raise usb_error(LibusbError.INVALID_PARAM, f"0x{endpoint:02x} is an IN endpoint")
+        return pipe.write_transfer(data, timeout_ms, handle.check)
+
+    def clear_halt(self, handle: SimHandle, endpoint: int) -> None:
+        handle.check()
+        self._pipe(endpoint).clear_halt()
+
+    # -- endpoint 0 ------------------------------------------------------------------------
+
+    def control(self, handle: SimHandle, request_type: int, request: int, value: int,
+                index: int, data: memoryview) -> int:
+        """A control transfer on endpoint 0; returns the byte count (IN: written into ``data``).
+        Requests the device does not support STALL (EPIPE), as on real hardware."""
+        handle.check()
+        if request_type & 0x80:
+            reply = self._control_in(request_type, request, value, index)
+            n = min(len(reply), len(data))
+            data[:n] = reply[:n]
+            return n
+        self._control_out(handle, request_type, request, value, index)
+        return len(data)
+
+    def _control_in(self, request_type: int, request: int, value: int, index: int) -> bytes:
+        d = self.descriptors
+        if request_type == 0x80 and request == GET_DESCRIPTOR:
+            kind, number = value >> 8, value & 0xFF
+            if kind == DT_DEVICE and number == 0:
+                return d.device.pack()
+            if kind == DT_CONFIG and number < len(d.configurations):
+                return d.configurations[number].pack()
+            if kind == DT_STRING:
+                text = d.string(number, index)
+                if text is not None:
+                    return text
+        elif request_type == 0x80 and request == GET_CONFIGURATION:
+            return bytes((self.configuration,))
+        elif request_type == 0x80 and request == GET_STATUS:
+            return b"\x00\x00"  # bus powered, no remote wakeup
+        elif request_type == 0x81 and request in (GET_STATUS, GET_INTERFACE):
+            if index == INTERFACE_NUMBER:
+                return b"\x00\x00" if request == GET_STATUS else b"\x00"
+        elif request_type == 0x82 and request == GET_STATUS:
+            return struct.pack("<H", int(self._pipe(index).halted))
+        raise usb_error(LibusbError.PIPE, f"request 0x{request_type:02x}/0x{request:02x} stalled")
+
+    def _control_out(self, handle: SimHandle, request_type: int, request: int, value: int,
+                     index: int) -> None:
+        if request_type == 0x00 and request == SET_CONFIGURATION:
+            self.set_configuration(handle, value)
+        elif request_type == 0x02 and request in (CLEAR_FEATURE, SET_FEATURE) \
+                and value == FEATURE_ENDPOINT_HALT:
+            pipe = self._pipe(index)
+            pipe.clear_halt() if request == CLEAR_FEATURE else pipe.halt()
+        elif request_type == 0x01 and request == SET_INTERFACE and index == INTERFACE_NUMBER \
+                and value == 0:
+            pass
+        else:
+            raise usb_error(LibusbError.PIPE,
+                            f"request 0x{request_type:02x}/0x{request:02x} stalled")

@@ -1,0 +1,70 @@
+"""Board renderer: poses are reproducible and visible; rendered corners sit where the truth says."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
+from device_sim.calibration.rays import project_points
+from device_sim.calibration.truth import true_calibration
+
+CALIB = true_calibration(2, (640, 480))
+BOARD = BoardSpec(9, 6, 0.03)
+
+
+def test_poses_reproducible_and_in_range() -> None:
+    a = list(board_poses(4, 12, BOARD, CALIB))
+    b = list(board_poses(4, 12, BOARD, CALIB))
+    assert all(np.array_equal(p.R, q.R) and np.array_equal(p.t, q.t) for p, q in zip(a, b))
+    centre = np.array([4, 2.5, 0]) * 0.03
+    for p in a:
+        assert 0.4 <= (p.R @ centre + p.t)[2] <= 1.5
+        tilt = np.degrees(np.arccos(abs(p.R[2, 2])))
+        assert tilt <= 40.01
+        for K, D, pts in ((CALIB.K_left, CALIB.D_left, BOARD.outline() @ p.R.T + p.t),
+                          (CALIB.K_right, CALIB.D_right, (BOARD.outline() @ p.R.T + p.t) @ CALIB.R.T + CALIB.T)):
+            uv = project_points(K, D, pts)
+            assert np.all(uv >= 0) and np.all(uv < [640, 480])
+    xs = [(p.R @ centre + p.t)[0] / (p.R @ centre + p.t)[2] for p in a]
+    assert max(xs) - min(xs) > 0.3  # spread across the field of view
+
+
+def test_impossible_board_is_an_error() -> None:
+    with pytest.raises(ValueError, match="does not fit"):
+        list(board_poses(0, 1, BoardSpec(9, 6, 0.2), CALIB, distance_m=(0.4, 0.5)))
+    with pytest.raises(ValueError, match="bad board"):
+        BoardSpec(1, 6, 0.03)
+
+
+def test_rendered_corners_match_projection() -> None:
+    renderer = StereoBoardRenderer(CALIB, BOARD, supersample=4)
+    rng = np.random.default_rng(0)
+    errors = []
+    for pose in board_poses(1, 4, BOARD, CALIB, distance_m=(0.35, 0.8)):
+        left, right = renderer.render(pose, rng)
+        assert left.dtype == np.uint8 and left.shape == (480, 640)
+        cam_pts = BOARD.object_points() @ pose.R.T + pose.t
+        for img, K, D, pts in ((left, CALIB.K_left, CALIB.D_left, cam_pts),
+                               (right, CALIB.K_right, CALIB.D_right, cam_pts @ CALIB.R.T + CALIB.T)):
+            found, corners = cv2.findChessboardCorners(img, (9, 6))
+            assert found
+            corners = cv2.cornerSubPix(img, corners, (5, 5), (-1, -1),
+                                       (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4))
+            truth = project_points(K, D, pts)
+            c = corners.reshape(-1, 2)
+            if np.linalg.norm(c[0] - truth[0]) > np.linalg.norm(c[-1] - truth[0]):
+                c = c[::-1]  # OpenCV may start from the opposite corner
+            errors.append(c - truth)
+    e = np.concatenate(errors)
+    assert np.sqrt((e ** 2).sum(axis=1).mean()) < 0.12
+    assert np.all(np.abs(e.mean(axis=0)) < 0.02)
+
+
+def test_noise_free_render_is_deterministic_and_levels() -> None:
+    renderer = StereoBoardRenderer(CALIB, BOARD, supersample=1)
+    pose = next(board_poses(3, 1, BOARD, CALIB))
+    a, _ = renderer.render(pose, noise_sigma=0.0)
+    b, _ = renderer.render(pose, noise_sigma=0.0)
+    assert np.array_equal(a, b)
+    assert set(np.unique(a)) == {30, 110, 220}

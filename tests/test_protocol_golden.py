@@ -1,0 +1,249 @@
+"""Golden wire vectors of protocol v1: the exact bytes every message class puts on the wire.
+
+``tests/golden/protocol_v1.json`` pins, for one representative instance of EVERY class in
+``protocol.messages.MESSAGES``, the complete frame (header + payload + CRC-32 trailer) as hex.
+A failure here means the bytes on the wire changed: old devices and hosts will no longer
+understand this code. That is almost always a bug, not a reason to update the file.
+
+Regenerate the file ONLY for a deliberate, versioned protocol change (and bump the protocol
+version / SPEC.md with it):
+
+    .venv/bin/python tests/test_protocol_golden.py --regenerate
+
+then review the diff of tests/golden/protocol_v1.json byte by byte.
+"""
+from __future__ import annotations
+
+import binascii
+import dataclasses
+import enum
+import json
+import struct
+import sys
+import zlib
+from pathlib import Path
+
+import pytest
+
+from protocol import messages as m
+from protocol.errors import ErrorCode
+from protocol.framing import FLAG_RESEND, HEADER_LEN, MAGIC, TRAILER_LEN, Decoder, Packet
+from protocol.params import PARAMS
+
+GOLDEN = Path(__file__).resolve().parent / "golden" / "protocol_v1.json"
+
+_COUNTERS = {name: (i + 1) * 1_000_003 for i, name in enumerate(m.COUNTERS)}
+_COUNTERS["rx_bytes"] = (1 << 64) - 1  # full u64 range
+_COUNTERS["nacks"] = 0
+
+# (instance, request_id, flags), one per message class, with non-trivial field values.
+CASES: list[tuple[m.Message, int, int]] = [
+    (m.GetInfo(), 1, 0),
+    (m.GetConfig(), 2, 0),
+    (m.SetConfig({1: 1280, 8: 128, 10: -64, 18: -1, 14: 1 << 20}), 0x1234, FLAG_RESEND),
+    (m.Trigger(), 0xFFFF, 0),
+    (m.Start(), 0x0100, 0),
+    (m.Stop(), 0x00FF, 0),
+    (m.Heartbeat(), 0xBEEF, 0),
+    (m.TimeSync(), 0x7FFF, 0),
+    (m.Info(model="STOC-Σ1 stereo", serial="SN-00042-ß", firmware_version="1.2.3+çà", protocol_version=(1, 0),
+            capabilities=0xA5A50F0F, sensor_width=1280, sensor_height=960, max_payload=1 << 20,
+            max_width=1280, max_height=960), 1, 0),
+    (m.Config({p.pid: int(p.default) for p in PARAMS}), 2, 0),
+    (m.ConfigApplied({1: 640, 10: -256, 14: 1 << 20, 0xFFFF: -(1 << 31), 0x1234: (1 << 31) - 1}), 0x1234, 0),
+    (m.Triggered(trigger_id=0xDEADBEEF, sequence=42), 0xFFFF, 0),
+    (m.Started(), 0x0100, 0),
+    (m.Stopped(), 0x00FF, 0),
+    (m.Status(uptime_us=0x0123456789ABCDEF, streaming=True, trigger_mode=1, counters=_COUNTERS), 0xBEEF, 0),
+    (m.Time(device_time_us=1_700_000_000_123_456), 0x7FFF, 0),
+    (m.Nack(request_type=m.MsgType.SET_CONFIG, code=int(ErrorCode.OUT_OF_RANGE), param_id=8,
+            message="num_disparities=100: muss ein Vielfaches von 16 sein — 視差 ✗ 📷"), 0x1234, 0),
+    (m.FrameBegin(sequence=0x01020304, trigger_id=7, device_time_us=123_456_789_012, exposure_us=4000, gain=120,
+                  width=640, height=480, planes=7, flags=m.FRAME_RECTIFIED, disparity_format=m.DISPARITY_S16_Q4,
+                  subpixel=16, min_disparity=-32, num_disparities=128, invalid_disparity=-32768,
+                  calibration_id=0xC0FFEE, focal_px=812.5, cx=319.75, cy=-239.25, baseline_m=0.0625), 0, 0),
+    (m.FrameData(sequence=0x01020304, plane=4, offset=0x00012340, data=bytes(range(0, 256, 7)) + MAGIC + b"\x00\xff"),
+     0, 0),
+    (m.FrameEnd(sequence=0x01020304, status=m.FRAME_SENSOR_OVERRUN, left_bytes=307200, right_bytes=307200,
+                disparity_bytes=614400), 0, 0),
+]
+BY_NAME = {type(msg).__name__: (msg, rid, flags) for msg, rid, flags in CASES}
+
+
+def _jsonable(v):
+    if isinstance(v, bool):
+        return v
+    if isinstance(v, enum.Enum):
+        return int(v)
+    if isinstance(v, (bytes, bytearray, memoryview)):
+        return {"hex": bytes(v).hex()}
+    if isinstance(v, (tuple, list)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    return v
+
+
+def fields_json(msg: m.Message) -> dict:
+    return {f.name: _jsonable(getattr(msg, f.name)) for f in dataclasses.fields(msg)}
+
+
+def build_golden() -> dict:
+    return {
+        "_comment": "Protocol v1 golden frames. Regenerate ONLY for a deliberate protocol change: "
+                    ".venv/bin/python tests/test_protocol_golden.py --regenerate",
+        "protocol_version": [1, 0],
+        "vectors": [
+            {"message": type(msg).__name__, "msg_type": f"0x{msg.TYPE:04x}", "request_id": rid, "flags": flags,
+             "fields": fields_json(msg), "hex": m.encode(msg, rid, flags).hex()}
+            for msg, rid, flags in CASES
+        ],
+    }
+
+
+def load_golden() -> dict:
+    return json.loads(GOLDEN.read_text(encoding="utf-8"))
+
+
+VECTORS = load_golden()["vectors"] if GOLDEN.exists() else []
+NAMES = [v["message"] for v in VECTORS]
+
+
+def vector(name: str) -> dict:
+    return next(v for v in VECTORS if v["message"] == name)
+
+
+# -- coverage ----------------------------------------------------------------------------------
+def test_every_message_class_has_exactly_one_vector() -> None:
+    classes = sorted(cls.__name__ for cls in m.MESSAGES.values())
+    assert len(classes) == 20
+    assert sorted(BY_NAME) == classes
+    assert len(CASES) == len(BY_NAME)
+    assert sorted(NAMES) == classes
+    assert load_golden()["protocol_version"] == [1, 0]
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_vector_metadata_matches_the_instance(name: str) -> None:
+    msg, rid, flags = BY_NAME[name]
+    v = vector(name)
+    assert v["msg_type"] == f"0x{m.MESSAGES[msg.TYPE].TYPE:04x}"
+    assert (v["request_id"], v["flags"]) == (rid, flags)
+    assert v["fields"] == fields_json(msg)
+
+
+# -- encode / decode against the stored bytes --------------------------------------------------
+@pytest.mark.parametrize("name", NAMES)
+def test_encode_gives_the_golden_bytes(name: str) -> None:
+    msg, rid, flags = BY_NAME[name]
+    assert m.encode(msg, rid, flags).hex() == vector(name)["hex"]
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_decode_of_the_golden_bytes_gives_the_instance(name: str) -> None:
+    msg, rid, flags = BY_NAME[name]
+    wire = bytes.fromhex(vector(name)["hex"])
+    dec = Decoder()
+    packets = dec.feed(wire)
+    assert packets == [Packet(msg.TYPE, rid, flags, msg.pack(), (1, 0))]
+    out = m.decode_packet(packets[0])
+    assert type(out) is type(msg)
+    assert out == msg
+    assert out.pack() == wire[HEADER_LEN:-TRAILER_LEN]
+    assert dec.buffered == 0
+    assert dec.stats.packets == 1 and dec.stats.garbage_bytes == 0 and dec.stats.dropped == 0
+    assert dec.stats.bytes_in == len(wire)
+
+
+def test_all_golden_frames_back_to_back_decode_in_order() -> None:
+    wire = b"".join(bytes.fromhex(v["hex"]) for v in VECTORS)
+    dec = Decoder()
+    packets = [p for i in range(0, len(wire), 7) for p in dec.feed(wire[i:i + 7])]
+    assert [type(m.decode_packet(p)).__name__ for p in packets] == NAMES
+    assert [m.decode_packet(p) for p in packets] == [BY_NAME[n][0] for n in NAMES]
+    assert [p.request_id for p in packets] == [BY_NAME[n][1] for n in NAMES]
+    assert dec.stats.packets == len(NAMES) and dec.stats.dropped == 0 and dec.stats.garbage_bytes == 0
+
+
+# -- the layout, checked by hand rather than through the codec ---------------------------------
+def test_crc_check_values() -> None:
+    assert binascii.crc_hqx(b"123456789", 0xFFFF) == 0x29B1  # CRC-16/CCITT-FALSE
+    assert zlib.crc32(b"123456789") == 0xCBF43926  # CRC-32 (IEEE)
+    assert zlib.crc32(b"") == 0
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_header_and_trailer_fields_by_hand(name: str) -> None:
+    msg, rid, flags = BY_NAME[name]
+    wire = bytes.fromhex(vector(name)["hex"])
+    payload = wire[20:-4]
+    assert wire[0:4] == b"STOC"
+    assert (wire[4], wire[5]) == (1, 0)  # version 1.0
+    assert wire[6] == 20  # header_len
+    assert wire[7] == flags
+    assert int.from_bytes(wire[8:10], "little") == msg.TYPE
+    assert int.from_bytes(wire[10:12], "little") == rid
+    assert int.from_bytes(wire[12:16], "little") == len(payload) == len(wire) - 24
+    assert wire[16:18] == b"\x00\x00"  # reserved
+    assert int.from_bytes(wire[18:20], "little") == binascii.crc_hqx(wire[:18], 0xFFFF)
+    assert int.from_bytes(wire[-4:], "little") == zlib.crc32(payload)
+
+
+def test_little_endian_fields_literally() -> None:
+    wire = bytes.fromhex(vector("SetConfig")["hex"])
+    assert wire[:16] == b"STOC\x01\x00\x14\x01\x03\x00\x34\x12" + struct.pack("<I", 2 + 5 * 6)
+    # payload: u16 count, then (u16 id, i32 value) pairs in insertion order
+    assert wire[20:22] == b"\x05\x00"
+    assert wire[22:28] == b"\x01\x00" + (1280).to_bytes(4, "little")
+    assert wire[34:40] == b"\x0a\x00\xc0\xff\xff\xff"  # min_disparity id 10 = -64
+    assert wire[40:46] == b"\x12\x00\xff\xff\xff\xff"  # disp12_max_diff id 18 = -1
+
+    wire = bytes.fromhex(vector("GetInfo")["hex"])
+    assert len(wire) == 24
+    assert wire[:18] == b"STOC\x01\x00\x14\x00\x01\x00\x01\x00" + bytes(6)
+    assert wire[20:] == bytes(4)  # CRC-32 of an empty payload
+
+    wire = bytes.fromhex(vector("Trigger")["hex"])
+    assert wire[8:12] == b"\x04\x00\xff\xff"
+
+    wire = bytes.fromhex(vector("Triggered")["hex"])
+    assert wire[8:16] == b"\x04\x80\xff\xff\x08\x00\x00\x00"
+    assert wire[20:28] == b"\xef\xbe\xad\xde\x2a\x00\x00\x00"
+
+    wire = bytes.fromhex(vector("Nack")["hex"])
+    text = BY_NAME["Nack"][0].message.encode("utf-8")
+    assert wire[8:12] == b"\xff\xff\x34\x12"
+    assert wire[20:28] == b"\x03\x00\x04\x00\x08\x00" + len(text).to_bytes(2, "little")
+    assert wire[28:-4] == text
+
+    wire = bytes.fromhex(vector("FrameBegin")["hex"])
+    assert wire[8:10] == b"\x01\x40"
+    p = wire[20:-4]
+    assert len(p) == 56
+    assert p[0:4] == b"\x04\x03\x02\x01"  # sequence
+    assert p[26:30] == b"\x07\x01\x01\x10"  # planes, flags, disparity_format, subpixel
+    assert p[30:32] == b"\xe0\xff"  # min_disparity -32 as i16
+    assert p[34:36] == b"\x00\x80"  # invalid_disparity -32768
+    assert p[36:40] == b"\xee\xff\xc0\x00"  # calibration_id
+    assert struct.unpack_from("<4f", p, 40) == (812.5, 319.75, -239.25, 0.0625)
+
+    wire = bytes.fromhex(vector("FrameData")["hex"])
+    assert wire[20:29] == b"\x04\x03\x02\x01\x04\x40\x23\x01\x00"
+    assert wire[29:-4] == BY_NAME["FrameData"][0].data
+
+    wire = bytes.fromhex(vector("Status")["hex"])
+    p = wire[20:-4]
+    assert p[:12] == bytes.fromhex("efcdab8967452301") + b"\x01\x01" + len(m.COUNTERS).to_bytes(2, "little")
+    assert len(p) == 12 + 8 * len(m.COUNTERS)
+
+
+def regenerate() -> None:
+    GOLDEN.parent.mkdir(parents=True, exist_ok=True)
+    GOLDEN.write_text(json.dumps(build_golden(), indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+    print(f"wrote {GOLDEN}")
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] != ["--regenerate"]:
+        sys.exit(__doc__)
+    regenerate()

@@ -1,0 +1,180 @@
+"""Benchmark the device matching core against cv2.StereoBM in one process.
+
+    python -m tools.bench_matching [--threads 2] [--repeat 15] [--quick] [--profile]
+
+Prints per case: median ms of each, ratio core/cv2, G disparity evaluations/s (W*H*D/time),
+bad-2.0 on Motorcycle (invalid counts as bad, unknown ground truth skipped), bit-identical,
+peak extra memory per call (tracemalloc) and the matcher's scratch size, plus the JIT warm-up.
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+
+def _cv_bm(cv2, p):
+    create = getattr(cv2, "StereoBM_create", None) or cv2.StereoBM.create
+    bm = create(numDisparities=p.num_disparities, blockSize=p.block_size)
+    bm.setMinDisparity(p.min_disparity)
+    bm.setPreFilterType(1 if p.pre_filter_type == "xsobel" else 0)
+    bm.setPreFilterSize(p.pre_filter_size)
+    bm.setPreFilterCap(p.pre_filter_cap)
+    bm.setTextureThreshold(p.texture_threshold)
+    bm.setUniquenessRatio(p.uniqueness_ratio)
+    bm.setSpeckleWindowSize(p.speckle_window_size)
+    bm.setSpeckleRange(p.speckle_range)
+    bm.setDisp12MaxDiff(p.disp12_max_diff)
+    return bm
+
+
+def synthetic_scene(h: int = 480, w: int = 640, seed: int = 0):
+    """Smoothed random texture: background at 20 px, a slanted plane and a box nearer."""
+    rng = np.random.default_rng(seed)
+    pad = 160
+    base = rng.integers(0, 256, (h, w + 2 * pad)).astype(np.float32)
+    k = np.array([1, 2, 1], np.float32) / 4
+    base = np.apply_along_axis(lambda v: np.convolve(v, k, "same"), 1, base)
+    base = np.apply_along_axis(lambda v: np.convolve(v, k, "same"), 0, base)
+    base = base.astype(np.uint8)
+    right = base[:, pad:pad + w].copy()
+    gt = np.full((h, w), 20.0, np.float32)
+    gt[:, :] += np.linspace(0, 12, w)[None, :] * (np.arange(h)[:, None] > h // 2)
+    gt[h // 5:h // 2, w // 4:w // 2] = 45.0
+    xs = np.arange(w)[None, :] + pad - np.rint(gt).astype(int)
+    left = np.take_along_axis(base, xs, axis=1)
+    return left.astype(np.uint8), right, gt
+
+
+def motorcycle():
+    import cv2
+    from skimage import data
+    left, right, gt = data.stereo_motorcycle()
+    return (cv2.cvtColor(left, cv2.COLOR_RGB2GRAY), cv2.cvtColor(right, cv2.COLOR_RGB2GRAY),
+            gt.astype(np.float32))
+
+
+def bad_rate(disp: np.ndarray, gt: np.ndarray, invalid: int, thr: float = 2.0) -> float:
+    """Middlebury bad-thr over known pixels (finite gt); invalid output counts as bad."""
+    known = np.isfinite(gt)
+    d = disp.astype(np.float32) / 16.0
+    bad = (disp == invalid) | (np.abs(d - gt) > thr)
+    return float(np.count_nonzero(bad & known)) / max(1, int(np.count_nonzero(known)))
+
+
+def _median_ms(fn, repeat: int) -> float:
+    ts = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        ts.append((time.perf_counter() - t0) * 1e3)
+    return statistics.median(ts)
+
+
+def _cache_present() -> bool:
+    d = Path(__file__).resolve().parent.parent / "device_sim" / "matching" / "__pycache__"
+    return d.is_dir() and any(d.glob("*.nbi"))
+
+
+def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
+    """Median ms of each pipeline stage of Matcher m (prefilter, SAD/WTA/LR, speckle)."""
+    from device_sim.matching.postfilter import filter_speckles
+    from device_sim.matching.prefilter import prefilter_pair
+    p = m.params
+    disp = m.match(left, right)
+    out = {"prefilter": _median_ms(lambda: prefilter_pair(
+        left, right, m.pl, m.pr, p.pre_filter_type, p.pre_filter_size, p.pre_filter_cap,
+        m.pf_vsum), repeat)}
+    out["sad+wta+lr"] = _median_ms(lambda: m.run_sad(disp), repeat)
+    if p.use_speckle:
+        out["speckle"] = _median_ms(lambda: filter_speckles(
+            disp.copy(), p.invalid_value, p.speckle_window_size, p.speckle_range, m.labels,
+            m.stack, m.rtype), repeat)
+    out["total"] = _median_ms(lambda: m.match(left, right), repeat)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="stereocam bench matching", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--threads", type=int, default=2, help="threads for both (default 2)")
+    ap.add_argument("--repeat", type=int, default=15, help="timed runs per case")
+    ap.add_argument("--quick", action="store_true", help="only 640x480, D=64, block 9")
+    ap.add_argument("--profile", action="store_true", help="per-stage timings of the core")
+    args = ap.parse_args(argv)
+
+    import cv2
+    import numba
+
+    cached = _cache_present()
+    t0 = time.perf_counter()
+    from device_sim.matching import Matcher, MatchParams
+    t_import = time.perf_counter() - t0
+    cv2.setNumThreads(args.threads)
+    numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
+
+    sl, sr, sgt = synthetic_scene()
+    scenes = [("synthetic 640x480", sl, sr, sgt)]
+    if not args.quick:
+        try:
+            scenes.append(("Motorcycle 741x500", *motorcycle()))
+        except Exception as exc:  # skimage missing or data unavailable
+            print(f"(Motorcycle skipped: {exc})")
+    cases = [(64, 9)] if args.quick else [(64, 9), (64, 15), (128, 9), (128, 15)]
+
+    # JIT warm-up: first call compiles (or loads the on-disk cache) every kernel
+    t0 = time.perf_counter()
+    for kw in (dict(num_disparities=16, block_size=9),
+               dict(num_disparities=16, block_size=9, pre_filter_type="normalized",
+                    disp12_max_diff=1, speckle_window_size=10, speckle_range=16)):
+        Matcher(sl[:64, :128].shape, MatchParams(**kw)).match(sl[:64, :128], sr[:64, :128])
+    t_jit = time.perf_counter() - t0 + t_import
+
+    print(f"threads={args.threads} (cv2 {cv2.__version__}, numba {numba.__version__}, "
+          f"numba threads {numba.get_num_threads()}); repeat={args.repeat}")
+    print(f"JIT warm-up (import + first calls): {t_jit:.2f} s "
+          f"({'on-disk cache present' if cached else 'compiled from scratch'})")
+    hdr = (f"{'scene':<19} {'D':>4} {'blk':>3} {'core ms':>8} {'cv2 ms':>8} {'ratio':>6} "
+           f"{'core G/s':>8} {'cv2 G/s':>8} {'bad2.0':>7} {'bitexact':>8} {'peak MiB':>8} "
+           f"{'scratch MiB':>11}")
+    print(hdr)
+    print("-" * len(hdr))
+    for name, left, right, gt in scenes:
+        h, w = left.shape
+        for nd, bs in cases:
+            p = MatchParams(num_disparities=nd, block_size=bs)
+            m = Matcher(left.shape, p)
+            bm = _cv_bm(cv2, p)
+            ours = m.match(left, right)
+            ref = bm.compute(left, right)
+            same = bool(np.array_equal(ours, ref))
+            t_core, t_cv = [], []
+            for _ in range(args.repeat):  # interleave so both see the same machine state
+                t_core.append(_median_ms(lambda: m.match(left, right), 1))
+                t_cv.append(_median_ms(lambda: bm.compute(left, right), 1))
+            mc, mcv = statistics.median(t_core), statistics.median(t_cv)
+            tracemalloc.start()
+            m.match(left, right)
+            peak = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+            scratch = sum(getattr(m, a).nbytes for a in vars(m)
+                          if isinstance(getattr(m, a), np.ndarray))
+            bad = bad_rate(ours, gt, p.invalid_value) if name.startswith("Motorcycle") else None
+            evals = w * h * nd
+            print(f"{name:<19} {nd:>4} {bs:>3} {mc:>8.2f} {mcv:>8.2f} {mc / mcv:>6.2f} "
+                  f"{evals / mc / 1e6:>8.2f} {evals / mcv / 1e6:>8.2f} "
+                  f"{'-' if bad is None else f'{100 * bad:.1f}%':>7} {'yes' if same else 'NO':>8} "
+                  f"{peak / 2**20:>8.2f} {scratch / 2**20:>11.2f}")
+            if args.profile:
+                prof = profile_stages(m, left, right, args.repeat)
+                print("    profile (ms): " + ", ".join(f"{k} {v:.2f}" for k, v in prof.items()))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
