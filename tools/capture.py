@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("url")
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--count", type=int, default=1, help="frames to save")
-    ap.add_argument("--timeout", type=float, default=10.0)
+    ap.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for each frame (the first pays JIT warm-up)")
     args = ap.parse_args(argv)
     with host.open(args.url, timeout=2.0) as cam:
         cam.set_trigger_mode("software")

@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     valid, med, bad1 = (float(np.mean([s[i] for s in stats])) for i in range(3))
     print("wrote " + ", ".join(str(p) for p in paths.values()))
     print(f"summary: frames={frames} fps={frames / elapsed:.1f} dropped={host_stats['frames_dropped']} "
-          f"(device {dev['frames_dropped']}) valid_disparity={valid:.1f}% "
+          f"device_dropped={dev['frames_dropped']} valid_disparity={valid:.1f}% "
           f"depth_error_median={med:.2f}% bad1px={bad1:.1f}% link_errors="
           f"{host_stats['header_crc_errors'] + host_stats['payload_crc_errors']}")
     return 0
