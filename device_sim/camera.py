@@ -260,7 +260,7 @@ class SimulatedCamera:
         while len(self._truth) > GROUND_TRUTH_KEEP:
             self._truth.popitem(last=False)
         begin = m.FrameBegin(
-            req.sequence, req.trigger_id, self.clock.at(req.time), cfg["exposure_us"], cfg["gain"], w, h,
+            req.sequence & 0xFFFFFFFF, req.trigger_id & 0xFFFFFFFF, self.clock.at(req.time), cfg["exposure_us"], cfg["gain"], w, h,
             int(outputs), m.FRAME_RECTIFIED, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
             cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, 0, g.focal_px, g.cx, g.cy, g.baseline_m)
         planes = [(Output.LEFT, left), (Output.RIGHT, right), (Output.DISPARITY, disp)]

@@ -14,8 +14,8 @@ import numba as nb
 import numpy as np
 
 # primitive record layout (float64 row)
-KIND, CX, CY, CZ, A1X, A1Y, A1Z, A2X, A2Y, A2Z, H1, H2, ALBEDO, CONTRAST, TEXSCALE, TEXOFF = range(16)
-PRIM_FIELDS = 16
+KIND, CX, CY, CZ, A1X, A1Y, A1Z, A2X, A2Y, A2Z, H1, H2, ALBEDO, CONTRAST, TEXSCALE, TEXOFF, NX, NY, NZ = range(19)
+PRIM_FIELDS = 19
 RECT, SPHERE = 0.0, 1.0
 
 
@@ -50,10 +50,11 @@ def _bilinear(data, off, side, u, v):
     fv = math.floor(v)
     au = u - fu
     av = v - fv
-    iu = int(fu) % side
-    iv = int(fv) % side
-    ju = (iu + 1) % side
-    jv = (iv + 1) % side
+    mask = side - 1  # sides are powers of two: wrap with a mask
+    iu = int(fu) & mask
+    iv = int(fv) & mask
+    ju = (iu + 1) & mask
+    jv = (iv + 1) & mask
     a = data[off + iv * side + iu]
     b = data[off + iv * side + ju]
     c = data[off + jv * side + iu]
@@ -99,9 +100,7 @@ def render_radiance(rays, origin, rot, prims, tex, tex_off, tex_side, light, out
                 py = prims[i, CY] - origin[1]
                 pz = prims[i, CZ] - origin[2]
                 if prims[i, KIND] == RECT:
-                    nx = prims[i, A1Y] * prims[i, A2Z] - prims[i, A1Z] * prims[i, A2Y]
-                    ny = prims[i, A1Z] * prims[i, A2X] - prims[i, A1X] * prims[i, A2Z]
-                    nz = prims[i, A1X] * prims[i, A2Y] - prims[i, A1Y] * prims[i, A2X]
+                    nx, ny, nz = prims[i, NX], prims[i, NY], prims[i, NZ]
                     den = nx * dx + ny * dy + nz * dz
                     if abs(den) < 1e-12:
                         continue
@@ -136,9 +135,7 @@ def render_radiance(rays, origin, rot, prims, tex, tex_off, tex_side, light, out
             if prims[hit, KIND] == RECT:
                 s1 = qx * prims[hit, A1X] + qy * prims[hit, A1Y] + qz * prims[hit, A1Z]
                 s2 = qx * prims[hit, A2X] + qy * prims[hit, A2Y] + qz * prims[hit, A2Z]
-                nx = prims[hit, A1Y] * prims[hit, A2Z] - prims[hit, A1Z] * prims[hit, A2Y]
-                ny = prims[hit, A1Z] * prims[hit, A2X] - prims[hit, A1X] * prims[hit, A2Z]
-                nz = prims[hit, A1X] * prims[hit, A2Y] - prims[hit, A1Y] * prims[hit, A2X]
+                nx, ny, nz = prims[hit, NX], prims[hit, NY], prims[hit, NZ]
             else:
                 r = prims[hit, H1]
                 nx, ny, nz = qx / r, qy / r, qz / r

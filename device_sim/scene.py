@@ -24,6 +24,7 @@ def _rect(center, a1, a2, h1, h2, albedo=0.5, contrast=0.45, texscale=1024.0, te
     a2 = np.asarray(a2, float) / np.linalg.norm(a2)
     row[R.A1X:R.A1Z + 1] = a1
     row[R.A2X:R.A2Z + 1] = a2
+    row[R.NX:R.NZ + 1] = np.cross(a1, a2)
     row[R.H1], row[R.H2] = h1, h2
     row[R.ALBEDO], row[R.CONTRAST], row[R.TEXSCALE], row[R.TEXOFF] = albedo, contrast, texscale, texoff
     return row

@@ -45,11 +45,11 @@ class Camera:
     """One connected camera. Use ``host.open(url)``; close it (or use ``with``) when done."""
 
     def __init__(self, transport: Transport, *, timeout: float = 1.0, retries: int = 2,
-                 heartbeat_interval: float = 0.5, queue_depth: int = 8):
+                 heartbeat_interval: float = 0.5, queue_depth: int = 8, deliver_incomplete: bool = False):
         self.url = transport.url
         self.timeout = timeout
         self.clock = ClockMap()
-        self.assembler = FrameAssembler(self.clock, queue_depth)
+        self.assembler = FrameAssembler(self.clock, queue_depth, deliver_incomplete)
         self.link = Link(transport, timeout=timeout, retries=retries, on_event=self.assembler.on_message)
         self._closed = threading.Event()
         self._last_sync = 0.0

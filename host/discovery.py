@@ -50,7 +50,8 @@ def usb_entries() -> list[DeviceEntry]:
             url = f"usb://?serial={serial}"
         entries.append(DeviceEntry(url, serial, model, "usb", _bcd_to_version(dev.bcdDevice),
                                    simulated=kind == "sim",
-                                   location=f"bus {dev.bus:03d} address {dev.address:03d}"))
+                                   location=f"{'simulated ' if kind == 'sim' else ''}bus "
+                                            f"{dev.bus:03d} address {dev.address:03d}"))
     return entries
 
 

@@ -19,8 +19,9 @@ from protocol.params import Output
 
 class FrameStatus(enum.Enum):
     COMPLETE = "complete"
-    MISSING_DATA = "missing data"
-    SIZE_MISMATCH = "size mismatch"
+    MISSING_DATA = "missing data"  # a chunk or the trailer never arrived; missing bytes read as 0
+    SIZE_MISMATCH = "size mismatch"  # a chunk outside its plane, or the trailer disagrees
+    DEVICE_ERROR = "device error"  # the device flagged the capture in its trailer
 
 
 @dataclass(frozen=True)
@@ -100,15 +101,17 @@ class Frame:
 @dataclass
 class AssemblyStats:
     frames: int = 0
-    incomplete: int = 0  # dropped: a chunk never arrived or the capture was cut off
-    size_mismatch: int = 0  # dropped: chunk outside its plane or trailer disagrees
+    incomplete: int = 0  # a chunk or the trailer never arrived
+    size_mismatch: int = 0  # chunk outside its plane or trailer disagrees
+    device_errors: int = 0  # the device's trailer status was not OK
     orphan_chunks: int = 0  # chunks of a capture whose leader was lost
     lost: int = 0  # sequence numbers never seen (dropped on the device or on the link)
     queue_overflow: int = 0  # delivered frames discarded because the user did not keep up
 
     @property
     def dropped(self) -> int:
-        return self.incomplete + self.size_mismatch + self.lost + self.queue_overflow
+        """Captures the user did not get whole (delivered flawed ones included)."""
+        return self.incomplete + self.size_mismatch + self.device_errors + self.lost + self.queue_overflow
 
 
 _PLANES = {Output.LEFT: (np.uint8, 1), Output.RIGHT: (np.uint8, 1), Output.DISPARITY: (np.dtype("<i2"), 2)}
@@ -123,9 +126,14 @@ class _Building:
 
 
 class FrameAssembler:
-    """Consumes frame messages in order; puts complete Frames on a bounded queue (oldest dropped)."""
+    """Consumes frame messages in order; puts Frames on a bounded queue (oldest dropped).
 
-    def __init__(self, clock_map, depth: int = 8):
+    Flawed captures are counted by reason and dropped, or, with ``deliver_incomplete``, delivered
+    with their ``status`` set (as GigE/USB3 Vision SDKs hand out buffers marked incomplete).
+    """
+
+    def __init__(self, clock_map, depth: int = 8, deliver_incomplete: bool = False):
+        self.deliver_incomplete = deliver_incomplete
         self.frames: queue.Queue[Frame] = queue.Queue(maxsize=depth)
         self.stats = AssemblyStats()
         self._clock_map = clock_map
@@ -150,8 +158,8 @@ class FrameAssembler:
             self._end(msg)
 
     def _begin(self, b: m.FrameBegin) -> None:
-        if self._cur is not None:
-            self.stats.incomplete += 1  # its FRAME_END never came
+        if self._cur is not None:  # its FRAME_END never came
+            self._flawed(self._cur, FrameStatus.MISSING_DATA)
         if self._last_seq is not None and b.sequence > self._last_seq + 1:
             self.stats.lost += b.sequence - self._last_seq - 1
         self._last_seq = b.sequence
@@ -174,18 +182,26 @@ class FrameAssembler:
         cur, self._cur = self._cur, None
         if cur is None or cur.begin.sequence != e.sequence:
             if cur is not None:
-                self.stats.incomplete += 1
+                self._flawed(cur, FrameStatus.MISSING_DATA)
             return
         sent = {Output.LEFT: e.left_bytes, Output.RIGHT: e.right_bytes, Output.DISPARITY: e.disparity_bytes}
-        if cur.bad or any(sent[p] != len(buf) for p, buf in cur.buffers.items()):
-            self.stats.size_mismatch += 1
-            return
-        if any(cur.received[p] != len(buf) for p, buf in cur.buffers.items()):
-            self.stats.incomplete += 1
-            return
-        self._deliver(self._frame(cur))
+        if e.status != m.FRAME_OK:
+            self._flawed(cur, FrameStatus.DEVICE_ERROR)
+        elif cur.bad or any(sent[p] != len(buf) for p, buf in cur.buffers.items()):
+            self._flawed(cur, FrameStatus.SIZE_MISMATCH)
+        elif any(cur.received[p] != len(buf) for p, buf in cur.buffers.items()):
+            self._flawed(cur, FrameStatus.MISSING_DATA)
+        else:
+            self._deliver(self._frame(cur, FrameStatus.COMPLETE))
 
-    def _frame(self, cur: _Building) -> Frame:
+    def _flawed(self, cur: _Building, status: FrameStatus) -> None:
+        counter = {FrameStatus.MISSING_DATA: "incomplete", FrameStatus.SIZE_MISMATCH: "size_mismatch",
+                   FrameStatus.DEVICE_ERROR: "device_errors"}[status]
+        setattr(self.stats, counter, getattr(self.stats, counter) + 1)
+        if self.deliver_incomplete:
+            self._deliver(self._frame(cur, status))
+
+    def _frame(self, cur: _Building, status: FrameStatus) -> Frame:
         b = cur.begin
         planes = {p: np.frombuffer(buf, dtype=_PLANES[p][0]).reshape(b.height, b.width)
                   for p, buf in cur.buffers.items()}
@@ -196,10 +212,10 @@ class FrameAssembler:
             disp.astype(np.int16, copy=False) if disp is not None else None, b.exposure_us, b.gain,
             bool(b.flags & m.FRAME_RECTIFIED),
             DisparityFormat(b.subpixel, b.min_disparity, b.num_disparities, b.invalid_disparity),
-            StereoGeometry(b.focal_px, b.cx, b.cy, b.baseline_m, b.calibration_id))
+            StereoGeometry(b.focal_px, b.cx, b.cy, b.baseline_m, b.calibration_id), status)
 
     def _deliver(self, frame: Frame) -> None:
-        self.stats.frames += 1
+        self.stats.frames += frame.status is FrameStatus.COMPLETE
         while True:
             try:
                 self.frames.put_nowait(frame)

@@ -16,10 +16,10 @@ from .faults import FaultyTransport, PacketFilter
 
 
 @pytest.fixture
-def faulty():
+def faulty(request):
     sim = SimulatedCamera(seed=11)
     link = FaultyTransport(InProcessTransport(sim))
-    cam = Camera(link, timeout=0.5, retries=2)
+    cam = Camera(link, timeout=0.5, retries=2, deliver_incomplete=getattr(request, "param", False))
     cam.configure(width=320, height=240, num_disparities=32, block_size=11)
     yield cam, link, sim
     cam.close()
@@ -69,6 +69,7 @@ def test_request_ids_wrap_and_skip_zero():
     assert ids == [0xFFFE, 0xFFFF, 1, 2]
 
 
+@pytest.mark.parametrize("faulty", [False, True], ids=["dropped", "delivered"], indirect=True)
 def test_corrupted_frame_is_dropped_and_counted(faulty):
     cam, link, sim = faulty
     hits = []
@@ -92,7 +93,13 @@ def test_corrupted_frame_is_dropped_and_counted(faulty):
     assert st["incomplete"] == 1  # the capture that lost its chunk never reached the user
     assert hits[0].payload[:4] != b""
     bad_seq = struct.unpack_from("<I", hits[0].payload)[0]
-    assert bad_seq not in [f.sequence for f in frames]
+    by_seq = {f.sequence: f for f in frames}
+    if cam.assembler.deliver_incomplete:  # handed out, but marked, and the gap reads as zeros
+        assert by_seq[bad_seq].status is host.FrameStatus.MISSING_DATA
+        assert all(f.status is host.FrameStatus.COMPLETE for s, f in by_seq.items() if s != bad_seq)
+    else:
+        assert bad_seq not in by_seq
+        assert all(f.status is host.FrameStatus.COMPLETE for f in frames)
 
 
 def test_bytes_split_into_tiny_reads(faulty):

@@ -271,7 +271,7 @@ def test_garbage_between_frames_is_skipped_and_counted(items, junk, size) -> Non
     s = dec.stats
     assert s.packets == len(items) and dec.buffered == 0
     assert s.bad_headers == s.payload_crc_errors == s.oversize == s.unsupported_version == 0
-    assert s.header_crc_errors <= sum(g.count(MAGIC) for g in junk)
+    assert s.header_crc_errors <= stream.count(MAGIC) - len(frames)  # at most one per false magic
     # SPEC §3: a rejected candidate costs one byte (counted as the error), the rest is garbage
     assert s.garbage_bytes + s.header_crc_errors == total_junk
     assert_every_byte_accounted(dec, out)
@@ -674,6 +674,10 @@ def test_counts_that_do_not_match_the_payload() -> None:
         decode_packet(Packet(m.MsgType.STATUS, 0, 0, struct.pack("<QBBH", 1, 0, 0, 3) + bytes(16)))
     with pytest.raises(ProtocolError, match="SetConfig.*3 parameters need 20 bytes, got 14"):
         decode_packet(Packet(m.MsgType.SET_CONFIG, 0, 0, struct.pack("<HHiHi", 3, 1, 1, 2, 2)))
+    # SPEC §4.2: payload_len MUST be exactly 2 + 6n - also not more whole entries than the count says
+    for cls in (m.SetConfig, m.Config, m.ConfigApplied):
+        with pytest.raises(ProtocolError, match=f"{cls.__name__}.*1 parameters need 8 bytes, got 14"):
+            decode_packet(Packet(cls.TYPE, 0, 0, struct.pack("<HHiHi", 1, 1, 1, 2, 2)))
 
 
 @pytest.mark.parametrize("mtype", [0x0000, 0x0009, 0x8000, 0x8009, 0x4004, 0x1234, 0xFFFE])

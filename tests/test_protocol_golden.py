@@ -237,6 +237,24 @@ def test_little_endian_fields_literally() -> None:
     assert len(p) == 12 + 8 * len(m.COUNTERS)
 
 
+def test_spec_worked_examples() -> None:
+    """protocol/SPEC.md §4.13, byte for byte."""
+    assert m.encode(m.GetInfo(), 1) == bytes.fromhex("53 54 4f 43 01 00 14 00 01 00 01 00 00 00 00 00 00 00 59 3c"
+                                                     " 00 00 00 00")
+    # the RESEND retry of it: flags 01, header CRC value 0xE410 (on the wire LE: 10 e4)
+    retry = m.encode(m.GetInfo(), 1, FLAG_RESEND)
+    assert retry[7] == 0x01 and int.from_bytes(retry[18:20], "little") == 0xE410
+    assert m.encode(m.SetConfig({3: 0}), 2) == bytes.fromhex(
+        "53 54 4f 43 01 00 14 00 03 00 02 00 08 00 00 00 00 00 e4 27 01 00 03 00 00 00 00 00 59 ad 1c 2f")
+    nack = bytes.fromhex("53 54 4f 43 01 00 14 00 ff ff 02 00 1c 00 00 00 00 00 37 6b"
+                         "03 00 04 00 03 00 14 00 66 70 73 3d 30 20 6f 75 74 73 69 64 65 20 31 2e 2e 31 32 30"
+                         "3f 04 0b fe")
+    assert m.encode(m.Nack(m.MsgType.SET_CONFIG, ErrorCode.OUT_OF_RANGE, 3, "fps=0 outside 1..120"), 2) == nack
+    (p,) = Decoder().feed(nack)
+    assert (p.msg_type, p.request_id) == (0xFFFF, 2)
+    assert m.decode_packet(p) == m.Nack(3, 4, 3, "fps=0 outside 1..120")
+
+
 def regenerate() -> None:
     GOLDEN.parent.mkdir(parents=True, exist_ok=True)
     GOLDEN.write_text(json.dumps(build_golden(), indent=1, ensure_ascii=False) + "\n", encoding="utf-8")

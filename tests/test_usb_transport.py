@@ -210,7 +210,6 @@ def test_real_libusb_backend_loads_and_enumerates():
 
 
 def test_simulated_camera_over_usb_answers_get_info():
-    pytest.importorskip("host.link")
     from device_sim import SimulatedCamera
     from host.link import Link
     from protocol import messages as m
@@ -236,14 +235,14 @@ def test_unplug_while_streaming_surfaces_disconnect_in_the_sdk():
         with host.open("usb://?serial=USBCAM2", timeout=2.0) as camera:
             camera.configure(width=320, height=240, fps=30)
             camera.start()
-            frame = camera.get_frame(timeout=10.0)
+            frame = camera.get_frame(timeout=30.0)  # the first one may wait for JIT compiling
             assert frame.left is not None and frame.left.shape == (240, 320)
             device.unplug()
             start = time.monotonic()
             with pytest.raises(DisconnectedError):
                 while True:  # frames already queued on the host may still come out first
-                    camera.get_frame(timeout=2.0)
-            assert time.monotonic() - start < 2.0
+                    camera.get_frame(timeout=2.0)  # a CameraTimeoutError would fail here
+            assert time.monotonic() - start < 5.0
     finally:
         device.unplug()
         cam.close()

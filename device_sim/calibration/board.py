@@ -54,33 +54,57 @@ class BoardPose:
     t: np.ndarray
 
 
+@numba.njit(inline="always")
+def _square_wave_integral(t: float) -> float:
+    """∫_0^t of the period-2 square wave that is +1 on [0, 1) and −1 on [1, 2)."""
+    m = t - 2.0 * np.floor(t / 2.0)
+    return 1.0 - abs(m - 1.0)
+
+
+@numba.njit(inline="always")
+def _filtered_square_wave(t: float, width: float) -> float:
+    """The square wave at t box-filtered over `width` (same units: squares)."""
+    if width < 1e-6:
+        return 1.0 if (int(np.floor(t)) & 1) == 0 else -1.0
+    return (_square_wave_integral(t + 0.5 * width) - _square_wave_integral(t - 0.5 * width)) / width
+
+
+@numba.njit(inline="always")
+def _hit(d: np.ndarray, R: np.ndarray, t: np.ndarray, nt: float) -> tuple[float, float, bool]:
+    """Board-plane coordinates (u, v) where ray d meets the board; False if it does not."""
+    den = R[0, 2] * d[0] + R[1, 2] * d[1] + R[2, 2] * d[2]
+    lam = nt / den if den != 0.0 else -1.0
+    if lam <= 0.0:
+        return 0.0, 0.0, False
+    px, py, pz = lam * d[0] - t[0], lam * d[1] - t[1], lam * d[2] - t[2]
+    return (R[0, 0] * px + R[1, 0] * py + R[2, 0] * pz, R[0, 1] * px + R[1, 1] * py + R[2, 1] * pz, True)
+
+
 @numba.njit(parallel=True, nogil=True, cache=True)
 def _render(rays: np.ndarray, R: np.ndarray, t: np.ndarray, cols: int, rows: int, sq: float,
             margin: float, s: int, black: float, white: float, background: float) -> np.ndarray:
-    h, w = rays.shape[0] // s, rays.shape[1] // s
-    n0, n1, n2 = R[0, 2], R[1, 2], R[2, 2]
-    nt = n0 * t[0] + n1 * t[1] + n2 * t[2]
+    hs, ws = rays.shape[0], rays.shape[1]
+    nt = R[0, 2] * t[0] + R[1, 2] * t[1] + R[2, 2] * t[2]
     lo, hx, hy = -sq - margin, cols * sq + margin, rows * sq + margin
-    out = np.empty((h, w), dtype=np.float32)
-    for j in numba.prange(h):
-        for i in range(w):
+    mid, amp = 0.5 * (black + white), 0.5 * (white - black)
+    out = np.empty((hs // s, ws // s), dtype=np.float32)
+    for j in numba.prange(hs // s):
+        for i in range(ws // s):
             acc = 0.0
             for a in range(s):
                 for b in range(s):
-                    d = rays[j * s + a, i * s + b]
-                    den = n0 * d[0] + n1 * d[1] + n2 * d[2]
-                    lam = nt / den if den != 0.0 else -1.0
-                    if lam <= 0.0:
-                        acc += background
-                        continue
-                    px, py, pz = lam * d[0] - t[0], lam * d[1] - t[1], lam * d[2] - t[2]
-                    u = R[0, 0] * px + R[1, 0] * py + R[2, 0] * pz
-                    v = R[0, 1] * px + R[1, 1] * py + R[2, 1] * pz
-                    if u < lo or u >= hx or v < lo or v >= hy:
+                    y, x = j * s + a, i * s + b
+                    u, v, ok = _hit(rays[y, x], R, t, nt)
+                    if not ok or u < lo or u >= hx or v < lo or v >= hy:
                         acc += background
                     elif -sq <= u < cols * sq and -sq <= v < rows * sq:
-                        parity = (int(np.floor(u / sq)) + int(np.floor(v / sq))) & 1
-                        acc += black if parity == 0 else white
+                        # footprint of this sample on the board, from its neighbours' hits
+                        ux, vx, okx = _hit(rays[y, x + 1 if x + 1 < ws else x - 1], R, t, nt)
+                        uy, vy, oky = _hit(rays[y + 1 if y + 1 < hs else y - 1, x], R, t, nt)
+                        wu = (abs(ux - u) + abs(uy - u)) / sq if okx and oky else 0.0
+                        wv = (abs(vx - v) + abs(vy - v)) / sq if okx and oky else 0.0
+                        acc += mid - amp * _filtered_square_wave(u / sq + 1.0, wu) * \
+                            _filtered_square_wave(v / sq + 1.0, wv)
                     else:
                         acc += white
             out[j, i] = acc / (s * s)

@@ -117,3 +117,15 @@ def opaque(typingctx, value):
             return builder.asm(fnty, "", "=r,0", [args[0]], side_effect=False)
         return value(value), codegen
     return None
+
+
+@intrinsic
+def cdiv(typingctx, a, b):
+    """C integer division (truncates toward zero) in the operands' width; b must be != 0."""
+    if _same_int(a, b):
+        def codegen(context, builder, sig, args):
+            if sig.args[0].signed:
+                return builder.sdiv(args[0], args[1])
+            return builder.udiv(args[0], args[1])
+        return a(a, b), codegen
+    return None

@@ -25,6 +25,14 @@ def check_pair(left: np.ndarray, right: np.ndarray) -> None:
         raise ValueError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
 
 
+def _reciprocals(max_q: int) -> np.ndarray:
+    """M[q] = ceil(2**40 / q): floor(a / q) == (a * M[q]) >> 40 for 0 <= a <= 2**22, q < 2**15."""
+    q = np.arange(max_q + 1, dtype=np.int64)
+    out = np.zeros(max_q + 1, np.int64)
+    out[1:] = -((-(1 << 40)) // q[1:])
+    return out
+
+
 def _stripes(lo: int, hi: int, n: int) -> np.ndarray:
     n = max(1, min(n, hi - lo))
     return np.array([lo + (hi - lo) * k // n for k in range(n + 1)], dtype=np.int64)
@@ -65,6 +73,7 @@ class Matcher:
         self.ts = np.empty((ns, ncols), np.int32)
         self.sad = np.empty((ns, nd), acc)
         self.big = acc(np.iinfo(acc).max)
+        self.recip = _reciprocals(p.max_sad) if acc is np.int16 else np.zeros(0, np.int64)
         self.drow = np.empty((ns, wide), np.int16)
         self.crow = np.empty((ns, wide), np.int32)
         self.d2buf = np.empty((ns, w), np.int32)
@@ -103,7 +112,7 @@ class Matcher:
                    p.num_disparities, p.min_disparity, p.texture_threshold,
                    p.uniqueness_ratio, p.disp12_max_diff, g.lofs, g.width1, g.roi_x0,
                    g.roi_x1, g.lr_x0, g.lr_x1, self.lc, self.rb, self.vs, self.ts,
-                   self.sad, self.big, self.drow, self.crow, self.d2buf,
+                   self.sad, self.big, self.recip, self.drow, self.crow, self.d2buf,
                    self.d2cost)
 
 

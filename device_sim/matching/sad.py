@@ -12,8 +12,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .lanes import absdiff_u8, cast_like, nadd, nmin, nsub, uidx
-from .simd import count_le, first_eq, slide_chunk, step_chunk
+from .lanes import absdiff_u8, cast_like, cdiv, nadd, nmin, nsub, uidx
+from .simd import slide_all, step_all, wta_all
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
@@ -53,12 +53,11 @@ def _slide_column(ci: int, pl: np.ndarray, pr: np.ndarray, ya: int, ys: int, cap
 def _row(pl: np.ndarray, pr: np.ndarray, y: int, upd: bool, r: int, cap: int, nd: int,
          min_disp: int, tex_thr: int, uratio: int, lofs: int, width1: int, lc: np.ndarray,
          rb: np.ndarray, vs: np.ndarray, ts: np.ndarray, sad: np.ndarray, big,
-         drow: np.ndarray, crow: np.ndarray) -> None:
+         recip: np.ndarray, drow: np.ndarray, crow: np.ndarray) -> None:
     """Disparities of row y for columns lofs .. lofs+width1-1 into drow (cost into crow)."""
     inv = (min_disp - 1) * 16
     zero = nsub(big, big)
     ya, ys = y + r, y - r - 1
-    nd32 = nd - nd % 32
     if upd:
         for ci in range(2 * r + 1):
             _slide_column(ci, pl, pr, ya, ys, cap, lc, rb, nd, vs, ts, zero)
@@ -75,56 +74,44 @@ def _row(pl: np.ndarray, pr: np.ndarray, y: int, upd: bool, r: int, cap: int, nd
     for x in range(width1):
         ci = x + 2 * r
         if x > 0:
-            m = big
             if upd:
                 lcol, b = lc[uidx(ci)], rb[uidx(ci)]
                 a = pl[ya, uidx(lcol)]
                 s = pl[ys, uidx(lcol)]
-                for j0 in range(0, nd32, 32):
-                    m = nmin(m, slide_chunk(vs, ci, x - 1, sad, pr, ya, ys, b, a, s, j0, 32))
-                if nd32 < nd:
-                    m = nmin(m, slide_chunk(vs, ci, x - 1, sad, pr, ya, ys, b, a, s, nd32, 16))
+                m = slide_all(vs, ci, x - 1, sad, pr, ya, ys, b, a, s, nd)
                 ts[uidx(ci)] += abs(np.int32(a) - cap) - abs(np.int32(s) - cap)
             else:
-                for j0 in range(0, nd32, 32):
-                    m = nmin(m, step_chunk(vs, ci, x - 1, sad, j0, 32))
-                if nd32 < nd:
-                    m = nmin(m, step_chunk(vs, ci, x - 1, sad, nd32, 16))
+                m = step_all(vs, ci, x - 1, sad, nd)
             tsum += ts[uidx(ci)] - ts[uidx(x - 1)]
-        X = lofs + x
+        X = uidx(lofs + x)
         if tsum < tex_thr:
-            drow[uidx(X)] = inv
+            drow[X] = inv
             continue
-        mind = nd
-        for j0 in range(0, nd32, 32):
-            k = first_eq(sad, j0, m, 32)
-            if k < 32:
-                mind = j0 + k
-                break
-        if mind == nd and nd32 < nd:
-            mind = nd32 + first_eq(sad, nd32, m, 16)
+        thr = cast_like(-1, big)  # uniqueness off: count nothing
         if uratio > 0:
-            thr = cast_like(min(np.int64(m) + np.int64(m) * uratio // 100, np.int64(big)), big)
-            c = -1
-            for j0 in range(0, nd32, 32):
-                c += count_le(sad, j0, thr, 32)
-            if nd32 < nd:
-                c += count_le(sad, nd32, thr, 16)
-            if mind > 0 and sad[uidx(mind - 1)] <= thr:
-                c -= 1
-            if mind < nd - 1 and sad[uidx(mind + 1)] <= thr:
-                c -= 1
-            if c > 0:
-                drow[uidx(X)] = inv
-                continue
-        p = np.int32(sad[uidx(mind + 1)]) if mind < nd - 1 else np.int32(sad[nd - 2])
-        n = np.int32(sad[uidx(mind - 1)]) if mind > 0 else np.int32(sad[1])
-        den = p + n - 2 * np.int32(m) + abs(p - n)
-        off = 0
-        if den != 0:
-            off = int(np.float64((p - n) * 256) / np.float64(den))  # C truncation, exact here
-        drow[uidx(X)] = ((nd - mind - 1 + min_disp) * 256 + off + 15) >> 4
-        crow[uidx(X)] = m
+            t = np.uint64(m) * np.uint64(uratio) // np.uint64(100) + np.uint64(m)
+            thr = cast_like(min(t, np.uint64(big)), big)
+        mind, cnt = wta_all(sad, nd, m, thr)
+        # neighbours for the parabola; OpenCV mirrors them at the ends (sad[-1] := sad[1])
+        inner = (mind > 0) & (mind < nd - 1)
+        pi = mind + 1 if mind < nd - 1 else nd - 2
+        ni = mind - 1 if mind > 0 else 1
+        p = np.int32(sad[uidx(pi)])
+        n = np.int32(sad[uidx(ni)])
+        # uniqueness: no j outside mind-1 .. mind+1 may have sad[j] <= thr
+        ok = cnt - 1 - (p <= thr) - (inner & (n <= thr)) <= 0
+        # OpenCV: off = (p - n) * 256 / den truncated, den = p + n - 2m + |p - n|
+        # = 2q with q = max(p, n) - m >= |p - n|, so off = +-(128 |p - n| / q)
+        q = max(p, n) - np.int32(m)
+        a128 = abs(p - n) * 128
+        if recip.shape[0] > 0:
+            off = (np.int64(a128) * recip[uidx(q)]) >> 40
+        else:
+            off = cdiv(a128, max(q, np.int32(1)))
+        off = -off if p < n else off
+        d = ((nd - mind - 1 + min_disp) * 256 + off + 15) >> 4
+        drow[X] = d if ok else inv
+        crow[X] = m
 
 
 @nb.njit(**_JIT)
@@ -161,8 +148,8 @@ def match_rows(pl: np.ndarray, pr: np.ndarray, disp: np.ndarray, bounds: np.ndar
                cap: int, nd: int, min_disp: int, tex_thr: int, uratio: int, maxdiff: int,
                lofs: int, width1: int, roi_x0: int, roi_x1: int, lr_x0: int, lr_x1: int,
                lc: np.ndarray, rb: np.ndarray, vs: np.ndarray, ts: np.ndarray,
-               sad: np.ndarray, big, drow: np.ndarray, crow: np.ndarray, d2buf: np.ndarray,
-               d2cost: np.ndarray) -> None:
+               sad: np.ndarray, big, recip: np.ndarray, drow: np.ndarray, crow: np.ndarray,
+               d2buf: np.ndarray, d2cost: np.ndarray) -> None:
     """Rows bounds[s] .. bounds[s+1]-1 per stripe s; writes disp rows (roi only valid)."""
     h, w = disp.shape
     inv = (min_disp - 1) * 16
@@ -177,7 +164,7 @@ def match_rows(pl: np.ndarray, pr: np.ndarray, disp: np.ndarray, bounds: np.ndar
             for x in range(dr.shape[0]):
                 dr[x] = inv
             _row(pl, pr, y, y != y0, r, cap, nd, min_disp, tex_thr, uratio, lofs, width1,
-                 lc, rb, vs[s], ts[s], sad[s], big, dr, cr)
+                 lc, rb, vs[s], ts[s], sad[s], big, recip, dr, cr)
             if maxdiff >= 0:
                 _lr_check(dr, cr, lr_x0, lr_x1, inv, maxdiff, d2buf[s], d2cost[s])
             out = disp[y]

@@ -93,10 +93,8 @@ def slide_all(typingctx, vs, ci, cu, sad, pr, ya, ys, b, a, s, nd):
         civ, cuv = _ix(context, builder, sig, args, 1), _ix(context, builder, sig, args, 2)
         yav, ysv = _ix(context, builder, sig, args, 5), _ix(context, builder, sig, args, 6)
         bv = _ix(context, builder, sig, args, 7)
-        best = {n: cgutils.alloca_once_value(builder, _splat(builder, ir.Constant(aty, -1)
-                                                             .lshr if False else
-                                                             ir.Constant(aty, (1 << (aty.width - 1)) - 1),
-                                                             ir.VectorType(aty, n)))
+        top = ir.Constant(aty, (1 << (aty.width - 1)) - 1)
+        best = {n: cgutils.alloca_once_value(builder, _splat(builder, top, ir.VectorType(aty, n)))
                 for n in (_BIG, _TAIL)}
 
         def body(j0, n):
@@ -209,3 +207,37 @@ def count_le_all(typingctx, sad, nd, value):
         return builder.load(res)
 
     return types.int64(sad, nd, value), codegen
+
+
+@intrinsic
+def wta_all(typingctx, sad, nd, value, thr):
+    """(smallest j with sad[j] == value or nd, number of j with sad[j] <= thr), j < nd."""
+    if not (isinstance(sad, types.Array) and sad.ndim == 1 and value == sad.dtype
+            and thr == sad.dtype and sad.dtype in (types.int16, types.int32)):
+        return None
+    ret = types.UniTuple(types.int64, 2)
+
+    def codegen(context, builder, sig, args):
+        aty = context.get_value_type(sad.dtype)
+        ndv = _ix(context, builder, sig, args, 1)
+        first = cgutils.alloca_once_value(builder, ndv)
+        count = cgutils.alloca_once_value(builder, ir.Constant(_I64, 0))
+
+        def body(j0, n):
+            vty, mty = ir.VectorType(aty, n), ir.IntType(n)
+            x = _vload(builder, _ptr(context, builder, sig.args[0], args[0], [j0]), vty)
+            eq = builder.bitcast(builder.icmp_signed("==", x, _splat(builder, args[2], vty)), mty)
+            le = builder.bitcast(builder.icmp_signed("<=", x, _splat(builder, args[3], vty)), mty)
+            k = builder.zext(_call(builder, f"llvm.cttz.i{n}", mty,
+                                   [eq, ir.Constant(ir.IntType(1), 0)]), _I64)
+            cur = builder.load(first)
+            hit = builder.and_(builder.icmp_unsigned("<", k, ir.Constant(_I64, n)),
+                               builder.icmp_signed("==", cur, ndv))
+            builder.store(builder.select(hit, builder.add(j0, k), cur), first)
+            c = builder.zext(_call(builder, f"llvm.ctpop.i{n}", mty, [le]), _I64)
+            builder.store(builder.add(builder.load(count), c), count)
+
+        _chunked(builder, ndv, body)
+        return context.make_tuple(builder, ret, [builder.load(first), builder.load(count)])
+
+    return ret(sad, nd, value, thr), codegen
