@@ -19,6 +19,7 @@ from protocol.errors import ErrorCode, ProtocolError
 from protocol.framing import FLAG_RESEND, MAX_PAYLOAD, Decoder, Packet
 from protocol.params import BY_NAME, Output, TriggerMode
 
+from . import registry
 from .capture import CaptureEngine, CaptureRequest
 from .clock import DeviceClock
 from .config_store import ConfigStore
@@ -78,6 +79,7 @@ class SimulatedCamera:
             m.MsgType.START: self._start, m.MsgType.STOP: self._stop,
             m.MsgType.HEARTBEAT: self._heartbeat, m.MsgType.TIME_SYNC: self._time_sync,
         }
+        registry.register(self)
 
     # -- byte interface ---------------------------------------------------------------------
     def attach(self, sink: Sink) -> None:
@@ -88,6 +90,11 @@ class SimulatedCamera:
             self._replies.clear()
             self.decoder = Decoder(stats=self.decoder.stats)
         self._last_rx = time.monotonic()
+
+    @property
+    def attached(self) -> bool:
+        """Whether a host link (in-process pipe, pty, socket, USB) currently holds this unit."""
+        return self._sink is not None
 
     def detach(self) -> None:
         """The host link is gone: output is discarded and streaming stops."""
@@ -106,6 +113,7 @@ class SimulatedCamera:
                     self._emit(wire)
 
     def close(self) -> None:
+        registry.unregister(self)
         self.engine.close()
         if self.trigger_line is not None:
             self.trigger_line.detach(self._on_pulse)

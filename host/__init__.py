@@ -4,11 +4,12 @@ from protocol.errors import (CameraTimeoutError, ConfigError, DeviceError, Disco
 from protocol.params import Output, TriggerMode
 
 from .camera import Camera, DeviceInfo, DeviceStatus, open
+from .discovery import DeviceEntry, list_devices
 from .frames import DisparityFormat, Frame, FrameStatus, StereoGeometry
 from .pointcloud import write_ply
 
 __all__ = [
-    "open", "Camera", "DeviceInfo", "DeviceStatus", "Frame", "FrameStatus", "DisparityFormat", "StereoGeometry",
+    "open", "list_devices", "DeviceEntry", "Camera", "DeviceInfo", "DeviceStatus", "Frame", "FrameStatus", "DisparityFormat", "StereoGeometry",
     "TriggerMode", "Output", "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError",
     "DeviceError", "ConfigError", "ErrorCode", "TransportError", "DisconnectedError", "CameraTimeoutError",
 ]

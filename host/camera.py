@@ -8,7 +8,8 @@ from dataclasses import dataclass
 from typing import Iterator
 
 from protocol import messages as m
-from protocol.errors import CameraTimeoutError, ConfigError, StereoCamError, VersionMismatchError
+from protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError, TransportError,
+                             VersionMismatchError)
 from protocol.framing import VERSION_MAJOR
 from protocol.params import BY_ID, BY_NAME, TriggerMode
 
@@ -48,22 +49,56 @@ class Camera:
                  heartbeat_interval: float = 0.5, queue_depth: int = 8, deliver_incomplete: bool = False):
         self.url = transport.url
         self.timeout = timeout
+        self._retries = retries
         self.clock = ClockMap()
         self.assembler = FrameAssembler(self.clock, queue_depth, deliver_incomplete)
-        self.link = Link(transport, timeout=timeout, retries=retries, on_event=self.assembler.on_message)
         self._closed = threading.Event()
         self._last_sync = 0.0
+        self._applied: dict[str, int] = {}  # every parameter this Camera set, for reconnect
+        self._streaming = False
         self.last_status: DeviceStatus | None = None
+        self._connect(transport)
+        self._heartbeat_interval = heartbeat_interval
+        self._heartbeat = threading.Thread(target=self._heartbeat_loop, name="stereocam-heartbeat", daemon=True)
+        self._heartbeat.start()
+
+    def _connect(self, transport: Transport) -> None:
+        """Bring up a link on ``transport``: identify, stop any stale stream, map the clock."""
+        self.link = Link(transport, timeout=self.timeout, retries=self._retries, on_event=self.assembler.on_message)
         try:
             self._info = self._fetch_info()
             self.request(m.Stop())  # a known state: no stale stream from a previous session
+            self.clock.samples.clear()  # the unit may have rebooted: its clock starts over
             self.sync_clock(SYNC_SAMPLES)
         except BaseException:
             self.link.close()
             raise
-        self._heartbeat_interval = heartbeat_interval
-        self._heartbeat = threading.Thread(target=self._heartbeat_loop, name="stereocam-heartbeat", daemon=True)
-        self._heartbeat.start()
+
+    def reconnect(self, timeout: float = 10.0, backoff: float = 0.1) -> None:
+        """After a disconnect: find the same unit again (by serial), re-apply every parameter this
+        Camera set, and resume streaming if it was streaming. Retries with exponential backoff
+        until ``timeout``; DisconnectedError if the unit does not come back in time."""
+        serial = self._info.serial
+        url = reopen_url(self.url, serial)
+        deadline = time.monotonic() + timeout
+        self.link.close()
+        while True:
+            try:
+                self._connect(open_transport(url, self.timeout))
+                if self._info.serial != serial:
+                    self.link.close()
+                    raise TransportError(f"{url} is serial {self._info.serial}, not {serial}")
+                break
+            except StereoCamError as exc:
+                if time.monotonic() + backoff > deadline:
+                    raise DisconnectedError(f"camera {serial} did not come back within {timeout:.3g} s: {exc}") \
+                        from exc
+                time.sleep(backoff)
+                backoff = min(backoff * 2, 1.0)
+        if self._applied:
+            self.request(m.SetConfig({BY_NAME[k].pid: v for k, v in self._applied.items()}))
+        if self._streaming:
+            self.start()
 
     # -- plumbing ---------------------------------------------------------------------------
     def request(self, msg: m.Message, timeout: float | None = None) -> m.Message:
@@ -95,8 +130,7 @@ class Camera:
                 if time.monotonic() - self._last_sync > SYNC_PERIOD:
                     self.sync_clock(1)
             except StereoCamError:
-                if not self.link.alive:
-                    return
+                pass  # a dead link shows in the user's next call; reconnect() brings a new one
 
     # -- API --------------------------------------------------------------------------------
     def info(self) -> DeviceInfo:
@@ -123,6 +157,7 @@ class Camera:
                     raise ConfigError(f"{name} must be an integer, got {value!r}")
             update[p.pid] = int(value)
         r = self.request(m.SetConfig(update))
+        self._applied.update({BY_ID[k].name: v for k, v in update.items()})
         return _names(r.values)  # type: ignore[attr-defined]
 
     def set_trigger_mode(self, mode: TriggerMode | str) -> None:
@@ -143,9 +178,11 @@ class Camera:
         """Start streaming; frames still queued from an earlier stream are discarded."""
         self.assembler.reset()
         self.request(m.Start())
+        self._streaming = True
 
     def stop(self) -> None:
         self.request(m.Stop())
+        self._streaming = False
 
     def status(self) -> DeviceStatus:
         r = self.request(m.Heartbeat())
@@ -208,6 +245,15 @@ def _names(values: dict[int, int]) -> dict[str, int]:
 
 def _fields(obj: LinkStats | AssemblyStats) -> dict[str, int]:
     return {k: getattr(obj, k) for k in obj.__dataclass_fields__}
+
+
+def reopen_url(url: str, serial: str) -> str:
+    """The URL that finds this unit again: USB by serial (bus addresses change on replug)."""
+    if url.startswith("usb://"):
+        return f"usb://?serial={serial}"
+    if url.startswith("sim://"):
+        return f"sim://?serial={serial}"
+    return url
 
 
 def open(url: str, timeout: float = 1.0, **kwargs) -> Camera:  # noqa: A001 - mirrors serial_for_url

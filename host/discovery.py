@@ -71,9 +71,18 @@ def serial_entries() -> list[DeviceEntry]:
 
 
 def inprocess_entries() -> list[DeviceEntry]:
-    """In-process simulators (``sim://`` URLs). Returns [] until the simulator registry is wired
-    in (planned: ``device_sim.registry.live_simulators()``)."""
-    return []
+    """Simulators alive in this process and held by no link (``sim://?serial=SN`` opens one).
+
+    Only looked for when ``device_sim`` is already imported: the SDK never imports the simulator.
+    """
+    import sys
+
+    if "device_sim.registry" not in sys.modules:
+        return []
+    from device_sim import registry
+
+    return [DeviceEntry(f"sim://?serial={s.serial}", s.serial, s.model, "sim", s.firmware_version, simulated=True,
+                        location="this process") for s in registry.live_simulators() if not s.attached]
 
 
 def list_devices() -> list[DeviceEntry]:

@@ -1,8 +1,9 @@
 """Shared fixtures: the same integration tests run over every transport, or against ``--device URL``.
 
 Without ``--device`` each test runs back-to-back over: an in-process simulator (sim://), a
-simulator in a second process behind a real pseudo-terminal opened by pyserial, and one behind a
-real TCP socket (pyserial's socket://).
+simulator in a second process behind a real pseudo-terminal opened by pyserial, one behind a
+real TCP socket (pyserial's socket://), and one plugged into the simulated USB bus and opened
+through the real pyusb core (usb://?serial=...).
 """
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import pytest
 
 from device_sim.process import ServedSimulator
 
-TRANSPORTS = ("sim", "pty", "tcp")
+TRANSPORTS = ("sim", "pty", "tcp", "usb")
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -39,11 +40,26 @@ def served():
         s.stop()
 
 
+@pytest.fixture(scope="session")
+def usb_camera():
+    """A simulated camera plugged into the simulated USB bus for the whole session."""
+    import device_sim.usb as simusb
+    from device_sim import SimulatedCamera
+
+    sim = SimulatedCamera(serial="IT-USB-7", seed=7)
+    handle = simusb.plug(sim)
+    yield f"usb://?serial={sim.serial}"
+    handle.unplug()
+    sim.close()
+
+
 @pytest.fixture
 def device_url(request, served) -> str:
     kind = request.param
     if kind == "sim":
         return "sim://?seed=7"
+    if kind == "usb":
+        return request.getfixturevalue("usb_camera")
     if kind in ("pty", "tcp"):
         return served(kind).url
     return kind  # an external device URL from --device

@@ -9,10 +9,11 @@ import host
 
 COMMANDS = {
     "sim": ("device_sim.__main__", "serve a simulated camera (pty or tcp), like python -m device_sim"),
+    "list": ("tools.list_devices", "list cameras: USB (real and simulated), camera serial ports, simulators"),
     "info": ("tools.info", "print a camera's info, configuration and counters"),
     "capture": ("tools.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
     "demo": ("tools.demo", "simulator + streaming + outputs in ./out + summary"),
-    "bench": ("tools.bench", "benchmarks: protocol decode, transports, matching core"),
+    "bench": ("tools.bench", "benchmarks: protocol decode, transports (incl. USB), matching core"),
 }
 
 

@@ -25,6 +25,9 @@ def check_pair(left: np.ndarray, right: np.ndarray) -> None:
         raise ValueError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
 
 
+STRIPES_PER_THREAD = 4
+
+
 def _reciprocals(max_q: int) -> np.ndarray:
     """M[q] = ceil(2**40 / q): floor(a / q) == (a * M[q]) >> 40 for 0 <= a <= 2**22, q < 2**15."""
     q = np.arange(max_q + 1, dtype=np.int64)
@@ -63,7 +66,9 @@ class Matcher:
         c = np.arange(-r, g.width1 + r)
         self.lc = (g.lofs + np.clip(c, -g.lofs, w - 1 - g.lofs)).astype(np.int64)
         self.rb = (g.rofs + np.clip(c, -g.rofs, w - nd - g.rofs)).astype(np.int64)
-        ns = self._nstripes or max(1, nb.get_num_threads())
+        # a few stripes per thread, handed out dynamically: a descheduled thread then delays
+        # the frame by one short stripe, not by half of it
+        ns = self._nstripes or STRIPES_PER_THREAD * max(1, nb.get_num_threads())
         self.bounds = _stripes(g.roi_y0, g.roi_y1, ns)
         ns = self.bounds.shape[0] - 1
         acc = np.int16 if p.max_sad <= 32767 else np.int32
@@ -108,12 +113,16 @@ class Matcher:
     def run_sad(self, disp: np.ndarray) -> None:
         """SAD / winner-take-all / left-right stage on the prefiltered pair (self.pl, self.pr)."""
         p, g = self.params, self.geom
-        match_rows(self.pl, self.pr, disp, self.bounds, p.block_size // 2, p.pre_filter_cap,
-                   p.num_disparities, p.min_disparity, p.texture_threshold,
-                   p.uniqueness_ratio, p.disp12_max_diff, g.lofs, g.width1, g.roi_x0,
-                   g.roi_x1, g.lr_x0, g.lr_x1, self.lc, self.rb, self.vs, self.ts,
-                   self.sad, self.big, self.recip, self.drow, self.crow, self.d2buf,
-                   self.d2cost)
+        chunk = nb.set_parallel_chunksize(1)
+        try:
+            match_rows(self.pl, self.pr, disp, self.bounds, p.block_size // 2,
+                       p.pre_filter_cap, p.num_disparities, p.min_disparity,
+                       p.texture_threshold, p.uniqueness_ratio, p.disp12_max_diff, g.lofs,
+                       g.width1, g.roi_x0, g.roi_x1, g.lr_x0, g.lr_x1, self.lc, self.rb,
+                       self.vs, self.ts, self.sad, self.big, self.recip, self.drow, self.crow,
+                       self.d2buf, self.d2cost)
+        finally:
+            nb.set_parallel_chunksize(chunk)
 
 
 _cache: dict[tuple, Matcher] = {}

@@ -11,7 +11,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-_BIG, _TAIL = 32, 16
+_TAIL = 16
 _I32 = ir.IntType(32)
 _I64 = ir.IntType(64)
 
@@ -57,13 +57,29 @@ def _absdiff_u8(builder, scalar, vec):
 
 
 def _chunked(builder, nd, body):
-    """Emit body(j0, lanes) for j0 = 0, 32, ... < nd - nd % 32, then a 16-lane tail."""
-    nd32 = builder.and_(nd, ir.Constant(nd.type, ~(_BIG - 1)))
-    with cgutils.for_range_slice(builder, ir.Constant(nd.type, 0), nd32,
-                                 ir.Constant(nd.type, _BIG)) as (j0, _):
-        body(j0, _BIG)
-    with builder.if_then(builder.icmp_signed("<", nd32, nd)):
-        body(nd32, _TAIL)
+    """Emit body(j0, lanes) over j0 < nd: 64-lane steps, then 32- and 16-lane tails."""
+    nd64 = builder.and_(nd, ir.Constant(nd.type, ~63))
+    with cgutils.for_range_slice(builder, ir.Constant(nd.type, 0), nd64,
+                                 ir.Constant(nd.type, 64)) as (j0, _):
+        body(j0, 64)
+    rest = builder.sub(nd, nd64)
+    j32 = builder.add(nd64, builder.and_(rest, ir.Constant(nd.type, 32)))
+    with builder.if_then(builder.icmp_signed("<", nd64, j32)):
+        body(nd64, 32)
+    with builder.if_then(builder.icmp_signed("<", j32, nd)):
+        body(j32, 16)
+
+
+def _fold16(builder, vec):
+    """Lane-wise min of a 16/32/64-lane vector folded to 16 lanes."""
+    while vec.type.count > _TAIL:
+        half = vec.type.count // 2
+        lo = builder.shuffle_vector(vec, vec, ir.Constant(ir.VectorType(_I32, half),
+                                                          list(range(half))))
+        hi = builder.shuffle_vector(vec, vec, ir.Constant(ir.VectorType(_I32, half),
+                                                          list(range(half, 2 * half))))
+        vec = _smin(builder, lo, hi)
+    return vec
 
 
 def _acc_ok(vs, sad) -> bool:
@@ -94,28 +110,27 @@ def slide_all(typingctx, vs, ci, cu, sad, pr, ya, ys, b, a, s, nd):
         yav, ysv = _ix(context, builder, sig, args, 5), _ix(context, builder, sig, args, 6)
         bv = _ix(context, builder, sig, args, 7)
         top = ir.Constant(aty, (1 << (aty.width - 1)) - 1)
-        best = {n: cgutils.alloca_once_value(builder, _splat(builder, top, ir.VectorType(aty, n)))
-                for n in (_BIG, _TAIL)}
+        best = cgutils.alloca_once_value(builder, _splat(builder, top, ir.VectorType(aty, _TAIL)))
 
         def body(j0, n):
             vty, bty = ir.VectorType(aty, n), ir.VectorType(ir.IntType(8), n)
             bj = builder.add(bv, j0)
             ra = _vload(builder, _ptr(context, builder, st[4], args[4], [yav, bj]), bty)
             rs = _vload(builder, _ptr(context, builder, st[4], args[4], [ysv, bj]), bty)
-            da = builder.zext(_absdiff_u8(builder, args[8], ra), vty)
-            ds = builder.zext(_absdiff_u8(builder, args[9], rs), vty)
+            # prefiltered values are <= 126, so both differences and their difference fit i8
+            dd = builder.sext(builder.sub(_absdiff_u8(builder, args[8], ra),
+                                          _absdiff_u8(builder, args[9], rs)), vty)
             pv = _ptr(context, builder, st[0], args[0], [civ, j0])
             pu = _ptr(context, builder, st[0], args[0], [cuv, j0])
             ps = _ptr(context, builder, st[3], args[3], [j0])
-            v = builder.add(_vload(builder, pv, vty), builder.sub(da, ds))
+            v = builder.add(_vload(builder, pv, vty), dd)
             _vstore(builder, v, pv)
             t = builder.add(_vload(builder, ps, vty), builder.sub(v, _vload(builder, pu, vty)))
             _vstore(builder, t, ps)
-            builder.store(_smin(builder, builder.load(best[n]), t), best[n])
+            builder.store(_smin(builder, builder.load(best), _fold16(builder, t)), best)
 
         _chunked(builder, ndv, body)
-        return _smin(builder, _reduce_min(builder, builder.load(best[_BIG])),
-                     _reduce_min(builder, builder.load(best[_TAIL])))
+        return _reduce_min(builder, builder.load(best))
 
     return acc(vs, ci, cu, sad, pr, ya, ys, b, a, s, nd), codegen
 
@@ -133,8 +148,7 @@ def step_all(typingctx, vs, ci, cu, sad, nd):
         ndv = _ix(context, builder, sig, args, 4)
         civ, cuv = _ix(context, builder, sig, args, 1), _ix(context, builder, sig, args, 2)
         top = ir.Constant(aty, (1 << (aty.width - 1)) - 1)
-        best = {n: cgutils.alloca_once_value(builder, _splat(builder, top, ir.VectorType(aty, n)))
-                for n in (_BIG, _TAIL)}
+        best = cgutils.alloca_once_value(builder, _splat(builder, top, ir.VectorType(aty, _TAIL)))
 
         def body(j0, n):
             vty = ir.VectorType(aty, n)
@@ -144,69 +158,12 @@ def step_all(typingctx, vs, ci, cu, sad, nd):
             t = builder.add(_vload(builder, ps, vty),
                             builder.sub(_vload(builder, pv, vty), _vload(builder, pu, vty)))
             _vstore(builder, t, ps)
-            builder.store(_smin(builder, builder.load(best[n]), t), best[n])
+            builder.store(_smin(builder, builder.load(best), _fold16(builder, t)), best)
 
         _chunked(builder, ndv, body)
-        return _smin(builder, _reduce_min(builder, builder.load(best[_BIG])),
-                     _reduce_min(builder, builder.load(best[_TAIL])))
+        return _reduce_min(builder, builder.load(best))
 
     return acc(vs, ci, cu, sad, nd), codegen
-
-
-@intrinsic
-def first_eq_all(typingctx, sad, nd, value):
-    """Smallest j < nd with sad[j] == value (nd if none), without data-dependent branches."""
-    if not (isinstance(sad, types.Array) and sad.ndim == 1 and value == sad.dtype
-            and sad.dtype in (types.int16, types.int32)):
-        return None
-
-    def codegen(context, builder, sig, args):
-        aty = context.get_value_type(sad.dtype)
-        ndv = _ix(context, builder, sig, args, 1)
-        res = cgutils.alloca_once_value(builder, ndv)
-
-        def body(j0, n):
-            vty = ir.VectorType(aty, n)
-            x = _vload(builder, _ptr(context, builder, sig.args[0], args[0], [j0]), vty)
-            mask = builder.bitcast(builder.icmp_signed("==", x, _splat(builder, args[2], vty)),
-                                   ir.IntType(n))
-            k = builder.zext(_call(builder, f"llvm.cttz.i{n}", ir.IntType(n),
-                                   [mask, ir.Constant(ir.IntType(1), 0)]), _I64)
-            cur = builder.load(res)
-            hit = builder.and_(builder.icmp_unsigned("<", k, ir.Constant(_I64, n)),
-                               builder.icmp_signed("==", cur, ndv))
-            builder.store(builder.select(hit, builder.add(j0, k), cur), res)
-
-        _chunked(builder, ndv, body)
-        return builder.load(res)
-
-    return types.int64(sad, nd, value), codegen
-
-
-@intrinsic
-def count_le_all(typingctx, sad, nd, value):
-    """Number of j < nd with sad[j] <= value."""
-    if not (isinstance(sad, types.Array) and sad.ndim == 1 and value == sad.dtype
-            and sad.dtype in (types.int16, types.int32)):
-        return None
-
-    def codegen(context, builder, sig, args):
-        aty = context.get_value_type(sad.dtype)
-        ndv = _ix(context, builder, sig, args, 1)
-        res = cgutils.alloca_once_value(builder, ir.Constant(_I64, 0))
-
-        def body(j0, n):
-            vty = ir.VectorType(aty, n)
-            x = _vload(builder, _ptr(context, builder, sig.args[0], args[0], [j0]), vty)
-            mask = builder.bitcast(builder.icmp_signed("<=", x, _splat(builder, args[2], vty)),
-                                   ir.IntType(n))
-            c = builder.zext(_call(builder, f"llvm.ctpop.i{n}", ir.IntType(n), [mask]), _I64)
-            builder.store(builder.add(builder.load(res), c), res)
-
-        _chunked(builder, ndv, body)
-        return builder.load(res)
-
-    return types.int64(sad, nd, value), codegen
 
 
 @intrinsic

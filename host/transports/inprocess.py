@@ -1,6 +1,8 @@
-"""``sim://`` — a fresh simulated camera in this process, joined by an in-memory byte pipe.
+"""``sim://`` — a simulated camera in this process, joined by an in-memory byte pipe.
 
-``sim://?seed=N&serial=S`` picks the unit. Host writes go straight into the firmware's
+``sim://?seed=N`` makes a fresh unit (closed with the transport). ``sim://?serial=S`` opens the
+live, unattached simulator with that serial if this process has one (``host.list_devices``
+lists them), else makes a fresh unit with that serial. Host writes go straight into the firmware's
 ``receive``; the firmware's output lands in a bounded FIFO the host reads (a full FIFO blocks
 the device, as a full USB or TCP buffer would).
 """
@@ -80,7 +82,7 @@ class InProcessTransport(Transport):
 
 
 def open_transport(url: str, timeout: float) -> InProcessTransport:
-    from device_sim import SimulatedCamera  # the simulator is only needed for sim:// URLs
+    from device_sim import SimulatedCamera, registry  # the simulator is only needed for sim:// URLs
 
     query = parse_qs(urlsplit(url).query)
     unknown = set(query) - {"seed", "serial"}
@@ -91,4 +93,8 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
     except ValueError as exc:
         raise ConfigError(f"sim:// URL: seed must be an integer, got {query['seed'][0]!r}") from exc
     serial = query.get("serial", [None])[0]
+    if serial is not None and "seed" not in query:
+        live = registry.find_free(serial)
+        if live is not None:
+            return InProcessTransport(live, url, owns=False)
     return InProcessTransport(SimulatedCamera(serial=serial, seed=seed), url)

@@ -1,0 +1,176 @@
+"""Offline calibration tool end to end on rendered chessboard pairs with a known truth."""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
+from device_sim.calibration.model import StereoCalibration
+from device_sim.calibration.truth import true_calibration
+from tools import calibrate
+from tools.calib_solve import (
+    BoardNotFoundError, CoverageSelector, SolveConfig, TooFewViewsError, calibrate_pairs, detect_corners,
+    view_params,
+)
+
+TRUTH = true_calibration(11, (640, 480))
+BOARD = BoardSpec(9, 6, 0.03)
+N_PAIRS = 24
+
+
+@pytest.fixture(scope="module")
+def pairs() -> list[tuple[np.ndarray, np.ndarray]]:
+    renderer = StereoBoardRenderer(TRUTH, BOARD, supersample=1)
+    rng = np.random.default_rng(5)
+    return [renderer.render(p, rng) for p in board_poses(11, N_PAIRS, BOARD, TRUTH, distance_m=(0.35, 0.9))]
+
+
+@pytest.fixture(scope="module")
+def image_dir(tmp_path_factory: pytest.TempPathFactory, pairs) -> Path:
+    d = tmp_path_factory.mktemp("pairs")
+    for i, (left, right) in enumerate(pairs):
+        cv2.imwrite(str(d / f"left_{i:03d}.png"), left)
+        cv2.imwrite(str(d / f"right{i}.png"), right)
+    (d / "notes.txt").write_text("ignored")
+    return d
+
+
+def run(image_dir: Path, out: Path, *extra: str) -> int:
+    return calibrate.main(["-q", "--images", str(image_dir), "--board", "9x6", "--square-size", "0.03",
+                           "--out", str(out), *extra])
+
+
+def test_offline_calibration_recovers_truth(image_dir: Path, tmp_path: Path) -> None:
+    assert run(image_dir, tmp_path) == 0
+    d = json.loads((tmp_path / "calibration.json").read_text())
+    assert d["passed"] is True and d["written"] is False and d["verified"] is False
+    assert d["views_used"] >= 8 and d["rms_stereo"] < 0.2 and d["epipolar_rms_px"] < 0.15
+    c = StereoCalibration.from_json_dict(d)
+    for got, true in ((c.K_left, TRUTH.K_left), (c.K_right, TRUTH.K_right)):
+        np.testing.assert_allclose(got[[0, 1, 0, 1], [0, 1, 2, 2]], true[[0, 1, 0, 1], [0, 1, 2, 2]], rtol=6e-3)
+    assert abs(c.baseline_m / TRUTH.baseline_m - 1) < 5e-3
+    fs = cv2.FileStorage(str(tmp_path / "calibration.yaml"), cv2.FILE_STORAGE_READ)
+    np.testing.assert_allclose(fs.getNode("T").mat().ravel(), c.T, rtol=1e-12)
+    assert fs.getNode("P2").mat().shape == (3, 4) and fs.getNode("Q").mat().shape == (4, 4)
+    left = (tmp_path / "left.yaml").read_text()
+    assert "distortion_model: plumb_bob" in left and "image_width: 640" in left and "projection_matrix:" in left
+    assert cv2.imread(str(tmp_path / "report.png")).shape[1] == 1280
+
+
+def test_metric_definitions(pairs) -> None:
+    res = calibrate_pairs(iter(pairs), BOARD)
+    used = [v for v in res.views if v.status == "used"]
+    held = [v for v in res.views if v.status == "held_out"]
+    assert len(used) == res.quality.views_used and len(held) == N_PAIRS // 5
+    assert [v.index for v in held] == [4, 9, 14, 19]          # every 5th pair with a board
+    # per-camera RMS = sqrt(mean over all corners of squared 2-D distance) = pooled per-view RMS
+    assert res.quality.rms_left == pytest.approx(np.sqrt(np.mean([v.rms_left ** 2 for v in used])), rel=1e-9)
+    # held-out epipolar RMS: recompute from scratch with the stored geometry
+    c, r = res.calibration, res.rectification
+    dy = []
+    for v in held:
+        cl, cr = (detect_corners(img, BOARD) for img in pairs[v.index])
+        if np.dot(cl[-1] - cl[0], cr[-1] - cr[0]) < 0:
+            cr = cr[::-1]
+        crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
+        yl = cv2.undistortPoints(cl.reshape(-1, 1, 2), c.K_left, c.D_left, R=r.R1, P=r.P1, criteria=crit)[:, 0, 1]
+        yr = cv2.undistortPoints(cr.reshape(-1, 1, 2), c.K_right, c.D_right, R=r.R2, P=r.P2, criteria=crit)[:, 0, 1]
+        dy.append(yl - yr)
+    assert res.quality.epipolar_rms_px == pytest.approx(np.sqrt(np.mean(np.concatenate(dy) ** 2)), rel=1e-6)
+
+
+def test_gate_failure_writes_nothing_as_passed(image_dir: Path, tmp_path: Path, capsys) -> None:
+    (tmp_path / "left.yaml").write_text("stale")
+    assert run(image_dir, tmp_path, "--max-stereo-rms", "0.01") == calibrate.EXIT_GATE
+    assert "FAILED the gate: stereo RMS" in capsys.readouterr().err
+    assert json.loads((tmp_path / "calibration.json").read_text())["passed"] is False
+    assert not any((tmp_path / n).exists() for n in ("left.yaml", "right.yaml", "calibration.yaml"))
+    assert (tmp_path / "report.png").exists()
+
+
+def test_mismatched_pairs_fail_the_gate(pairs, tmp_path: Path) -> None:
+    """Right images shifted by one pair: the solve 'converges' but held-out epipolar error exposes it."""
+    shifted = [(pairs[i][0], pairs[(i + 1) % len(pairs)][1]) for i in range(len(pairs))]
+    res = calibrate_pairs(iter(shifted), BOARD)
+    assert not res.passed and any("stereo RMS" in f for f in res.failures)
+
+
+def test_board_never_found(tmp_path: Path, capsys) -> None:
+    blank = np.full((480, 640), 100, np.uint8)
+    for i in range(3):
+        cv2.imwrite(str(tmp_path / f"left{i}.png"), blank)
+        cv2.imwrite(str(tmp_path / f"right{i}.png"), blank)
+    out = tmp_path / "out"
+    assert run(tmp_path, out) == calibrate.EXIT_NO_SOLUTION
+    assert "not found in both images of any of the 3 pairs" in capsys.readouterr().err
+    assert not out.exists()
+    with pytest.raises(BoardNotFoundError):
+        calibrate_pairs(iter([(blank, blank)]), BOARD)
+
+
+def test_too_few_views(pairs, image_dir: Path, tmp_path: Path) -> None:
+    with pytest.raises(TooFewViewsError, match="need 8"):
+        calibrate_pairs(iter(pairs[:6]), BOARD)
+    small = tmp_path / "small"
+    small.mkdir()
+    for p in sorted(image_dir.glob("*_00[0-5].png")) + [image_dir / f"right{i}.png" for i in range(6)]:
+        shutil.copy(p, small)
+    assert run(small, tmp_path / "out") == calibrate.EXIT_NO_SOLUTION
+    assert not (tmp_path / "out").exists()
+
+
+def test_engine_stops_reading_when_enough(pairs) -> None:
+    consumed = []
+
+    def stream():
+        for i, p in enumerate(pairs * 3):
+            consumed.append(i)
+            yield p
+
+    res = calibrate_pairs(stream(), BOARD, SolveConfig(max_views=8))
+    assert res.quality.views_used == 8 and len(consumed) < 3 * len(pairs)
+
+
+def test_bad_arguments(image_dir: Path, tmp_path: Path, capsys) -> None:
+    assert run(image_dir, tmp_path, "--holdout-every", "1") == calibrate.EXIT_USAGE
+    assert calibrate.main(["--images", str(image_dir), "--board", "9x6", "--square-size", "25",
+                           "--out", str(tmp_path)]) == calibrate.EXIT_USAGE
+    assert "metres" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        calibrate.main(["--images", str(image_dir), "--board", "9by6", "--square-size", "0.03", "--out", "x"])
+    with pytest.raises(ValueError, match="cols != rows"):
+        calibrate_pairs(iter([]), BoardSpec(6, 6, 0.03))
+
+
+def test_find_pairs_rules(tmp_path: Path) -> None:
+    for name in ("left1.png", "right01.png", "LEFT_2.jpg", "right-2.png", "left3.png", "right.png"):
+        (tmp_path / name).write_bytes(b"")
+    assert [(n, l.name, r.name) for n, l, r in calibrate.find_pairs(tmp_path)] == [
+        (1, "left1.png", "right01.png"), (2, "LEFT_2.jpg", "right-2.png")]
+    (tmp_path / "left001.png").write_bytes(b"")
+    with pytest.raises(ValueError, match="two left images with number 1"):
+        calibrate.find_pairs(tmp_path)
+    with pytest.raises(ValueError, match="is not a directory"):
+        calibrate.find_pairs(tmp_path / "left3.png")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(ValueError, match="no left<N>/right<N>"):
+        calibrate.find_pairs(empty)
+
+
+def test_view_params_and_selector() -> None:
+    w, h = 640, 480
+    j, i = np.mgrid[0:6, 0:9]
+    centred = np.column_stack([320 + (i.ravel() - 4) * 30, 240 + (j.ravel() - 2.5) * 30]).astype(np.float32)
+    x, y, size, skew = view_params(centred, BOARD, (w, h))
+    assert x == pytest.approx(0.5) and y == pytest.approx(0.5) and skew == pytest.approx(0.0, abs=1e-9)
+    assert size == pytest.approx(np.sqrt(240 * 150 / (w * h)))
+    sel = CoverageSelector(0.2)
+    assert sel.offer((0.5, 0.5, 0.3, 0.0)) and not sel.offer((0.55, 0.55, 0.3, 0.05))
+    assert sel.offer((0.9, 0.5, 0.3, 0.0))
+    assert sel.coverage() == pytest.approx((0.4 / 0.7, 0.0, 0.0, 0.0))

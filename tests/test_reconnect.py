@@ -1,0 +1,45 @@
+"""Unplug, replug (same serial), reconnect: the configuration comes back and streaming resumes."""
+from __future__ import annotations
+
+import pytest
+
+import device_sim.usb as simusb
+import host
+from device_sim import SimulatedCamera
+
+
+def test_usb_unplug_replug_reconnect_reapplies_config_and_resumes():
+    sim = SimulatedCamera(serial="RECON-1", seed=51)
+    handle = simusb.plug(sim)
+    cam = host.open("usb://?serial=RECON-1", timeout=1.0)
+    try:
+        cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=8, gain=35)
+        cam.start()
+        before = cam.get_frame(timeout=30)
+        handle.unplug()
+        with pytest.raises(host.DisconnectedError):
+            for _ in range(50):
+                cam.get_frame(timeout=1.0)
+        sim.close()
+        rebooted = SimulatedCamera(serial="RECON-1", seed=51)  # the unit comes back after a power cycle
+        assert rebooted.config.snapshot()["fps"] == 30  # with its defaults
+        handle = simusb.plug(rebooted)
+        cam.reconnect(timeout=5.0)
+        cfg = cam.config()
+        assert (cfg["fps"], cfg["gain"], cfg["width"], cfg["num_disparities"]) == (8, 35, 320, 32)
+        after = cam.get_frame(timeout=30)  # streaming resumed without a start() from the user
+        assert after.left.shape == before.left.shape == (240, 320) and after.gain == 35
+    finally:
+        cam.close()
+        handle.unplug()
+
+
+def test_reconnect_gives_up_with_a_disconnect_error():
+    sim = SimulatedCamera(serial="RECON-2", seed=52)
+    handle = simusb.plug(sim)
+    cam = host.open("usb://?serial=RECON-2", timeout=1.0)
+    handle.unplug()
+    sim.close()
+    with pytest.raises(host.DisconnectedError, match="RECON-2"):
+        cam.reconnect(timeout=0.5)
+    cam.close()
