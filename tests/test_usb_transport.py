@@ -181,14 +181,31 @@ def test_close_from_another_thread_ends_a_pending_read(echo):
 
 def test_list_devices_finds_plugged_simulators():
     handles = [simusb.plug(EchoDevice(serial=s)) for s in ("L1", "L2")]
-    entries = [e for e in list_devices() if e.simulated]
+    entries = [e for e in list_devices() if e.transport == "usb"]
     assert [(e.serial, e.model, e.transport, e.firmware) for e in entries] == [
         ("L1", "Echo", "usb", "1.2.3"), ("L2", "Echo", "usb", "1.2.3")]
     assert all(isinstance(e, DeviceEntry) for e in entries)
     with open_transport(entries[1].url) as t:  # the listed URL opens that very camera
         assert t.device.serial_number == "L2"
     handles[0].unplug()
-    assert [e.serial for e in list_devices() if e.simulated] == ["L2"]
+    assert [e.serial for e in list_devices() if e.transport == "usb"] == ["L2"]
+
+
+def test_list_devices_includes_free_in_process_simulators():
+    from device_sim import SimulatedCamera
+    import host
+
+    sim = SimulatedCamera(serial="INPROC-9", seed=9)
+    try:
+        (entry,) = [e for e in list_devices() if e.serial == "INPROC-9"]
+        assert (entry.transport, entry.url, entry.model) == ("sim", "sim://?serial=INPROC-9", "STOC-SIM")
+        with host.open(entry.url) as cam:  # that very simulator, not a fresh one
+            assert cam.info().serial == "INPROC-9" and sim.attached
+            assert "INPROC-9" not in [e.serial for e in list_devices()]  # held by a link now
+        assert not sim.attached
+    finally:
+        sim.close()
+    assert "INPROC-9" not in [e.serial for e in list_devices()]
 
 
 def test_list_devices_table(capsys):

@@ -1,15 +1,18 @@
 """``stereocam bench [protocol|transport|matching|all]``: figures, not pass/fail.
 
 protocol  — decoder throughput (MB/s) on a stream of 640x480 frame messages fed in 64 KiB chunks.
-transport — end-to-end frames/s and MB/s at 640x480 (left, right, disparity) per transport, the
-            simulator rendering and matching every frame; side by side in one run.
+transport — end-to-end frames/s and MB/s at 640x480 (left, right, disparity) per transport (sim,
+            pty, tcp, usb), the simulator rendering and matching every frame; side by side in one run.
+usb       — the USB path alone: bulk IN MB/s through pyusb and the transport (tools/bench_usb.py).
 matching  — the numba matching core against cv2.StereoBM (tools/bench_matching.py).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import time
+from typing import Iterator
 
 import numpy as np
 
@@ -57,33 +60,53 @@ def _stream_fps(url: str, seconds: float) -> tuple[float, float, int]:
     return n / dt, n * 640 * 480 * 4 / dt / 1e6, dropped
 
 
-def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty", "tcp")) -> dict[str, float]:
+@contextlib.contextmanager
+def _device(kind: str) -> Iterator[str]:
+    """A simulator reachable over ``kind``; yields its URL."""
+    from device_sim import SimulatedCamera
     from device_sim.process import ServedSimulator  # the same child-process servers the tests use
 
-    out = {}
-    print(f"end-to-end at 640x480, 64 disparities, all three planes ({seconds:.0f} s each):")
-    print(f"  {'transport':<10} {'fps':>6} {'MB/s':>7} {'device drops':>13}")
-    for kind in kinds:
-        server = None if kind == "sim" else ServedSimulator("pty" if kind == "pty" else "tcp:127.0.0.1:0")
+    if kind == "sim":
+        yield "sim://?seed=1"
+    elif kind == "usb":
+        import device_sim.usb as simusb
+
+        sim = SimulatedCamera(serial="BENCH-USB", seed=1)
+        handle = simusb.plug(sim)
         try:
-            fps, mbps, dropped = _stream_fps("sim://?seed=1" if server is None else server.url, seconds)
+            yield "usb://?serial=BENCH-USB"
         finally:
-            if server is not None:
-                server.stop()
+            handle.unplug()
+            sim.close()
+    else:
+        with ServedSimulator("pty" if kind == "pty" else "tcp:127.0.0.1:0", seed=1) as server:
+            yield server.url
+
+
+def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty", "tcp", "usb")) -> dict[str, float]:
+    out = {}
+    print(f"end-to-end at 640x480, 64 disparities, all three planes ({seconds:.0f} s each; sim and usb "
+          "run the device in this process, pty and tcp in a second one):")
+    print(f"  {'transport':<10} {'fps':>6} {'MB/s':>7} {'drops':>6}")
+    for kind in kinds:
+        with _device(kind) as url:
+            fps, mbps, dropped = _stream_fps(url, seconds)
         out[f"{kind}_fps"] = fps
-        print(f"  {kind:<10} {fps:6.1f} {mbps:7.1f} {dropped:13d}")
+        print(f"  {kind:<10} {fps:6.1f} {mbps:7.1f} {dropped:6d}")
     return out
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="stereocam bench", description=__doc__.splitlines()[0])
-    ap.add_argument("what", nargs="?", default="all", choices=["protocol", "transport", "matching", "all"])
+    ap.add_argument("what", nargs="?", default="all", choices=["protocol", "transport", "usb", "matching", "all"])
     ap.add_argument("--seconds", type=float, default=5.0)
     args, rest = ap.parse_known_args(argv)
     if args.what in ("protocol", "all"):
         bench_protocol()
     if args.what in ("transport", "all"):
         bench_transport(args.seconds)
+    if args.what == "usb":
+        importlib.import_module("tools.bench_usb").main(rest)
     if args.what in ("matching", "all"):
         importlib.import_module("tools.bench_matching").main(rest)
     return 0
