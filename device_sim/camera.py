@@ -7,16 +7,18 @@ from __future__ import annotations
 
 import collections
 import logging
+import tempfile
 import threading
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from protocol import messages as m
-from protocol.errors import ErrorCode, ProtocolError
-from protocol.framing import FLAG_RESEND, MAX_PAYLOAD, Decoder, Packet
+from protocol.errors import DeviceError, ErrorCode, ProtocolError
+from protocol.framing import FLAG_RESEND, MAX_PAYLOAD, VERSION_MAJOR, VERSION_MINOR, Decoder, Packet
 from protocol.params import BY_NAME, Output, TriggerMode
 
 from . import registry
@@ -24,7 +26,11 @@ from .capture import CaptureEngine, CaptureRequest
 from .clock import DeviceClock
 from .config_store import ConfigStore
 from .matching import Matcher, MatchParams
-from .sensor import SENSOR_H, SENSOR_W, SensorRig
+from .calib_service import CalibrationService
+from protocol.calibration import StereoCalibration
+from .calibration.truth import true_calibration
+from .scene import BOARD_SCENE
+from .sensor import SENSOR_H, SENSOR_W, Geometry, SensorRig
 from .trigger import TriggerLine
 
 MODEL = "STOC-SIM"
@@ -39,33 +45,57 @@ log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
+class _Exposure:
+    """What the simulator needs to reconstruct the truth of one capture on demand."""
+
+    sequence: int
+    host_monotonic: float
+    scene_time: float
+    scene: int
+    rays: np.ndarray  # camera-frame rays of the delivered left image (rectified pinhole or raw lens)
+    rot: np.ndarray  # that view's camera→world rotation
+    focal_px: float
+    baseline_m: float
+
+
+@dataclass(frozen=True)
 class GroundTruth:
-    """What the simulator knows about one capture."""
+    """What the simulator knows about one capture, for the delivered left image's pixels."""
 
     sequence: int
     host_monotonic: float  # the exposure instant on the host's monotonic clock
-    depth_m: np.ndarray  # left camera z, inf where nothing was hit
-    disparity_px: np.ndarray  # f * B / z, 0 where nothing was hit
+    depth_m: np.ndarray  # along the delivered view's optical axis; inf where nothing was hit
+    disparity_px: np.ndarray  # f * B / z for rectified frames, 0 where nothing was hit (or raw)
 
 
 class SimulatedCamera:
     """One simulated STOC-class unit (firmware + sensor rig)."""
 
-    def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: TriggerLine | None = None):
+    def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: TriggerLine | None = None,
+                 flash_path: str | Path | None = None, factory_calibrated: bool = True):
+        """``flash_path``: the file behind this unit's flash (kept across runs); None: a private
+        temporary file. ``factory_calibrated``: the unit left the factory with its true calibration
+        stored (False: fresh from assembly, streams raw images until calibrated)."""
         self.seed = seed
         self.serial = serial or f"SIM{seed:05d}"
         self.model = MODEL
         self.firmware_version = FIRMWARE_VERSION
         self.clock = DeviceClock(seed)
         self.config = ConfigStore()
-        self.rig = SensorRig(seed)
+        self._truth_cal = true_calibration(seed)
+        self.rig = SensorRig(seed, self._truth_cal)
+        self._tmpdir = None
+        if flash_path is None:
+            self._tmpdir = tempfile.TemporaryDirectory(prefix="stereocam-flash-")
+            flash_path = Path(self._tmpdir.name) / f"{self.serial}.flash"
+        self.calibration = CalibrationService(flash_path, self._truth_cal, factory_calibrated)
         self.decoder = Decoder()
         self.counters: collections.Counter[str] = collections.Counter()
         self._sink: Sink | None = None
         self._sink_lock = threading.Lock()
         self._rx_lock = threading.Lock()
         self._replies: collections.OrderedDict[int, tuple[int, bytes]] = collections.OrderedDict()
-        self._truth: collections.OrderedDict[int, GroundTruth] = collections.OrderedDict()
+        self._truth: collections.OrderedDict[int, _Exposure] = collections.OrderedDict()
         self._matcher: Matcher | None = None
         self._last_rx = time.monotonic()
         self._soft_triggers = 0
@@ -78,6 +108,9 @@ class SimulatedCamera:
             m.MsgType.SET_CONFIG: self._set_config, m.MsgType.TRIGGER: self._trigger,
             m.MsgType.START: self._start, m.MsgType.STOP: self._stop,
             m.MsgType.HEARTBEAT: self._heartbeat, m.MsgType.TIME_SYNC: self._time_sync,
+            m.MsgType.CALIB_READ: self.calibration.read, m.MsgType.CALIB_WRITE: self.calibration.write,
+            m.MsgType.CALIB_COMMIT: self.calibration.commit,
+            m.MsgType.CALIB_RESTORE: lambda _: self.calibration.restore_factory(),
         }
         registry.register(self)
 
@@ -119,6 +152,12 @@ class SimulatedCamera:
             self.trigger_line.detach(self._on_pulse)
         with self._sink_lock:
             self._sink = None
+        if self._tmpdir is not None:
+            self._tmpdir.cleanup()
+
+    def true_calibration(self) -> StereoCalibration:
+        """This unit's true calibration (full sensor resolution), as the calibration tool writes it."""
+        return self._truth_cal
 
     def __enter__(self) -> "SimulatedCamera":
         return self
@@ -142,6 +181,9 @@ class SimulatedCamera:
                 reply = handler(m.decode_packet(packet))
             except ProtocolError as exc:
                 reply = self._nack(packet.msg_type, ErrorCode.BAD_PAYLOAD, str(exc))
+            except DeviceError as exc:  # a handler's refusal: the state it guards is unchanged
+                pid = BY_NAME[exc.param].pid if exc.param in BY_NAME else 0
+                reply = self._nack(packet.msg_type, ErrorCode(exc.code), exc.device_message, pid)
             except Exception as exc:  # a firmware bug still answers, so the host never just times out
                 log.exception("handler for 0x%04x failed", packet.msg_type)
                 reply = self._nack(packet.msg_type, ErrorCode.INTERNAL, f"{type(exc).__name__}: {exc}")
@@ -170,8 +212,9 @@ class SimulatedCamera:
 
     # -- handlers ---------------------------------------------------------------------------
     def _get_info(self, _: m.Message) -> m.Info:
-        return m.Info(self.model, self.serial, self.firmware_version, (1, 0), CAPABILITIES,
-                      SENSOR_W, SENSOR_H, MAX_PAYLOAD, BY_NAME["width"].hi, BY_NAME["height"].hi)
+        return m.Info(self.model, self.serial, self.firmware_version, (VERSION_MAJOR, VERSION_MINOR), CAPABILITIES,
+                      SENSOR_W, SENSOR_H, MAX_PAYLOAD, BY_NAME["width"].hi, BY_NAME["height"].hi,
+                      self.calibration.calibration_id)
 
     def _get_config(self, _: m.Message) -> m.Config:
         return m.Config(self.config.by_id())
@@ -257,20 +300,28 @@ class SimulatedCamera:
         w, h = cfg["width"], cfg["height"]
         self.rig.set_format(w, h)
         t = req.time - self.clock.boot
-        left, right, depth = self.rig.capture(t, cfg["scene"], cfg["exposure_us"], cfg["gain"],
-                                              req.sequence ^ (self.seed << 20))
+        left, right = self.rig.capture(t, cfg["scene"], cfg["exposure_us"], cfg["gain"],
+                                       req.sequence ^ (self.seed << 20))
+        maps = self.calibration.maps(w, h) if cfg["rectify"] else None
         outputs = Output(cfg["outputs"])
+        if maps is not None:  # on-board rectification from the stored calibration
+            left, right = maps.rectify(left, right)
+            g = maps.geometry
+            focal, cx, cy, baseline = g.focal_px, g.cx, g.cy, g.baseline_m
+            view = Geometry(w, h, focal, cx, cy, baseline)
+            self._remember(req, cfg["scene"], t, view.rays(), g.R1.T, focal, baseline)
+            flags = m.FRAME_RECTIFIED
+        else:  # raw images: no disparity without a calibration
+            outputs &= ~Output.DISPARITY
+            focal = cx = cy = baseline = 0.0
+            self._remember(req, cfg["scene"], t, self.rig._rays[0], np.eye(3), 0.0, 0.0)
+            flags = 0
         disp = self._disparity(cfg, left, right) if Output.DISPARITY in outputs else None
-        g = self.rig.geometry
-        with np.errstate(divide="ignore"):
-            gt_disp = np.where(np.isfinite(depth), g.focal_px * g.baseline_m / depth, 0).astype(np.float32)
-        self._truth[req.sequence] = GroundTruth(req.sequence, req.time, depth, gt_disp)
-        while len(self._truth) > GROUND_TRUTH_KEEP:
-            self._truth.popitem(last=False)
         begin = m.FrameBegin(
-            req.sequence & 0xFFFFFFFF, req.trigger_id & 0xFFFFFFFF, self.clock.at(req.time), cfg["exposure_us"], cfg["gain"], w, h,
-            int(outputs), m.FRAME_RECTIFIED, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
-            cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, 0, g.focal_px, g.cx, g.cy, g.baseline_m)
+            req.sequence & 0xFFFFFFFF, req.trigger_id & 0xFFFFFFFF, self.clock.at(req.time), cfg["exposure_us"],
+            cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
+            cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, self.calibration.calibration_id,
+            focal, cx, cy, baseline)
         planes = [(Output.LEFT, left), (Output.RIGHT, right), (Output.DISPARITY, disp)]
         sizes = {}
         with self._sink_lock:
@@ -290,6 +341,19 @@ class SimulatedCamera:
                 return
         self.counters["frames_sent"] += 1
 
+    def _remember(self, req: CaptureRequest, scene_id: int, t: float, rays: np.ndarray, rot: np.ndarray,
+                  focal: float, baseline: float) -> None:
+        self._truth[req.sequence] = _Exposure(req.sequence, req.time, t, scene_id, rays, rot, focal, baseline)
+        while len(self._truth) > GROUND_TRUTH_KEEP:
+            self._truth.popitem(last=False)
+
     def ground_truth(self, sequence: int) -> GroundTruth | None:
-        """Truth for one of the last few captures (None once it has aged out)."""
-        return self._truth.get(sequence)
+        """Truth for one of the last few captures (None once it has aged out), rendered on demand
+        for exactly the view the frame delivered (rectified by the stored calibration, or raw)."""
+        e = self._truth.get(sequence)
+        if e is None or e.scene == BOARD_SCENE:
+            return None
+        depth = self.rig.depth(e.scene_time, e.scene, e.rays, e.rot)
+        with np.errstate(divide="ignore"):
+            disp = np.where(np.isfinite(depth) & (e.focal_px > 0), e.focal_px * e.baseline_m / depth, 0)
+        return GroundTruth(sequence, e.host_monotonic, depth, disp.astype(np.float32))

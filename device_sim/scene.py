@@ -2,7 +2,9 @@
 
 A scene is a list of primitives packed for ``render.render_radiance``. ``scene`` config values:
 0 — "lab": back wall, floor, a sliding panel, a slanted board and a sphere moving in depth;
-1 — "wall": one fronto-parallel textured wall at ``WALL_DISTANCE_M`` filling the view.
+1 — "wall": one fronto-parallel textured wall at ``WALL_DISTANCE_M`` filling the view;
+2 — "calibration board": a chessboard a fixture moves through varied poses (rendered by
+    ``calibration.board``; ``sensor.BOARD*`` give its size, pose count and dwell time).
 """
 from __future__ import annotations
 
@@ -12,8 +14,9 @@ import numpy as np
 
 from . import render as R
 
-WALL_DISTANCE_M = 1.5
-SCENES = {0: "lab", 1: "wall"}
+WALL_DISTANCE_M = 1.0
+BOARD_SCENE = 2
+SCENES = {0: "lab", 1: "wall", BOARD_SCENE: "calibration board"}
 
 
 def _rect(center, a1, a2, h1, h2, albedo=0.5, contrast=0.45, texscale=1024.0, texoff=0.0) -> list[float]:

@@ -1,4 +1,4 @@
-"""The sensor rig: two synchronised imagers on an ideal rectified stereo head, and their pixels.
+"""The sensor rig: two synchronised imagers behind real lenses, and their pixels.
 
 Photometry: radiance (0..1) → signal in DN = radiance · 255 · (exposure / EXPOSURE_REF_US) · gain,
 then shot noise (variance = signal / CONVERSION) and read noise (READ_NOISE_DN), quantised and
@@ -13,19 +13,23 @@ import numba as nb
 import numpy as np
 
 from . import render, scene
+from .calibration.board import BoardPose, BoardSpec, StereoBoardRenderer, board_poses
+from protocol.calibration import StereoCalibration
+from .calibration.rays import pixel_rays
 
 SENSOR_W, SENSOR_H = 1280, 960
-FOCAL_FULL_PX = 960.0  # 3.6 mm lens on 3.75 um pixels
-BASELINE_M = 0.09
 EXPOSURE_REF_US = 4000.0
 CONVERSION = 4.0  # DN per sqrt(DN) of shot noise: variance = signal / CONVERSION
 READ_NOISE_DN = 0.8
 LIGHT = np.array([0.3, 0.45, 1.0]) / np.linalg.norm([0.3, 0.45, 1.0])  # travelling direction
+BOARD = BoardSpec(cols=9, rows=6, square_m=0.03)  # the calibration scene's chessboard
+BOARD_POSES = 48
+BOARD_DWELL_S = 0.5  # the fixture holds each pose this long
 
 
 @dataclass(frozen=True)
 class Geometry:
-    """Rectified pinhole geometry of the output images (what turns disparity into depth)."""
+    """A rectified pinhole view (what turns disparity into depth): Z = f * B / d."""
 
     width: int
     height: int
@@ -42,12 +46,6 @@ class Geometry:
         r[..., 0] = xs[None, :]
         r[..., 1] = ys[:, None]
         return r
-
-
-def ideal_geometry(width: int, height: int) -> Geometry:
-    """Binned/scaled output of the ideal head: square pixels, centred principal point."""
-    f = FOCAL_FULL_PX * width / SENSOR_W
-    return Geometry(width, height, f, (width - 1) / 2.0, (height - 1) / 2.0, BASELINE_M)
 
 
 @nb.njit(cache=True, inline="always")
@@ -84,37 +82,65 @@ def expose(radiance, scale, seed, out):
 
 
 class SensorRig:
-    """Renders both imagers of one unit; caches per-format ray tables and scratch buffers."""
+    """Both imagers of one unit, seen through its true lenses (distortion, misalignment).
 
-    def __init__(self, seed: int = 0):
+    The world frame is the left imager's frame; the right imager sits at -Rᵀ·T looking along Rᵀ
+    (R, T as cv2.stereoCalibrate defines them). Images come out raw: distorted, unrectified.
+    """
+
+    def __init__(self, seed: int, truth: StereoCalibration):
         self.seed = seed
+        self.truth = truth
         self.texture, self.tex_offsets = render.pack_pyramid(render.make_texture(seed))
         self.tex_side = 512
         self._format: tuple[int, int] | None = None
-        self.geometry = ideal_geometry(640, 480)
+        self._board: StereoBoardRenderer | None = None
+        self._board_poses: list[BoardPose] = []
 
     def set_format(self, width: int, height: int) -> None:
         if self._format == (width, height):
             return
-        self.geometry = ideal_geometry(width, height)
-        self._rays = self.geometry.rays()
+        cal = self.truth.scaled(width, height)
+        self.calibration = cal
+        self._rays = [pixel_rays(cal.K_left, cal.D_left, width, height),
+                      pixel_rays(cal.K_right, cal.D_right, width, height)]
+        self._poses = [(np.zeros(3), np.eye(3)), (-cal.R.T @ cal.T.ravel(), cal.R.T)]
         self._rad = np.empty((height, width), np.float32)
+        self._board = None
         self._format = (width, height)
 
+    def _board_view(self, t: float, frame_seed: int) -> tuple[np.ndarray, np.ndarray]:
+        if self._board is None:
+            self._board = StereoBoardRenderer(self.calibration, BOARD)
+            self._board_poses = list(board_poses(self.seed, BOARD_POSES, BOARD, self.calibration,
+                                                 distance_m=(0.45, 1.2)))
+        pose = self._board_poses[int(t / BOARD_DWELL_S) % len(self._board_poses)]
+        return self._board.render(pose, np.random.default_rng(frame_seed))
+
     def capture(self, t: float, scene_id: int, exposure_us: int, gain: int, frame_seed: int
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Left, right (uint8) and the left camera's true depth in metres (float32, inf = none)."""
-        g = self.geometry
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Raw left and right images (uint8) exposed at the same instant ``t``."""
+        if scene_id == scene.BOARD_SCENE:
+            return self._board_view(t, frame_seed)
         prims = scene.primitives(scene_id, t)
         scale = 255.0 * exposure_us / EXPOSURE_REF_US * 10.0 ** (gain / 200.0)
-        depth = np.empty((g.height, g.width), np.float32)
-        scratch = np.empty_like(depth)
+        scratch = np.empty_like(self._rad)
         images = []
-        for eye, origin in enumerate(((0.0, 0.0, 0.0), (g.baseline_m, 0.0, 0.0))):
-            render.render_radiance(self._rays, np.array(origin), np.eye(3), prims, self.texture,
-                                   self.tex_offsets, self.tex_side, LIGHT, self._rad,
-                                   depth if eye == 0 else scratch)
-            img = np.empty((g.height, g.width), np.uint8)
+        for eye, (origin, rot) in enumerate(self._poses):
+            render.render_radiance(self._rays[eye], origin, rot, prims, self.texture, self.tex_offsets,
+                                   self.tex_side, LIGHT, self._rad, scratch)
+            img = np.empty(self._rad.shape, np.uint8)
             expose(self._rad, scale, (frame_seed * 2 + eye) ^ (self.seed << 32), img)
             images.append(img)
-        return images[0], images[1], depth
+        return images[0], images[1]
+
+    def depth(self, t: float, scene_id: int, rays: np.ndarray, rot: np.ndarray) -> np.ndarray:
+        """True depth (m, inf = nothing) along the optical axis of a view from the left imager's
+        centre with camera-frame ``rays`` and camera→world rotation ``rot``."""
+        if scene_id == scene.BOARD_SCENE:
+            raise ValueError("no depth truth for the calibration scene")
+        rad = np.empty(rays.shape[:2], np.float32)
+        depth = np.empty_like(rad)
+        render.render_radiance(rays, np.zeros(3), np.ascontiguousarray(rot, np.float64), scene.primitives(scene_id, t),
+                               self.texture, self.tex_offsets, self.tex_side, LIGHT, rad, depth)
+        return depth

@@ -13,6 +13,10 @@ from protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError,
 from protocol.framing import VERSION_MAJOR
 from protocol.params import BY_ID, BY_NAME, TriggerMode
 
+from protocol.calibration import StereoCalibration
+
+from . import calibration_io
+from .calibration_io import StoredCalibration
 from .clock import ClockMap, SyncSample
 from .frames import AssemblyStats, Frame, FrameAssembler
 from .link import Link, LinkStats
@@ -32,6 +36,7 @@ class DeviceInfo:
     sensor_width: int
     sensor_height: int
     max_payload: int
+    calibration_id: int  # the calibration in force when this was read; 0 = uncalibrated
 
 
 @dataclass(frozen=True)
@@ -111,7 +116,7 @@ class Camera:
             raise VersionMismatchError(f"device speaks protocol {r.protocol_version[0]}.{r.protocol_version[1]}, "
                                        f"this host speaks {VERSION_MAJOR}.x")
         return DeviceInfo(r.model, r.serial, r.firmware_version, r.protocol_version, r.capabilities,
-                          r.sensor_width, r.sensor_height, r.max_payload)
+                          r.sensor_width, r.sensor_height, r.max_payload, r.calibration_id)
 
     def sync_clock(self, samples: int = 1) -> None:
         """Take ``samples`` time-sync round trips into the device→host clock map."""
@@ -134,7 +139,21 @@ class Camera:
 
     # -- API --------------------------------------------------------------------------------
     def info(self) -> DeviceInfo:
+        """Identity and state, read now (the calibration id changes when a calibration is written)."""
+        self._info = self._fetch_info()
         return self._info
+
+    def read_calibration(self, source: str = "active") -> StoredCalibration | None:
+        """The calibration stored on the device (``active``, ``factory`` or ``user``), or None."""
+        return calibration_io.read_calibration(self.request, source)
+
+    def write_calibration(self, calibration: StereoCalibration, target: str = "user") -> StoredCalibration:
+        """Write, commit, read back and compare; raises VerificationError if the device holds
+        anything else, DeviceError if it refused (its previous calibration stays in force)."""
+        return calibration_io.write_calibration(self.request, calibration, target)
+
+    def restore_factory_calibration(self) -> StoredCalibration | None:
+        return calibration_io.restore_factory(self.request)
 
     def config(self) -> dict[str, int]:
         r = self.request(m.GetConfig())

@@ -72,7 +72,8 @@ class Frame:
     def disparity_px(self) -> np.ndarray:
         """Disparity in pixels, float32, NaN where invalid."""
         if self.disparity is None:
-            raise ValueError("this frame carries no disparity (outputs config excludes it)")
+            raise ValueError("this frame carries no disparity (raw frame of an uncalibrated unit or "
+                             "rectify=0, or the outputs config excludes it)")
         d = self.disparity.astype(np.float32) / self.disparity_format.subpixel
         d[self.disparity == self.disparity_format.invalid] = np.nan
         return d

@@ -27,6 +27,7 @@ class ErrorCode(enum.IntEnum):
     BUSY = 6
     INTERNAL = 7
     UNSUPPORTED_VERSION = 8
+    STORAGE = 9  # flash write or verify failed; the previous stored data is still in force
 
 
 class DeviceError(StereoCamError):
@@ -55,6 +56,10 @@ class TransportError(StereoCamError):
 
 class DisconnectedError(TransportError):
     """The device went away (cable pulled, process ended, socket closed)."""
+
+
+class VerificationError(StereoCamError):
+    """Data read back from the device differs from what was written."""
 
 
 class CameraTimeoutError(StereoCamError, TimeoutError):

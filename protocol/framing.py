@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 MAGIC = b"STOC"
 VERSION_MAJOR = 1
-VERSION_MINOR = 0
+VERSION_MINOR = 1
 HEADER_LEN = 20
 MAX_HEADER_LEN = 64
 TRAILER_LEN = 4

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import enum
 import struct
+import zlib
 from dataclasses import astuple, dataclass, field
 from typing import ClassVar
 
@@ -23,6 +24,10 @@ class MsgType(enum.IntEnum):
     STOP = 0x0006
     HEARTBEAT = 0x0007
     TIME_SYNC = 0x0008
+    CALIB_READ = 0x0009
+    CALIB_WRITE = 0x000A
+    CALIB_COMMIT = 0x000B
+    CALIB_RESTORE = 0x000C
     INFO = 0x8001
     CONFIG = 0x8002
     CONFIG_APPLIED = 0x8003
@@ -31,6 +36,10 @@ class MsgType(enum.IntEnum):
     STOPPED = 0x8006
     STATUS = 0x8007
     TIME = 0x8008
+    CALIB_DATA = 0x8009
+    CALIB_WRITTEN = 0x800A
+    CALIB_COMMITTED = 0x800B
+    CALIB_RESTORED = 0x800C
     FRAME_BEGIN = 0x4001
     FRAME_DATA = 0x4002
     FRAME_END = 0x4003
@@ -135,11 +144,13 @@ class Info(Message):
     max_payload: int
     max_width: int
     max_height: int
+    calibration_id: int = 0  # since 1.1: the active calibration, 0 = uncalibrated
 
     def pack(self) -> bytes:
         head = self._S.pack(*self.protocol_version, self.capabilities, self.sensor_width, self.sensor_height,
                             self.max_payload, self.max_width, self.max_height)
-        return head + _str(self.model) + _str(self.serial) + _str(self.firmware_version)
+        return head + _str(self.model) + _str(self.serial) + _str(self.firmware_version) + \
+            struct.pack("<I", self.calibration_id)
 
     @classmethod
     def unpack(cls, payload: bytes) -> "Info":
@@ -148,7 +159,8 @@ class Info(Message):
         model, off = _read_str(payload, off)
         serial, off = _read_str(payload, off)
         fw, off = _read_str(payload, off)
-        return cls(model, serial, fw, (major, minor), caps, sw, sh, mp, mw, mh)
+        calib_id = struct.unpack_from("<I", payload, off)[0] if len(payload) >= off + 4 else 0  # 1.0 devices
+        return cls(model, serial, fw, (major, minor), caps, sw, sh, mp, mw, mh, calib_id)
 
 
 _KV = struct.Struct("<Hi")
@@ -264,6 +276,144 @@ class Nack(Message):
         return cls(rt, code, pid, text)
 
 
+MAX_CALIB_CHUNK = 60 * 1024  # data bytes per CALIB_DATA / CALIB_WRITE message
+
+
+def calib_id(body: bytes) -> int:
+    """A calibration record's id as frames carry it: CRC-32 of its body, never 0 (0 = uncalibrated)."""
+    return zlib.crc32(body) or 1
+
+
+class CalibSource(enum.IntEnum):
+    """Which calibration record: in requests, what to read or write; in replies, what was found."""
+
+    ACTIVE = 0  # request: the one in force (user if valid, else factory); reply: none found
+    FACTORY = 1
+    USER = 2
+
+
+@dataclass(frozen=True)
+class CalibRead(Message):
+    """Read ``length`` bytes at ``offset`` of a stored calibration body (SPEC §12)."""
+
+    TYPE: ClassVar[int] = MsgType.CALIB_READ
+    _S: ClassVar[struct.Struct] = struct.Struct("<BII")
+    source: int
+    offset: int
+    length: int
+
+    def pack(self) -> bytes:
+        return self._S.pack(self.source, self.offset, self.length)
+
+    @classmethod
+    def unpack(cls, payload: bytes) -> "CalibRead":
+        return cls(*cls._S.unpack(payload))
+
+
+@dataclass(frozen=True)
+class CalibData(Message):
+    TYPE: ClassVar[int] = MsgType.CALIB_DATA
+    _S: ClassVar[struct.Struct] = struct.Struct("<BIIII")
+    source: int  # CalibSource.ACTIVE (0) here means: no valid record
+    generation: int
+    calibration_id: int
+    total: int  # body length
+    offset: int
+    data: bytes
+
+    def pack(self) -> bytes:
+        return self._S.pack(self.source, self.generation, self.calibration_id, self.total, self.offset) + self.data
+
+    @classmethod
+    def unpack(cls, payload: bytes) -> "CalibData":
+        head = cls._S.unpack_from(payload, 0)
+        return cls(*head, bytes(payload[cls._S.size:]))
+
+
+@dataclass(frozen=True)
+class CalibWrite(Message):
+    """Stage ``data`` at ``offset`` of a body of ``total`` bytes; offset 0 starts a new staging."""
+
+    TYPE: ClassVar[int] = MsgType.CALIB_WRITE
+    _S: ClassVar[struct.Struct] = struct.Struct("<II")
+    offset: int
+    total: int
+    data: bytes
+
+    def pack(self) -> bytes:
+        return self._S.pack(self.offset, self.total) + self.data
+
+    @classmethod
+    def unpack(cls, payload: bytes) -> "CalibWrite":
+        off, total = cls._S.unpack_from(payload, 0)
+        return cls(off, total, bytes(payload[cls._S.size:]))
+
+
+@dataclass(frozen=True)
+class CalibWritten(Message):
+    TYPE: ClassVar[int] = MsgType.CALIB_WRITTEN
+    staged: int  # contiguous bytes staged so far
+
+    def pack(self) -> bytes:
+        return struct.pack("<I", self.staged)
+
+    @classmethod
+    def unpack(cls, payload: bytes) -> "CalibWritten":
+        return cls(*struct.unpack("<I", payload))
+
+
+@dataclass(frozen=True)
+class CalibCommit(Message):
+    """Write the staged body to flash as ``target`` (FACTORY or USER) if its CRC-32 is ``crc``."""
+
+    TYPE: ClassVar[int] = MsgType.CALIB_COMMIT
+    _S: ClassVar[struct.Struct] = struct.Struct("<BII")
+    target: int
+    total: int
+    crc: int
+
+    def pack(self) -> bytes:
+        return self._S.pack(self.target, self.total, self.crc)
+
+    @classmethod
+    def unpack(cls, payload: bytes) -> "CalibCommit":
+        return cls(*cls._S.unpack(payload))
+
+
+@dataclass(frozen=True)
+class CalibRestore(_Empty):
+    """Invalidate the user calibration so the factory one is in force again."""
+
+    TYPE: ClassVar[int] = MsgType.CALIB_RESTORE
+
+
+@dataclass(frozen=True)
+class CalibState(Message):
+    """Reply to COMMIT and RESTORE: the calibration now in force."""
+
+    _S: ClassVar[struct.Struct] = struct.Struct("<BII")
+    source: int
+    generation: int
+    calibration_id: int
+
+    def pack(self) -> bytes:
+        return self._S.pack(self.source, self.generation, self.calibration_id)
+
+    @classmethod
+    def unpack(cls, payload: bytes) -> "CalibState":
+        return cls(*cls._S.unpack(payload))
+
+
+@dataclass(frozen=True)
+class CalibCommitted(CalibState):
+    TYPE: ClassVar[int] = MsgType.CALIB_COMMITTED
+
+
+@dataclass(frozen=True)
+class CalibRestored(CalibState):
+    TYPE: ClassVar[int] = MsgType.CALIB_RESTORED
+
+
 DISPARITY_S16_Q4 = 1  # int16 little-endian, value = disparity * subpixel
 FRAME_RECTIFIED = 0x01  # frame flags
 
@@ -351,14 +501,16 @@ class FrameEnd(Message):
 MESSAGES: dict[int, type[Message]] = {
     cls.TYPE: cls for cls in (
         GetInfo, GetConfig, SetConfig, Trigger, Start, Stop, Heartbeat, TimeSync, Info, Config,
-        ConfigApplied, Triggered, Started, Stopped, Status, Time, Nack, FrameBegin, FrameData, FrameEnd)
+        ConfigApplied, Triggered, Started, Stopped, Status, Time, Nack, FrameBegin, FrameData, FrameEnd,
+        CalibRead, CalibData, CalibWrite, CalibWritten, CalibCommit, CalibRestore, CalibCommitted, CalibRestored)
 }
 
 # request type -> reply class
 REPLIES: dict[int, type[Message]] = {
     MsgType.GET_INFO: Info, MsgType.GET_CONFIG: Config, MsgType.SET_CONFIG: ConfigApplied,
     MsgType.TRIGGER: Triggered, MsgType.START: Started, MsgType.STOP: Stopped,
-    MsgType.HEARTBEAT: Status, MsgType.TIME_SYNC: Time,
+    MsgType.HEARTBEAT: Status, MsgType.TIME_SYNC: Time, MsgType.CALIB_READ: CalibData,
+    MsgType.CALIB_WRITE: CalibWritten, MsgType.CALIB_COMMIT: CalibCommitted, MsgType.CALIB_RESTORE: CalibRestored,
 }
 
 

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from device_sim.calibration.model import (
+from protocol.calibration import (
     BODY_SIZE, CalibrationFormatError, CalibrationQuality, StereoCalibration,
 )
 from device_sim.calibration.truth import true_calibration

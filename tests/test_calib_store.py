@@ -8,7 +8,7 @@ import pytest
 from device_sim.calibration.flash import (
     FlashAddressError, FlashProgramError, FlashProtectedError, NorFlash, PowerLossError,
 )
-from device_sim.calibration.model import StereoCalibration
+from protocol.calibration import StereoCalibration
 from device_sim.calibration.store import CalibrationStore, FactoryLockedError, StoreError
 from device_sim.calibration.truth import true_calibration
 
@@ -104,6 +104,14 @@ def test_read_order_user_then_factory_then_none(path: Path) -> None:
     s.restore_factory()
     assert reopen(path).read().body == SMALL
     assert s.write_user(body(3)).generation == 1
+
+
+def test_restore_without_factory_record_is_refused(path: Path) -> None:
+    s = CalibrationStore(NorFlash(path))
+    s.write_user(body(1))
+    with pytest.raises(StoreError, match="no valid factory record"):
+        s.restore_factory()
+    assert reopen(path).read().body == body(1)
 
 
 def test_factory_lock(path: Path) -> None:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
-from device_sim.calibration.model import StereoCalibration
+from protocol.calibration import StereoCalibration
 from device_sim.calibration.truth import true_calibration
 from tools import calibrate
 from tools.calib_solve import (
@@ -78,8 +78,8 @@ def test_metric_definitions(pairs) -> None:
         if np.dot(cl[-1] - cl[0], cr[-1] - cr[0]) < 0:
             cr = cr[::-1]
         crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
-        yl = cv2.undistortPoints(cl.reshape(-1, 1, 2), c.K_left, c.D_left, R=r.R1, P=r.P1, criteria=crit)[:, 0, 1]
-        yr = cv2.undistortPoints(cr.reshape(-1, 1, 2), c.K_right, c.D_right, R=r.R2, P=r.P2, criteria=crit)[:, 0, 1]
+        yl = cv2.undistortPoints(cl.reshape(-1, 1, 2).astype(float), c.K_left, c.D_left, R=r.R1, P=r.P1, criteria=crit)[:, 0, 1]
+        yr = cv2.undistortPoints(cr.reshape(-1, 1, 2).astype(float), c.K_right, c.D_right, R=r.R2, P=r.P2, criteria=crit)[:, 0, 1]
         dy.append(yl - yr)
     assert res.quality.epipolar_rms_px == pytest.approx(np.sqrt(np.mean(np.concatenate(dy) ** 2)), rel=1e-6)
 

@@ -15,7 +15,7 @@ from protocol.framing import encode_frame
 def test_info(cam):
     info = cam.info()
     assert info.model and info.serial
-    assert info.protocol_version == (1, 0)
+    assert info.protocol_version[0] == 1 and info.protocol_version >= (1, 1)
     assert info.firmware_version.count(".") == 2
     assert info.max_payload >= 64 * 1024
 

@@ -84,8 +84,11 @@ def test_depth_of_a_flat_wall():
     z = f.depth()
     assert np.isfinite(z).mean() > 0.8
     assert abs(np.nanmedian(z) - WALL_DISTANCE_M) / WALL_DISTANCE_M < 0.01
-    truth = sim.ground_truth(f.sequence)
-    assert np.allclose(truth.depth_m, WALL_DISTANCE_M, rtol=1e-5)
+    truth = sim.ground_truth(f.sequence)  # seen from the rectified left camera, a little tilted
+    assert np.allclose(truth.depth_m, WALL_DISTANCE_M, rtol=0.01)
+    ok = np.isfinite(z)
+    assert np.median(np.abs(z[ok] - truth.depth_m[ok]) / truth.depth_m[ok]) < 0.005
+    assert f.rectified and f.geometry.calibration_id == cam.info().calibration_id != 0
     pts, grey = f.points()
     assert pts.shape[1] == 3 and len(pts) == len(grey) == np.isfinite(z).sum()
     Q = f.geometry.Q

@@ -55,7 +55,7 @@ def assert_same(left: np.ndarray, right: np.ndarray, p: MatchParams) -> np.ndarr
 
 SHAPES = [(64, 96), (97, 151), (120, 160), (81, 203), (111, 127)]
 GRID = list(itertools.product(
-    ["xsobel", "normalized"], [5, 9, 15, 21], [16, 32, 64, 128], [0, -7, 5],
+    ["xsobel", "normalized"], [5, 9, 15, 21], [16, 32, 48, 64, 80, 112, 128], [0, -7, 5],
     [(10, 15), (0, 0), (25, 5)], [False, True], [False, True]))
 
 
@@ -76,7 +76,7 @@ def _grid_case(i: int):
     return (h, w), MatchParams(**kw), 3 + i % 9
 
 
-@pytest.mark.parametrize("i", range(0, len(GRID), 7))
+@pytest.mark.parametrize("i", range(0, len(GRID), 11))
 def test_grid_vs_opencv(i: int) -> None:
     shape, p, shift = _grid_case(i)
     left, right = scene(*shape, shift=shift + max(p.min_disparity, 0), seed=i)
@@ -88,6 +88,8 @@ def test_grid_vs_opencv(i: int) -> None:
     dict(num_disparities=16, block_size=9, min_disparity=-15),  # N - 1 + min = 0
     dict(num_disparities=16, block_size=9, min_disparity=-16),
     dict(num_disparities=32, block_size=25, pre_filter_cap=63),  # 32-bit accumulators
+    dict(num_disparities=112, block_size=23, min_disparity=-3),  # 32-bit, 64+32+16 lanes
+    dict(num_disparities=80, block_size=5, pre_filter_cap=63, uniqueness_ratio=40),
     dict(num_disparities=32, block_size=41, pre_filter_cap=40, uniqueness_ratio=5),
     dict(num_disparities=32, block_size=21, pre_filter_type="normalized", pre_filter_size=31),
     dict(num_disparities=16, block_size=9, min_disparity=7, texture_threshold=0,
@@ -101,6 +103,26 @@ def test_grid_vs_opencv(i: int) -> None:
 def test_edge_cases_vs_opencv(kw: dict) -> None:
     left, right = scene(97, 151, shift=6, seed=1)
     assert_same(left, right, MatchParams(**kw))
+
+
+def test_wide_costs_with_lr_check_differ_only_in_lr_decisions() -> None:
+    """OpenCV bug: with 32-bit costs (cap > 31 or block > 21) its left-right check reads the
+    16-bit cost buffer that the matcher filled through an int pointer, so it compares garbage
+    costs. We run the intended check; every pixel where we differ must be one the check
+    invalidated on one side only, with the value both give without the check on the other."""
+    left, right = scene(97, 151, shift=6, seed=0)
+    for kw in (dict(num_disparities=32, block_size=25), dict(num_disparities=32, block_size=9,
+                                                             pre_filter_cap=63)):
+        base = MatchParams(**kw)
+        p = MatchParams(**kw, disp12_max_diff=1)
+        ours, ref = match(left, right, p), cv_stereo_bm(p).compute(left, right)
+        no_lr = match(left, right, base)
+        diff = ours != ref
+        assert np.array_equal(no_lr, cv_stereo_bm(base).compute(left, right))
+        inv = p.invalid_value
+        one_side = ((ours == inv) & (ref == no_lr)) | ((ref == inv) & (ours == no_lr))
+        assert np.all(one_side[diff])
+        assert np.count_nonzero(ours != no_lr) > 0  # the check does invalidate pixels
 
 
 def test_known_shift_recovered() -> None:

@@ -81,8 +81,29 @@ def _cache_present() -> bool:
     return d.is_dir() and any(d.glob("*.nbi"))
 
 
+def cold_jit_seconds() -> float:
+    """Seconds a fresh process needs to import the core and compile every kernel."""
+    import os
+    import subprocess
+    import tempfile
+    code = ("import time; t0 = time.perf_counter(); from device_sim.matching import warm_up; "
+            "warm_up(); print(time.perf_counter() - t0)")
+    root = Path(__file__).resolve().parent.parent
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(os.environ, NUMBA_CACHE_DIR=tmp)
+        res = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, check=True,
+                             capture_output=True, text=True)
+    return float(res.stdout.strip().splitlines()[-1])
+
+
 def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
-    """Median ms of each pipeline stage of Matcher m (prefilter, SAD/WTA/LR, speckle)."""
+    """Median ms per pipeline stage of Matcher m.
+
+    'cost volume' runs the SAD stage with a texture threshold no pixel passes, so it times the
+    running sums alone; 'wta+subpixel+lr' is the SAD stage minus that."""
+    from dataclasses import replace
+
+    from device_sim.matching import Matcher
     from device_sim.matching.postfilter import filter_speckles
     from device_sim.matching.prefilter import prefilter_pair
     p = m.params
@@ -90,7 +111,11 @@ def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
     out = {"prefilter": _median_ms(lambda: prefilter_pair(
         left, right, m.pl, m.pr, p.pre_filter_type, p.pre_filter_size, p.pre_filter_cap,
         m.pf_vsum), repeat)}
-    out["sad+wta+lr"] = _median_ms(lambda: m.run_sad(disp), repeat)
+    stage = _median_ms(lambda: m.run_sad(disp), repeat)
+    mc = Matcher(left.shape, replace(p, texture_threshold=2**30, disp12_max_diff=-1))
+    mc.match(left, right)
+    out["cost volume"] = _median_ms(lambda: mc.run_sad(disp), repeat)
+    out["wta+subpixel+lr"] = stage - out["cost volume"]
     if p.use_speckle:
         out["speckle"] = _median_ms(lambda: filter_speckles(
             disp.copy(), p.invalid_value, p.speckle_window_size, p.speckle_range, m.labels,
@@ -106,6 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=15, help="timed runs per case")
     ap.add_argument("--quick", action="store_true", help="only 640x480, D=64, block 9")
     ap.add_argument("--profile", action="store_true", help="per-stage timings of the core")
+    ap.add_argument("--cold-jit", action="store_true",
+                    help="also time a from-scratch compile (subprocess, empty numba cache)")
     args = ap.parse_args(argv)
 
     import cv2
@@ -113,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
 
     cached = _cache_present()
     t0 = time.perf_counter()
-    from device_sim.matching import Matcher, MatchParams
+    from device_sim.matching import Matcher, MatchParams, warm_up
     t_import = time.perf_counter() - t0
     cv2.setNumThreads(args.threads)
     numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
@@ -127,18 +154,14 @@ def main(argv: list[str] | None = None) -> int:
             print(f"(Motorcycle skipped: {exc})")
     cases = [(64, 9)] if args.quick else [(64, 9), (64, 15), (128, 9), (128, 15)]
 
-    # JIT warm-up: first call compiles (or loads the on-disk cache) every kernel
-    t0 = time.perf_counter()
-    for kw in (dict(num_disparities=16, block_size=9),
-               dict(num_disparities=16, block_size=9, pre_filter_type="normalized",
-                    disp12_max_diff=1, speckle_window_size=10, speckle_range=16)):
-        Matcher(sl[:64, :128].shape, MatchParams(**kw)).match(sl[:64, :128], sr[:64, :128])
-    t_jit = time.perf_counter() - t0 + t_import
+    t_jit = warm_up() + t_import  # compiles, or loads numba's disk cache of, every kernel
 
     print(f"threads={args.threads} (cv2 {cv2.__version__}, numba {numba.__version__}, "
           f"numba threads {numba.get_num_threads()}); repeat={args.repeat}")
     print(f"JIT warm-up (import + first calls): {t_jit:.2f} s "
-          f"({'on-disk cache present' if cached else 'compiled from scratch'})")
+          f"({'loaded from numba disk cache' if cached else 'compiled from scratch'})")
+    if args.cold_jit:
+        print(f"JIT compile from scratch (subprocess, empty cache): {cold_jit_seconds():.2f} s")
     hdr = (f"{'scene':<19} {'D':>4} {'blk':>3} {'core ms':>8} {'cv2 ms':>8} {'ratio':>6} "
            f"{'core G/s':>8} {'cv2 G/s':>8} {'bad2.0':>7} {'bitexact':>8} {'peak MiB':>8} "
            f"{'scratch MiB':>11}")
@@ -162,8 +185,7 @@ def main(argv: list[str] | None = None) -> int:
             m.match(left, right)
             peak = tracemalloc.get_traced_memory()[1]
             tracemalloc.stop()
-            scratch = sum(getattr(m, a).nbytes for a in vars(m)
-                          if isinstance(getattr(m, a), np.ndarray))
+            scratch = m.scratch_bytes()
             bad = bad_rate(ours, gt, p.invalid_value) if name.startswith("Motorcycle") else None
             evals = w * h * nd
             print(f"{name:<19} {nd:>4} {bs:>3} {mc:>8.2f} {mcv:>8.2f} {mc / mcv:>6.2f} "

@@ -6,7 +6,7 @@ the device's raw stream in device mode — and returns a CalibrationResult. It s
 
 Pipeline and exact metric definitions (units: pixels of the raw image, N = number of corners):
   1. Detect: cv2.findChessboardCorners (adaptive threshold, normalise) then cv2.cornerSubPix with
-     a half-window of ~1/3 of the smallest corner spacing (2..11 px). A pair counts only when the
+     a half-window of 0.4 × the smallest corner spacing (2..15 px). A pair counts only when the
      board is found in both images; the right corner order is reversed if it runs opposite to the
      left one.
   2. Hold out: of the pairs with both boards, every `holdout_every`-th one (the 5th, 10th, ...)
@@ -42,7 +42,7 @@ import cv2
 import numpy as np
 
 from device_sim.calibration.board import BoardSpec
-from device_sim.calibration.model import CalibrationQuality, StereoCalibration
+from protocol.calibration import CalibrationQuality, StereoCalibration
 from protocol.errors import StereoCamError
 
 PARAM_NAMES = ("X", "Y", "Size", "Skew")
@@ -151,7 +151,7 @@ def detect_corners(img: np.ndarray, board: BoardSpec) -> np.ndarray | None:
     grid = corners.reshape(board.rows, board.cols, 2)
     spacing = min(np.linalg.norm(np.diff(grid, axis=0), axis=2).min(),
                   np.linalg.norm(np.diff(grid, axis=1), axis=2).min())
-    half = int(np.clip(spacing / 3, 2, 11))
+    half = int(np.clip(0.4 * spacing, 2, 15))
     corners = cv2.cornerSubPix(gray, corners, (half, half), (-1, -1), _SUBPIX)
     return corners.reshape(-1, 2).astype(np.float32)
 

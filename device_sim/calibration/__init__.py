@@ -1,1 +1,4 @@
-"""Metric camera support: calibration model, per-unit truth, rays, rectification, flash store."""
+"""Metric camera support: per-unit truth, lens rays, the chessboard scene, rectification, flash store.
+
+The calibration data model itself is shared with the host: protocol.calibration.
+"""

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .model import StereoCalibration
+from protocol.calibration import StereoCalibration
 from .rays import pixel_rays, project_points
 from .truth import rodrigues
 

@@ -135,7 +135,12 @@ class CalibrationStore:
         return self._write("factory", body)
 
     def restore_factory(self) -> None:
-        """Invalidate every user record so that read() returns the factory record."""
+        """Invalidate every user record so that read() returns the factory record.
+
+        Refused (StoreError, nothing touched) when there is no valid factory record.
+        """
+        if self.read_factory() is None:
+            raise StoreError("no valid factory record to restore; user records left as they are")
         for rec in reversed(self._valid("user")):  # oldest first, newest last
             self.flash.program(self._slot_addr("user", rec.slot), b"\x00" * 4)
 

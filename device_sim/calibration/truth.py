@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model import StereoCalibration
+from protocol.calibration import StereoCalibration
 
 NOMINAL_FOCAL_PX = 960.0
 NOMINAL_WIDTH = 1280

@@ -1,9 +1,24 @@
-"""Device matching core: StereoBM-compatible block matching, bit-exact with cv2.StereoBM.
+"""Device matching core: StereoBM block matching, bit-exact with cv2.StereoBM (OpenCV 4.x/5.x).
 
-``match(left, right, MatchParams(...))`` returns int16 disparity * 16; ``Matcher`` keeps its
-scratch buffers between frames of one shape. OpenCV is only the test oracle, never called here.
+    from device_sim.matching import MatchParams, match, Matcher
+    disp = match(left, right, MatchParams(num_disparities=64, block_size=9))  # int16, d * 16
+    m = Matcher(left.shape, params); disp = m.match(left, right)  # keeps scratch per frame
+
+Pipeline (modules): prefilter.py (XSOBEL / NORMALIZED_RESPONSE) -> sad.py + simd.py (running
+SAD sums, texture, winner-take-all, uniqueness, subpixel, left-right check, valid region) ->
+postfilter.py (speckle filter). numba, parallel over row stripes; ``warm_up()`` pays the JIT
+(or loads numba's on-disk cache) once per process. OpenCV is the test oracle only.
+
+Where OpenCV's own output is not well defined we do the following instead:
+  * no valid column (image too narrow for range + window): ValueError (OpenCV returns all
+    invalid, or its uninitialised output buffer when only the valid region is empty);
+  * 32-bit costs (pre_filter_cap > 31 or block_size > 21) with disp12_max_diff >= 0: OpenCV
+    writes int costs into a 16-bit buffer and its left-right check reads them back as shorts;
+    we check with the true costs;
+  * min_disparity > 0: OpenCV writes past each row end; only the spill into row H - r survives
+    deterministically and is reproduced; spills across its thread stripes race, we drop them.
 """
-from .matcher import Matcher, check_pair, match
+from .matcher import Matcher, check_pair, match, warm_up
 from .params import MatchParams, geometry
 
-__all__ = ["MatchParams", "Matcher", "match", "check_pair", "geometry"]
+__all__ = ["MatchParams", "Matcher", "match", "warm_up", "check_pair", "geometry"]

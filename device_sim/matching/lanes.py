@@ -7,7 +7,6 @@ as the C code they mirror), letting the vectoriser use 16-bit lanes.
 from __future__ import annotations
 
 from numba.core import types
-from llvmlite import ir
 from numba.extending import intrinsic
 
 
@@ -36,19 +35,6 @@ def nsub(typingctx, a, b):
 
 
 @intrinsic
-def nmin(typingctx, a, b):
-    """Signed/unsigned minimum in the operands' own width."""
-    if _same_int(a, b):
-        def codegen(context, builder, sig, args):
-            x, y = args
-            lt = (builder.icmp_signed("<", x, y) if sig.args[0].signed
-                  else builder.icmp_unsigned("<", x, y))
-            return builder.select(lt, x, y)
-        return a(a, b), codegen
-    return None
-
-
-@intrinsic
 def absdiff_u8(typingctx, a, b, like):
     """|a - b| of two uint8 values, zero-extended to the type of ``like``."""
     if a == types.uint8 and b == types.uint8 and isinstance(like, types.Integer):
@@ -59,27 +45,6 @@ def absdiff_u8(typingctx, a, b, like):
             lo = builder.select(gt, y, x)
             return builder.zext(builder.sub(hi, lo), context.get_value_type(sig.return_type))
         return like(a, b, like), codegen
-    return None
-
-
-@intrinsic
-def eq_select(typingctx, a, b, x, y):
-    """x if a == b else y (a, b one integer type; x, y another)."""
-    if _same_int(a, b) and _same_int(x, y):
-        def codegen(context, builder, sig, args):
-            return builder.select(builder.icmp_signed("==", args[0], args[1]), args[2], args[3])
-        return x(a, b, x, y), codegen
-    return None
-
-
-@intrinsic
-def le_count(typingctx, a, b):
-    """1 if a <= b (signed) else 0, in the operands' width."""
-    if _same_int(a, b):
-        def codegen(context, builder, sig, args):
-            c = builder.icmp_signed("<=", args[0], args[1])
-            return builder.zext(c, context.get_value_type(sig.return_type))
-        return a(a, b), codegen
     return None
 
 
@@ -101,21 +66,6 @@ def uidx(typingctx, value):
         def codegen(context, builder, sig, args):
             return context.cast(builder, args[0], sig.args[0], types.uint64)
         return types.uint64(value), codegen
-    return None
-
-
-@intrinsic
-def opaque(typingctx, value):
-    """Return ``value`` unchanged through an empty inline-asm barrier.
-
-    Used on row indices so LLVM cannot widen a runtime alias check to the whole outer loop
-    (it would then always report a conflict and run the scalar loop)."""
-    if isinstance(value, types.Integer):
-        def codegen(context, builder, sig, args):
-            ty = context.get_value_type(sig.args[0])
-            fnty = ir.FunctionType(ty, [ty])
-            return builder.asm(fnty, "", "=r,0", [args[0]], side_effect=False)
-        return value(value), codegen
     return None
 
 

@@ -6,10 +6,12 @@ import threading
 import numba as nb
 import numpy as np
 
+from . import sad as _sad
 from .params import Geometry, MatchParams, geometry
 from .postfilter import filter_speckles
 from .prefilter import prefilter_pair
-from .sad import match_rows
+
+STRIPES_PER_THREAD = 4  # handed out dynamically: a preempted thread delays one short stripe
 
 
 def check_pair(left: np.ndarray, right: np.ndarray) -> None:
@@ -25,11 +27,8 @@ def check_pair(left: np.ndarray, right: np.ndarray) -> None:
         raise ValueError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
 
 
-STRIPES_PER_THREAD = 4
-
-
 def _reciprocals(max_q: int) -> np.ndarray:
-    """M[q] = ceil(2**40 / q): floor(a / q) == (a * M[q]) >> 40 for 0 <= a <= 2**22, q < 2**15."""
+    """M[q] = ceil(2**40 / q): floor(a / q) == (a * M[q]) >> 40 for 0 <= a < 2**23, q < 2**15."""
     q = np.arange(max_q + 1, dtype=np.int64)
     out = np.zeros(max_q + 1, np.int64)
     out[1:] = -((-(1 << 40)) // q[1:])
@@ -41,11 +40,30 @@ def _stripes(lo: int, hi: int, n: int) -> np.ndarray:
     return np.array([lo + (hi - lo) * k // n for k in range(n + 1)], dtype=np.int64)
 
 
+def _aligned(shape: tuple[int, ...], dtype, align: int = 64) -> np.ndarray:
+    """Uninitialised C-contiguous array whose data starts on an `align`-byte boundary."""
+    n = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    raw = np.empty(n + align, np.uint8)
+    off = (-raw.ctypes.data) % align
+    return raw[off:off + n].view(dtype).reshape(shape)
+
+
+def _contiguous(img: np.ndarray) -> np.ndarray:
+    img = np.ascontiguousarray(img)
+    return img if img.flags.writeable else img.copy()  # one compiled signature only
+
+
 class Matcher:
-    """Block matcher for one (shape, params); scratch buffers live between frames."""
+    """Block matcher for one (shape, params); scratch buffers live between frames.
+
+    ``nstripes`` fixes the number of row stripes (default: STRIPES_PER_THREAD per numba
+    thread); the output does not depend on it. Calls are serialised by a lock.
+    """
 
     def __init__(self, shape: tuple[int, int], params: MatchParams = MatchParams(),
                  nstripes: int | None = None) -> None:
+        if not isinstance(params, MatchParams):
+            raise ValueError(f"params must be MatchParams, got {type(params).__name__}")
         params.validate()
         h, w = int(shape[0]), int(shape[1])
         self.params = params
@@ -53,52 +71,70 @@ class Matcher:
         self.geom: Geometry = geometry(h, w, params)
         self._nstripes = nstripes
         self._lock = threading.Lock()
-        self._alloc()
+        self._alloc_fixed()
+        self._threads = 0
+        self._ensure_threads(nb.get_num_threads())
 
-    def _alloc(self) -> None:
+    def _alloc_fixed(self) -> None:
         p, g = self.params, self.geom
         h, w = self.shape
         r, nd = p.block_size // 2, p.num_disparities
-        self.pl = np.empty((h, w), np.uint8)
-        self.pr = np.empty((h, w), np.uint8)
+        self.pl = _aligned((h, w), np.uint8)
+        self.pr = _aligned((h, w), np.uint8)
         self.pf_vsum = np.empty((2, w + p.pre_filter_size + 2), np.int32)
         # virtual columns c = -r .. width1-1+r: clamped left column and right base column
         c = np.arange(-r, g.width1 + r)
         self.lc = (g.lofs + np.clip(c, -g.lofs, w - 1 - g.lofs)).astype(np.int64)
         self.rb = (g.rofs + np.clip(c, -g.rofs, w - nd - g.rofs)).astype(np.int64)
-        # a few stripes per thread, handed out dynamically: a descheduled thread then delays
-        # the frame by one short stripe, not by half of it
-        ns = self._nstripes or STRIPES_PER_THREAD * max(1, nb.get_num_threads())
-        self.bounds = _stripes(g.roi_y0, g.roi_y1, ns)
-        ns = self.bounds.shape[0] - 1
-        acc = np.int16 if p.max_sad <= 32767 else np.int32
-        ncols = self.lc.shape[0]
-        wide = max(w, g.lofs + g.width1)
-        self.vs = np.empty((ns, ncols, nd), acc)
-        self.ts = np.empty((ns, ncols), np.int32)
-        self.sad = np.empty((ns, nd), acc)
-        self.big = acc(np.iinfo(acc).max)
-        self.recip = _reciprocals(p.max_sad) if acc is np.int16 else np.zeros(0, np.int64)
-        self.drow = np.empty((ns, wide), np.int16)
-        self.crow = np.empty((ns, wide), np.int32)
-        self.d2buf = np.empty((ns, w), np.int32)
-        self.d2cost = np.empty((ns, w), np.int32)
+        self.acc = np.int16 if p.max_sad <= 32767 else np.int32
+        self.big = self.acc(np.iinfo(self.acc).max)
+        self.recip = (_reciprocals(p.max_sad) if self.acc is np.int16
+                      else np.zeros(0, np.int64))
+        cfg = np.zeros(_sad.C_LEN, np.int64)
+        cfg[[_sad.C_R, _sad.C_CAP, _sad.C_ND, _sad.C_MIND, _sad.C_TEX, _sad.C_URATIO,
+             _sad.C_MAXDIFF, _sad.C_LOFS, _sad.C_WIDTH1, _sad.C_ROIX0, _sad.C_ROIX1,
+             _sad.C_LRX0, _sad.C_LRX1]] = [
+            r, p.pre_filter_cap, nd, p.min_disparity, p.texture_threshold, p.uniqueness_ratio,
+            p.disp12_max_diff, g.lofs, g.width1, g.roi_x0, g.roi_x1, g.lr_x0, g.lr_x1]
+        self.cfg = cfg
         if p.use_speckle:
             self.labels = np.empty((h, w), np.int32)
             self.stack = np.empty((h * w, 2), np.int32)
             self.rtype = np.zeros(h * w + 1, np.uint8)
+
+    def _ensure_threads(self, nthreads: int) -> None:
+        """Per-thread scratch for every thread numba may run (sized once) and the stripe
+        split for the nthreads threads active now."""
+        if nthreads == self._threads:
+            return
+        if self._threads == 0:
+            g, nd = self.geom, self.params.num_disparities
+            n = max(1, nb.config.NUMBA_NUM_THREADS)  # numba.get_thread_id() < this
+            ncols, wide = self.lc.shape[0], max(self.shape[1], g.lofs + g.width1)
+            self.vs = _aligned((n, ncols, nd), self.acc)
+            self.ts = np.empty((n, ncols), np.int32)
+            self.sad = _aligned((n, nd), self.acc)
+            self.drow = np.empty((n, wide), np.int16)
+            self.crow = np.empty((n, wide), np.int32)
+            self.d2buf = np.empty((n, self.shape[1]), np.int32)
+            self.d2cost = np.empty((n, self.shape[1]), np.int32)
+        n = self._nstripes or STRIPES_PER_THREAD * max(1, nthreads)
+        self.bounds = _stripes(self.geom.roi_y0, self.geom.roi_y1, n)
+        self._threads = nthreads
+
+    def scratch_bytes(self) -> int:
+        """Bytes of scratch this matcher keeps between frames."""
+        return sum(v.nbytes for v in vars(self).values() if isinstance(v, np.ndarray))
 
     def match(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """Disparity map (int16, disparity * 16; invalid = (min_disparity - 1) * 16)."""
         check_pair(left, right)
         if left.shape != self.shape:
             raise ValueError(f"image shape {left.shape} differs from the matcher's {self.shape}")
-        left = np.ascontiguousarray(left)
-        right = np.ascontiguousarray(right)
+        left, right = _contiguous(left), _contiguous(right)
         p, g = self.params, self.geom
-        h, w = self.shape
         inv = p.invalid_value
-        disp = np.empty((h, w), np.int16)
+        disp = np.empty(self.shape, np.int16)
         with self._lock:
             prefilter_pair(left, right, self.pl, self.pr, p.pre_filter_type, p.pre_filter_size,
                            p.pre_filter_cap, self.pf_vsum)
@@ -112,15 +148,12 @@ class Matcher:
 
     def run_sad(self, disp: np.ndarray) -> None:
         """SAD / winner-take-all / left-right stage on the prefiltered pair (self.pl, self.pr)."""
-        p, g = self.params, self.geom
+        self._ensure_threads(nb.get_num_threads())
         chunk = nb.set_parallel_chunksize(1)
         try:
-            match_rows(self.pl, self.pr, disp, self.bounds, p.block_size // 2,
-                       p.pre_filter_cap, p.num_disparities, p.min_disparity,
-                       p.texture_threshold, p.uniqueness_ratio, p.disp12_max_diff, g.lofs,
-                       g.width1, g.roi_x0, g.roi_x1, g.lr_x0, g.lr_x1, self.lc, self.rb,
-                       self.vs, self.ts, self.sad, self.big, self.recip, self.drow, self.crow,
-                       self.d2buf, self.d2cost)
+            _sad.match_rows(self.pl, self.pr, disp, self.bounds, self.cfg, self.lc, self.rb,
+                            self.recip, self.big, self.vs, self.ts, self.sad, self.drow,
+                            self.crow, self.d2buf, self.d2cost)
         finally:
             nb.set_parallel_chunksize(chunk)
 
@@ -130,11 +163,11 @@ _cache_lock = threading.Lock()
 
 
 def match(left: np.ndarray, right: np.ndarray, params: MatchParams = MatchParams()) -> np.ndarray:
-    """Match a rectified grey pair with a cached Matcher for (shape, params, threads)."""
+    """Match a rectified grey pair with a cached Matcher for (shape, params)."""
     check_pair(left, right)
     if not isinstance(params, MatchParams):
         raise ValueError(f"params must be MatchParams, got {type(params).__name__}")
-    key = (left.shape, params, nb.get_num_threads())
+    key = (left.shape, params)
     with _cache_lock:
         m = _cache.get(key)
         if m is None:
@@ -142,3 +175,16 @@ def match(left: np.ndarray, right: np.ndarray, params: MatchParams = MatchParams
                 _cache.pop(next(iter(_cache)))
             m = _cache[key] = Matcher(left.shape, params)
     return m.match(left, right)
+
+
+def warm_up() -> float:
+    """Compile (or load from numba's disk cache) every kernel; returns the seconds spent."""
+    import time
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 256, (40, 96), dtype=np.uint8)
+    for kw in (dict(num_disparities=16, block_size=9, disp12_max_diff=1,
+                    speckle_window_size=10, speckle_range=16),
+               dict(num_disparities=16, block_size=25, pre_filter_type="normalized")):
+        Matcher(img.shape, MatchParams(**kw)).match(img, np.roll(img, -3, axis=1))
+    return time.perf_counter() - t0

@@ -1,21 +1,30 @@
 """SAD block matching kernel: running sums, winner-take-all, texture, uniqueness, subpixel,
-left-right check, valid-region border. Bit-exact with OpenCV's findStereoCorrespondenceBM.
+left-right check and valid-region border, bit-exact with OpenCV's findStereoCorrespondenceBM.
 
-Layout: rows are processed top to bottom inside a stripe (one stripe per thread, ``prange``).
-``vs[c, j]`` holds the vertical (2r+1)-row sum of |P_L - P_R| for virtual column ``c`` and cost
-index ``j`` (disparity = N - 1 + min_disparity - j); ``j`` is the contiguous innermost axis.
-Each row updates ``vs`` column by column (add the row entering the window, subtract the row
-leaving it) fused with the horizontal running sum that yields the window SAD for every ``j``.
+Layout: each stripe of rows runs top to bottom on one thread (``prange`` over stripes, handed
+out dynamically). ``vs[c, j]`` holds the vertical (2r+1)-row sum of |P_L - P_R| for virtual
+column ``c`` (left column lofs + c, clamped as OpenCV clamps it) and cost index ``j``
+(disparity = N - 1 + min_disparity - j); ``j`` is the contiguous innermost axis. For every
+pixel one vector pass slides the column's vertical window down a row and the horizontal window
+right a column (``simd.slide_all``), a second pass finds the first minimum and the uniqueness
+count (``simd.wta_all``); the rest is scalar.
+
+numba caches this module's kernels on disk keyed on *this* file only: after editing simd.py or
+lanes.py, touch this file (or delete __pycache__) so the cache is rebuilt.
 """
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
 
-from .lanes import absdiff_u8, cast_like, cdiv, nadd, nmin, nsub, uidx
+from .lanes import absdiff_u8, cast_like, cdiv, nadd, nsub, uidx
 from .simd import slide_all, step_all, wta_all
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
+
+# layout of the int64 configuration vector passed to match_rows
+(C_R, C_CAP, C_ND, C_MIND, C_TEX, C_URATIO, C_MAXDIFF, C_LOFS, C_WIDTH1, C_ROIX0, C_ROIX1,
+ C_LRX0, C_LRX1, C_LEN) = range(14)
 
 
 @nb.njit(**_JIT)
@@ -50,26 +59,32 @@ def _slide_column(ci: int, pl: np.ndarray, pr: np.ndarray, ya: int, ys: int, cap
 
 
 @nb.njit(**_JIT)
-def _row(pl: np.ndarray, pr: np.ndarray, y: int, upd: bool, r: int, cap: int, nd: int,
-         min_disp: int, tex_thr: int, uratio: int, lofs: int, width1: int, lc: np.ndarray,
+def _row(pl: np.ndarray, pr: np.ndarray, y: int, upd: bool, cfg: np.ndarray, lc: np.ndarray,
          rb: np.ndarray, vs: np.ndarray, ts: np.ndarray, sad: np.ndarray, big,
          recip: np.ndarray, drow: np.ndarray, crow: np.ndarray) -> None:
-    """Disparities of row y for columns lofs .. lofs+width1-1 into drow (cost into crow)."""
+    """Disparities of row y, columns lofs .. lofs+width1-1, into drow (their cost into crow).
+
+    upd: slide the vertical sums down from row y-1 (False on a stripe's first row, whose
+    sums _init_columns has just built)."""
+    r, cap, nd, min_disp = cfg[C_R], cfg[C_CAP], cfg[C_ND], cfg[C_MIND]
+    tex_thr, uratio, lofs, width1 = cfg[C_TEX], cfg[C_URATIO], cfg[C_LOFS], cfg[C_WIDTH1]
     inv = (min_disp - 1) * 16
     zero = nsub(big, big)
     ya, ys = y + r, y - r - 1
+    wsz = 2 * r + 1
     if upd:
-        for ci in range(2 * r + 1):
+        for ci in range(wsz):
             _slide_column(ci, pl, pr, ya, ys, cap, lc, rb, nd, vs, ts, zero)
-    m = big
     for j in range(nd):
         sj = zero
-        for ci in range(2 * r + 1):
+        for ci in range(wsz):
             sj = nadd(sj, vs[ci, j])
         sad[j] = sj
-        m = nmin(m, sj)
+    m = big
+    for j in range(nd):
+        m = min(m, sad[j])
     tsum = 0
-    for ci in range(2 * r + 1):
+    for ci in range(wsz):
         tsum += ts[ci]
     for x in range(width1):
         ci = x + 2 * r
@@ -84,24 +99,22 @@ def _row(pl: np.ndarray, pr: np.ndarray, y: int, upd: bool, r: int, cap: int, nd
                 m = step_all(vs, ci, x - 1, sad, nd)
             tsum += ts[uidx(ci)] - ts[uidx(x - 1)]
         X = uidx(lofs + x)
-        if tsum < tex_thr:
+        if tsum < tex_thr:  # texture is checked first, as in OpenCV
             drow[X] = inv
             continue
         thr = cast_like(-1, big)  # uniqueness off: count nothing
         if uratio > 0:
             t = np.uint64(m) * np.uint64(uratio) // np.uint64(100) + np.uint64(m)
             thr = cast_like(min(t, np.uint64(big)), big)
-        mind, cnt = wta_all(sad, nd, m, thr)
-        # neighbours for the parabola; OpenCV mirrors them at the ends (sad[-1] := sad[1])
+        mind, cnt = wta_all(sad, nd, m, thr)  # first minimum; #{j: sad[j] <= thr}
+        # parabola neighbours; OpenCV mirrors them at the ends (sad[-1] := sad[1], ...)
         inner = (mind > 0) & (mind < nd - 1)
-        pi = mind + 1 if mind < nd - 1 else nd - 2
-        ni = mind - 1 if mind > 0 else 1
-        p = np.int32(sad[uidx(pi)])
-        n = np.int32(sad[uidx(ni)])
+        p = np.int32(sad[uidx(mind + 1 if mind < nd - 1 else nd - 2)])
+        n = np.int32(sad[uidx(mind - 1 if mind > 0 else 1)])
         # uniqueness: no j outside mind-1 .. mind+1 may have sad[j] <= thr
         ok = cnt - 1 - (p <= thr) - (inner & (n <= thr)) <= 0
         # OpenCV: off = (p - n) * 256 / den truncated, den = p + n - 2m + |p - n|
-        # = 2q with q = max(p, n) - m >= |p - n|, so off = +-(128 |p - n| / q)
+        # = 2q with q = max(p, n) - m >= |p - n|, hence off = +-(128 |p - n| / q)
         q = max(p, n) - np.int32(m)
         a128 = abs(p - n) * 128
         if recip.shape[0] > 0:
@@ -118,22 +131,22 @@ def _row(pl: np.ndarray, pr: np.ndarray, y: int, upd: bool, r: int, cap: int, nd
 def _lr_check(drow: np.ndarray, crow: np.ndarray, x0: int, x1: int, inv: int, maxdiff: int,
               d2buf: np.ndarray, d2cost: np.ndarray) -> None:
     """OpenCV validateDisparity on one row (in place)."""
-    for x in range(d2buf.shape[0]):
+    w = d2buf.shape[0]
+    for x in range(w):
         d2buf[x] = inv
         d2cost[x] = 2147483647
     for x in range(x0, x1):
-        d = drow[x]
+        d = np.int32(drow[x])
         if d == inv:
             continue
         c = crow[x]
-        x2 = x - ((d + 8) >> 4)
+        x2 = uidx(x - ((d + 8) >> 4))
         if d2cost[x2] > c:
             d2cost[x2] = c
             d2buf[x2] = d
-    w = d2buf.shape[0]
     md = maxdiff * 16
     for x in range(x0, x1):
-        d = drow[x]
+        d = np.int32(drow[x])
         if d == inv:
             continue
         xa = x - (d >> 4)
@@ -144,29 +157,31 @@ def _lr_check(drow: np.ndarray, crow: np.ndarray, x0: int, x1: int, inv: int, ma
 
 
 @nb.njit(parallel=True, **_JIT)
-def match_rows(pl: np.ndarray, pr: np.ndarray, disp: np.ndarray, bounds: np.ndarray, r: int,
-               cap: int, nd: int, min_disp: int, tex_thr: int, uratio: int, maxdiff: int,
-               lofs: int, width1: int, roi_x0: int, roi_x1: int, lr_x0: int, lr_x1: int,
-               lc: np.ndarray, rb: np.ndarray, vs: np.ndarray, ts: np.ndarray,
-               sad: np.ndarray, big, recip: np.ndarray, drow: np.ndarray, crow: np.ndarray,
-               d2buf: np.ndarray, d2cost: np.ndarray) -> None:
-    """Rows bounds[s] .. bounds[s+1]-1 per stripe s; writes disp rows (roi only valid)."""
+def match_rows(pl: np.ndarray, pr: np.ndarray, disp: np.ndarray, bounds: np.ndarray,
+               cfg: np.ndarray, lc: np.ndarray, rb: np.ndarray, recip: np.ndarray, big,
+               vs: np.ndarray, ts: np.ndarray, sad: np.ndarray, drow: np.ndarray,
+               crow: np.ndarray, d2buf: np.ndarray, d2cost: np.ndarray) -> None:
+    """Rows bounds[s] .. bounds[s+1]-1 of stripe s into disp (valid region only).
+
+    Scratch arrays have one slice per thread (leading axis >= the active thread count)."""
     h, w = disp.shape
-    inv = (min_disp - 1) * 16
-    nstripes = bounds.shape[0] - 1
-    for s in nb.prange(nstripes):
+    r, nd, maxdiff = cfg[C_R], cfg[C_ND], cfg[C_MAXDIFF]
+    roi_x0, roi_x1 = cfg[C_ROIX0], cfg[C_ROIX1]
+    inv = (cfg[C_MIND] - 1) * 16
+    spill = cfg[C_LOFS] + cfg[C_WIDTH1]
+    for s in nb.prange(bounds.shape[0] - 1):
+        t = nb.get_thread_id()
         y0, y1 = bounds[s], bounds[s + 1]
-        dr = drow[s]
-        cr = crow[s]
+        dr, cr = drow[t], crow[t]
         for y in range(y0, y1):
             if y == y0:
-                _init_columns(pl, pr, y, r, cap, lc, rb, nd, vs[s], ts[s], nsub(big, big))
+                _init_columns(pl, pr, y, r, cfg[C_CAP], lc, rb, nd, vs[t], ts[t],
+                              nsub(big, big))
             for x in range(dr.shape[0]):
                 dr[x] = inv
-            _row(pl, pr, y, y != y0, r, cap, nd, min_disp, tex_thr, uratio, lofs, width1,
-                 lc, rb, vs[s], ts[s], sad[s], big, recip, dr, cr)
+            _row(pl, pr, y, y != y0, cfg, lc, rb, vs[t], ts[t], sad[t], big, recip, dr, cr)
             if maxdiff >= 0:
-                _lr_check(dr, cr, lr_x0, lr_x1, inv, maxdiff, d2buf[s], d2cost[s])
+                _lr_check(dr, cr, cfg[C_LRX0], cfg[C_LRX1], inv, maxdiff, d2buf[t], d2cost[t])
             out = disp[y]
             for x in range(roi_x0):
                 out[x] = inv
@@ -175,7 +190,7 @@ def match_rows(pl: np.ndarray, pr: np.ndarray, disp: np.ndarray, bounds: np.ndar
             for x in range(roi_x1, w):
                 out[x] = inv
             if y == h - r - 1:
-                # OpenCV writes columns w .. lofs+width1-1 past the row end, i.e. into the
-                # first columns of the next row, which no later step overwrites.
-                for x in range(w, lofs + width1):
+                # OpenCV writes columns w .. lofs+width1-1 (min_disparity > 0) past the row
+                # end, i.e. into the first columns of row h - r, which nothing overwrites.
+                for x in range(w, spill):
                     disp[y + 1, x - w] = dr[x]

@@ -1,0 +1,138 @@
+"""The firmware's calibration subsystem: flash records, staged writes, rectification maps.
+
+At boot and after every successful write it loads the record in force (user, else factory) and
+builds the rectification maps for the current output format from it. A refused or failed write
+raises DeviceError (the dispatcher's NACK) and leaves the calibration in force unchanged.
+"""
+from __future__ import annotations
+
+import zlib
+from pathlib import Path
+
+from protocol import messages as m
+from protocol.errors import DeviceError, ErrorCode
+
+from .calibration.flash import FlashError, NorFlash
+from protocol.calibration import CalibrationFormatError, StereoCalibration
+from .calibration.rectify import RectificationMaps, rectification_maps
+from .calibration.store import CalibrationStore, StoredRecord
+
+MAX_BODY = 4096
+
+
+class CalibrationService:
+    def __init__(self, flash_path: str | Path, truth: StereoCalibration, factory_calibrated: bool):
+        self.flash = NorFlash(flash_path)
+        self.store = CalibrationStore(self.flash)
+        if factory_calibrated and self.store.read_factory() is None and not self.store.factory_locked:
+            # what the factory line did to this unit before it shipped
+            self.store.write_factory(truth.to_bytes())
+            self.store.lock_factory()
+        self._staging = bytearray()
+        self._staging_total = 0
+        self._maps: dict[tuple[int, int], RectificationMaps] = {}
+        self.record: StoredRecord | None = None
+        self.calibration: StereoCalibration | None = None
+        self.rejected_records = 0  # valid CRC but a body this firmware cannot use
+        self._load()
+
+    # -- state in force -------------------------------------------------------------------------
+    def _load(self) -> None:
+        self._maps.clear()
+        self.record, self.calibration = None, None
+        rec = self.store.read()
+        if rec is None:
+            return
+        try:
+            self.calibration = StereoCalibration.from_bytes(rec.body)
+            self.record = rec
+        except CalibrationFormatError:
+            self.rejected_records += 1
+
+    @property
+    def calibration_id(self) -> int:
+        return m.calib_id(self.record.body) if self.record else 0
+
+    def maps(self, width: int, height: int) -> RectificationMaps | None:
+        """Rectification maps for this output format from the calibration in force (cached)."""
+        if self.calibration is None:
+            return None
+        key = (width, height)
+        if key not in self._maps:
+            self._maps[key] = rectification_maps(self.calibration.scaled(width, height))
+        return self._maps[key]
+
+    def _state(self, cls: type[m.CalibState]) -> m.CalibState:
+        rec = self.record
+        source = {None: m.CalibSource.ACTIVE, "factory": m.CalibSource.FACTORY, "user": m.CalibSource.USER}[
+            rec.region if rec else None]
+        return cls(source, rec.generation if rec else 0, self.calibration_id)
+
+    # -- requests -------------------------------------------------------------------------------
+    def read(self, msg: m.CalibRead) -> m.CalibData:
+        if msg.source == m.CalibSource.ACTIVE:
+            rec = self.store.read()
+        elif msg.source == m.CalibSource.FACTORY:
+            rec = self.store.read_factory()
+        elif msg.source == m.CalibSource.USER:
+            rec = self.store.read()
+            rec = rec if rec is not None and rec.region == "user" else None
+        else:
+            raise DeviceError(ErrorCode.OUT_OF_RANGE, f"unknown calibration source {msg.source}")
+        if rec is None:
+            return m.CalibData(m.CalibSource.ACTIVE, 0, 0, 0, msg.offset, b"")
+        source = m.CalibSource.FACTORY if rec.region == "factory" else m.CalibSource.USER
+        chunk = rec.body[msg.offset:msg.offset + min(msg.length, m.MAX_CALIB_CHUNK)]
+        return m.CalibData(source, rec.generation, m.calib_id(rec.body), len(rec.body), msg.offset, chunk)
+
+    def write(self, msg: m.CalibWrite) -> m.CalibWritten:
+        if not 0 < msg.total <= MAX_BODY:
+            raise DeviceError(ErrorCode.OUT_OF_RANGE, f"calibration body of {msg.total} bytes; limit {MAX_BODY}")
+        if msg.offset == 0:
+            self._staging, self._staging_total = bytearray(), msg.total
+        if msg.total != self._staging_total or msg.offset != len(self._staging):
+            raise DeviceError(ErrorCode.BAD_STATE, f"chunk at {msg.offset} of {msg.total} does not continue the "
+                              f"staged {len(self._staging)} of {self._staging_total} bytes; restart at offset 0")
+        if msg.offset + len(msg.data) > msg.total:
+            raise DeviceError(ErrorCode.OUT_OF_RANGE, f"chunk runs past the announced {msg.total} bytes")
+        self._staging += msg.data
+        return m.CalibWritten(len(self._staging))
+
+    def commit(self, msg: m.CalibCommit) -> m.CalibState:
+        body = bytes(self._staging)
+        self._staging, self._staging_total = bytearray(), 0  # one commit per staging
+        if msg.total != len(body) or zlib.crc32(body) != msg.crc:
+            raise DeviceError(ErrorCode.BAD_PAYLOAD, f"staged {len(body)} bytes with CRC {zlib.crc32(body):08x}, "
+                              f"commit announced {msg.total} bytes with CRC {msg.crc:08x}; nothing written")
+        try:
+            StereoCalibration.from_bytes(body)
+        except CalibrationFormatError as exc:
+            raise DeviceError(ErrorCode.BAD_PAYLOAD, f"not a calibration this firmware can use: {exc}") from exc
+        if msg.target == m.CalibSource.FACTORY and self.store.factory_locked:
+            raise DeviceError(ErrorCode.BAD_STATE, "the factory calibration is write-protected; write target=user")
+        if msg.target not in (m.CalibSource.FACTORY, m.CalibSource.USER):
+            raise DeviceError(ErrorCode.OUT_OF_RANGE, f"commit target must be factory (1) or user (2), not {msg.target}")
+        try:
+            if msg.target == m.CalibSource.FACTORY:
+                written = self.store.write_factory(body)
+                self.store.lock_factory()
+            else:
+                written = self.store.write_user(body)
+        except FlashError as exc:
+            self._load()  # whatever survived on flash is what is in force
+            raise DeviceError(ErrorCode.STORAGE, f"flash write failed ({exc}); the previous calibration "
+                              "is still in force") from exc
+        self._load()
+        stored = self.store.read_factory() if msg.target == m.CalibSource.FACTORY else self.record
+        if stored is None or stored.body != body or stored.generation != written.generation:
+            raise DeviceError(ErrorCode.STORAGE, "the record read back from flash differs from what was written")
+        return self._state(m.CalibCommitted)
+
+    def restore_factory(self) -> m.CalibState:
+        try:
+            self.store.restore_factory()
+        except FlashError as exc:
+            self._load()
+            raise DeviceError(ErrorCode.STORAGE, f"flash write failed ({exc})") from exc
+        self._load()
+        return self._state(m.CalibRestored)
