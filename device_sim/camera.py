@@ -38,7 +38,7 @@ FIRMWARE_VERSION = "1.0.0"
 CHUNK = 128 * 1024  # FRAME_DATA payload bytes per message
 CAPABILITIES = 0x0F  # disparity | software trigger | external trigger | time sync
 RESEND_CACHE = 64
-GROUND_TRUTH_KEEP = 16
+GROUND_TRUTH_KEEP = 64
 
 Sink = Callable[[bytes], None]
 log = logging.getLogger(__name__)
@@ -96,6 +96,7 @@ class SimulatedCamera:
         self._rx_lock = threading.Lock()
         self._replies: collections.OrderedDict[int, tuple[int, bytes]] = collections.OrderedDict()
         self._truth: collections.OrderedDict[int, _Exposure] = collections.OrderedDict()
+        self._view_rays: dict[Geometry, np.ndarray] = {}
         self._matcher: Matcher | None = None
         self._last_rx = time.monotonic()
         self._soft_triggers = 0
@@ -309,7 +310,9 @@ class SimulatedCamera:
             g = maps.geometry
             focal, cx, cy, baseline = g.focal_px, g.cx, g.cy, g.baseline_m
             view = Geometry(w, h, focal, cx, cy, baseline)
-            self._remember(req, cfg["scene"], t, view.rays(), g.R1.T, focal, baseline)
+            if view not in self._view_rays:
+                self._view_rays = {view: view.rays()}  # one table per rectified view, not per frame
+            self._remember(req, cfg["scene"], t, self._view_rays[view], g.R1.T, focal, baseline)
             flags = m.FRAME_RECTIFIED
         else:  # raw images: no disparity without a calibration
             outputs &= ~Output.DISPARITY

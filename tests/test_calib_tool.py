@@ -14,8 +14,8 @@ from protocol.calibration import StereoCalibration
 from device_sim.calibration.truth import true_calibration
 from tools import calibrate
 from tools.calib_solve import (
-    BoardNotFoundError, CoverageSelector, SolveConfig, TooFewViewsError, calibrate_pairs, detect_corners,
-    view_params,
+    BoardNotFoundError, CalibrationError, CoverageSelector, SolveConfig, TooFewViewsError, calibrate_pairs,
+    detect_corners, view_params,
 )
 
 TRUTH = true_calibration(11, (640, 480))
@@ -78,8 +78,10 @@ def test_metric_definitions(pairs) -> None:
         if np.dot(cl[-1] - cl[0], cr[-1] - cr[0]) < 0:
             cr = cr[::-1]
         crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
-        yl = cv2.undistortPoints(cl.reshape(-1, 1, 2).astype(float), c.K_left, c.D_left, R=r.R1, P=r.P1, criteria=crit)[:, 0, 1]
-        yr = cv2.undistortPoints(cr.reshape(-1, 1, 2).astype(float), c.K_right, c.D_right, R=r.R2, P=r.P2, criteria=crit)[:, 0, 1]
+        yl = cv2.undistortPoints(cl.reshape(-1, 1, 2).astype(float), c.K_left, c.D_left,
+                                 R=r.R1, P=r.P1, criteria=crit)[:, 0, 1]
+        yr = cv2.undistortPoints(cr.reshape(-1, 1, 2).astype(float), c.K_right, c.D_right,
+                                 R=r.R2, P=r.P2, criteria=crit)[:, 0, 1]
         dy.append(yl - yr)
     assert res.quality.epipolar_rms_px == pytest.approx(np.sqrt(np.mean(np.concatenate(dy) ** 2)), rel=1e-6)
 
@@ -174,3 +176,12 @@ def test_view_params_and_selector() -> None:
     assert sel.offer((0.5, 0.5, 0.3, 0.0)) and not sel.offer((0.55, 0.55, 0.3, 0.05))
     assert sel.offer((0.9, 0.5, 0.3, 0.0))
     assert sel.coverage() == pytest.approx((0.4 / 0.7, 0.0, 0.0, 0.0))
+
+
+def test_solver_failure_is_a_calibration_error(pairs, monkeypatch) -> None:
+    def broken(*args, **kwargs):
+        raise cv2.error("simulated solver breakdown")
+
+    monkeypatch.setattr(cv2, "calibrateCameraExtended", broken)
+    with pytest.raises(CalibrationError, match="solver failed on .* views: simulated"):
+        calibrate_pairs(iter(pairs), BOARD)

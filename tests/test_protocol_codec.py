@@ -11,6 +11,7 @@ whole file stays well under 30 s on a shared two-core machine.
 from __future__ import annotations
 
 import binascii
+import dataclasses
 import struct
 import zlib
 
@@ -19,21 +20,22 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from protocol import messages as m
-from protocol.errors import ProtocolError
+from protocol.errors import ErrorCode, ProtocolError
 from protocol.framing import (
-    FLAG_RESEND, HEADER_LEN, MAGIC, MAX_HEADER_LEN, MAX_PAYLOAD, TRAILER_LEN, Decoder, DecoderStats, Packet,
-    encode_frame, header_crc,
+    FLAG_RESEND, HEADER_LEN, MAGIC, MAX_HEADER_LEN, MAX_PAYLOAD, TRAILER_LEN, VERSION_MAJOR, VERSION_MINOR, Decoder,
+    DecoderStats, Packet, encode_frame, header_crc,
 )
 from protocol.messages import UnknownMessageError, decode_packet
 from protocol.params import BY_ID, BY_NAME, PARAMS, Param, defaults
 
 FAST = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 FUZZ = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+LIGHT = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
 # -- helpers -----------------------------------------------------------------------------------
 def raw_frame(msg_type: int, request_id: int = 0, payload: bytes = b"", *, flags: int = 0, major: int = 1,
-              minor: int = 0, header_len: int = HEADER_LEN, payload_len: int | None = None,
+              minor: int = 1, header_len: int = HEADER_LEN, payload_len: int | None = None,
               ext: bytes | None = None) -> bytes:
     """A frame built by hand (not through encode_frame), with a correct header CRC for whatever it claims."""
     ext = bytes(header_len - HEADER_LEN) if ext is None else ext
@@ -84,7 +86,7 @@ def assert_every_byte_accounted(dec: Decoder, packets: list[Packet]) -> None:
 
 
 def packet_of(msg: m.Message, rid: int = 0, flags: int = 0) -> Packet:
-    return Packet(msg.TYPE, rid, flags, msg.pack(), (1, 0))
+    return Packet(msg.TYPE, rid, flags, msg.pack(), (1, 1))  # what this code (v1.1) sends
 
 
 # -- strategies --------------------------------------------------------------------------------
@@ -116,7 +118,7 @@ MESSAGE_STRATEGIES: dict[type[m.Message], st.SearchStrategy[m.Message]] = {
     m.TimeSync: st.just(m.TimeSync()),
     m.Info: st.builds(m.Info, model=short_str, serial=short_str, firmware_version=short_str,
                       protocol_version=st.tuples(u8, u8), capabilities=u32, sensor_width=u16, sensor_height=u16,
-                      max_payload=u32, max_width=u16, max_height=u16),
+                      max_payload=u32, max_width=u16, max_height=u16, calibration_id=u32),
     m.Config: st.builds(m.Config, param_values),
     m.ConfigApplied: st.builds(m.ConfigApplied, param_values),
     m.Triggered: st.builds(m.Triggered, trigger_id=u32, sequence=u32),
@@ -133,6 +135,17 @@ MESSAGE_STRATEGIES: dict[type[m.Message], st.SearchStrategy[m.Message]] = {
     m.FrameData: st.builds(m.FrameData, sequence=u32, plane=u8, offset=u32, data=st.binary(max_size=64)),
     m.FrameEnd: st.builds(m.FrameEnd, sequence=u32, status=u8, left_bytes=u32, right_bytes=u32,
                           disparity_bytes=u32),
+    # v1.1 calibration storage (SPEC §12); sources / targets drawn beyond the defined values on purpose:
+    # the codec carries any u8, the device judges it
+    m.CalibRead: st.builds(m.CalibRead, source=u8, offset=u32, length=u32),
+    m.CalibData: st.builds(m.CalibData, source=u8, generation=u32, calibration_id=u32, total=u32, offset=u32,
+                           data=st.binary(max_size=300)),
+    m.CalibWrite: st.builds(m.CalibWrite, offset=u32, total=u32, data=st.binary(max_size=300)),
+    m.CalibWritten: st.builds(m.CalibWritten, staged=u32),
+    m.CalibCommit: st.builds(m.CalibCommit, target=u8, total=u32, crc=u32),
+    m.CalibRestore: st.just(m.CalibRestore()),
+    m.CalibCommitted: st.builds(m.CalibCommitted, source=u8, generation=u32, calibration_id=u32),
+    m.CalibRestored: st.builds(m.CalibRestored, source=u8, generation=u32, calibration_id=u32),
 }
 any_message = st.one_of(*MESSAGE_STRATEGIES.values())
 framed = st.tuples(any_message, u16, u8)  # (message, request_id, flags)
@@ -207,9 +220,160 @@ def test_overlong_strings_are_truncated_at_the_byte_limit() -> None:
 
 @pytest.mark.parametrize("cls", [m.Info, m.Nack, m.Status], ids=lambda c: c.__name__)
 def test_trailing_fields_tolerated_where_spec_allows(cls) -> None:
-    """SPEC §11: a v1.x sender may append fields to INFO, NACK and STATUS; v1.0 ignores them."""
+    """SPEC §11: a v1.x sender may append fields to INFO (after v1.1's calibration_id), NACK and STATUS."""
     msg = SAMPLES[cls]
     assert decode_packet(Packet(cls.TYPE, 0, 0, msg.pack() + b"\x01\x02new fields")) == msg
+
+
+# -- INFO across minor versions (SPEC §4.1, §11) -----------------------------------------------
+def info_v10_payload(major: int = 1, minor: int = 0, model: bytes = b"STOC-SIM", serial: bytes = b"SIM00007",
+                     fw: bytes = b"1.0.0") -> bytes:
+    """An INFO payload exactly as a v1.0 device sends it, built by hand from SPEC §4.1 (no calibration_id)."""
+    head = struct.pack("<BBIHHIHH", major, minor, 0x0F, 1280, 960, MAX_PAYLOAD, 1280, 960)
+    return head + b"".join(len(s).to_bytes(1, "little") + s for s in (model, serial, fw))
+
+
+V10_INFO = m.Info("STOC-SIM", "SIM00007", "1.0.0", (1, 0), 0x0F, 1280, 960, MAX_PAYLOAD, 1280, 960)
+
+
+def test_info_from_a_v1_0_device_decodes_with_calibration_id_0() -> None:
+    out = decode_packet(Packet(m.MsgType.INFO, 1, 0, info_v10_payload(), (1, 0)))
+    assert out == V10_INFO and out.calibration_id == 0
+    # the same through the whole receive path: a 1.0 frame (ver_minor 0 in the header) is accepted
+    dec = Decoder()
+    (pkt,) = dec.feed(raw_frame(m.MsgType.INFO, 1, info_v10_payload(), minor=0))
+    assert pkt.version == (1, 0) and decode_packet(pkt) == V10_INFO
+    assert dec.stats.dropped == 0
+
+
+def test_info_from_a_v1_1_device_carries_calibration_id() -> None:
+    payload = info_v10_payload(minor=1) + b"\x78\x56\x34\x12"
+    out = decode_packet(Packet(m.MsgType.INFO, 1, 0, payload))
+    assert out == dataclasses.replace(V10_INFO, protocol_version=(1, 1), calibration_id=0x12345678)
+    assert out.pack() == payload  # a 1.1 sender always writes the field, 0 included
+    uncalibrated = dataclasses.replace(out, calibration_id=0)
+    assert uncalibrated.pack() == info_v10_payload(minor=1) + bytes(4)
+    assert m.Info("a", "b", "c", (1, 1), 0, 0, 0, 0, 0, 0).calibration_id == 0  # the default
+
+
+@pytest.mark.parametrize("tail, calibration_id", [
+    (b"", 0),  # 1.0 device: field absent
+    (b"\x01", 0), (b"\x01\x02", 0), (b"\x01\x02\x03", 0),  # fewer than 4 bytes: taken as absent, ignored
+    (b"\x01\x02\x03\x04", 0x04030201),
+    (b"\xff\xff\xff\xff", 0xFFFFFFFF),
+    (b"\x01\x02\x03\x04\x05later v1.x fields", 0x04030201),  # a later minor's fields after it: ignored
+])
+def test_info_trailing_calibration_id(tail: bytes, calibration_id: int) -> None:
+    out = decode_packet(Packet(m.MsgType.INFO, 0, 0, info_v10_payload() + tail))
+    assert out == dataclasses.replace(V10_INFO, calibration_id=calibration_id)
+
+
+@LIGHT
+@given(msg=MESSAGE_STRATEGIES[m.Info])
+def test_info_without_its_last_4_bytes_is_the_v1_0_message(msg: m.Info) -> None:
+    """The 1.1 INFO is the 1.0 INFO plus 4 bytes: what a 1.0 host reads of it is unchanged."""
+    payload = msg.pack()
+    assert payload[-4:] == struct.pack("<I", msg.calibration_id)
+    assert decode_packet(Packet(m.MsgType.INFO, 0, 0, payload[:-4])) == dataclasses.replace(msg, calibration_id=0)
+    assert decode_packet(Packet(m.MsgType.INFO, 0, 0, payload)) == msg
+
+
+def test_info_strings_must_still_fit_before_calibration_id() -> None:
+    """The trailing field does not rescue a string length running past the payload."""
+    payload = info_v10_payload()
+    assert payload[18] == 8  # len("STOC-SIM")
+    # fw claims 9 bytes, 5 are there: the 4 bytes of calibration_id must not be taken as the rest of it
+    bad = payload[:-6] + b"\x09" + payload[-5:] + bytes(4)
+    with pytest.raises(ProtocolError, match="Info.*string runs past the payload"):
+        decode_packet(Packet(m.MsgType.INFO, 0, 0, bad[:-4]))
+    assert decode_packet(Packet(m.MsgType.INFO, 0, 0, bad)).firmware_version == "1.0.0\x00\x00\x00\x00"
+
+
+# -- calibration messages (SPEC §12) -----------------------------------------------------------
+def test_calibration_types_sources_and_codes() -> None:
+    assert {t.name: int(t) for t in m.MsgType if t.name.startswith("CALIB")} == {
+        "CALIB_READ": 0x0009, "CALIB_WRITE": 0x000A, "CALIB_COMMIT": 0x000B, "CALIB_RESTORE": 0x000C,
+        "CALIB_DATA": 0x8009, "CALIB_WRITTEN": 0x800A, "CALIB_COMMITTED": 0x800B, "CALIB_RESTORED": 0x800C}
+    assert {int(k): v for k, v in m.REPLIES.items() if k >= 0x0009} == {
+        0x0009: m.CalibData, 0x000A: m.CalibWritten, 0x000B: m.CalibCommitted, 0x000C: m.CalibRestored}
+    for req, reply in m.REPLIES.items():
+        assert reply.TYPE == m.reply_type(req) and m.MESSAGES[req].TYPE == req
+    assert [(s.name, int(s)) for s in m.CalibSource] == [("ACTIVE", 0), ("FACTORY", 1), ("USER", 2)]
+    assert int(ErrorCode.STORAGE) == 9 and max(ErrorCode) is ErrorCode.STORAGE
+    assert m.MAX_CALIB_CHUNK == 61440
+
+
+def test_max_calib_chunk_fits_one_frame() -> None:
+    body = bytes(range(256)) * (m.MAX_CALIB_CHUNK // 256)
+    for msg in (m.CalibData(m.CalibSource.USER, 1, 2, 3 * len(body), len(body), body),
+                m.CalibWrite(len(body), 3 * len(body), body)):
+        wire = m.encode(msg, 7)
+        assert len(wire) <= HEADER_LEN + MAX_PAYLOAD + TRAILER_LEN
+        (pkt,) = Decoder().feed(wire)
+        out = decode_packet(pkt)
+        assert out == msg and type(out.data) is bytes and out.data == body
+
+
+@LIGHT
+@given(source=u8, generation=u32, calibration_id=u32)
+def test_committed_and_restored_share_the_calib_state_layout(source, generation, calibration_id) -> None:
+    a = m.CalibCommitted(source, generation, calibration_id)
+    b = m.CalibRestored(source, generation, calibration_id)
+    assert a.pack() == b.pack() == struct.pack("<BII", source, generation, calibration_id)
+    assert isinstance(a, m.CalibState) and isinstance(b, m.CalibState) and a.TYPE != b.TYPE
+    assert decode_packet(Packet(m.MsgType.CALIB_RESTORED, 0, 0, a.pack())) == b
+    assert decode_packet(Packet(m.MsgType.CALIB_COMMITTED, 0, 0, b.pack())) == a
+
+
+@LIGHT
+@given(source=u8, generation=u32, calibration_id=u32, total=u32, offset=u32, data=st.binary(max_size=200))
+def test_calib_data_layout(source, generation, calibration_id, total, offset, data) -> None:
+    payload = struct.pack("<BIIII", source, generation, calibration_id, total, offset) + data
+    out = decode_packet(Packet(m.MsgType.CALIB_DATA, 0, 0, payload))
+    assert out == m.CalibData(source, generation, calibration_id, total, offset, data)
+    assert out.pack() == payload
+
+
+@LIGHT
+@given(offset=u32, total=u32, data=st.binary(max_size=200))
+def test_calib_write_layout(offset, total, data) -> None:
+    payload = struct.pack("<II", offset, total) + data
+    out = decode_packet(Packet(m.MsgType.CALIB_WRITE, 0, 0, payload))
+    assert out == m.CalibWrite(offset, total, data) and out.pack() == payload
+
+
+def test_calib_head_only_payloads_carry_no_data() -> None:
+    """CALIB_DATA with no data is what a device sends when nothing is stored (source 0) or past the end."""
+    none = m.CalibData(m.CalibSource.ACTIVE, 0, 0, 0, 0, b"")
+    assert none.pack() == bytes(17)
+    assert decode_packet(Packet(m.MsgType.CALIB_DATA, 0, 0, bytes(17))) == none
+    assert decode_packet(Packet(m.MsgType.CALIB_WRITE, 0, 0, bytes(8))) == m.CalibWrite(0, 0, b"")
+
+
+@pytest.mark.parametrize("cls, size", [(m.CalibRead, 9), (m.CalibWritten, 4), (m.CalibCommit, 9),
+                                       (m.CalibCommitted, 9), (m.CalibRestored, 9), (m.CalibData, 17),
+                                       (m.CalibWrite, 8)], ids=lambda x: getattr(x, "__name__", str(x)))
+@LIGHT
+@given(payload=st.binary(max_size=40))
+def test_malformed_calibration_payloads(cls, size: int, payload: bytes) -> None:
+    """Fixed layouts need their exact size; head + data layouts need at least the head."""
+    fixed = cls not in (m.CalibData, m.CalibWrite)
+    ok = len(payload) == size if fixed else len(payload) >= size
+    try:
+        out = decode_packet(Packet(cls.TYPE, 0, 0, payload))
+    except ProtocolError as exc:
+        assert not ok and cls.__name__ in str(exc) and f"({len(payload)} bytes)" in str(exc)
+        assert not isinstance(exc, UnknownMessageError)
+    else:
+        assert ok and type(out) is cls and out.pack() == payload
+
+
+def test_calibration_fields_out_of_range_are_refused_when_packing() -> None:
+    for bad in (m.CalibRead(256, 0, 0), m.CalibRead(0, 1 << 32, 0), m.CalibCommit(-1, 0, 0),
+                m.CalibWrite(0, -1, b""), m.CalibWritten(1 << 32), m.CalibRestored(0, 1 << 32, 0),
+                m.CalibData(0, 0, 1 << 32, 0, 0, b"")):
+        with pytest.raises(struct.error):
+            bad.pack()
 
 
 # -- decoder: chunking -------------------------------------------------------------------------
@@ -611,7 +775,7 @@ SAMPLES: dict[type[m.Message], m.Message] = {
     m.SetConfig: m.SetConfig({1: 640, 10: -5}),
     m.Config: m.Config({}),
     m.ConfigApplied: m.ConfigApplied({3: 30}),
-    m.Info: m.Info("STOC", "SN1", "", (1, 0), 1, 2, 3, 4, 5, 6),
+    m.Info: m.Info("STOC", "SN1", "", (1, 1), 1, 2, 3, 4, 5, 6, 0xC0DECAFE),
     m.Triggered: m.Triggered(1, 2),
     m.Status: m.Status(1, True, 0, dict(zip(m.COUNTERS, range(100, 200)))),
     m.Time: m.Time(1),
@@ -619,13 +783,24 @@ SAMPLES: dict[type[m.Message], m.Message] = {
     m.FrameBegin: m.FrameBegin(*range(14), 0, 1.0, 2.0, 3.0, 0.5),
     m.FrameData: m.FrameData(1, 4, 0, b"abc"),
     m.FrameEnd: m.FrameEnd(1, 0, 2, 3, 4),
+    m.CalibRead: m.CalibRead(m.CalibSource.USER, 248, 61440),
+    m.CalibData: m.CalibData(m.CalibSource.FACTORY, 3, 0x89ABCDEF, 248, 8, b"\x01\x00\x05\x00data"),
+    m.CalibWrite: m.CalibWrite(0, 248, b"\x01\x00\x05\x00body"),
+    m.CalibWritten: m.CalibWritten(248),
+    m.CalibCommit: m.CalibCommit(m.CalibSource.USER, 248, 0x01234567),
+    m.CalibCommitted: m.CalibCommitted(m.CalibSource.USER, 2, 0x76543210),
+    m.CalibRestored: m.CalibRestored(m.CalibSource.FACTORY, 1, 0xFEDCBA98),
 }
-FIXED_SIZE = {m.Triggered: 8, m.Time: 8, m.FrameBegin: 56, m.FrameEnd: 17}
+FIXED_SIZE = {m.Triggered: 8, m.Time: 8, m.FrameBegin: 56, m.FrameEnd: 17, m.CalibRead: 9, m.CalibWritten: 4,
+              m.CalibCommit: 9, m.CalibCommitted: 9, m.CalibRestored: 9}
+# messages whose payload ends in data running to the end: the fixed head, then any number of bytes
+HEAD_THEN_DATA = {m.FrameData: 9, m.CalibData: 17, m.CalibWrite: 8}
 EMPTY = [cls for cls in m.MESSAGES.values() if cls not in SAMPLES]
 
 
 def test_samples_cover_every_message_with_a_payload() -> None:
-    assert len(EMPTY) == 9 and all(isinstance(cls(), m._Empty) for cls in EMPTY)
+    assert len(EMPTY) == 10 and all(isinstance(cls(), m._Empty) for cls in EMPTY)
+    assert m.CalibRestore in EMPTY
     for cls, size in FIXED_SIZE.items():
         assert len(SAMPLES[cls].pack()) == size
 
@@ -634,7 +809,8 @@ def test_samples_cover_every_message_with_a_payload() -> None:
 def test_every_truncation_is_a_protocol_error_naming_the_message(cls) -> None:
     payload = SAMPLES[cls].pack()
     assert decode_packet(Packet(cls.TYPE, 0, 0, payload)) == SAMPLES[cls]
-    limit = 9 if cls is m.FrameData else len(payload)  # FrameData's data may legitimately be shorter
+    # data running to the end may legitimately be shorter; INFO's trailing calibration_id (v1.1) may be absent
+    limit = HEAD_THEN_DATA.get(cls, len(payload) - 4 if cls is m.Info else len(payload))
     for n in range(limit):
         with pytest.raises(ProtocolError, match=cls.__name__) as info:
             decode_packet(Packet(cls.TYPE, 0, 0, payload[:n]))
@@ -680,7 +856,7 @@ def test_counts_that_do_not_match_the_payload() -> None:
             decode_packet(Packet(cls.TYPE, 0, 0, struct.pack("<HHiHi", 1, 1, 1, 2, 2)))
 
 
-@pytest.mark.parametrize("mtype", [0x0000, 0x0009, 0x8000, 0x8009, 0x4004, 0x1234, 0xFFFE])
+@pytest.mark.parametrize("mtype", [0x0000, 0x000D, 0x8000, 0x800D, 0x4004, 0x1234, 0xFFFE, 0x0089, 0xC009])
 def test_unknown_type(mtype: int) -> None:
     with pytest.raises(UnknownMessageError, match=f"unknown message type 0x{mtype:04x}"):
         decode_packet(Packet(mtype, 0, 0, b""))
@@ -718,7 +894,8 @@ def test_stats_dropped_sums_every_loss_counter() -> None:
 def test_param_ids_and_names_are_unique_and_sane() -> None:
     ids = [p.pid for p in PARAMS]
     names = [p.name for p in PARAMS]
-    assert len(set(ids)) == len(ids) == 20
+    assert len(set(ids)) == len(ids) == 21
+    assert ids == list(range(1, 22))  # v1.1 appended id 21; ids are never reused or renumbered
     assert len(set(names)) == len(names)
     assert all(1 <= i <= 0xFFFF for i in ids)  # 0 means "no parameter" in a NACK
     assert BY_ID[10].name == "min_disparity" and BY_NAME["width"].pid == 1
@@ -761,6 +938,18 @@ def test_check_rejects_non_multiples_of_step() -> None:
     assert "multiple of 16" in BY_NAME["width"].check(650)
     assert BY_NAME["height"].check(484) is not None and BY_NAME["height"].check(488) is None
     assert BY_NAME["min_disparity"].check(-256) is None and BY_NAME["min_disparity"].check(-257) is not None
+
+
+def test_v1_1_parameters() -> None:
+    """SPEC §5.1: v1.1 added `rectify` (21) and widened `scene` to 0..2 (2 = calibration board)."""
+    r = BY_NAME["rectify"]
+    assert (r.pid, r.default, r.lo, r.hi, r.step, r.odd) == (21, 1, 0, 1, 1, False)
+    assert BY_ID[21] is r and PARAMS[-1] is r
+    s = BY_NAME["scene"]
+    assert (s.pid, s.default, s.lo, s.hi) == (20, 0, 0, 2)
+    assert s.check(2) is None and "outside 0..2" in s.check(3)
+    assert r.check(0) is None and r.check(1) is None and "outside 0..1" in r.check(2)
+    assert defaults()["rectify"] == 1 and list(defaults())[-1] == "rectify"
 
 
 @given(st.integers(-(1 << 31), (1 << 31) - 1))

@@ -284,12 +284,16 @@ def _solve(used: list[tuple[np.ndarray, np.ndarray]], held: list[tuple[np.ndarra
     obj = [board.object_points()] * len(used)
     img_l = [l.reshape(-1, 1, 2) for l, _ in used]
     img_r = [r.reshape(-1, 1, 2) for _, r in used]
-    rms_l, K1, D1, *_, err_l = cv2.calibrateCameraExtended(obj, img_l, size, None, None, criteria=_SOLVE)
-    rms_r, K2, D2, *_, err_r = cv2.calibrateCameraExtended(obj, img_r, size, None, None, criteria=_SOLVE)
-    rms_s, K1, D1, K2, D2, R, T, *_, err_s = cv2.stereoCalibrateExtended(
-        obj, img_l, img_r, K1, D1, K2, D2, size, None, None, flags=cv2.CALIB_FIX_INTRINSIC, criteria=_SOLVE)
-    calib = StereoCalibration(size, K1, D1, K2, D2, R, T)
-    R1, R2, P1, P2, Q, *_ = cv2.stereoRectify(K1, D1, K2, D2, size, R, T, flags=cv2.CALIB_ZERO_DISPARITY, alpha=0)
+    try:
+        rms_l, K1, D1, *_, err_l = cv2.calibrateCameraExtended(obj, img_l, size, None, None, criteria=_SOLVE)
+        rms_r, K2, D2, *_, err_r = cv2.calibrateCameraExtended(obj, img_r, size, None, None, criteria=_SOLVE)
+        rms_s, K1, D1, K2, D2, R, T, *_, err_s = cv2.stereoCalibrateExtended(
+            obj, img_l, img_r, K1, D1, K2, D2, size, None, None, flags=cv2.CALIB_FIX_INTRINSIC, criteria=_SOLVE)
+        calib = StereoCalibration(size, K1, D1, K2, D2, R, T)
+        R1, R2, P1, P2, Q, *_ = cv2.stereoRectify(K1, D1, K2, D2, size, R, T, flags=cv2.CALIB_ZERO_DISPARITY,
+                                                  alpha=0)
+    except (cv2.error, ValueError) as exc:
+        raise CalibrationError(f"the solver failed on {len(used)} views: {exc}") from exc
     rect = Rectification(R1, R2, P1, P2, Q)
     used_views = iter(v for v in views if v.status == "used")
     for i, v in enumerate(used_views):

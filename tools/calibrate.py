@@ -109,9 +109,10 @@ def write_outputs(result: CalibrationResult, outdir: Path) -> list[Path]:
     fs = cv2.FileStorage(str(outdir / "calibration.yaml"), cv2.FILE_STORAGE_WRITE)
     fs.write("image_width", c.image_size[0])
     fs.write("image_height", c.image_size[1])
-    for key, value in (("K1", c.K_left), ("D1", c.D_left), ("K2", c.K_right), ("D2", c.D_right),
-                       ("R", c.R), ("T", c.T), ("R1", r.R1), ("R2", r.R2), ("P1", r.P1), ("P2", r.P2), ("Q", r.Q)):
-        fs.write(key, np.asarray(value, dtype=np.float64).reshape(value.shape if value.ndim == 2 else (1, -1)))
+    for key, value in (("K1", c.K_left), ("D1", c.D_left.reshape(1, 5)), ("K2", c.K_right),
+                       ("D2", c.D_right.reshape(1, 5)), ("R", c.R), ("T", c.T.reshape(3, 1)), ("R1", r.R1),
+                       ("R2", r.R2), ("P1", r.P1), ("P2", r.P2), ("Q", r.Q)):
+        fs.write(key, np.asarray(value, dtype=np.float64))
     for key in ("rms_left", "rms_right", "rms_stereo", "epipolar_rms_px"):
         fs.write(key, float(getattr(q, key)))
     fs.release()

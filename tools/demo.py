@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from device_sim import SimulatedCamera
+from device_sim.camera import GROUND_TRUTH_KEEP
 from host.camera import Camera
 from host.transports.inprocess import InProcessTransport
 
@@ -40,17 +41,15 @@ def main(argv: list[str] | None = None) -> int:
         cam.configure(width=640, height=480, fps=args.fps, num_disparities=64, block_size=15)
         cam.start()
         cam.get_frame(timeout=30.0)  # first frame pays the JIT warm-up
-        stats: list[tuple[float, float, float]] = []
+        recent: list = []
         frames = 0
-        last = None
         t0 = time.monotonic()
         while time.monotonic() - t0 < args.seconds:
-            last = cam.get_frame(timeout=5.0)
+            recent = (recent + [cam.get_frame(timeout=5.0)])[-GROUND_TRUTH_KEEP // 2:]
             frames += 1
-            truth = sim.ground_truth(last.sequence)
-            if truth is not None:
-                stats.append(depth_errors(last, truth))
         elapsed = time.monotonic() - t0
+        last = recent[-1]
+        stats = [depth_errors(f, sim.ground_truth(f.sequence)) for f in recent]  # truth after timing
         cam.stop()
         paths = save_frame(last, args.out, "demo")
         host_stats = cam.stats

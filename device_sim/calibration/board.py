@@ -190,7 +190,7 @@ def board_poses(seed: int, n: int, board: BoardSpec, calib: StereoCalibration,
 class StereoBoardRenderer:
     """Renders raw (left, right) views of a board through a stereo head's true calibration."""
 
-    def __init__(self, calib: StereoCalibration, board: BoardSpec, supersample: int = 2) -> None:
+    def __init__(self, calib: StereoCalibration, board: BoardSpec, supersample: int = 1) -> None:
         w, h = calib.image_size
         self.calib, self.board, self.supersample = calib, board, supersample
         self._rays = [pixel_rays(K, D, w, h, supersample)

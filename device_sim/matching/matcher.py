@@ -27,14 +27,6 @@ def check_pair(left: np.ndarray, right: np.ndarray) -> None:
         raise ValueError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
 
 
-def _reciprocals(max_q: int) -> np.ndarray:
-    """M[q] = ceil(2**40 / q): floor(a / q) == (a * M[q]) >> 40 for 0 <= a < 2**23, q < 2**15."""
-    q = np.arange(max_q + 1, dtype=np.int64)
-    out = np.zeros(max_q + 1, np.int64)
-    out[1:] = -((-(1 << 40)) // q[1:])
-    return out
-
-
 def _stripes(lo: int, hi: int, n: int) -> np.ndarray:
     n = max(1, min(n, hi - lo))
     return np.array([lo + (hi - lo) * k // n for k in range(n + 1)], dtype=np.int64)
@@ -81,15 +73,13 @@ class Matcher:
         r, nd = p.block_size // 2, p.num_disparities
         self.pl = _aligned((h, w), np.uint8)
         self.pr = _aligned((h, w), np.uint8)
-        self.pf_vsum = np.empty((2, w + p.pre_filter_size + 2), np.int32)
+        self.pf_vsum = np.empty((2, 2, w + p.pre_filter_size + 3), np.int64)
         # virtual columns c = -r .. width1-1+r: clamped left column and right base column
         c = np.arange(-r, g.width1 + r)
         self.lc = (g.lofs + np.clip(c, -g.lofs, w - 1 - g.lofs)).astype(np.int64)
         self.rb = (g.rofs + np.clip(c, -g.rofs, w - nd - g.rofs)).astype(np.int64)
         self.acc = np.int16 if p.max_sad <= 32767 else np.int32
         self.big = self.acc(np.iinfo(self.acc).max)
-        self.recip = (_reciprocals(p.max_sad) if self.acc is np.int16
-                      else np.zeros(0, np.int64))
         cfg = np.zeros(_sad.C_LEN, np.int64)
         cfg[[_sad.C_R, _sad.C_CAP, _sad.C_ND, _sad.C_MIND, _sad.C_TEX, _sad.C_URATIO,
              _sad.C_MAXDIFF, _sad.C_LOFS, _sad.C_WIDTH1, _sad.C_ROIX0, _sad.C_ROIX1,
@@ -114,6 +104,7 @@ class Matcher:
             self.vs = _aligned((n, ncols, nd), self.acc)
             self.ts = np.empty((n, ncols), np.int32)
             self.sad = _aligned((n, nd), self.acc)
+            self.pix = _aligned((n, 5, g.width1), np.int32)
             self.drow = np.empty((n, wide), np.int16)
             self.crow = np.empty((n, wide), np.int32)
             self.d2buf = np.empty((n, self.shape[1]), np.int32)
@@ -152,7 +143,7 @@ class Matcher:
         chunk = nb.set_parallel_chunksize(1)
         try:
             _sad.match_rows(self.pl, self.pr, disp, self.bounds, self.cfg, self.lc, self.rb,
-                            self.recip, self.big, self.vs, self.ts, self.sad, self.drow,
+                            self.big, self.vs, self.ts, self.sad, self.pix, self.drow,
                             self.crow, self.d2buf, self.d2cost)
         finally:
             nb.set_parallel_chunksize(chunk)

@@ -51,15 +51,19 @@ def xsobel(src: np.ndarray, dst: np.ndarray, cap: int) -> None:
 
 @nb.njit(**_JIT)
 def _normalized_rows(src: np.ndarray, dst: np.ndarray, winsize: int, cap: int,
-                     vsum: np.ndarray) -> None:
+                     buf: np.ndarray) -> None:
+    """OpenCV prefilterNorm: vertical running box sums, horizontal box sum by prefix sums
+    (the same integers as OpenCV's running sum), then the centre-weighted response."""
     h, w = src.shape
     r = winsize // 2
     scale_g = winsize * winsize // 8
     scale_s = (1024 + scale_g) // (scale_g * 2)
     scale_g *= scale_s
+    vsum, cs = buf[0], buf[1]
     off = r + 1  # vsum[off + x] holds column x; pads of r + 1 on both sides
+    n = w + 2 * off
     for x in range(w):
-        vsum[off + x] = np.int32(src[0, x]) * (r + 2)
+        vsum[off + x] = np.int64(src[0, x]) * (r + 2)
     for y in range(1, r):
         for x in range(w):
             vsum[off + x] += src[y, x]
@@ -71,37 +75,42 @@ def _normalized_rows(src: np.ndarray, dst: np.ndarray, winsize: int, cap: int,
         nxt = src[min(y + 1, h - 1)]
         out = dst[y]
         for x in range(w):
-            vsum[off + x] += np.int32(bottom[x]) - np.int32(top[x])
-        for x in range(r + 1):
-            vsum[off - x - 1] = vsum[off]
+            vsum[off + x] += np.int64(bottom[x]) - np.int64(top[x])
+        for x in range(off):
+            vsum[x] = vsum[off]
             vsum[off + w + x] = vsum[off + w - 1]
-        s = vsum[off] * (r + 1)
-        for x in range(1, r + 1):
-            s += vsum[off + x]
-        c5 = (np.int32(curr[0]) * 5 + np.int32(curr[1]) + np.int32(prev[0])
-              + np.int32(nxt[0]))
-        out[0] = np.uint8(_clip((c5 * scale_g - s * scale_s) >> 10, cap))
+        cs[0] = 0
+        for i in range(n):
+            cs[i + 1] = cs[i] + vsum[i]
+        # window sum of column x: cs[off + x + r + 1] - cs[off + x - r]
+        c5 = (np.int64(curr[0]) * 5 + np.int64(curr[1]) + np.int64(prev[0])
+              + np.int64(nxt[0]))
+        sx = cs[off + r + 1] - cs[off - r]
+        out[0] = np.uint8(_clip((c5 * scale_g - sx * scale_s) >> 10, cap))
         for x in range(1, w - 1):
-            s += vsum[off + x + r] - vsum[off + x - r - 1]
-            c5 = (np.int32(curr[x]) * 4 + np.int32(curr[x - 1]) + np.int32(curr[x + 1])
-                  + np.int32(prev[x]) + np.int32(nxt[x]))
-            out[x] = np.uint8(_clip((c5 * scale_g - s * scale_s) >> 10, cap))
+            sx = cs[off + x + r + 1] - cs[off + x - r]
+            c5 = (np.int64(curr[x]) * 4 + np.int64(curr[x - 1]) + np.int64(curr[x + 1])
+                  + np.int64(prev[x]) + np.int64(nxt[x]))
+            v = (c5 * scale_g - sx * scale_s) >> 10
+            out[x] = np.uint8(min(max(v, -cap), cap) + cap)
         x = w - 1
-        s += vsum[off + x + r] - vsum[off + x - r - 1]
-        c5 = (np.int32(curr[x]) * 5 + np.int32(curr[x - 1]) + np.int32(prev[x])
-              + np.int32(nxt[x]))
-        out[x] = np.uint8(_clip((c5 * scale_g - s * scale_s) >> 10, cap))
+        sx = cs[off + x + r + 1] - cs[off + x - r]
+        c5 = (np.int64(curr[x]) * 5 + np.int64(curr[x - 1]) + np.int64(prev[x])
+              + np.int64(nxt[x]))
+        out[x] = np.uint8(_clip((c5 * scale_g - sx * scale_s) >> 10, cap))
 
 
 @nb.njit(parallel=True, **_JIT)
 def normalized_pair(left: np.ndarray, right: np.ndarray, dst_l: np.ndarray,
-                    dst_r: np.ndarray, winsize: int, cap: int, vsum: np.ndarray) -> None:
-    """NORMALIZED_RESPONSE on both images (one per thread); vsum: int32 (2, w + winsize + 2)."""
+                    dst_r: np.ndarray, winsize: int, cap: int, buf: np.ndarray) -> None:
+    """NORMALIZED_RESPONSE on both images (one per thread).
+
+    buf: int64 scratch of shape (2, 2, width + winsize + 3)."""
     for i in nb.prange(2):
         if i == 0:
-            _normalized_rows(left, dst_l, winsize, cap, vsum[0])
+            _normalized_rows(left, dst_l, winsize, cap, buf[0])
         else:
-            _normalized_rows(right, dst_r, winsize, cap, vsum[1])
+            _normalized_rows(right, dst_r, winsize, cap, buf[1])
 
 
 def prefilter_pair(left: np.ndarray, right: np.ndarray, dst_l: np.ndarray, dst_r: np.ndarray,

@@ -61,14 +61,15 @@ def _slide_column(ci: int, pl: np.ndarray, pr: np.ndarray, ya: int, ys: int, cap
 @nb.njit(**_JIT)
 def _row(pl: np.ndarray, pr: np.ndarray, y: int, upd: bool, cfg: np.ndarray, lc: np.ndarray,
          rb: np.ndarray, vs: np.ndarray, ts: np.ndarray, sad: np.ndarray, big,
-         recip: np.ndarray, drow: np.ndarray, crow: np.ndarray) -> None:
-    """Disparities of row y, columns lofs .. lofs+width1-1, into drow (their cost into crow).
+         pix: np.ndarray) -> None:
+    """Pass A of row y: per column x < width1, the first minimum of the window SADs.
 
-    upd: slide the vertical sums down from row y-1 (False on a stripe's first row, whose
-    sums _init_columns has just built)."""
-    r, cap, nd, min_disp = cfg[C_R], cfg[C_CAP], cfg[C_ND], cfg[C_MIND]
-    tex_thr, uratio, lofs, width1 = cfg[C_TEX], cfg[C_URATIO], cfg[C_LOFS], cfg[C_WIDTH1]
-    inv = (min_disp - 1) * 16
+    Writes pix[0..4, x] = (min SAD or -1 when the texture check fails, its index, the number
+    of SADs <= the uniqueness threshold, the SADs at index+1 and index-1 as OpenCV mirrors
+    them). upd: slide the vertical sums down from row y-1 (False on a stripe's first row,
+    whose sums _init_columns has just built)."""
+    r, cap, nd = cfg[C_R], cfg[C_CAP], cfg[C_ND]
+    tex_thr, uratio, width1 = cfg[C_TEX], cfg[C_URATIO], cfg[C_WIDTH1]
     zero = nsub(big, big)
     ya, ys = y + r, y - r - 1
     wsz = 2 * r + 1
@@ -98,31 +99,50 @@ def _row(pl: np.ndarray, pr: np.ndarray, y: int, upd: bool, cfg: np.ndarray, lc:
             else:
                 m = step_all(vs, ci, x - 1, sad, nd)
             tsum += ts[uidx(ci)] - ts[uidx(x - 1)]
-        X = uidx(lofs + x)
+        xu = uidx(x)
         if tsum < tex_thr:  # texture is checked first, as in OpenCV
-            drow[X] = inv
+            pix[0, xu] = -1
             continue
         thr = cast_like(-1, big)  # uniqueness off: count nothing
         if uratio > 0:
             t = np.uint64(m) * np.uint64(uratio) // np.uint64(100) + np.uint64(m)
             thr = cast_like(min(t, np.uint64(big)), big)
         mind, cnt = wta_all(sad, nd, m, thr)  # first minimum; #{j: sad[j] <= thr}
+        pix[0, xu] = m
+        pix[1, xu] = mind
+        pix[2, xu] = cnt
         # parabola neighbours; OpenCV mirrors them at the ends (sad[-1] := sad[1], ...)
-        inner = (mind > 0) & (mind < nd - 1)
-        p = np.int32(sad[uidx(mind + 1 if mind < nd - 1 else nd - 2)])
-        n = np.int32(sad[uidx(mind - 1 if mind > 0 else 1)])
+        pix[3, xu] = sad[uidx(mind + 1 if mind < nd - 1 else nd - 2)]
+        pix[4, xu] = sad[uidx(mind - 1 if mind > 0 else 1)]
+
+
+@nb.njit(**_JIT)
+def _finish_row(cfg: np.ndarray, big, pix: np.ndarray, drow: np.ndarray,
+                crow: np.ndarray) -> None:
+    """Pass B (vectorised over x): uniqueness verdict, subpixel offset, output values."""
+    nd, min_disp, uratio = cfg[C_ND], cfg[C_MIND], cfg[C_URATIO]
+    lofs, width1 = cfg[C_LOFS], cfg[C_WIDTH1]
+    inv = (min_disp - 1) * 16
+    top = np.int64(big)
+    base = (nd - 1 + min_disp) * 256 + 15
+    for x in range(width1):
+        m = np.int64(pix[0, x])
+        k = np.int64(pix[1, x])
+        p = np.int64(pix[3, x])
+        n = np.int64(pix[4, x])
+        thr = min(m + cdiv(m * uratio, np.int64(100)), top)  # m >= 0 where it matters
+        thr = thr if uratio > 0 else np.int64(-1)
+        inner = (k > 0) & (k < nd - 1)
         # uniqueness: no j outside mind-1 .. mind+1 may have sad[j] <= thr
-        ok = cnt - 1 - (p <= thr) - (inner & (n <= thr)) <= 0
+        ok = (m >= 0) & (np.int64(pix[2, x]) - 1 - (p <= thr) - (inner & (n <= thr)) <= 0)
         # OpenCV: off = (p - n) * 256 / den truncated, den = p + n - 2m + |p - n|
-        # = 2q with q = max(p, n) - m >= |p - n|, hence off = +-(128 |p - n| / q)
-        q = max(p, n) - np.int32(m)
-        a128 = abs(p - n) * 128
-        if recip.shape[0] > 0:
-            off = (np.int64(a128) * recip[uidx(q)]) >> 40
-        else:
-            off = cdiv(a128, max(q, np.int32(1)))
+        # = 2q with q = max(p, n) - m >= |p - n|, so off = +-(128 |p - n| / q); the float64
+        # quotient truncates exactly (its error is far below 1/q)
+        q = max(max(p, n) - m, np.int64(1))
+        off = np.int64(np.float64(abs(p - n) * 128) / np.float64(q))
         off = -off if p < n else off
-        d = ((nd - mind - 1 + min_disp) * 256 + off + 15) >> 4
+        d = (base - k * 256 + off) >> 4
+        X = uidx(lofs + x)
         drow[X] = d if ok else inv
         crow[X] = m
 
@@ -145,21 +165,21 @@ def _lr_check(drow: np.ndarray, crow: np.ndarray, x0: int, x1: int, inv: int, ma
             d2cost[x2] = c
             d2buf[x2] = d
     md = maxdiff * 16
-    for x in range(x0, x1):
-        d = np.int32(drow[x])
-        if d == inv:
-            continue
+    for x in range(x0, x1):  # branch-free so that it vectorises (gathers from d2buf)
+        d = np.int64(drow[x])
         xa = x - (d >> 4)
         xb = x - ((d + 15) >> 4)
-        if (0 <= xa < w and d2buf[xa] > inv and abs(d2buf[xa] - d) > md
-                and 0 <= xb < w and d2buf[xb] > inv and abs(d2buf[xb] - d) > md):
-            drow[x] = inv
+        ga = np.int64(d2buf[uidx(min(max(xa, 0), w - 1))])
+        gb = np.int64(d2buf[uidx(min(max(xb, 0), w - 1))])
+        bad = ((d != inv) & (xa >= 0) & (xa < w) & (ga > inv) & (abs(ga - d) > md)
+               & (xb >= 0) & (xb < w) & (gb > inv) & (abs(gb - d) > md))
+        drow[x] = inv if bad else d
 
 
 @nb.njit(parallel=True, **_JIT)
 def match_rows(pl: np.ndarray, pr: np.ndarray, disp: np.ndarray, bounds: np.ndarray,
-               cfg: np.ndarray, lc: np.ndarray, rb: np.ndarray, recip: np.ndarray, big,
-               vs: np.ndarray, ts: np.ndarray, sad: np.ndarray, drow: np.ndarray,
+               cfg: np.ndarray, lc: np.ndarray, rb: np.ndarray, big, vs: np.ndarray,
+               ts: np.ndarray, sad: np.ndarray, pix: np.ndarray, drow: np.ndarray,
                crow: np.ndarray, d2buf: np.ndarray, d2cost: np.ndarray) -> None:
     """Rows bounds[s] .. bounds[s+1]-1 of stripe s into disp (valid region only).
 
@@ -179,7 +199,8 @@ def match_rows(pl: np.ndarray, pr: np.ndarray, disp: np.ndarray, bounds: np.ndar
                               nsub(big, big))
             for x in range(dr.shape[0]):
                 dr[x] = inv
-            _row(pl, pr, y, y != y0, cfg, lc, rb, vs[t], ts[t], sad[t], big, recip, dr, cr)
+            _row(pl, pr, y, y != y0, cfg, lc, rb, vs[t], ts[t], sad[t], big, pix[t])
+            _finish_row(cfg, big, pix[t], dr, cr)
             if maxdiff >= 0:
                 _lr_check(dr, cr, cfg[C_LRX0], cfg[C_LRX1], inv, maxdiff, d2buf[t], d2cost[t])
             out = disp[y]
