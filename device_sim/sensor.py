@@ -23,8 +23,8 @@ CONVERSION = 4.0  # DN per sqrt(DN) of shot noise: variance = signal / CONVERSIO
 READ_NOISE_DN = 0.8
 LIGHT = np.array([0.3, 0.45, 1.0]) / np.linalg.norm([0.3, 0.45, 1.0])  # travelling direction
 BOARD = BoardSpec(cols=9, rows=6, square_m=0.03)  # the calibration scene's chessboard
-BOARD_POSES = 48
-BOARD_DWELL_S = 0.5  # the fixture holds each pose this long
+BOARD_POSES = 120
+BOARD_DWELL_S = 0.15  # a fixture robot: it holds each pose this long, then moves on
 
 
 @dataclass(frozen=True)

@@ -41,7 +41,8 @@ def read_calibration(request, source: str = "active") -> StoredCalibration | Non
         if len(body) >= r.total or not r.data:
             break
     if len(body) != r.total or m.calib_id(body) != r.calibration_id:
-        raise ProtocolError(f"calibration read back incomplete or inconsistent ({len(body)} of {r.total} bytes)")
+        raise ProtocolError(f"calibration body of {len(body)} of {r.total} bytes does not match its id "
+                            f"{r.calibration_id:08x}")
     return StoredCalibration(StereoCalibration.from_bytes(body), body,
                              "factory" if r.source == m.CalibSource.FACTORY else "user", r.generation,
                              r.calibration_id)
@@ -57,7 +58,10 @@ def write_calibration(request, calib: StereoCalibration, target: str = "user") -
         if r.staged != min(off + m.MAX_CALIB_CHUNK, len(body)):
             raise ProtocolError(f"device staged {r.staged} bytes after the chunk at {off}")
     state = request(m.CalibCommit(SOURCES[target], len(body), zlib.crc32(body)))
-    back = read_calibration(request, target)
+    try:
+        back = read_calibration(request, target)
+    except ProtocolError as exc:
+        raise VerificationError(f"the {target} calibration could not be read back intact: {exc}") from exc
     if back is None or back.body != body:
         raise VerificationError(f"the {target} calibration read back from the device differs from what was "
                                 "written")

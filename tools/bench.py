@@ -5,6 +5,9 @@ transport — end-to-end frames/s and MB/s at 640x480 (left, right, disparity) p
             pty, tcp, usb), the simulator rendering and matching every frame; side by side in one run.
 usb       — the USB path alone: bulk IN MB/s through pyusb and the transport (tools/bench_usb.py).
 matching  — the numba matching core against cv2.StereoBM (tools/bench_matching.py).
+calibration — calibration accuracy against the simulator's truth: the solver on rendered views
+            (tools/bench_calibration.py) and the factory tool through the protocol on uncalibrated
+            units, plus metric depth at 1 m through the stored result (tools/bench_device_calibration.py).
 """
 from __future__ import annotations
 
@@ -98,7 +101,8 @@ def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty"
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="stereocam bench", description=__doc__.splitlines()[0])
-    ap.add_argument("what", nargs="?", default="all", choices=["protocol", "transport", "usb", "matching", "all"])
+    ap.add_argument("what", nargs="?", default="all",
+                    choices=["protocol", "transport", "usb", "matching", "calibration", "all"])
     ap.add_argument("--seconds", type=float, default=5.0)
     args, rest = ap.parse_known_args(argv)
     if args.what in ("protocol", "all"):
@@ -109,4 +113,7 @@ def main(argv: list[str] | None = None) -> int:
         importlib.import_module("tools.bench_usb").main(rest)
     if args.what in ("matching", "all"):
         importlib.import_module("tools.bench_matching").main(rest)
+    if args.what in ("calibration", "all"):
+        importlib.import_module("tools.bench_calibration").main([])
+        importlib.import_module("tools.bench_device_calibration").main([])
     return 0

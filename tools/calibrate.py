@@ -1,6 +1,12 @@
-"""``stereocam calibrate``: factory stereo calibration from chessboard image pairs (offline mode).
+"""``stereocam calibrate``: factory stereo calibration, from a camera or from image pairs.
 
-    stereocam calibrate --images DIR --board 9x6 --square-size 0.025 --out OUTDIR
+    stereocam calibrate URL --out OUTDIR [--target user|factory]          (device mode)
+    stereocam calibrate --images DIR --board 9x6 --square-size 0.025 --out OUTDIR   (offline)
+
+Device mode (tools/calibrate_device.py) captures raw pairs of the calibration board, solves, gates,
+writes the result to the camera, reads it back and compares it byte for byte before it reports
+success; calibration.json then says written/verified true. The simulator's board is 9x6 inner
+corners of 30 mm, the device-mode default.
 
 DIR holds pairs named left<N>.<ext> / right<N>.<ext> (any text between the side and the number,
 e.g. left_003.png ↔ right3.png); they are paired by the integer N. The engine and the metric
@@ -12,9 +18,10 @@ Outputs in OUTDIR:
   calibration.yaml   OpenCV FileStorage: K1 D1 K2 D2 R T R1 R2 P1 P2 Q + metrics   (only if passed)
   left.yaml, right.yaml   ROS camera_info (plumb_bob)                              (only if passed)
   report.png         per-view errors, coverage, rectified pair with epipolar lines
-Exit status: 0 passed; 2 bad arguments or unreadable images; 3 no solution (board never found,
-too few views); 4 the solution failed the gate (calibration.json says passed: false, the YAML
-files are not written and stale ones from an earlier run are removed).
+Exit status: 0 passed; 1 the camera could not be reached; 2 bad arguments or unreadable images;
+3 no solution (board never found, too few views); 4 the solution failed the gate (calibration.json
+says passed: false, the YAML files are not written and stale ones from an earlier run are removed);
+5 the write to the camera failed or read back different (the camera keeps its previous calibration).
 """
 from __future__ import annotations
 
@@ -130,10 +137,17 @@ def _board(text: str) -> tuple[int, int]:
 
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="stereocam calibrate", description=__doc__.splitlines()[0])
-    ap.add_argument("--images", type=Path, required=True, help="folder of left<N>/right<N> images")
-    ap.add_argument("--board", type=_board, required=True, help="inner corners COLSxROWS, e.g. 9x6")
-    ap.add_argument("--square-size", type=float, required=True, help="square side in metres")
+    ap.add_argument("url", nargs="?", help="camera to calibrate (device mode)")
+    ap.add_argument("--images", type=Path, help="folder of left<N>/right<N> images (offline mode)")
+    ap.add_argument("--board", type=_board, default=(9, 6), help="inner corners COLSxROWS (default 9x6)")
+    ap.add_argument("--square-size", type=float, default=None,
+                    help="square side in metres (required offline; device default 0.03)")
     ap.add_argument("--out", type=Path, required=True, help="output folder")
+    ap.add_argument("--target", choices=["user", "factory"], default="user", help="device record to write")
+    ap.add_argument("--pairs", type=int, default=200, help="device mode: most pairs to capture")
+    ap.add_argument("--size", type=_board, default=None, metavar="WxH",
+                    help="device mode: capture format (default the full sensor)")
+    ap.add_argument("--scene", type=int, default=2, help=argparse.SUPPRESS)  # simulator: which scene to show
     d = SolveConfig()
     ap.add_argument("--max-stereo-rms", type=float, default=d.max_stereo_rms_px, help="gate, px")
     ap.add_argument("--max-epipolar", type=float, default=d.max_epipolar_rms_px, help="gate, px (held-out)")
@@ -152,11 +166,19 @@ def _fail(code: int, text: str) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    if (args.url is None) == (args.images is None):
+        return _fail(EXIT_USAGE, "give a camera URL (device mode) or --images DIR (offline), not both")
+    if args.square_size is None:
+        if args.images is not None:
+            return _fail(EXIT_USAGE, "--square-size is required with --images")
+        args.square_size = 0.03
     if not 0 < args.square_size <= 1.0:
         return _fail(EXIT_USAGE, f"--square-size is in metres (0 < s <= 1), got {args.square_size}")
     if args.holdout_every < 2 or args.min_views < 3:
         return _fail(EXIT_USAGE, "--holdout-every must be >= 2 and --min-views >= 3")
     config = SolveConfig(args.max_stereo_rms, args.max_epipolar, args.min_views, args.max_views, args.holdout_every)
+    if args.url is not None:
+        return _device_mode(args, config)
     try:
         board = BoardSpec(*args.board, args.square_size)
         pairs = find_pairs(args.images)
@@ -175,6 +197,28 @@ def main(argv: list[str] | None = None) -> int:
     if not result.passed:
         return _fail(EXIT_GATE, "calibration FAILED the gate: " + "; ".join(result.failures))
     print("calibration PASSED")
+    return EXIT_OK
+
+
+def _device_mode(args: argparse.Namespace, config: SolveConfig) -> int:
+    import host
+    from tools.calibrate_device import calibrate_device
+
+    try:
+        with host.open(args.url, timeout=2.0) as cam:
+            code, result, verdict = calibrate_device(
+                cam, BoardSpec(*args.board, args.square_size), config, args.out, target=args.target,
+                pairs=args.pairs, size=args.size, scene=args.scene, write_outputs=write_outputs,
+                progress=None if args.quiet else print_progress)
+    except host.StereoCamError as exc:
+        return _fail(1, f"camera {args.url}: {exc}")
+    if result is not None:
+        q = result.quality
+        print(f"rms left {q.rms_left:.3f} px  right {q.rms_right:.3f} px  stereo {q.rms_stereo:.3f} px  "
+              f"held-out epipolar {q.epipolar_rms_px:.3f} px  views {q.views_used}")
+    if code:
+        return _fail(code, verdict)
+    print(verdict)
     return EXIT_OK
 
 

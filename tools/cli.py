@@ -12,6 +12,7 @@ COMMANDS = {
     "list": ("tools.list_devices", "list cameras: USB (real and simulated), camera serial ports, simulators"),
     "info": ("tools.info", "print a camera's info, configuration and counters"),
     "capture": ("tools.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
+    "calibrate": ("tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
     "demo": ("tools.demo", "simulator + streaming + outputs in ./out + summary"),
     "bench": ("tools.bench", "benchmarks: protocol decode, transports (incl. USB), matching core"),
 }

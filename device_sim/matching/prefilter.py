@@ -19,34 +19,42 @@ def _clip(v: int, cap: int) -> int:
     return v + cap
 
 
-@nb.njit(parallel=True, **_JIT)
-def xsobel(src: np.ndarray, dst: np.ndarray, cap: int) -> None:
-    """P = clip(d[y-1] + 2 d[y] + d[y+1]) with d = I[x+1] - I[x-1]; OpenCV's border rules."""
+@nb.njit(**_JIT)
+def _xsobel_pair_rows(src: np.ndarray, dst: np.ndarray, y: int, cap: int) -> None:
+    """Output rows y and y+1 (y even): P = clip(d[y-1] + 2 d[y] + d[y+1]), d = I[x+1] - I[x-1]."""
     h, w = src.shape
+    r0 = y - 1 if y > 0 else (y + 1 if h > 1 else y)
+    r3 = y + 2 if y < h - 2 else y
+    s0, s1, s2, s3 = src[r0], src[y], src[y + 1], src[r3]
+    o0, o1 = dst[y], dst[y + 1]
+    o0[0] = cap
+    o0[w - 1] = cap
+    o1[0] = cap
+    o1[w - 1] = cap
+    for x in range(1, w - 1):
+        d0 = np.int32(s0[x + 1]) - np.int32(s0[x - 1])
+        d1 = np.int32(s1[x + 1]) - np.int32(s1[x - 1])
+        d2 = np.int32(s2[x + 1]) - np.int32(s2[x - 1])
+        d3 = np.int32(s3[x + 1]) - np.int32(s3[x - 1])
+        o0[x] = np.uint8(min(max(d0 + 2 * d1 + d2, -cap), cap) + cap)
+        o1[x] = np.uint8(min(max(d1 + 2 * d2 + d3, -cap), cap) + cap)
+
+
+@nb.njit(parallel=True, **_JIT)
+def xsobel_pair(left: np.ndarray, right: np.ndarray, dst_l: np.ndarray, dst_r: np.ndarray,
+                cap: int) -> None:
+    """XSOBEL on both images in one parallel region (rows in pairs, as OpenCV does them);
+    an odd last row is all cap, as in OpenCV."""
+    h = left.shape[0]
     npairs = h // 2
-    for k in nb.prange(npairs):
-        y = 2 * k
-        r1 = y
-        r0 = y - 1 if y > 0 else (y + 1 if h > 1 else y)
-        r2 = y + 1
-        r3 = y + 2 if y < h - 2 else y
-        s0, s1, s2, s3 = src[r0], src[r1], src[r2], src[r3]
-        o0, o1 = dst[y], dst[y + 1]
-        o0[0] = cap
-        o0[w - 1] = cap
-        o1[0] = cap
-        o1[w - 1] = cap
-        for x in range(1, w - 1):
-            d0 = np.int32(s0[x + 1]) - np.int32(s0[x - 1])
-            d1 = np.int32(s1[x + 1]) - np.int32(s1[x - 1])
-            d2 = np.int32(s2[x + 1]) - np.int32(s2[x - 1])
-            d3 = np.int32(s3[x + 1]) - np.int32(s3[x - 1])
-            v0 = min(max(d0 + 2 * d1 + d2, -cap), cap) + cap
-            v1 = min(max(d1 + 2 * d2 + d3, -cap), cap) + cap
-            o0[x] = np.uint8(v0)
-            o1[x] = np.uint8(v1)
+    for k in nb.prange(2 * npairs):
+        if k < npairs:
+            _xsobel_pair_rows(left, dst_l, 2 * k, cap)
+        else:
+            _xsobel_pair_rows(right, dst_r, 2 * (k - npairs), cap)
     if h % 2 == 1:
-        dst[h - 1, :] = cap
+        dst_l[h - 1, :] = cap
+        dst_r[h - 1, :] = cap
 
 
 @nb.njit(**_JIT)
@@ -117,7 +125,6 @@ def prefilter_pair(left: np.ndarray, right: np.ndarray, dst_l: np.ndarray, dst_r
                    kind: str, winsize: int, cap: int, vsum: np.ndarray) -> None:
     """Apply the chosen prefilter to both images into dst_l / dst_r."""
     if kind == "xsobel":
-        xsobel(left, dst_l, cap)
-        xsobel(right, dst_r, cap)
+        xsobel_pair(left, right, dst_l, dst_r, cap)
     else:
         normalized_pair(left, right, dst_l, dst_r, winsize, cap, vsum)

@@ -1,0 +1,74 @@
+"""Device mode of ``stereocam calibrate URL --out DIR``: calibrate a camera on the line and store it.
+
+Steps: switch the camera to raw (unrectified) free-run images of the calibration scene; feed the
+pairs to the solver (tools/calib_solve.py) until it has enough distinct views; gate; on a pass,
+write the calibration to the device, read it back and compare byte for byte, and only then report
+success. On any failure nothing is written (or the device keeps its previous calibration) and the
+reason is printed. The camera's own configuration is restored afterwards.
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+import host
+from tools.calib_solve import CalibrationError, CalibrationResult, SolveConfig, calibrate_pairs
+
+EXIT_OK, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_WRITE = 0, 3, 4, 5
+CALIBRATION_SCENE = 2  # the simulator's chessboard fixture (device_sim/scene.py)
+
+
+def raw_pairs(cam: host.Camera, count: int, timeout: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Up to ``count`` raw (left, right) pairs from the running stream."""
+    for _ in range(count):
+        f = cam.get_frame(timeout=timeout)
+        if f.rectified:
+            raise host.ProtocolError("the camera sent rectified frames in raw mode")
+        yield f.left, f.right
+
+
+def calibrate_device(cam: host.Camera, board, config: SolveConfig, outdir: Path, *, target: str = "user",
+                     pairs: int = 200, fps: int = 10, size: tuple[int, int] | None = None, scene: int | None =
+                     CALIBRATION_SCENE, progress=None, write_outputs=None, frame_timeout: float = 60.0
+                     ) -> tuple[int, CalibrationResult | None, str]:
+    """Returns (exit code, result or None, one-line verdict)."""
+    before = cam.config()
+    width, height = size or (cam.info().sensor_width, cam.info().sensor_height)
+    setup = dict(rectify=0, width=width, height=height, fps=fps, trigger_mode=int(host.TriggerMode.FREE_RUN))
+    if scene is not None:
+        setup["scene"] = scene
+    cam.configure(**setup)
+    try:
+        cam.start()
+        try:
+            result = calibrate_pairs(raw_pairs(cam, pairs, frame_timeout), board, config, progress=progress)
+        finally:
+            cam.stop()
+    except CalibrationError as exc:
+        return EXIT_NO_SOLUTION, None, f"{exc}; nothing was written to the camera"
+    finally:
+        cam.configure(**{k: before[k] for k in setup})
+    if not result.passed:
+        verdict = "calibration FAILED the gate: " + "; ".join(result.failures) + "; nothing was written to the camera"
+        return _finish(EXIT_GATE, result, verdict, outdir, write_outputs)
+    try:
+        stored = cam.write_calibration(result.calibration, target)
+    except host.StereoCamError as exc:
+        result.quality = dataclasses.replace(result.quality, written=False, verified=False)
+        verdict = (f"writing the calibration failed: {exc}; calibration in force on the camera: "
+                   f"{cam.info().calibration_id:08x}")
+        return _finish(EXIT_WRITE, result, verdict, outdir, write_outputs)
+    result.quality = dataclasses.replace(result.quality, written=True, verified=True)
+    verdict = (f"calibration PASSED, written to {cam.info().serial} as the {stored.source} record "
+               f"(generation {stored.generation}, id {stored.calibration_id:08x}) and verified by read-back")
+    return _finish(EXIT_OK, result, verdict, outdir, write_outputs)
+
+
+def _finish(code: int, result: CalibrationResult, verdict: str, outdir: Path, write_outputs
+            ) -> tuple[int, CalibrationResult, str]:
+    if write_outputs is not None:
+        write_outputs(result, outdir)
+    return code, result, verdict
