@@ -40,14 +40,15 @@ class CalibrationService:
     def _load(self) -> None:
         self._maps.clear()
         self.record, self.calibration = None, None
-        rec = self.store.read()
-        if rec is None:
-            return
-        try:
-            self.calibration = StereoCalibration.from_bytes(rec.body)
-            self.record = rec
-        except CalibrationFormatError:
-            self.rejected_records += 1
+        for rec in (self.store.read(), self.store.read_factory()):  # user if valid and usable, else factory
+            if rec is None:
+                continue
+            try:
+                self.calibration = StereoCalibration.from_bytes(rec.body)
+                self.record = rec
+                return
+            except CalibrationFormatError:
+                self.rejected_records += 1
 
     @property
     def calibration_id(self) -> int:

@@ -29,7 +29,7 @@ A reader rejects any other body_version, n_dist or length. Floats are IEEE-754 b
 from __future__ import annotations
 
 import struct
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -90,7 +90,7 @@ class StereoCalibration:
     K_right: np.ndarray
     D_right: np.ndarray
     R: np.ndarray
-    T: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    T: np.ndarray
 
     def __post_init__(self) -> None:
         w, h = (int(v) for v in self.image_size)
