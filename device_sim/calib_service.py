@@ -6,6 +6,7 @@ raises DeviceError (the dispatcher's NACK) and leaves the calibration in force u
 """
 from __future__ import annotations
 
+import threading
 import zlib
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from protocol.errors import DeviceError, ErrorCode
 from .calibration.flash import FlashError, NorFlash
 from protocol.calibration import CalibrationFormatError, StereoCalibration
 from .calibration.rectify import RectificationMaps, rectification_maps
-from .calibration.store import CalibrationStore, StoredRecord
+from .calibration.store import CalibrationStore, StoreError, StoredRecord
 
 MAX_BODY = 4096
 
@@ -31,6 +32,7 @@ class CalibrationService:
         self._staging = bytearray()
         self._staging_total = 0
         self._maps: dict[tuple[int, int], RectificationMaps] = {}
+        self._lock = threading.Lock()  # the capture thread reads what requests change
         self.record: StoredRecord | None = None
         self.calibration: StereoCalibration | None = None
         self.rejected_records = 0  # valid CRC but a body this firmware cannot use
@@ -38,30 +40,37 @@ class CalibrationService:
 
     # -- state in force -------------------------------------------------------------------------
     def _load(self) -> None:
-        self._maps.clear()
-        self.record, self.calibration = None, None
-        for rec in (self.store.read(), self.store.read_factory()):  # user if valid and usable, else factory
-            if rec is None:
+        """Put the newest usable record in force: user if valid and parseable, else factory."""
+        record, calibration = None, None
+        seen: set[tuple[str, int]] = set()
+        for rec in (self.store.read(), self.store.read_factory()):
+            if rec is None or (rec.region, rec.slot) in seen:
                 continue
+            seen.add((rec.region, rec.slot))
             try:
-                self.calibration = StereoCalibration.from_bytes(rec.body)
-                self.record = rec
-                return
+                calibration = StereoCalibration.from_bytes(rec.body)
+                record = rec
+                break
             except CalibrationFormatError:
                 self.rejected_records += 1
+        with self._lock:
+            self._maps.clear()
+            self.record, self.calibration = record, calibration
 
     @property
     def calibration_id(self) -> int:
         return m.calib_id(self.record.body) if self.record else 0
 
-    def maps(self, width: int, height: int) -> RectificationMaps | None:
-        """Rectification maps for this output format from the calibration in force (cached)."""
-        if self.calibration is None:
-            return None
-        key = (width, height)
-        if key not in self._maps:
-            self._maps[key] = rectification_maps(self.calibration.scaled(width, height))
-        return self._maps[key]
+    def maps(self, width: int, height: int) -> tuple[RectificationMaps | None, int]:
+        """Rectification maps for this output format from the calibration in force (cached), and
+        that calibration's id — one consistent pair even while a write is being committed."""
+        with self._lock:
+            if self.calibration is None:
+                return None, 0
+            key = (width, height)
+            if key not in self._maps:
+                self._maps[key] = rectification_maps(self.calibration.scaled(width, height))
+            return self._maps[key], m.calib_id(self.record.body)
 
     def _state(self, cls: type[m.CalibState]) -> m.CalibState:
         rec = self.record
@@ -72,7 +81,7 @@ class CalibrationService:
     # -- requests -------------------------------------------------------------------------------
     def read(self, msg: m.CalibRead) -> m.CalibData:
         if msg.source == m.CalibSource.ACTIVE:
-            rec = self.store.read()
+            rec = self.record  # the one in force (a stored but unusable record is not)
         elif msg.source == m.CalibSource.FACTORY:
             rec = self.store.read_factory()
         elif msg.source == m.CalibSource.USER:
@@ -100,8 +109,12 @@ class CalibrationService:
         return m.CalibWritten(len(self._staging))
 
     def commit(self, msg: m.CalibCommit) -> m.CalibState:
+        if msg.target not in (m.CalibSource.FACTORY, m.CalibSource.USER):
+            raise DeviceError(ErrorCode.OUT_OF_RANGE, f"commit target must be factory (1) or user (2), not {msg.target}")
+        if msg.target == m.CalibSource.FACTORY and self.store.factory_locked:
+            raise DeviceError(ErrorCode.BAD_STATE, "the factory calibration is write-protected; write target=user")
         body = bytes(self._staging)
-        self._staging, self._staging_total = bytearray(), 0  # one commit per staging
+        self._staging, self._staging_total = bytearray(), 0  # one commit attempt per staging
         if msg.total != len(body) or zlib.crc32(body) != msg.crc:
             raise DeviceError(ErrorCode.BAD_PAYLOAD, f"staged {len(body)} bytes with CRC {zlib.crc32(body):08x}, "
                               f"commit announced {msg.total} bytes with CRC {msg.crc:08x}; nothing written")
@@ -109,20 +122,22 @@ class CalibrationService:
             StereoCalibration.from_bytes(body)
         except CalibrationFormatError as exc:
             raise DeviceError(ErrorCode.BAD_PAYLOAD, f"not a calibration this firmware can use: {exc}") from exc
-        if msg.target == m.CalibSource.FACTORY and self.store.factory_locked:
-            raise DeviceError(ErrorCode.BAD_STATE, "the factory calibration is write-protected; write target=user")
-        if msg.target not in (m.CalibSource.FACTORY, m.CalibSource.USER):
-            raise DeviceError(ErrorCode.OUT_OF_RANGE, f"commit target must be factory (1) or user (2), not {msg.target}")
         try:
             if msg.target == m.CalibSource.FACTORY:
                 written = self.store.write_factory(body)
-                self.store.lock_factory()
             else:
                 written = self.store.write_user(body)
-        except FlashError as exc:
+        except (FlashError, StoreError) as exc:
             self._load()  # whatever survived on flash is what is in force
             raise DeviceError(ErrorCode.STORAGE, f"flash write failed ({exc}); the previous calibration "
                               "is still in force") from exc
+        if msg.target == m.CalibSource.FACTORY:
+            try:
+                self.store.lock_factory()
+            except FlashError as exc:
+                self._load()
+                raise DeviceError(ErrorCode.STORAGE, f"the factory record was written but write-protecting it "
+                                  f"failed ({exc}); it is stored unprotected") from exc
         self._load()
         stored = self.store.read_factory() if msg.target == m.CalibSource.FACTORY else self.record
         if stored is None or stored.body != body or stored.generation != written.generation:
@@ -130,9 +145,11 @@ class CalibrationService:
         return self._state(m.CalibCommitted)
 
     def restore_factory(self) -> m.CalibState:
+        if self.store.read_factory() is None:
+            raise DeviceError(ErrorCode.BAD_STATE, "no factory calibration stored; nothing to restore")
         try:
             self.store.restore_factory()
-        except FlashError as exc:
+        except (FlashError, StoreError) as exc:
             self._load()
             raise DeviceError(ErrorCode.STORAGE, f"flash write failed ({exc})") from exc
         self._load()

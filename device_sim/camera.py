@@ -34,9 +34,9 @@ from .sensor import SENSOR_H, SENSOR_W, Geometry, SensorRig
 from .trigger import TriggerLine
 
 MODEL = "STOC-SIM"
-FIRMWARE_VERSION = "1.0.0"
+FIRMWARE_VERSION = "1.1.0"
 CHUNK = 128 * 1024  # FRAME_DATA payload bytes per message
-CAPABILITIES = 0x0F  # disparity | software trigger | external trigger | time sync
+CAPABILITIES = 0x1F  # disparity | software trigger | external trigger | time sync | calibration storage
 RESEND_CACHE = 64
 GROUND_TRUTH_KEEP = 64
 
@@ -303,7 +303,9 @@ class SimulatedCamera:
         t = req.time - self.clock.boot
         left, right = self.rig.capture(t, cfg["scene"], cfg["exposure_us"], cfg["gain"],
                                        req.sequence ^ (self.seed << 20))
-        maps = self.calibration.maps(w, h) if cfg["rectify"] else None
+        maps, calib_id = self.calibration.maps(w, h)
+        if not cfg["rectify"]:
+            maps = None
         outputs = Output(cfg["outputs"])
         if maps is not None:  # on-board rectification from the stored calibration
             left, right = maps.rectify(left, right)
@@ -323,7 +325,7 @@ class SimulatedCamera:
         begin = m.FrameBegin(
             req.sequence & 0xFFFFFFFF, req.trigger_id & 0xFFFFFFFF, self.clock.at(req.time), cfg["exposure_us"],
             cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
-            cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, self.calibration.calibration_id,
+            cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, calib_id,
             focal, cx, cy, baseline)
         planes = [(Output.LEFT, left), (Output.RIGHT, right), (Output.DISPARITY, disp)]
         sizes = {}

@@ -183,3 +183,24 @@ def test_calibration_survives_a_reboot(tmp_path):
         f = one_frame(cam)
         assert f.geometry.calibration_id == written.calibration_id
         assert np.isfinite(f.geometry.focal_px)
+
+
+def test_restore_without_factory_record_is_refused(tmp_path):
+    sim = SimulatedCamera(seed=65, flash_path=tmp_path / "n.flash", factory_calibrated=False)
+    with Camera(InProcessTransport(sim)) as cam:
+        written = cam.write_calibration(shifted(sim.true_calibration()))
+        with pytest.raises(host.DeviceError) as exc:
+            cam.restore_factory_calibration()
+        assert exc.value.code == ErrorCode.BAD_STATE and "factory" in str(exc.value)
+        assert cam.read_calibration().body == written.body  # the user record is untouched
+
+
+def test_refused_target_keeps_the_staging(unit):
+    cam, sim = unit
+    body = shifted(sim.true_calibration()).to_bytes()
+    cam.request(m.CalibWrite(0, len(body), body))
+    with pytest.raises(host.DeviceError) as exc:
+        cam.request(m.CalibCommit(m.CalibSource.FACTORY, len(body), zlib.crc32(body)))  # locked
+    assert exc.value.code == ErrorCode.BAD_STATE
+    state = cam.request(m.CalibCommit(m.CalibSource.USER, len(body), zlib.crc32(body)))
+    assert state.source == m.CalibSource.USER and cam.read_calibration().body == body

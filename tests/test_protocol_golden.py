@@ -152,7 +152,8 @@ def test_info_is_the_v1_0_layout_plus_a_trailing_calibration_id() -> None:
                        for s in (info.model, info.serial, info.firmware_version))
     v10_part = struct.pack("<BBIHHIHH", 1, 1, 0xA5A50F0F, 1280, 960, 1 << 20, 1280, 960) + strings
     assert p == v10_part + b"\x0d\xf0\xad\x8b"  # calibration_id 0x8BADF00D, u32 LE
-    assert m.Info.unpack(v10_part) == dataclasses.replace(info, calibration_id=0)  # no trailing field: as a 1.0 device sends it
+    # no trailing field: as a 1.0 device sends it
+    assert m.Info.unpack(v10_part) == dataclasses.replace(info, calibration_id=0)
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -57,7 +57,8 @@ class MatchParams:
         if nd <= 0 or nd % 16 != 0:
             raise ValueError(f"num_disparities must be positive and divisible by 16, got {nd}")
         if self.texture_threshold < 0:
-            raise ValueError(f"texture_threshold must be non-negative, got {self.texture_threshold}")
+            raise ValueError(f"texture_threshold must be non-negative, "
+                             f"got {self.texture_threshold}")
         if self.uniqueness_ratio < 0:
             raise ValueError(f"uniqueness_ratio must be non-negative, got {self.uniqueness_ratio}")
         if self.speckle_window_size < 0:

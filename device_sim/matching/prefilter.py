@@ -122,9 +122,9 @@ def normalized_pair(left: np.ndarray, right: np.ndarray, dst_l: np.ndarray,
 
 
 def prefilter_pair(left: np.ndarray, right: np.ndarray, dst_l: np.ndarray, dst_r: np.ndarray,
-                   kind: str, winsize: int, cap: int, vsum: np.ndarray) -> None:
-    """Apply the chosen prefilter to both images into dst_l / dst_r."""
+                   kind: str, winsize: int, cap: int, buf: np.ndarray) -> None:
+    """Apply the chosen prefilter to both images into dst_l / dst_r (buf: see normalized_pair)."""
     if kind == "xsobel":
         xsobel_pair(left, right, dst_l, dst_r, cap)
     else:
-        normalized_pair(left, right, dst_l, dst_r, winsize, cap, vsum)
+        normalized_pair(left, right, dst_l, dst_r, winsize, cap, buf)

@@ -165,15 +165,15 @@ def _lr_check(drow: np.ndarray, crow: np.ndarray, x0: int, x1: int, inv: int, ma
             d2cost[x2] = c
             d2buf[x2] = d
     md = maxdiff * 16
-    for x in range(x0, x1):  # branch-free so that it vectorises (gathers from d2buf)
-        d = np.int64(drow[x])
+    for x in range(x0, x1):
+        d = np.int32(drow[x])
+        if d == inv:
+            continue
         xa = x - (d >> 4)
         xb = x - ((d + 15) >> 4)
-        ga = np.int64(d2buf[uidx(min(max(xa, 0), w - 1))])
-        gb = np.int64(d2buf[uidx(min(max(xb, 0), w - 1))])
-        bad = ((d != inv) & (xa >= 0) & (xa < w) & (ga > inv) & (abs(ga - d) > md)
-               & (xb >= 0) & (xb < w) & (gb > inv) & (abs(gb - d) > md))
-        drow[x] = inv if bad else d
+        if (0 <= xa < w and d2buf[uidx(xa)] > inv and abs(d2buf[uidx(xa)] - d) > md
+                and 0 <= xb < w and d2buf[uidx(xb)] > inv and abs(d2buf[uidx(xb)] - d) > md):
+            drow[x] = inv
 
 
 @nb.njit(parallel=True, **_JIT)
