@@ -26,6 +26,7 @@ from .capture import CaptureEngine, CaptureRequest
 from .clock import DeviceClock
 from .config_store import ConfigStore
 from .matching import Matcher, MatchParams
+from .matching import warm_up as matching_warm_up
 from .calib_service import CalibrationService
 from protocol.calibration import StereoCalibration
 from .calibration.truth import true_calibration
@@ -113,7 +114,18 @@ class SimulatedCamera:
             m.MsgType.CALIB_COMMIT: self.calibration.commit,
             m.MsgType.CALIB_RESTORE: lambda _: self.calibration.restore_factory(),
         }
+        self._boot()
         registry.register(self)
+
+    def _boot(self) -> None:
+        """What firmware does before it answers: compile (or load from numba's cache) every kernel
+        of the capture path, so the first frames are not stalled. Paid once per process."""
+        matching_warm_up()
+        self.rig.set_format(64, 48)  # a tiny format: the real one is set by the first capture
+        left, right = self.rig.capture(0.0, 0, 4000, 0, 0)
+        maps, _ = self.calibration.maps(64, 48)
+        if maps is not None:
+            maps.rectify(left, right)
 
     # -- byte interface ---------------------------------------------------------------------
     def attach(self, sink: Sink) -> None:

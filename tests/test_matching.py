@@ -10,22 +10,7 @@ import pytest
 cv2 = pytest.importorskip("cv2")
 
 from device_sim.matching import Matcher, MatchParams, match  # noqa: E402
-
-
-def cv_stereo_bm(p: MatchParams):
-    """cv2.StereoBM configured like p (cv2 4.x StereoBM_create or 5.x StereoBM.create)."""
-    create = getattr(cv2, "StereoBM_create", None) or cv2.StereoBM.create
-    bm = create(numDisparities=p.num_disparities, blockSize=p.block_size)
-    bm.setMinDisparity(p.min_disparity)
-    bm.setPreFilterType(1 if p.pre_filter_type == "xsobel" else 0)
-    bm.setPreFilterSize(p.pre_filter_size)
-    bm.setPreFilterCap(p.pre_filter_cap)
-    bm.setTextureThreshold(p.texture_threshold)
-    bm.setUniquenessRatio(p.uniqueness_ratio)
-    bm.setSpeckleWindowSize(p.speckle_window_size)
-    bm.setSpeckleRange(p.speckle_range)
-    bm.setDisp12MaxDiff(p.disp12_max_diff)
-    return bm
+from tools.stereobm_oracle import opencv_stereobm as cv_stereo_bm  # noqa: E402
 
 
 def scene(h: int, w: int, shift: int, seed: int) -> tuple[np.ndarray, np.ndarray]:

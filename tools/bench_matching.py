@@ -21,20 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-
-def _cv_bm(cv2, p):
-    create = getattr(cv2, "StereoBM_create", None) or cv2.StereoBM.create
-    bm = create(numDisparities=p.num_disparities, blockSize=p.block_size)
-    bm.setMinDisparity(p.min_disparity)
-    bm.setPreFilterType(1 if p.pre_filter_type == "xsobel" else 0)
-    bm.setPreFilterSize(p.pre_filter_size)
-    bm.setPreFilterCap(p.pre_filter_cap)
-    bm.setTextureThreshold(p.texture_threshold)
-    bm.setUniquenessRatio(p.uniqueness_ratio)
-    bm.setSpeckleWindowSize(p.speckle_window_size)
-    bm.setSpeckleRange(p.speckle_range)
-    bm.setDisp12MaxDiff(p.disp12_max_diff)
-    return bm
+from tools.stereobm_oracle import opencv_stereobm
 
 
 def synthetic_scene(h: int = 480, w: int = 640, seed: int = 0):
@@ -178,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
         for nd, bs in cases:
             p = MatchParams(num_disparities=nd, block_size=bs)
             m = Matcher(left.shape, p)
-            bm = _cv_bm(cv2, p)
+            bm = opencv_stereobm(p)
             ours = m.match(left, right)
             ref = bm.compute(left, right)
             same = bool(np.array_equal(ours, ref))
