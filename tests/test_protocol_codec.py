@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from protocol import messages as m
 from protocol.errors import ErrorCode, ProtocolError
 from protocol.framing import (
-    FLAG_RESEND, HEADER_LEN, MAGIC, MAX_HEADER_LEN, MAX_PAYLOAD, TRAILER_LEN, VERSION_MAJOR, VERSION_MINOR, Decoder,
+    FLAG_RESEND, HEADER_LEN, MAGIC, MAX_HEADER_LEN, MAX_PAYLOAD, TRAILER_LEN, Decoder,
     DecoderStats, Packet, encode_frame, header_crc,
 )
 from protocol.messages import UnknownMessageError, decode_packet

@@ -89,7 +89,9 @@ def _device(kind: str) -> Iterator[str]:
 def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty", "tcp", "usb")) -> dict[str, float]:
     out = {}
     print(f"end-to-end at 640x480, 64 disparities, all three planes ({seconds:.0f} s each; sim and usb "
-          "run the device in this process, pty and tcp in a second one):")
+          "run the device in this process, pty and tcp in a second one). The camera is asked for 60 fps: "
+          "fps is what the whole pipeline (render, rectify, match, link, host) sustains; drops are the "
+          "exposures the device skipped, counted and visible as sequence gaps:")
     print(f"  {'transport':<10} {'fps':>6} {'MB/s':>7} {'drops':>6}")
     for kind in kinds:
         with _device(kind) as url:

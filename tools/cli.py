@@ -1,7 +1,6 @@
 """The ``stereocam`` command: one subcommand per tool module."""
 from __future__ import annotations
 
-import argparse
 import importlib
 import sys
 
