@@ -341,22 +341,29 @@ class SimulatedCamera:
             focal, cx, cy, baseline)
         planes = [(Output.LEFT, left), (Output.RIGHT, right), (Output.DISPARITY, disp)]
         sizes = {}
-        with self._sink_lock:
-            if not self.engine.current(req) or not self._emit(m.encode(begin)):
-                return
-            for plane, img in planes:
-                sizes[plane] = 0
-                if plane not in outputs:
-                    continue
-                raw = memoryview(np.ascontiguousarray(img, dtype=img.dtype.newbyteorder("<"))).cast("B")
-                for off in range(0, len(raw), CHUNK):
-                    if not self._emit(m.encode(m.FrameData(req.sequence, int(plane), off, raw[off:off + CHUNK]))):
-                        return
-                sizes[plane] = len(raw)
-            if not self._emit(m.encode(m.FrameEnd(req.sequence, m.FRAME_OK, sizes[Output.LEFT],
-                                                  sizes[Output.RIGHT], sizes[Output.DISPARITY]))):
-                return
+        if not self._send_frame_part(req, m.encode(begin)):
+            return
+        for plane, img in planes:
+            sizes[plane] = 0
+            if plane not in outputs:
+                continue
+            raw = memoryview(np.ascontiguousarray(img, dtype=img.dtype.newbyteorder("<"))).cast("B")
+            for off in range(0, len(raw), CHUNK):
+                if not self._send_frame_part(req, m.encode(m.FrameData(req.sequence, int(plane), off,
+                                                                       raw[off:off + CHUNK]))):
+                    return
+            sizes[plane] = len(raw)
+        if not self._send_frame_part(req, m.encode(m.FrameEnd(req.sequence, m.FRAME_OK, sizes[Output.LEFT],
+                                                              sizes[Output.RIGHT], sizes[Output.DISPARITY]))):
+            return
         self.counters["frames_sent"] += 1
+
+    def _send_frame_part(self, req: CaptureRequest, wire: bytes) -> bool:
+        """One message of a capture. The sink is taken per message, not per capture, so a reply
+        waits for at most one chunk on a slow link; a capture whose stream was stopped meanwhile
+        is cut off (the host counts it incomplete and forgets it at the next start)."""
+        with self._sink_lock:
+            return self.engine.current(req) and self._emit(wire)
 
     def _remember(self, req: CaptureRequest, scene_id: int, t: float, rays: np.ndarray, rot: np.ndarray,
                   focal: float, baseline: float) -> None:

@@ -142,8 +142,10 @@ class FrameAssembler:
         self._last_seq: int | None = None
 
     def reset(self) -> None:
-        """Before a new stream: forget the last sequence (a gap across start is no loss), empty the queue."""
+        """Before a new stream: forget the last sequence (a gap across start is no loss), a capture
+        cut off by the stop, and the frames still queued."""
         self._last_seq = None
+        self._cur = None
         while True:
             try:
                 self.frames.get_nowait()

@@ -121,3 +121,27 @@ def test_sim_url_options_are_checked():
 def test_unreachable_url_is_a_transport_error():
     with pytest.raises(host.TransportError):
         host.open("socket://127.0.0.1:1", timeout=0.5)
+
+
+def test_replies_do_not_wait_behind_a_whole_frame():
+    """On a slow link a reply slips in between the chunks of a capture being sent."""
+    sim = SimulatedCamera(seed=25)
+    transport = InProcessTransport(sim, owns=True)
+    fifo_put = transport._fifo.put
+
+    def slow_link(data: bytes) -> None:  # ~10 ms per message: a 640x480 capture takes > 0.1 s
+        time.sleep(0.01)
+        fifo_put(data)
+
+    sim.attach(slow_link)
+    with Camera(transport, timeout=2.0) as cam:
+        cam.configure(width=640, height=480, fps=30)
+        cam.start()
+        cam.get_frame(timeout=30)
+        latencies = []
+        for _ in range(5):
+            t0 = time.monotonic()
+            cam.status()
+            latencies.append(time.monotonic() - t0)
+        cam.stop()
+    assert max(latencies) < 0.08  # a whole capture is 12 messages, > 0.12 s on this link
