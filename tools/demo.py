@@ -48,16 +48,16 @@ def main(argv: list[str] | None = None) -> int:
             recent = (recent + [cam.get_frame(timeout=5.0)])[-GROUND_TRUTH_KEEP // 2:]
             frames += 1
         elapsed = time.monotonic() - t0
-        last = recent[-1]
-        stats = [depth_errors(f, sim.ground_truth(f.sequence)) for f in recent]  # truth after timing
         cam.stop()
-        paths = save_frame(last, args.out, "demo")
         host_stats = cam.stats
         dev = cam.status().counters
+        stats = [depth_errors(f, sim.ground_truth(f.sequence)) for f in recent]  # truth after timing
+        paths = save_frame(recent[-1], args.out, "demo")
     valid, med, bad1 = (float(np.mean([s[i] for s in stats])) for i in range(3))
     print("wrote " + ", ".join(str(p) for p in paths.values()))
+    link = host_stats["incomplete"] + host_stats["size_mismatch"] + host_stats["header_crc_errors"] + \
+        host_stats["payload_crc_errors"]
     print(f"summary: frames={frames} fps={frames / elapsed:.1f} dropped={host_stats['frames_dropped']} "
-          f"device_dropped={dev['frames_dropped']} valid_disparity={valid:.1f}% "
-          f"depth_error_median={med:.2f}% bad1px={bad1:.1f}% link_errors="
-          f"{host_stats['header_crc_errors'] + host_stats['payload_crc_errors']}")
+          f"device_dropped={dev['frames_dropped']} host_queue_dropped={host_stats['queue_overflow']} "
+          f"link_errors={link} valid_disparity={valid:.1f}% depth_error_median={med:.2f}% bad1px={bad1:.1f}%")
     return 0
