@@ -11,9 +11,8 @@ from protocol import messages as m
 from protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError, TransportError,
                              VersionMismatchError)
 from protocol.framing import VERSION_MAJOR
-from protocol.params import BY_ID, BY_NAME, TriggerMode
-
 from protocol.calibration import StereoCalibration
+from protocol.params import BY_ID, BY_NAME, TriggerMode
 
 from . import calibration_io
 from .calibration_io import StoredCalibration
@@ -73,7 +72,7 @@ class Camera:
         try:
             self._info = self._fetch_info()
             self.request(m.Stop())  # a known state: no stale stream from a previous session
-            self.clock.samples.clear()  # the unit may have rebooted: its clock starts over
+            self.clock.reset()  # the unit may have rebooted: its clock starts over
             self.sync_clock(SYNC_SAMPLES)
         except BaseException:
             self.link.close()

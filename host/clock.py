@@ -6,9 +6,10 @@ the map keeps the lowest-RTT samples and fits host = a + b·device through them 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 KEEP = 32
+MAX_DRIFT = 1e-3  # a crystal is within 1000 ppm
 
 
 @dataclass(frozen=True)
@@ -26,47 +27,49 @@ class SyncSample:
         return 0.5 * (self.host_send + self.host_recv)
 
 
-@dataclass
 class ClockMap:
-    """Maps device microseconds to host ``time.monotonic()`` seconds."""
+    """Maps device microseconds to host ``time.monotonic()`` seconds.
 
-    samples: list[SyncSample] = field(default_factory=list)
-    _a: float = 0.0  # host seconds at device_us == _ref
-    _b: float = 1e-6  # host seconds per device µs
-    _ref: int = 0
+    Written by the thread taking sync samples, read by the thread stamping frames: the fit is
+    published as one tuple, so a reader never sees half of an update.
+    """
 
-    @property
-    def ready(self) -> bool:
-        return bool(self.samples)
+    def __init__(self) -> None:
+        self.samples: list[SyncSample] = []
+        self._fit: tuple[float, float, int] | None = None  # (host s at ref, host s per device µs, ref µs)
 
-    @property
-    def best_rtt(self) -> float:
-        return min(s.rtt for s in self.samples)
+    def reset(self) -> None:
+        """Forget everything (the device may have rebooted: its clock starts over)."""
+        self.samples = []
+        self._fit = None
 
     def add(self, sample: SyncSample) -> None:
-        self.samples.append(sample)
-        self.samples.sort(key=lambda s: s.device_us)
-        if len(self.samples) > KEEP:  # drop the worst round trip, keep the time span
-            worst = max(range(1, len(self.samples) - 1), key=lambda i: self.samples[i].rtt)
-            del self.samples[worst]
-        self._fit()
-
-    def _fit(self) -> None:
-        good = sorted(self.samples, key=lambda s: s.rtt)[: max(2, len(self.samples) // 2)]
-        self._ref = good[0].device_us
-        if len(good) < 2 or max(s.device_us for s in good) - min(s.device_us for s in good) < 200_000:
-            self._a, self._b = good[0].host_mid, 1e-6  # too short a span to see drift
-            return
-        xs = [s.device_us - self._ref for s in good]
-        ys = [s.host_mid for s in good]
-        n = len(xs)
-        mx, my = sum(xs) / n, sum(ys) / n
-        sxx = sum((x - mx) ** 2 for x in xs)
-        b = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx
-        self._b = min(max(b, 1e-6 * (1 - 1e-3)), 1e-6 * (1 + 1e-3))  # a crystal is within 1000 ppm
-        self._a = my - self._b * mx
+        samples = sorted(self.samples + [sample], key=lambda s: s.device_us)
+        if len(samples) > KEEP:  # drop the worst round trip, keep the time span
+            del samples[max(range(1, len(samples) - 1), key=lambda i: samples[i].rtt)]
+        self.samples = samples
+        self._fit = _fit(samples)
 
     def to_host(self, device_us: int) -> float:
-        if not self.samples:
+        fit = self._fit
+        if fit is None:
             return float("nan")
-        return self._a + self._b * (device_us - self._ref)
+        a, b, ref = fit
+        return a + b * (device_us - ref)
+
+
+def _fit(samples: list[SyncSample]) -> tuple[float, float, int]:
+    """Line through the better half of the samples (lowest round trips); drift only when the
+    samples span enough device time to show it, and never beyond what a crystal can do."""
+    good = sorted(samples, key=lambda s: s.rtt)[: max(2, len(samples) // 2)]
+    ref = good[0].device_us
+    if len(good) < 2 or max(s.device_us for s in good) - min(s.device_us for s in good) < 200_000:
+        return good[0].host_mid, 1e-6, ref
+    xs = [s.device_us - ref for s in good]
+    ys = [s.host_mid for s in good]
+    n = len(xs)
+    mx, my = sum(xs) / n, sum(ys) / n
+    sxx = sum((x - mx) ** 2 for x in xs)
+    b = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx
+    b = min(max(b, 1e-6 * (1 - MAX_DRIFT)), 1e-6 * (1 + MAX_DRIFT))
+    return my - b * mx, b, ref
