@@ -37,7 +37,8 @@ from .trigger import TriggerLine
 MODEL = "STOC-SIM"
 FIRMWARE_VERSION = "1.1.0"
 CHUNK = 128 * 1024  # FRAME_DATA payload bytes per message
-CAPABILITIES = 0x1F  # disparity | software trigger | external trigger | time sync | calibration storage
+CAPABILITIES = (m.Capability.DISPARITY | m.Capability.SOFTWARE_TRIGGER | m.Capability.EXTERNAL_TRIGGER
+                | m.Capability.TIME_SYNC | m.Capability.CALIBRATION)
 RESEND_CACHE = 64
 GROUND_TRUTH_KEEP = 64
 

@@ -1,6 +1,7 @@
 """The Camera API: what a user of the SDK holds."""
 from __future__ import annotations
 
+import math
 import queue
 import threading
 import time
@@ -13,11 +14,12 @@ from protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError,
 from protocol.framing import VERSION_MAJOR
 from protocol.calibration import StereoCalibration
 from protocol.params import BY_ID, BY_NAME, TriggerMode
+from protocol.rectification import stereo_rectify
 
 from . import calibration_io
 from .calibration_io import StoredCalibration
 from .clock import ClockMap, SyncSample
-from .frames import AssemblyStats, Frame, FrameAssembler
+from .frames import AssemblyStats, Frame, FrameAssembler, StereoGeometry
 from .link import Link, LinkStats
 from .transports import Transport, open_transport
 
@@ -59,6 +61,8 @@ class Camera:
         self._closed = threading.Event()
         self._last_sync = 0.0
         self._applied: dict[str, int] = {}  # every parameter this Camera set, for reconnect
+        self._geometries: dict[tuple[int, int, int], tuple[StereoCalibration, StereoGeometry]] = {}
+        self.geometry_mismatches = 0  # frames whose carried geometry disagreed with the stored calibration
         self._streaming = False
         self.last_status: DeviceStatus | None = None
         self._connect(transport)
@@ -217,9 +221,34 @@ class Camera:
             if left <= 0:
                 raise CameraTimeoutError(f"no frame from {self.url} within {timeout:.3g} s")
             try:
-                return self.assembler.frames.get(timeout=min(left, 0.1))
+                frame = self.assembler.frames.get(timeout=min(left, 0.1))
             except queue.Empty:
                 continue
+            return self._with_stored_calibration(frame)
+
+    def _with_stored_calibration(self, frame: Frame) -> Frame:
+        """Give a rectified frame the geometry derived on this host from the calibration read
+        from the device (cached per calibration id and size), cross-checked against the geometry
+        the device put in the frame; a device without calibration storage keeps its own."""
+        cid = frame.geometry.calibration_id
+        if not frame.rectified or not cid or not self._info.capabilities & m.Capability.CALIBRATION:
+            return frame
+        key = (cid, frame.width, frame.height)
+        if key not in self._geometries:
+            stored = self.read_calibration()
+            if stored is None or stored.calibration_id != cid:  # changed since this frame was taken
+                return frame
+            cal = stored.calibration.scaled(frame.width, frame.height)
+            g = stereo_rectify(cal)
+            self._geometries[key] = (cal, StereoGeometry(g.focal_px, g.cx, g.cy, g.baseline_m, cid))
+        cal, geometry = self._geometries[key]
+        carried = frame.geometry
+        if not (math.isclose(carried.focal_px, geometry.focal_px, rel_tol=1e-5)
+                and math.isclose(carried.baseline_m, geometry.baseline_m, rel_tol=1e-5)
+                and abs(carried.cx - geometry.cx) < 1e-3 and abs(carried.cy - geometry.cy) < 1e-3):
+            self.geometry_mismatches += 1
+        frame.geometry, frame.calibration = geometry, cal
+        return frame
 
     def __iter__(self) -> Iterator[Frame]:
         """Frames as they come, until the link fails or frames stop for ``timeout`` seconds."""

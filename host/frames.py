@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from protocol import messages as m
+from protocol.calibration import StereoCalibration
 from protocol.params import Output
 
 
@@ -64,10 +65,13 @@ class Frame:
     disparity: np.ndarray | None  # int16, disparity * 16, invalid = (min_disparity - 1) * 16
     exposure_us: int
     gain: int
+    width: int
+    height: int
     rectified: bool
     disparity_format: DisparityFormat
-    geometry: StereoGeometry
+    geometry: StereoGeometry  # from the calibration the host read from the device (see Camera)
     status: FrameStatus = FrameStatus.COMPLETE
+    calibration: StereoCalibration | None = None  # that calibration, scaled to this frame's size
 
     def disparity_px(self) -> np.ndarray:
         """Disparity in pixels, float32, NaN where invalid."""
@@ -213,7 +217,7 @@ class FrameAssembler:
             b.sequence, b.trigger_id, b.device_time_us, self._clock_map.to_host(b.device_time_us),
             planes.get(Output.LEFT), planes.get(Output.RIGHT),
             disp.astype(np.int16, copy=False) if disp is not None else None, b.exposure_us, b.gain,
-            bool(b.flags & m.FRAME_RECTIFIED),
+            b.width, b.height, bool(b.flags & m.FRAME_RECTIFIED),
             DisparityFormat(b.subpixel, b.min_disparity, b.num_disparities, b.invalid_disparity),
             StereoGeometry(b.focal_px, b.cx, b.cy, b.baseline_m, b.calibration_id), status)
 

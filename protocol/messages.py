@@ -65,6 +65,16 @@ class TimeSync(_Empty):
     TYPE: ClassVar[int] = MsgType.TIME_SYNC
 
 
+class Capability:
+    """INFO.capabilities bits (SPEC §4.1)."""
+
+    DISPARITY = 0x01
+    SOFTWARE_TRIGGER = 0x02
+    EXTERNAL_TRIGGER = 0x04
+    TIME_SYNC = 0x08
+    CALIBRATION = 0x10  # since 1.1: CALIB_* messages (SPEC §12)
+
+
 @dataclass(frozen=True)
 class Info(Message):
     TYPE: ClassVar[int] = MsgType.INFO
@@ -254,7 +264,7 @@ def encode(msg: Message, request_id: int = 0, flags: int = 0) -> bytes:
 __all__ = [  # the whole message catalogue, whichever module defines each part
     "MsgType", "Message", "REPLY_BIT", "EVENT_BIT", "reply_type", "MESSAGES", "REPLIES", "decode_packet", "encode",
     "UnknownMessageError", "GetInfo", "GetConfig", "SetConfig", "Trigger", "Start", "Stop", "Heartbeat", "TimeSync",
-    "Info", "Config", "ConfigApplied", "Triggered", "Started", "Stopped", "Status", "COUNTERS", "Time", "Nack",
+    "Info", "Capability", "Config", "ConfigApplied", "Triggered", "Started", "Stopped", "Status", "COUNTERS", "Time", "Nack",
     "FrameBegin", "FrameData", "FrameEnd", "DISPARITY_S16_Q4", "FRAME_RECTIFIED", "FRAME_OK", "FRAME_SENSOR_OVERRUN",
     "CalibSource", "CalibRead", "CalibData", "CalibWrite", "CalibWritten", "CalibCommit", "CalibRestore",
     "CalibState", "CalibCommitted", "CalibRestored", "MAX_CALIB_CHUNK", "calib_id",

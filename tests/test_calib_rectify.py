@@ -7,10 +7,9 @@ import pytest
 
 from device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
 from protocol.calibration import StereoCalibration
-from device_sim.calibration.rectify import (
-    _log_rotation, rectification_maps, remap_bilinear, stereo_rectify, undistort_rectify_map,
-)
-from device_sim.calibration.truth import rodrigues, true_calibration
+from device_sim.calibration.rectify import rectification_maps, remap_bilinear, undistort_rectify_map
+from device_sim.calibration.truth import true_calibration
+from protocol.rectification import _log_rotation, rodrigues, stereo_rectify
 from tools.calib_solve import detect_corners
 
 

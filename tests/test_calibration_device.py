@@ -204,3 +204,32 @@ def test_refused_target_keeps_the_staging(unit):
     assert exc.value.code == ErrorCode.BAD_STATE
     state = cam.request(m.CalibCommit(m.CalibSource.USER, len(body), zlib.crc32(body)))
     assert state.source == m.CalibSource.USER and cam.read_calibration().body == body
+
+
+def test_host_depth_uses_the_calibration_read_from_the_device(tmp_path):
+    from protocol.framing import encode_frame
+    from protocol.rectification import stereo_rectify
+
+    sim = SimulatedCamera(seed=66, flash_path=tmp_path / "g.flash")
+    link = FaultyTransport(InProcessTransport(sim))
+    with Camera(link) as cam:
+        cam.configure(**SMALL)
+        honest = one_frame(cam)
+        stored = cam.read_calibration()
+        expect = stereo_rectify(stored.calibration.scaled(320, 240))
+        assert honest.calibration.image_size == (320, 240)
+        assert honest.geometry.focal_px == pytest.approx(expect.focal_px)
+        assert honest.geometry.baseline_m == pytest.approx(expect.baseline_m)
+        assert cam.geometry_mismatches == 0
+
+        def lie_about_focal(p):  # a device whose frames disagree with its own stored calibration
+            if p.msg_type == m.MsgType.FRAME_BEGIN:
+                begin = m.FrameBegin.unpack(p.payload)
+                forged = dataclasses.replace(begin, focal_px=begin.focal_px * 1.1)
+                return encode_frame(p.msg_type, p.request_id, forged.pack(), p.flags)
+            return None
+
+        link.set_manipulator(read=PacketFilter(lie_about_focal))
+        f = one_frame(cam)
+    assert cam.geometry_mismatches == 1
+    assert f.geometry.focal_px == pytest.approx(expect.focal_px)  # the stored calibration wins

@@ -23,7 +23,7 @@ import numpy as np
 
 from protocol.calibration import StereoCalibration
 from .rays import pixel_rays, project_points
-from .truth import rodrigues
+from protocol.rectification import rodrigues
 
 
 @dataclass(frozen=True)

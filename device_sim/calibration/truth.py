@@ -10,19 +10,10 @@ from __future__ import annotations
 import numpy as np
 
 from protocol.calibration import StereoCalibration
+from protocol.rectification import rodrigues
 
 NOMINAL_FOCAL_PX = 960.0
 NOMINAL_WIDTH = 1280
-
-
-def rodrigues(rvec: np.ndarray) -> np.ndarray:
-    """Rotation matrix of an axis-angle vector (radians)."""
-    theta = float(np.linalg.norm(rvec))
-    if theta == 0.0:
-        return np.eye(3)
-    k = rvec / theta
-    Kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + np.sin(theta) * Kx + (1.0 - np.cos(theta)) * Kx @ Kx
 
 
 def _camera(rng: np.random.Generator, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
