@@ -52,8 +52,12 @@ class Camera:
     """One connected camera. Use ``host.open(url)``; close it (or use ``with``) when done."""
 
     def __init__(self, transport: Transport, *, timeout: float = 1.0, retries: int = 2,
-                 heartbeat_interval: float = 0.5, queue_depth: int = 8, deliver_incomplete: bool = False):
+                 heartbeat_interval: float = 0.5, queue_depth: int = 8, deliver_incomplete: bool = False,
+                 auto_reconnect: bool = False):
+        """``auto_reconnect``: when the link drops, ``get_frame`` (and iteration) call ``reconnect``
+        within their own timeout instead of raising DisconnectedError at once."""
         self.url = transport.url
+        self.auto_reconnect = auto_reconnect
         self.timeout = timeout
         self._retries = retries
         self.clock = ClockMap()
@@ -216,7 +220,12 @@ class Camera:
         timeout = self.timeout if timeout is None else timeout
         deadline = time.monotonic() + timeout
         while True:
-            self.link.check_alive()
+            try:
+                self.link.check_alive()
+            except DisconnectedError:
+                if not self.auto_reconnect or self._closed.is_set():
+                    raise
+                self.reconnect(timeout=max(deadline - time.monotonic(), 0.0))
             left = deadline - time.monotonic()
             if left <= 0:
                 raise CameraTimeoutError(f"no frame from {self.url} within {timeout:.3g} s")

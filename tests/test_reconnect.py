@@ -43,3 +43,31 @@ def test_reconnect_gives_up_with_a_disconnect_error():
     with pytest.raises(host.DisconnectedError, match="RECON-2"):
         cam.reconnect(timeout=0.5)
     cam.close()
+
+
+def test_auto_reconnect_rides_through_an_unplug():
+    import threading
+
+    sim = SimulatedCamera(serial="RECON-3", seed=53)
+    handles = [simusb.plug(sim)]
+    cam = host.open("usb://?serial=RECON-3", timeout=1.0, auto_reconnect=True)
+    try:
+        cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=8, gain=20)
+        cam.start()
+        first = cam.get_frame(timeout=30)
+
+        def power_cycle():
+            handles[0].unplug()
+            sim.close()
+            threading.Event().wait(0.5)
+            handles.append(simusb.plug(SimulatedCamera(serial="RECON-3", seed=53)))
+
+        threading.Thread(target=power_cycle).start()
+        frames = [cam.get_frame(timeout=15) for _ in range(20)]  # no DisconnectedError reaches us
+        assert frames[-1].gain == 20 and frames[-1].left.shape == (240, 320)
+        seqs = [first.sequence] + [f.sequence for f in frames]
+        assert any(b <= a for a, b in zip(seqs, seqs[1:]))  # the rebooted unit's counter started over
+        assert cam.config()["fps"] == 8
+    finally:
+        cam.close()
+        handles[-1].unplug()
