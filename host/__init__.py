@@ -1,15 +1,19 @@
 """Host SDK: ``host.open(url)`` gives a Camera; frames, errors and transports live here."""
+from protocol.calibration import StereoCalibration
 from protocol.errors import (CameraTimeoutError, ConfigError, DeviceError, DisconnectedError, ErrorCode,
-                             ProtocolError, StereoCamError, TransportError, VersionMismatchError)
+                             ProtocolError, StereoCamError, TransportError, VerificationError,
+                             VersionMismatchError)
 from protocol.params import Output, TriggerMode
 
+from .calibration_io import StoredCalibration
 from .camera import Camera, DeviceInfo, DeviceStatus, open
 from .discovery import DeviceEntry, list_devices
 from .frames import DisparityFormat, Frame, FrameStatus, StereoGeometry
 from .pointcloud import write_ply
 
 __all__ = [
-    "open", "list_devices", "DeviceEntry", "Camera", "DeviceInfo", "DeviceStatus", "Frame", "FrameStatus", "DisparityFormat", "StereoGeometry",
-    "TriggerMode", "Output", "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError",
-    "DeviceError", "ConfigError", "ErrorCode", "TransportError", "DisconnectedError", "CameraTimeoutError",
+    "open", "list_devices", "DeviceEntry", "Camera", "DeviceInfo", "DeviceStatus", "Frame", "FrameStatus",
+    "DisparityFormat", "StereoGeometry", "StereoCalibration", "StoredCalibration", "TriggerMode", "Output",
+    "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError",
+    "ErrorCode", "TransportError", "DisconnectedError", "CameraTimeoutError", "VerificationError",
 ]
