@@ -68,10 +68,15 @@ class PtyServer:
 
 
 class TcpServer:
-    """The firmware behind a listening TCP socket, one host connection at a time."""
+    """The firmware behind a listening TCP socket, one host connection at a time.
 
-    def __init__(self, sim: SimulatedCamera, host: str = "127.0.0.1", port: int = 0):
+    A host that stops reading for ``send_timeout`` seconds is dropped (the send fails, the device
+    detaches and stops streaming), so a wedged client cannot hold the camera forever.
+    """
+
+    def __init__(self, sim: SimulatedCamera, host: str = "127.0.0.1", port: int = 0, send_timeout: float = 5.0):
         self.sim = sim
+        self.send_timeout = send_timeout
         self._sock = socket.create_server((host, port))
         self._sock.settimeout(0.1)
         self.address = self._sock.getsockname()[:2]
@@ -91,11 +96,11 @@ class TcpServer:
                 self._serve(conn)
 
     def _serve(self, conn: socket.socket) -> None:
-        conn.settimeout(None)
+        conn.settimeout(self.send_timeout)  # bounds sendall; recv only runs when select says ready
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.sim.attach(conn.sendall)
         try:
-            while not self._stop.is_set():
+            while not self._stop.is_set() and self.sim.attached:  # a failed send detaches the sim
                 ready, _, _ = select.select([conn], [], [], 0.1)
                 if not ready:
                     continue

@@ -30,3 +30,31 @@ def test_device_killed_mid_stream(spec):
     finally:
         if server.proc.poll() is None:
             server.stop()
+
+
+def test_a_client_that_stops_reading_does_not_wedge_the_device():
+    import socket
+    import threading
+
+    from device_sim import SimulatedCamera
+    from device_sim.serve import TcpServer
+    from protocol import messages as m
+
+    sim = SimulatedCamera(seed=42)
+    server = TcpServer(sim, send_timeout=0.5)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        wedged = socket.create_connection(server.address)
+        wedged.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        wedged.sendall(m.encode(m.Start(), 1))  # starts 640x480 streaming, then never reads a byte
+        time.sleep(2.0)
+        assert not sim.engine.streaming  # the stalled send dropped that host and stopped the stream
+        with host.open(server.url, timeout=2.0) as cam:  # the next host gets the camera
+            assert cam.info().serial == sim.serial
+        wedged.close()
+    finally:
+        server.shutdown()
+        thread.join(timeout=5)
+        server.close()
+        sim.close()
