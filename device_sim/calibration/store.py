@@ -152,7 +152,3 @@ class CalibrationStore:
     def lock_factory(self) -> None:
         """Write-protect the factory region (flash status register)."""
         self.flash.set_protection(self._slot_addr("user", 0))
-
-    def unlock_factory(self) -> None:
-        """Remove the write protection (factory re-calibration only)."""
-        self.flash.set_protection(0)

@@ -82,10 +82,6 @@ class MatchParams:
         return self.speckle_range >= 0 and self.speckle_window_size > 0
 
     @property
-    def use_lr_check(self) -> bool:
-        return self.disp12_max_diff >= 0
-
-    @property
     def max_sad(self) -> int:
         """Upper bound of a window SAD (decides 16- or 32-bit accumulators)."""
         return 2 * self.pre_filter_cap * self.block_size * self.block_size
