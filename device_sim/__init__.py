@@ -1,5 +1,12 @@
-"""The simulated STOC-class camera: firmware, sensor rig, matching core and its servers."""
+"""The simulated STOC-class camera: firmware, sensor rig, matching core and its servers.
+
+Importing it registers the ``sim://`` URL scheme and the simulated USB bus with the SDK.
+"""
+from stereocam.transports import register_scheme
+
 from .camera import GroundTruth, SimulatedCamera
 from .trigger import TriggerLine
+
+register_scheme("sim", "stereocam.device_sim.links.inprocess")
 
 __all__ = ["SimulatedCamera", "GroundTruth", "TriggerLine"]

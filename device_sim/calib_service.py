@@ -10,11 +10,11 @@ import threading
 import zlib
 from pathlib import Path
 
-from protocol import messages as m
-from protocol.errors import DeviceError, ErrorCode
+from stereocam.protocol import messages as m
+from stereocam.protocol.errors import DeviceError, ErrorCode
 
 from .calibration.flash import FlashError, NorFlash
-from protocol.calibration import CalibrationFormatError, StereoCalibration
+from stereocam.protocol.calibration import CalibrationFormatError, StereoCalibration
 from .calibration.rectify import RectificationMaps, rectification_maps
 from .calibration.store import CalibrationStore, StoreError, StoredRecord
 

@@ -16,10 +16,10 @@ from typing import Callable
 
 import numpy as np
 
-from protocol import messages as m
-from protocol.errors import DeviceError, ErrorCode, ProtocolError
-from protocol.framing import FLAG_RESEND, MAX_PAYLOAD, VERSION_MAJOR, VERSION_MINOR, Decoder, Packet
-from protocol.params import BY_NAME, Output, TriggerMode
+from stereocam.protocol import messages as m
+from stereocam.protocol.errors import DeviceError, ErrorCode, ProtocolError
+from stereocam.protocol.framing import FLAG_RESEND, MAX_PAYLOAD, VERSION_MAJOR, VERSION_MINOR, Decoder, Packet
+from stereocam.protocol.params import BY_NAME, Output, TriggerMode
 
 from . import registry
 from .capture import CaptureEngine, CaptureRequest
@@ -28,7 +28,7 @@ from .config_store import ConfigStore
 from .matching import Matcher, MatchParams
 from .matching import warm_up as matching_warm_up
 from .calib_service import CalibrationService
-from protocol.calibration import StereoCalibration
+from stereocam.protocol.calibration import StereoCalibration
 from .calibration.truth import true_calibration
 from .scene import BOARD_SCENE
 from .sensor import SENSOR_H, SENSOR_W, Geometry, SensorRig

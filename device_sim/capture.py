@@ -12,7 +12,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from protocol.params import TriggerMode
+from stereocam.protocol.params import TriggerMode
 
 TRIGGER_QUEUE_DEPTH = 2
 log = logging.getLogger(__name__)

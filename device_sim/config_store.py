@@ -4,8 +4,8 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass
 
-from protocol.errors import ErrorCode
-from protocol.params import BY_ID, BY_NAME, PARAMS, TriggerMode, defaults
+from stereocam.protocol.errors import ErrorCode
+from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, TriggerMode, defaults
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ class ServedSimulator:
     """Starts the child and reads the URL it prints first; ``stop`` sends SIGTERM and waits."""
 
     def __init__(self, spec: str, seed: int = 7):
-        self.proc = subprocess.Popen([sys.executable, "-m", "device_sim", "--serve", spec, "--seed", str(seed)],
+        self.proc = subprocess.Popen([sys.executable, "-m", "stereocam.device_sim", "--serve", spec, "--seed", str(seed)],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                      env={**os.environ, "PYTHONUNBUFFERED": "1"})
         self.url = self.proc.stdout.readline().strip()

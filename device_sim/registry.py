@@ -1,4 +1,4 @@
-"""The simulators alive in this process, so ``sim://?serial=SN`` and ``host.list_devices`` find them."""
+"""The simulators alive in this process, so ``sim://?serial=SN`` and ``stereocam.list_devices`` find them."""
 from __future__ import annotations
 
 import threading

@@ -14,7 +14,7 @@ import numpy as np
 
 from . import render, scene
 from .calibration.board import BoardPose, BoardSpec, StereoBoardRenderer, board_poses
-from protocol.calibration import StereoCalibration
+from stereocam.protocol.calibration import StereoCalibration
 from .calibration.rays import pixel_rays
 
 SENSOR_W, SENSOR_H = 1280, 960

@@ -1,9 +1,9 @@
-"""Host SDK: ``host.open(url)`` gives a Camera; frames, errors and transports live here."""
-from protocol.calibration import StereoCalibration
-from protocol.errors import (CameraTimeoutError, ConfigError, DeviceError, DisconnectedError, ErrorCode,
+"""Host SDK: ``stereocam.open(url)`` gives a Camera; frames, errors and transports live here."""
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DeviceError, DisconnectedError, ErrorCode,
                              ProtocolError, StereoCamError, TransportError, VerificationError,
                              VersionMismatchError)
-from protocol.params import Output, TriggerMode
+from stereocam.protocol.params import Output, TriggerMode
 
 from .calibration_io import StoredCalibration
 from .camera import Camera, DeviceInfo, DeviceStatus, open
@@ -11,7 +11,13 @@ from .discovery import DeviceEntry, list_devices
 from .frames import DisparityFormat, Frame, FrameStatus, StereoGeometry
 from .pointcloud import write_ply
 
+try:
+    __version__ = _version("stereocam")
+except PackageNotFoundError:  # running from a source tree that was never installed
+    __version__ = "0+unknown"
+
 __all__ = [
+    "__version__",
     "open", "list_devices", "DeviceEntry", "Camera", "DeviceInfo", "DeviceStatus", "Frame", "FrameStatus",
     "DisparityFormat", "StereoGeometry", "StereoCalibration", "StoredCalibration", "TriggerMode", "Output",
     "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError",

@@ -8,9 +8,9 @@ from __future__ import annotations
 import zlib
 from dataclasses import dataclass
 
-from protocol import messages as m
-from protocol.calibration import StereoCalibration
-from protocol.errors import ProtocolError, VerificationError
+from stereocam.protocol import messages as m
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.errors import ProtocolError, VerificationError
 
 SOURCES = {"active": m.CalibSource.ACTIVE, "factory": m.CalibSource.FACTORY, "user": m.CalibSource.USER}
 

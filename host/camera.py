@@ -8,20 +8,20 @@ import time
 from dataclasses import dataclass
 from typing import Iterator
 
-from protocol import messages as m
-from protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError, TransportError,
+from stereocam.protocol import messages as m
+from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError, TransportError,
                              VersionMismatchError)
-from protocol.framing import VERSION_MAJOR
-from protocol.calibration import StereoCalibration
-from protocol.params import BY_ID, BY_NAME, TriggerMode
-from protocol.rectification import stereo_rectify
+from stereocam.protocol.framing import VERSION_MAJOR
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.params import BY_ID, BY_NAME, TriggerMode
+from stereocam.protocol.rectification import stereo_rectify
 
 from . import calibration_io
 from .calibration_io import StoredCalibration
 from .clock import ClockMap, SyncSample
 from .frames import AssemblyStats, Frame, FrameAssembler, StereoGeometry
 from .link import Link, LinkStats
-from .transports import Transport, open_transport
+from .transports import Transport, open_transport, reopen_url
 
 SYNC_SAMPLES = 8
 SYNC_PERIOD = 5.0  # seconds between background time-sync samples
@@ -49,7 +49,7 @@ class DeviceStatus:
 
 
 class Camera:
-    """One connected camera. Use ``host.open(url)``; close it (or use ``with``) when done."""
+    """One connected camera. Use ``stereocam.open(url)``; close it (or use ``with``) when done."""
 
     def __init__(self, transport: Transport, *, timeout: float = 1.0, retries: int = 2,
                  heartbeat_interval: float = 0.5, queue_depth: int = 8, deliver_incomplete: bool = False,
@@ -301,15 +301,6 @@ def _names(values: dict[int, int]) -> dict[str, int]:
 
 def _fields(obj: LinkStats | AssemblyStats) -> dict[str, int]:
     return {k: getattr(obj, k) for k in obj.__dataclass_fields__}
-
-
-def reopen_url(url: str, serial: str) -> str:
-    """The URL that finds this unit again: USB by serial (bus addresses change on replug)."""
-    if url.startswith("usb://"):
-        return f"usb://?serial={serial}"
-    if url.startswith("sim://"):
-        return f"sim://?serial={serial}"
-    return url
 
 
 def open(url: str, timeout: float = 1.0, **kwargs) -> Camera:  # noqa: A001 - mirrors serial_for_url

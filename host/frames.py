@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from protocol import messages as m
-from protocol.calibration import StereoCalibration
-from protocol.params import Output
+from stereocam.protocol import messages as m
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.params import Output
 
 
 class FrameStatus(enum.Enum):

@@ -10,11 +10,11 @@ import threading
 from dataclasses import dataclass, field
 from typing import Callable
 
-from protocol import messages as m
-from protocol.errors import (CameraTimeoutError, DeviceError, DisconnectedError, ProtocolError, StereoCamError,
+from stereocam.protocol import messages as m
+from stereocam.protocol.errors import (CameraTimeoutError, DeviceError, DisconnectedError, ProtocolError, StereoCamError,
                              TransportError)
-from protocol.framing import FLAG_RESEND, Decoder, Packet
-from protocol.params import BY_ID
+from stereocam.protocol.framing import FLAG_RESEND, Decoder, Packet
+from stereocam.protocol.params import BY_ID
 
 from .transports.base import Transport
 
@@ -77,7 +77,12 @@ class Link:
         self.stats.requests += 1
         try:
             for attempt in range(retries + 1):
-                self._write(m.encode(msg, rid, FLAG_RESEND if attempt else 0))
+                try:
+                    self._write(m.encode(msg, rid, FLAG_RESEND if attempt else 0))
+                except CameraTimeoutError:  # the device did not take the bytes in time: one try spent
+                    if attempt < retries:
+                        self.stats.retries += 1
+                    continue
                 if pending.event.wait(timeout):
                     break
                 self.check_alive()
@@ -96,9 +101,13 @@ class Link:
         return pending.reply
 
     def _write(self, data: bytes) -> None:
+        """A write timeout (the device is busy, not gone) is the caller's to retry; any other
+        failure ends the link."""
         with self._write_lock:
             try:
                 self.transport.write(data)
+            except CameraTimeoutError:
+                raise
             except StereoCamError as exc:
                 self._die(exc)
                 raise

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from protocol.errors import StereoCamError
+from stereocam.protocol.errors import StereoCamError
 
 BODY_VERSION = 1
 N_DIST = 5

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from device_sim.process import ServedSimulator
+from stereocam.device_sim.process import ServedSimulator
 
 TRANSPORTS = ("sim", "pty", "tcp", "usb")
 
@@ -43,8 +43,8 @@ def served():
 @pytest.fixture(scope="session")
 def usb_camera():
     """A simulated camera plugged into the simulated USB bus for the whole session."""
-    import device_sim.usb as simusb
-    from device_sim import SimulatedCamera
+    import stereocam.device_sim.usb as simusb
+    from stereocam.device_sim import SimulatedCamera
 
     sim = SimulatedCamera(serial="IT-USB-7", seed=7)
     handle = simusb.plug(sim)
@@ -68,10 +68,10 @@ def device_url(request, served) -> str:
 @pytest.fixture
 def cam(device_url):
     """An open camera in its default configuration, at a small format so tests run fast."""
-    import host
-    from protocol.params import defaults
+    import stereocam
+    from stereocam.protocol.params import defaults
 
-    camera = host.open(device_url, timeout=2.0)
+    camera = stereocam.open(device_url, timeout=2.0)
     try:
         camera.configure(**{**defaults(), "width": 320, "height": 240, "num_disparities": 32, "block_size": 11})
         yield camera

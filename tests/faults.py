@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from typing import Callable
 
-from host.transports.base import Transport
-from protocol.framing import Decoder, encode_frame
+from stereocam.transports.base import Transport
+from stereocam.protocol.framing import Decoder, encode_frame
 
 Manipulator = Callable[[bytes], bytes]
 

@@ -5,9 +5,9 @@ import cv2
 import numpy as np
 import pytest
 
-from device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses, render_board_view
-from device_sim.calibration.rays import pixel_rays, project_points
-from device_sim.calibration.truth import true_calibration
+from stereocam.device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses, render_board_view
+from stereocam.device_sim.calibration.rays import pixel_rays, project_points
+from stereocam.device_sim.calibration.truth import true_calibration
 
 CALIB = true_calibration(2, (640, 480))
 BOARD = BoardSpec(9, 6, 0.03)

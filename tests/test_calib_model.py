@@ -8,10 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.calibration import (
+from stereocam.protocol.calibration import (
     BODY_SIZE, CalibrationFormatError, CalibrationQuality, StereoCalibration,
 )
-from device_sim.calibration.truth import true_calibration
+from stereocam.device_sim.calibration.truth import true_calibration
 
 
 @pytest.fixture

@@ -5,8 +5,8 @@ import cv2
 import numpy as np
 import pytest
 
-from device_sim.calibration.rays import pixel_rays, project_points
-from device_sim.calibration.truth import true_calibration
+from stereocam.device_sim.calibration.rays import pixel_rays, project_points
+from stereocam.device_sim.calibration.truth import true_calibration
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

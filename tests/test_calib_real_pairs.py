@@ -10,7 +10,7 @@ PAIRS = Path(__file__).parent / "data" / "opencv_chessboard_pairs"
 
 
 def calibrate(out: Path, *extra: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "tools.cli", "calibrate", "--images", str(PAIRS), "--board", "9x6",
+    return subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "--images", str(PAIRS), "--board", "9x6",
                            "--square-size", "0.025", "--out", str(out), "-q", *extra],
                           capture_output=True, text=True, timeout=300)
 

@@ -5,12 +5,12 @@ import cv2
 import numpy as np
 import pytest
 
-from device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
-from protocol.calibration import StereoCalibration
-from device_sim.calibration.rectify import rectification_maps, remap_bilinear, undistort_rectify_map
-from device_sim.calibration.truth import true_calibration
-from protocol.rectification import _log_rotation, rodrigues, stereo_rectify
-from tools.calib_solve import detect_corners
+from stereocam.device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.device_sim.calibration.rectify import rectification_maps, remap_bilinear, undistort_rectify_map
+from stereocam.device_sim.calibration.truth import true_calibration
+from stereocam.protocol.rectification import _log_rotation, rodrigues, stereo_rectify
+from stereocam.tools.calib_solve import detect_corners
 
 
 def cv_rectify(c: StereoCalibration):

@@ -5,12 +5,12 @@ from pathlib import Path
 
 import pytest
 
-from device_sim.calibration.flash import (
+from stereocam.device_sim.calibration.flash import (
     FlashAddressError, FlashProgramError, FlashProtectedError, NorFlash, PowerLossError,
 )
-from protocol.calibration import StereoCalibration
-from device_sim.calibration.store import CalibrationStore, FactoryLockedError, StoreError
-from device_sim.calibration.truth import true_calibration
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.device_sim.calibration.store import CalibrationStore, FactoryLockedError, StoreError
+from stereocam.device_sim.calibration.truth import true_calibration
 
 SMALL = true_calibration(1).to_bytes()          # 248 bytes: the record spans 2 pages
 BIG = bytes(range(256)) * 5 + b"tail"           # 1284 bytes: 6 pages

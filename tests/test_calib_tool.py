@@ -9,11 +9,11 @@ import cv2
 import numpy as np
 import pytest
 
-from device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
-from protocol.calibration import StereoCalibration
-from device_sim.calibration.truth import true_calibration
-from tools import calibrate
-from tools.calib_solve import (
+from stereocam.device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.device_sim.calibration.truth import true_calibration
+from stereocam.tools import calibrate
+from stereocam.tools.calib_solve import (
     BoardNotFoundError, CalibrationError, CoverageSelector, SolveConfig, TooFewViewsError, calibrate_pairs,
     detect_corners, view_params,
 )

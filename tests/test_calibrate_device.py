@@ -7,14 +7,14 @@ import sys
 
 import pytest
 
-from device_sim import SimulatedCamera
-from device_sim.sensor import BOARD
-from host.camera import Camera
-from host.transports.inprocess import InProcessTransport
-from protocol import messages as m
-from tools.calib_solve import SolveConfig
-from tools.calibrate import write_outputs
-from tools.calibrate_device import (EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_WRITE, calibrate_device)
+from stereocam.device_sim import SimulatedCamera
+from stereocam.device_sim.sensor import BOARD
+from stereocam.camera import Camera
+from stereocam.device_sim.links.inprocess import InProcessTransport
+from stereocam.protocol import messages as m
+from stereocam.tools.calib_solve import SolveConfig
+from stereocam.tools.calibrate import write_outputs
+from stereocam.tools.calibrate_device import (EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_WRITE, calibrate_device)
 
 from .faults import FaultyTransport, PacketFilter
 
@@ -100,7 +100,7 @@ def test_read_back_that_differs_is_not_success(tmp_path):
 
     def corrupt(p):
         if p.msg_type == m.MsgType.CALIB_DATA and len(p.payload) > 100:
-            from protocol.framing import encode_frame
+            from stereocam.protocol.framing import encode_frame
             bad = bytearray(p.payload)
             bad[50] ^= 0x01
             return encode_frame(p.msg_type, p.request_id, bytes(bad), p.flags)
@@ -114,7 +114,7 @@ def test_read_back_that_differs_is_not_success(tmp_path):
 
 
 def test_cli_device_mode(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "tools.cli", "calibrate", "sim://?seed=74", "--out", str(tmp_path),
+    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "sim://?seed=74", "--out", str(tmp_path),
                         "--size", "640x480", "--max-views", "15", "-q"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "PASSED" in r.stdout and "verified by read-back" in r.stdout
@@ -123,6 +123,6 @@ def test_cli_device_mode(tmp_path):
 
 
 def test_cli_needs_a_url_or_images(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "tools.cli", "calibrate", "--out", str(tmp_path)],
+    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "--out", str(tmp_path)],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "URL" in r.stderr

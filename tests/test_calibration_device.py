@@ -7,12 +7,12 @@ import zlib
 import numpy as np
 import pytest
 
-import host
-from device_sim import SimulatedCamera
-from host.camera import Camera
-from host.transports.inprocess import InProcessTransport
-from protocol import messages as m
-from protocol.errors import ErrorCode
+import stereocam
+from stereocam.device_sim import SimulatedCamera
+from stereocam.camera import Camera
+from stereocam.device_sim.links.inprocess import InProcessTransport
+from stereocam.protocol import messages as m
+from stereocam.protocol.errors import ErrorCode
 
 from .faults import FaultyTransport, PacketFilter
 
@@ -26,7 +26,7 @@ def shifted(calib, dfx: float = 3.0):
     return dataclasses.replace(calib, K_left=K)
 
 
-def one_frame(cam: Camera) -> host.Frame:
+def one_frame(cam: Camera) -> stereocam.Frame:
     cam.set_trigger_mode("software")
     cam.start()
     cam.trigger()
@@ -95,7 +95,7 @@ def test_write_read_back_and_restore(unit):
 def test_locked_factory_record_is_refused_and_nothing_changes(unit):
     cam, sim = unit
     before = cam.read_calibration()
-    with pytest.raises(host.DeviceError) as exc:
+    with pytest.raises(stereocam.DeviceError) as exc:
         cam.write_calibration(shifted(sim.true_calibration()), target="factory")
     assert exc.value.code == ErrorCode.BAD_STATE and "write-protected" in str(exc.value)
     assert cam.read_calibration().body == before.body
@@ -111,7 +111,7 @@ def test_commit_checks_length_and_crc(unit, tamper, code):
     body = shifted(sim.true_calibration()).to_bytes()
     cam.request(m.CalibWrite(0, len(body), body))
     total, crc = tamper(body, zlib.crc32(body))
-    with pytest.raises(host.DeviceError) as exc:
+    with pytest.raises(stereocam.DeviceError) as exc:
         cam.request(m.CalibCommit(m.CalibSource.USER, total, crc))
     assert exc.value.code == code
     assert cam.read_calibration().body == before.body
@@ -121,11 +121,11 @@ def test_unusable_body_and_gaps_are_refused(unit):
     cam, _ = unit
     junk = b"\x07" * 248
     cam.request(m.CalibWrite(0, len(junk), junk))
-    with pytest.raises(host.DeviceError) as exc:
+    with pytest.raises(stereocam.DeviceError) as exc:
         cam.request(m.CalibCommit(m.CalibSource.USER, len(junk), zlib.crc32(junk)))
     assert exc.value.code == ErrorCode.BAD_PAYLOAD and "calibration" in str(exc.value)
     cam.request(m.CalibWrite(0, 200, b"\x00" * 100))
-    with pytest.raises(host.DeviceError) as exc:
+    with pytest.raises(stereocam.DeviceError) as exc:
         cam.request(m.CalibWrite(150, 200, b"\x00" * 50))  # a hole at 100..150
     assert exc.value.code == ErrorCode.BAD_STATE
     assert cam.read_calibration().source == "factory"
@@ -144,7 +144,7 @@ def test_power_loss_at_every_flash_step_keeps_the_previous_calibration(unit):
     candidate = shifted(sim.true_calibration(), 6.0)
     for k in range(steps):
         flash.power_loss_after(k)
-        with pytest.raises(host.DeviceError) as exc:
+        with pytest.raises(stereocam.DeviceError) as exc:
             cam.write_calibration(candidate)
         flash.power_loss_after(None)
         assert exc.value.code == ErrorCode.STORAGE, k
@@ -162,12 +162,12 @@ def test_read_back_that_differs_is_a_verification_error(tmp_path):
             if p.msg_type == m.MsgType.CALIB_DATA and len(p.payload) > 40:
                 payload = bytearray(p.payload)
                 payload[-1] ^= 0xFF
-                from protocol.framing import encode_frame
+                from stereocam.protocol.framing import encode_frame
                 return encode_frame(p.msg_type, p.request_id, bytes(payload), p.flags)
             return None
 
         link.set_manipulator(read=PacketFilter(corrupt_read_back))
-        with pytest.raises(host.StereoCamError):  # the tool never reports success
+        with pytest.raises(stereocam.StereoCamError):  # the tool never reports success
             cam.write_calibration(shifted(sim.true_calibration()))
 
 
@@ -189,7 +189,7 @@ def test_restore_without_factory_record_is_refused(tmp_path):
     sim = SimulatedCamera(seed=65, flash_path=tmp_path / "n.flash", factory_calibrated=False)
     with Camera(InProcessTransport(sim)) as cam:
         written = cam.write_calibration(shifted(sim.true_calibration()))
-        with pytest.raises(host.DeviceError) as exc:
+        with pytest.raises(stereocam.DeviceError) as exc:
             cam.restore_factory_calibration()
         assert exc.value.code == ErrorCode.BAD_STATE and "factory" in str(exc.value)
         assert cam.read_calibration().body == written.body  # the user record is untouched
@@ -199,7 +199,7 @@ def test_refused_target_keeps_the_staging(unit):
     cam, sim = unit
     body = shifted(sim.true_calibration()).to_bytes()
     cam.request(m.CalibWrite(0, len(body), body))
-    with pytest.raises(host.DeviceError) as exc:
+    with pytest.raises(stereocam.DeviceError) as exc:
         cam.request(m.CalibCommit(m.CalibSource.FACTORY, len(body), zlib.crc32(body)))  # locked
     assert exc.value.code == ErrorCode.BAD_STATE
     state = cam.request(m.CalibCommit(m.CalibSource.USER, len(body), zlib.crc32(body)))
@@ -207,8 +207,8 @@ def test_refused_target_keeps_the_staging(unit):
 
 
 def test_host_depth_uses_the_calibration_read_from_the_device(tmp_path):
-    from protocol.framing import encode_frame
-    from protocol.rectification import stereo_rectify
+    from stereocam.protocol.framing import encode_frame
+    from stereocam.protocol.rectification import stereo_rectify
 
     sim = SimulatedCamera(seed=66, flash_path=tmp_path / "g.flash")
     link = FaultyTransport(InProcessTransport(sim))

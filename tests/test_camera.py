@@ -6,10 +6,10 @@ import time
 import numpy as np
 import pytest
 
-import host
-from protocol import messages as m
-from protocol.errors import ErrorCode
-from protocol.framing import encode_frame
+import stereocam
+from stereocam.protocol import messages as m
+from stereocam.protocol.errors import ErrorCode
+from stereocam.protocol.framing import encode_frame
 
 
 def test_info(cam):
@@ -35,7 +35,7 @@ def test_configure_roundtrip(cam):
 ])
 def test_rejected_config_names_param_and_changes_nothing(cam, params, param):
     before = cam.config()
-    with pytest.raises(host.DeviceError) as exc:
+    with pytest.raises(stereocam.DeviceError) as exc:
         cam.configure(**params)
     assert exc.value.code == ErrorCode.OUT_OF_RANGE
     assert exc.value.param == param
@@ -44,7 +44,7 @@ def test_rejected_config_names_param_and_changes_nothing(cam, params, param):
 
 
 def test_unknown_parameter_name_is_a_local_config_error(cam):
-    with pytest.raises(host.ConfigError, match="no_such_thing"):
+    with pytest.raises(stereocam.ConfigError, match="no_such_thing"):
         cam.configure(no_such_thing=3)
     with pytest.raises(ValueError):  # ConfigError is also a ValueError
         cam.configure(fps="fast")
@@ -52,7 +52,7 @@ def test_unknown_parameter_name_is_a_local_config_error(cam):
 
 def test_resolution_cannot_change_while_streaming(cam):
     cam.start()
-    with pytest.raises(host.DeviceError) as exc:
+    with pytest.raises(stereocam.DeviceError) as exc:
         cam.configure(width=640)
     assert exc.value.code == ErrorCode.BAD_STATE and exc.value.param == "width"
     cam.configure(num_disparities=16)  # matching parameters may change live
@@ -77,14 +77,14 @@ def test_software_trigger_frames(cam):
         assert valid.mean() > 0.3
         assert f.disparity[valid].min() >= 0 and f.disparity[valid].max() < 32 * 16
         assert f.left.std() > 10 and not np.array_equal(f.left, f.right)
-    with pytest.raises(host.CameraTimeoutError):
+    with pytest.raises(stereocam.CameraTimeoutError):
         cam.get_frame(timeout=0.3)  # no trigger, no frame
-    assert isinstance(host.CameraTimeoutError("x"), TimeoutError)
+    assert isinstance(stereocam.CameraTimeoutError("x"), TimeoutError)
 
 
 def test_trigger_refused_in_free_run(cam):
     cam.start()
-    with pytest.raises(host.DeviceError) as exc:
+    with pytest.raises(stereocam.DeviceError) as exc:
         cam.trigger()
     assert exc.value.code == ErrorCode.BAD_STATE
 
@@ -131,7 +131,7 @@ class _Unknown(m.Message):
 
 
 def test_unknown_message_type_gets_a_nack(cam):
-    with pytest.raises(host.DeviceError) as exc:
+    with pytest.raises(stereocam.DeviceError) as exc:
         cam.request(_Unknown())
     assert exc.value.code == ErrorCode.UNKNOWN_TYPE
     assert cam.info().serial  # still talking

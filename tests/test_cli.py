@@ -8,11 +8,11 @@ import sys
 import numpy as np
 import pytest
 
-from device_sim.process import ServedSimulator
+from stereocam.device_sim.process import ServedSimulator
 
 
 def stereocam(*args: str, timeout: float = 180) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "tools.cli", *args], capture_output=True, text=True, timeout=timeout)
+    return subprocess.run([sys.executable, "-m", "stereocam.tools.cli", *args], capture_output=True, text=True, timeout=timeout)
 
 
 def test_usage_lists_commands():
@@ -61,5 +61,5 @@ def test_served_simulator_exits_cleanly(sig):
 
 
 def test_bad_serve_spec():
-    r = subprocess.run([sys.executable, "-m", "device_sim", "--serve", "udp:1"], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "stereocam.device_sim", "--serve", "udp:1"], capture_output=True, text=True)
     assert r.returncode != 0 and "tcp:HOST:PORT" in r.stderr

@@ -5,7 +5,7 @@ import random
 
 import pytest
 
-from host.clock import ClockMap, SyncSample
+from stereocam.clock import ClockMap, SyncSample
 
 
 def simulate(drift_ppm: float, offset_us: int, n: int, span_s: float, seed: int = 0) -> tuple[ClockMap, callable]:

@@ -5,26 +5,26 @@ import time
 
 import pytest
 
-import host
-from device_sim.process import ServedSimulator
+import stereocam
+from stereocam.device_sim.process import ServedSimulator
 
 
 @pytest.mark.parametrize("spec", ["pty", "tcp:127.0.0.1:0"])
 def test_device_killed_mid_stream(spec):
     server = ServedSimulator(spec, seed=41)
     try:
-        cam = host.open(server.url, timeout=1.0)
+        cam = stereocam.open(server.url, timeout=1.0)
         cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=10)
         cam.start()
         cam.get_frame(timeout=30)
         server.proc.kill()
         server.proc.wait()
         t0 = time.monotonic()
-        with pytest.raises(host.DisconnectedError):
+        with pytest.raises(stereocam.DisconnectedError):
             for _ in range(100):
                 cam.get_frame(timeout=1.0)
         assert time.monotonic() - t0 < 3.0
-        with pytest.raises(host.DisconnectedError):
+        with pytest.raises(stereocam.DisconnectedError):
             cam.config()
         cam.close()  # closing a dead camera is quiet
     finally:
@@ -36,9 +36,9 @@ def test_a_client_that_stops_reading_does_not_wedge_the_device():
     import socket
     import threading
 
-    from device_sim import SimulatedCamera
-    from device_sim.serve import TcpServer
-    from protocol import messages as m
+    from stereocam.device_sim import SimulatedCamera
+    from stereocam.device_sim.serve import TcpServer
+    from stereocam.protocol import messages as m
 
     sim = SimulatedCamera(seed=42)
     server = TcpServer(sim, send_timeout=0.5)
@@ -50,7 +50,7 @@ def test_a_client_that_stops_reading_does_not_wedge_the_device():
         wedged.sendall(m.encode(m.Start(), 1))  # starts 640x480 streaming, then never reads a byte
         time.sleep(2.0)
         assert not sim.engine.streaming  # the stalled send dropped that host and stopped the stream
-        with host.open(server.url, timeout=2.0) as cam:  # the next host gets the camera
+        with stereocam.open(server.url, timeout=2.0) as cam:  # the next host gets the camera
             assert cam.info().serial == sim.serial
         wedged.close()
     finally:

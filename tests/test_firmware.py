@@ -6,11 +6,11 @@ import time
 import numpy as np
 import pytest
 
-import host
-from device_sim import SimulatedCamera, TriggerLine
-from device_sim.scene import WALL_DISTANCE_M
-from host.camera import Camera
-from host.transports.inprocess import InProcessTransport
+import stereocam
+from stereocam.device_sim import SimulatedCamera, TriggerLine
+from stereocam.device_sim.scene import WALL_DISTANCE_M
+from stereocam.camera import Camera
+from stereocam.device_sim.links.inprocess import InProcessTransport
 
 SMALL = dict(width=320, height=240, num_disparities=32, block_size=11)
 
@@ -52,7 +52,7 @@ def test_external_trigger_line_shared_by_two_heads():
             time.sleep(0.05)
         got = [[cam.get_frame(timeout=20).trigger_id for _ in range(3)] for cam in heads]
         assert got[0] == got[1] == [1, 2, 3]
-        with pytest.raises(host.DeviceError):
+        with pytest.raises(stereocam.DeviceError):
             heads[0].trigger()  # software trigger is refused in external mode
     finally:
         for cam in heads:
@@ -101,7 +101,7 @@ def test_depth_of_a_flat_wall():
 
 def test_ply_writer(tmp_path):
     pts = np.array([[0, 0, 1], [0.5, -0.5, 2.0]], np.float32)
-    n = host.write_ply(tmp_path / "c.ply", pts, np.array([10, 200], np.uint8))
+    n = stereocam.write_ply(tmp_path / "c.ply", pts, np.array([10, 200], np.uint8))
     data = (tmp_path / "c.ply").read_bytes()
     header, body = data.split(b"end_header\n")
     assert n == 2 and b"element vertex 2" in header and len(body) == 2 * 15
@@ -110,17 +110,17 @@ def test_ply_writer(tmp_path):
 
 
 def test_sim_url_options_are_checked():
-    with pytest.raises(host.ConfigError, match="seed"):
-        host.open("sim://?seed=abc")
-    with pytest.raises(host.ConfigError, match="colour"):
-        host.open("sim://?colour=red")
-    with host.open("sim://?seed=5&serial=ABC123") as cam:
+    with pytest.raises(stereocam.ConfigError, match="seed"):
+        stereocam.open("sim://?seed=abc")
+    with pytest.raises(stereocam.ConfigError, match="colour"):
+        stereocam.open("sim://?colour=red")
+    with stereocam.open("sim://?seed=5&serial=ABC123") as cam:
         assert cam.info().serial == "ABC123"
 
 
 def test_unreachable_url_is_a_transport_error():
-    with pytest.raises(host.TransportError):
-        host.open("socket://127.0.0.1:1", timeout=0.5)
+    with pytest.raises(stereocam.TransportError):
+        stereocam.open("socket://127.0.0.1:1", timeout=0.5)
 
 
 def test_replies_do_not_wait_behind_a_whole_frame():

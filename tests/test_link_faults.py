@@ -5,12 +5,12 @@ import struct
 
 import pytest
 
-import host
-from device_sim import SimulatedCamera
-from host.camera import Camera
-from host.transports.inprocess import InProcessTransport
-from protocol import messages as m
-from protocol.framing import FLAG_RESEND, Decoder
+import stereocam
+from stereocam.device_sim import SimulatedCamera
+from stereocam.camera import Camera
+from stereocam.device_sim.links.inprocess import InProcessTransport
+from stereocam.protocol import messages as m
+from stereocam.protocol.framing import FLAG_RESEND, Decoder
 
 from .faults import FaultyTransport, PacketFilter
 
@@ -48,7 +48,7 @@ def test_lost_reply_is_retried_and_never_applied_twice(faulty):
     assert status.counters["resends_replayed"] == 1
     f = cam.get_frame(timeout=10)
     assert f.trigger_id == 1
-    with pytest.raises(host.CameraTimeoutError):
+    with pytest.raises(stereocam.CameraTimeoutError):
         cam.get_frame(timeout=0.5)  # and exactly one capture came of it
     assert cam.stats["retries"] >= 1
 
@@ -58,7 +58,7 @@ def test_request_ids_wrap_and_skip_zero():
     link = FaultyTransport(InProcessTransport(sim))
     ids = []
     link.set_manipulator(write=lambda b: ids.append(struct.unpack_from("<H", b, 10)[0]) or b)
-    from host.link import Link
+    from stereocam.link import Link
 
     lk = Link(link, timeout=1.0, first_request_id=0xFFFE)
     try:
@@ -77,7 +77,7 @@ def test_corrupted_frame_is_dropped_and_counted(faulty):
     def corrupt_one_chunk(p):
         if p.msg_type == m.MsgType.FRAME_DATA and not hits:
             hits.append(p)
-            from protocol.framing import encode_frame
+            from stereocam.protocol.framing import encode_frame
             wire = bytearray(encode_frame(p.msg_type, p.request_id, p.payload, p.flags))
             wire[200] ^= 0x40  # a bit error inside the payload
             return bytes(wire)
@@ -95,11 +95,11 @@ def test_corrupted_frame_is_dropped_and_counted(faulty):
     bad_seq = struct.unpack_from("<I", hits[0].payload)[0]
     by_seq = {f.sequence: f for f in frames}
     if cam.assembler.deliver_incomplete:  # handed out, but marked, and the gap reads as zeros
-        assert by_seq[bad_seq].status is host.FrameStatus.MISSING_DATA
-        assert all(f.status is host.FrameStatus.COMPLETE for s, f in by_seq.items() if s != bad_seq)
+        assert by_seq[bad_seq].status is stereocam.FrameStatus.MISSING_DATA
+        assert all(f.status is stereocam.FrameStatus.COMPLETE for s, f in by_seq.items() if s != bad_seq)
     else:
         assert bad_seq not in by_seq
-        assert all(f.status is host.FrameStatus.COMPLETE for f in frames)
+        assert all(f.status is stereocam.FrameStatus.COMPLETE for f in frames)
 
 
 def test_bytes_split_into_tiny_reads(faulty):
@@ -131,7 +131,7 @@ def test_version_mismatch_is_refused():
     sim = SimulatedCamera(seed=13)
     real = sim._get_info
     sim._handlers[m.MsgType.GET_INFO] = lambda msg: m.Info(**{**real(msg).__dict__, "protocol_version": (2, 0)})
-    with pytest.raises(host.VersionMismatchError, match="protocol 2.0"):
+    with pytest.raises(stereocam.VersionMismatchError, match="protocol 2.0"):
         Camera(InProcessTransport(sim))
 
 

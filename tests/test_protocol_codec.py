@@ -19,14 +19,14 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from protocol import messages as m
-from protocol.errors import ErrorCode, ProtocolError
-from protocol.framing import (
+from stereocam.protocol import messages as m
+from stereocam.protocol.errors import ErrorCode, ProtocolError
+from stereocam.protocol.framing import (
     FLAG_RESEND, HEADER_LEN, MAGIC, MAX_HEADER_LEN, MAX_PAYLOAD, TRAILER_LEN, Decoder,
     DecoderStats, Packet, encode_frame, header_crc,
 )
-from protocol.messages import UnknownMessageError, decode_packet
-from protocol.params import BY_ID, BY_NAME, PARAMS, Param, defaults
+from stereocam.protocol.messages import UnknownMessageError, decode_packet
+from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, Param, defaults
 
 FAST = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 FUZZ = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])

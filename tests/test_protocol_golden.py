@@ -28,10 +28,10 @@ from pathlib import Path
 
 import pytest
 
-from protocol import messages as m
-from protocol.errors import ErrorCode
-from protocol.framing import FLAG_RESEND, HEADER_LEN, MAGIC, TRAILER_LEN, VERSION_MAJOR, VERSION_MINOR, Decoder, Packet
-from protocol.params import PARAMS
+from stereocam.protocol import messages as m
+from stereocam.protocol.errors import ErrorCode
+from stereocam.protocol.framing import FLAG_RESEND, HEADER_LEN, MAGIC, TRAILER_LEN, VERSION_MAJOR, VERSION_MINOR, Decoder, Packet
+from stereocam.protocol.params import PARAMS
 
 GOLDEN = Path(__file__).resolve().parent / "golden" / "protocol_v1.json"
 SPEC = Path(__file__).resolve().parent.parent / "protocol" / "SPEC.md"

@@ -3,21 +3,21 @@ from __future__ import annotations
 
 import pytest
 
-import device_sim.usb as simusb
-import host
-from device_sim import SimulatedCamera
+import stereocam.device_sim.usb as simusb
+import stereocam
+from stereocam.device_sim import SimulatedCamera
 
 
 def test_usb_unplug_replug_reconnect_reapplies_config_and_resumes():
     sim = SimulatedCamera(serial="RECON-1", seed=51)
     handle = simusb.plug(sim)
-    cam = host.open("usb://?serial=RECON-1", timeout=1.0)
+    cam = stereocam.open("usb://?serial=RECON-1", timeout=1.0)
     try:
         cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=8, gain=35)
         cam.start()
         before = cam.get_frame(timeout=30)
         handle.unplug()
-        with pytest.raises(host.DisconnectedError):
+        with pytest.raises(stereocam.DisconnectedError):
             for _ in range(50):
                 cam.get_frame(timeout=1.0)
         sim.close()
@@ -37,10 +37,10 @@ def test_usb_unplug_replug_reconnect_reapplies_config_and_resumes():
 def test_reconnect_gives_up_with_a_disconnect_error():
     sim = SimulatedCamera(serial="RECON-2", seed=52)
     handle = simusb.plug(sim)
-    cam = host.open("usb://?serial=RECON-2", timeout=1.0)
+    cam = stereocam.open("usb://?serial=RECON-2", timeout=1.0)
     handle.unplug()
     sim.close()
-    with pytest.raises(host.DisconnectedError, match="RECON-2"):
+    with pytest.raises(stereocam.DisconnectedError, match="RECON-2"):
         cam.reconnect(timeout=0.5)
     cam.close()
 
@@ -50,7 +50,7 @@ def test_auto_reconnect_rides_through_an_unplug():
 
     sim = SimulatedCamera(serial="RECON-3", seed=53)
     handles = [simusb.plug(sim)]
-    cam = host.open("usb://?serial=RECON-3", timeout=1.0, auto_reconnect=True)
+    cam = stereocam.open("usb://?serial=RECON-3", timeout=1.0, auto_reconnect=True)
     try:
         cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=8, gain=20)
         cam.start()

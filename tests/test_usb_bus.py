@@ -10,8 +10,8 @@ import pytest
 import usb.core
 import usb.util
 
-from device_sim.usb import EP_IN, EP_OUT, PRODUCT_ID, VENDOR_ID, SimUsbBus, bcd_version
-from device_sim.usb.testdevices import EchoDevice, SourceDevice
+from stereocam.device_sim.usb import EP_IN, EP_OUT, PRODUCT_ID, VENDOR_ID, SimUsbBus, bcd_version
+from stereocam.device_sim.usb.testdevices import EchoDevice, SourceDevice
 
 
 @pytest.fixture

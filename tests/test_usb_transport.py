@@ -1,4 +1,4 @@
-"""host.transports.usb and host.discovery over the simulated bus, plus the real libusb backend."""
+"""stereocam.transports.usb and host.discovery over the simulated bus, plus the real libusb backend."""
 from __future__ import annotations
 
 import threading
@@ -7,12 +7,12 @@ import time
 import pytest
 import usb.core
 
-import device_sim.usb as simusb
-from device_sim.usb.testdevices import EchoDevice, SourceDevice
-from host.discovery import DeviceEntry, list_devices
-from host.transports import open_transport
-from host.transports import usb as usbt
-from protocol.errors import DisconnectedError, StereoCamError, TransportError
+import stereocam.device_sim.usb as simusb
+from stereocam.device_sim.usb.testdevices import EchoDevice, SourceDevice
+from stereocam.discovery import DeviceEntry, list_devices
+from stereocam.transports import open_transport
+from stereocam.transports import usb as usbt
+from stereocam.protocol.errors import DisconnectedError, StereoCamError, TransportError
 
 
 @pytest.fixture(autouse=True)
@@ -192,14 +192,14 @@ def test_list_devices_finds_plugged_simulators():
 
 
 def test_list_devices_includes_free_in_process_simulators():
-    from device_sim import SimulatedCamera
-    import host
+    from stereocam.device_sim import SimulatedCamera
+    import stereocam
 
     sim = SimulatedCamera(serial="INPROC-9", seed=9)
     try:
         (entry,) = [e for e in list_devices() if e.serial == "INPROC-9"]
         assert (entry.transport, entry.url, entry.model) == ("sim", "sim://?serial=INPROC-9", "STOC-SIM")
-        with host.open(entry.url) as cam:  # that very simulator, not a fresh one
+        with stereocam.open(entry.url) as cam:  # that very simulator, not a fresh one
             assert cam.info().serial == "INPROC-9" and sim.attached
             assert "INPROC-9" not in [e.serial for e in list_devices()]  # held by a link now
         assert not sim.attached
@@ -209,7 +209,7 @@ def test_list_devices_includes_free_in_process_simulators():
 
 
 def test_list_devices_table(capsys):
-    from tools.list_devices import main
+    from stereocam.tools.list_devices import main
     simusb.plug(EchoDevice(serial="TBL1"))
     assert main([]) == 0
     out = capsys.readouterr().out
@@ -227,9 +227,9 @@ def test_real_libusb_backend_loads_and_enumerates():
 
 
 def test_simulated_camera_over_usb_answers_get_info():
-    from device_sim import SimulatedCamera
-    from host.link import Link
-    from protocol import messages as m
+    from stereocam.device_sim import SimulatedCamera
+    from stereocam.link import Link
+    from stereocam.protocol import messages as m
 
     cam = SimulatedCamera(serial="USBCAM1", seed=3)
     simusb.plug(cam)
@@ -243,13 +243,13 @@ def test_simulated_camera_over_usb_answers_get_info():
 
 
 def test_unplug_while_streaming_surfaces_disconnect_in_the_sdk():
-    import host
-    from device_sim import SimulatedCamera
+    import stereocam
+    from stereocam.device_sim import SimulatedCamera
 
     cam = SimulatedCamera(serial="USBCAM2", seed=4)
     device = simusb.plug(cam)
     try:
-        with host.open("usb://?serial=USBCAM2", timeout=2.0) as camera:
+        with stereocam.open("usb://?serial=USBCAM2", timeout=2.0) as camera:
             camera.configure(width=320, height=240, fps=30)
             camera.start()
             frame = camera.get_frame(timeout=30.0)  # the first one may wait for JIT compiling

@@ -19,8 +19,8 @@ from typing import Iterator
 
 import numpy as np
 
-from protocol import messages as m
-from protocol.framing import Decoder
+from stereocam.protocol import messages as m
+from stereocam.protocol.framing import Decoder
 
 
 def bench_protocol(seconds: float = 2.0) -> dict[str, float]:
@@ -46,9 +46,9 @@ def bench_protocol(seconds: float = 2.0) -> dict[str, float]:
 
 
 def _stream_fps(url: str, seconds: float) -> tuple[float, float, int]:
-    import host
+    import stereocam
 
-    with host.open(url, timeout=3.0) as cam:
+    with stereocam.open(url, timeout=3.0) as cam:
         cam.configure(width=640, height=480, fps=60, num_disparities=64, block_size=15)
         cam.start()
         cam.get_frame(timeout=60.0)  # warm-up (JIT cache load)
@@ -66,13 +66,13 @@ def _stream_fps(url: str, seconds: float) -> tuple[float, float, int]:
 @contextlib.contextmanager
 def _device(kind: str) -> Iterator[str]:
     """A simulator reachable over ``kind``; yields its URL."""
-    from device_sim import SimulatedCamera
-    from device_sim.process import ServedSimulator  # the same child-process servers the tests use
+    from stereocam.device_sim import SimulatedCamera
+    from stereocam.device_sim.process import ServedSimulator  # the same child-process servers the tests use
 
     if kind == "sim":
         yield "sim://?seed=1"
     elif kind == "usb":
-        import device_sim.usb as simusb
+        import stereocam.device_sim.usb as simusb
 
         sim = SimulatedCamera(serial="BENCH-USB", seed=1)
         handle = simusb.plug(sim)
@@ -112,10 +112,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.what in ("transport", "all"):
         bench_transport(args.seconds)
     if args.what == "usb":
-        importlib.import_module("tools.bench_usb").main(rest)
+        importlib.import_module("stereocam.tools.bench_usb").main(rest)
     if args.what in ("matching", "all"):
-        importlib.import_module("tools.bench_matching").main(rest)
+        importlib.import_module("stereocam.tools.bench_matching").main(rest)
     if args.what in ("calibration", "all"):
-        importlib.import_module("tools.bench_calibration").main([])
-        importlib.import_module("tools.bench_device_calibration").main([])
+        importlib.import_module("stereocam.tools.bench_calibration").main([])
+        importlib.import_module("stereocam.tools.bench_device_calibration").main([])
     return 0

@@ -16,11 +16,11 @@ import time
 import cv2
 import numpy as np
 
-from device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
-from protocol.calibration import StereoCalibration
-from device_sim.calibration.rays import project_points
-from device_sim.calibration.truth import true_calibration
-from tools.calib_solve import CalibrationResult, SolveConfig, calibrate_pairs
+from stereocam.device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.device_sim.calibration.rays import project_points
+from stereocam.device_sim.calibration.truth import true_calibration
+from stereocam.tools.calib_solve import CalibrationResult, SolveConfig, calibrate_pairs
 
 MAX_REL_ERROR = 0.002
 MAX_EPIPOLAR_PX = 0.1

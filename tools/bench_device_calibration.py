@@ -16,13 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
-from device_sim import SimulatedCamera
-from device_sim.scene import WALL_DISTANCE_M
-from host.camera import Camera
-from host.transports.inprocess import InProcessTransport
-from tools.calib_solve import SolveConfig
-from tools.calibrate_device import calibrate_device
-from device_sim.sensor import BOARD
+from stereocam.device_sim import SimulatedCamera
+from stereocam.device_sim.scene import WALL_DISTANCE_M
+from stereocam.camera import Camera
+from stereocam.device_sim.links.inprocess import InProcessTransport
+from stereocam.tools.calib_solve import SolveConfig
+from stereocam.tools.calibrate_device import calibrate_device
+from stereocam.device_sim.sensor import BOARD
 
 TARGET_PCT, TARGET_EPI_PX, TARGET_DEPTH_PCT = 0.2, 0.1, 1.0
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tools.stereobm_oracle import opencv_stereobm
+from stereocam.tools.stereobm_oracle import opencv_stereobm
 
 
 def synthetic_scene(h: int = 480, w: int = 640, seed: int = 0):
@@ -94,9 +94,9 @@ def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
     running sums alone; 'wta+subpixel+lr' is the SAD stage minus that."""
     from dataclasses import replace
 
-    from device_sim.matching import Matcher
-    from device_sim.matching.postfilter import filter_speckles
-    from device_sim.matching.prefilter import prefilter_pair
+    from stereocam.device_sim.matching import Matcher
+    from stereocam.device_sim.matching.postfilter import filter_speckles
+    from stereocam.device_sim.matching.prefilter import prefilter_pair
     p = m.params
     disp = m.match(left, right)
     out = {"prefilter": _median_ms(lambda: prefilter_pair(
@@ -131,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
 
     cached = _cache_present()
     t0 = time.perf_counter()
-    from device_sim.matching import Matcher, MatchParams, warm_up
+    from stereocam.device_sim.matching import Matcher, MatchParams, warm_up
     t_import = time.perf_counter() - t0
     cv2.setNumThreads(args.threads)
     numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))

@@ -1,7 +1,7 @@
 """Benchmark the USB path on the simulated bus.
 
 1. raw bulk IN MB/s through pyusb's core (``usb.core.Device.read``) from a streaming stand-in
-   firmware, 2. the same through ``host.transports.usb`` (what the SDK uses), 3. frames per
+   firmware, 2. the same through ``stereocam.transports.usb`` (what the SDK uses), 3. frames per
    second of a ``SimulatedCamera`` at 640x480 opened as ``usb://?serial=...``.
 """
 from __future__ import annotations
@@ -13,9 +13,9 @@ from typing import Sequence
 
 import usb.core
 
-import device_sim.usb as simusb
-from device_sim.usb.testdevices import SourceDevice
-from host.transports import usb as usb_transport
+import stereocam.device_sim.usb as simusb
+from stereocam.device_sim.usb.testdevices import SourceDevice
+from stereocam.transports import usb as usb_transport
 
 MB = 1e6
 
@@ -55,13 +55,13 @@ def bench_transport(total: int, chunk: int) -> float:
 
 def bench_camera(frames: int, fps: int) -> tuple[float, float]:
     """(frames/s, MB/s of frame data) of a SimulatedCamera at 640x480 over the USB path."""
-    import host
-    from device_sim import SimulatedCamera
+    import stereocam
+    from stereocam.device_sim import SimulatedCamera
 
     cam = SimulatedCamera(serial="BENCH-CAM", seed=1)
     handle = simusb.plug(cam)
     try:
-        with host.open("usb://?serial=BENCH-CAM", timeout=5.0) as camera:
+        with stereocam.open("usb://?serial=BENCH-CAM", timeout=5.0) as camera:
             camera.configure(width=640, height=480, fps=fps)
             camera.start()
             camera.get_frame(timeout=10.0)  # warm-up: JIT compilation, first capture

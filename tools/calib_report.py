@@ -6,7 +6,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tools.calib_solve import PARAM_NAMES, CalibrationResult
+from stereocam.tools.calib_solve import PARAM_NAMES, CalibrationResult
 
 WIDTH = 1280
 _FONT = cv2.FONT_HERSHEY_SIMPLEX

@@ -41,9 +41,9 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from device_sim.calibration.board import BoardSpec
-from protocol.calibration import CalibrationQuality, StereoCalibration
-from protocol.errors import StereoCamError
+from stereocam.device_sim.calibration.board import BoardSpec
+from stereocam.protocol.calibration import CalibrationQuality, StereoCalibration
+from stereocam.protocol.errors import StereoCamError
 
 PARAM_NAMES = ("X", "Y", "Size", "Skew")
 PARAM_RANGES = (0.7, 0.7, 0.4, 0.5)

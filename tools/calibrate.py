@@ -35,9 +35,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from device_sim.calibration.board import BoardSpec
-from tools.calib_report import write_report
-from tools.calib_solve import PARAM_NAMES, CalibrationError, CalibrationResult, Progress, SolveConfig, calibrate_pairs
+from stereocam.device_sim.calibration.board import BoardSpec
+from stereocam.tools.calib_report import write_report
+from stereocam.tools.calib_solve import PARAM_NAMES, CalibrationError, CalibrationResult, Progress, SolveConfig, calibrate_pairs
 
 EXIT_OK, EXIT_USAGE, EXIT_NO_SOLUTION, EXIT_GATE = 0, 2, 3, 4
 _NAME = re.compile(r"^(left|right)\D*?(\d+)\.(png|jpe?g|bmp|pgm|ppm|tiff?)$", re.IGNORECASE)
@@ -201,16 +201,16 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _device_mode(args: argparse.Namespace, config: SolveConfig) -> int:
-    import host
-    from tools.calibrate_device import calibrate_device
+    import stereocam
+    from stereocam.tools.calibrate_device import calibrate_device
 
     try:
-        with host.open(args.url, timeout=2.0) as cam:
+        with stereocam.open(args.url, timeout=2.0) as cam:
             code, result, verdict = calibrate_device(
                 cam, BoardSpec(*args.board, args.square_size), config, args.out, target=args.target,
                 pairs=args.pairs, size=args.size, scene=args.scene, write_outputs=write_outputs,
                 progress=None if args.quiet else print_progress)
-    except host.StereoCamError as exc:
+    except stereocam.StereoCamError as exc:
         return _fail(1, f"camera {args.url}: {exc}")
     if result is not None:
         q = result.quality

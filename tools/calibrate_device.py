@@ -14,30 +14,30 @@ from pathlib import Path
 
 import numpy as np
 
-import host
-from tools.calib_solve import CalibrationError, CalibrationResult, SolveConfig, calibrate_pairs
+import stereocam
+from stereocam.tools.calib_solve import CalibrationError, CalibrationResult, SolveConfig, calibrate_pairs
 
 EXIT_OK, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_WRITE = 0, 3, 4, 5
 CALIBRATION_SCENE = 2  # the simulator's chessboard fixture (device_sim/scene.py)
 
 
-def raw_pairs(cam: host.Camera, count: int, timeout: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+def raw_pairs(cam: stereocam.Camera, count: int, timeout: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """Up to ``count`` raw (left, right) pairs from the running stream."""
     for _ in range(count):
         f = cam.get_frame(timeout=timeout)
         if f.rectified:
-            raise host.ProtocolError("the camera sent rectified frames in raw mode")
+            raise stereocam.ProtocolError("the camera sent rectified frames in raw mode")
         yield f.left, f.right
 
 
-def calibrate_device(cam: host.Camera, board, config: SolveConfig, outdir: Path, *, target: str = "user",
+def calibrate_device(cam: stereocam.Camera, board, config: SolveConfig, outdir: Path, *, target: str = "user",
                      pairs: int = 200, fps: int = 10, size: tuple[int, int] | None = None, scene: int | None =
                      CALIBRATION_SCENE, progress=None, write_outputs=None, frame_timeout: float = 60.0
                      ) -> tuple[int, CalibrationResult | None, str]:
     """Returns (exit code, result or None, one-line verdict)."""
     before = cam.config()
     width, height = size or (cam.info().sensor_width, cam.info().sensor_height)
-    setup = dict(rectify=0, width=width, height=height, fps=fps, trigger_mode=int(host.TriggerMode.FREE_RUN))
+    setup = dict(rectify=0, width=width, height=height, fps=fps, trigger_mode=int(stereocam.TriggerMode.FREE_RUN))
     if scene is not None:
         setup["scene"] = scene
     cam.configure(**setup)
@@ -56,7 +56,7 @@ def calibrate_device(cam: host.Camera, board, config: SolveConfig, outdir: Path,
         return _finish(EXIT_GATE, result, verdict, outdir, write_outputs)
     try:
         stored = cam.write_calibration(result.calibration, target)
-    except host.StereoCamError as exc:
+    except stereocam.StereoCamError as exc:
         result.quality = dataclasses.replace(result.quality, written=False, verified=False)
         verdict = (f"writing the calibration failed: {exc}; calibration in force on the camera: "
                    f"{cam.info().calibration_id:08x}")

@@ -7,10 +7,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-import host
+import stereocam
 
 
-def colorize(frame: host.Frame) -> np.ndarray:
+def colorize(frame: stereocam.Frame) -> np.ndarray:
     """Disparity as a TURBO colour map (near = warm), invalid pixels black."""
     d = frame.disparity_px()
     fmt = frame.disparity_format
@@ -21,7 +21,7 @@ def colorize(frame: host.Frame) -> np.ndarray:
     return img
 
 
-def save_frame(frame: host.Frame, out: Path, stem: str = "frame") -> dict[str, Path]:
+def save_frame(frame: stereocam.Frame, out: Path, stem: str = "frame") -> dict[str, Path]:
     """left/right PNG, disparity .npy (raw int16) and colour PNG, point cloud .ply."""
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {}
@@ -35,7 +35,7 @@ def save_frame(frame: host.Frame, out: Path, stem: str = "frame") -> dict[str, P
         paths["disparity_png"] = out / f"{stem}_disparity.png"
         cv2.imwrite(str(paths["disparity_png"]), colorize(frame))
         paths["ply"] = out / f"{stem}_points.ply"
-        host.write_ply(paths["ply"], *frame.points())
+        stereocam.write_ply(paths["ply"], *frame.points())
     return paths
 
 
@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--count", type=int, default=1, help="frames to save")
     ap.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for each frame (the first pays JIT warm-up)")
     args = ap.parse_args(argv)
-    with host.open(args.url, timeout=2.0) as cam:
+    with stereocam.open(args.url, timeout=2.0) as cam:
         cam.set_trigger_mode("software")
         cam.start()
         for i in range(args.count):

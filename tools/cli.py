@@ -4,16 +4,16 @@ from __future__ import annotations
 import importlib
 import sys
 
-import host
+import stereocam
 
 COMMANDS = {
-    "sim": ("device_sim.__main__", "serve a simulated camera (pty or tcp), like python -m device_sim"),
-    "list": ("tools.list_devices", "list cameras: USB (real and simulated), camera serial ports, simulators"),
-    "info": ("tools.info", "print a camera's info, configuration and counters"),
-    "capture": ("tools.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
-    "calibrate": ("tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
-    "demo": ("tools.demo", "simulator + streaming + outputs in ./out + summary"),
-    "bench": ("tools.bench", "benchmarks: protocol decode, transports (incl. USB), matching core"),
+    "sim": ("stereocam.device_sim.__main__", "serve a simulated camera (pty or tcp), like python -m device_sim"),
+    "list": ("stereocam.tools.list_devices", "list cameras: USB (real and simulated), camera serial ports, simulators"),
+    "info": ("stereocam.tools.info", "print a camera's info, configuration and counters"),
+    "capture": ("stereocam.tools.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
+    "calibrate": ("stereocam.tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
+    "demo": ("stereocam.tools.demo", "simulator + streaming + outputs in ./out + summary"),
+    "bench": ("stereocam.tools.bench", "benchmarks: protocol decode, transports (incl. USB), matching core"),
 }
 
 
@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     module = importlib.import_module(COMMANDS[argv[0]][0])
     try:
         return module.main(argv[1:]) or 0
-    except host.StereoCamError as exc:
+    except stereocam.StereoCamError as exc:
         print(f"stereocam {argv[0]}: error: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:

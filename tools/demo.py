@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from device_sim import SimulatedCamera
-from device_sim.camera import GROUND_TRUTH_KEEP
-from host.camera import Camera
-from host.transports.inprocess import InProcessTransport
+from stereocam.device_sim import SimulatedCamera
+from stereocam.device_sim.camera import GROUND_TRUTH_KEEP
+from stereocam.camera import Camera
+from stereocam.device_sim.links.inprocess import InProcessTransport
 
 from .capture import save_frame
 

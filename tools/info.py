@@ -3,14 +3,14 @@ from __future__ import annotations
 
 import argparse
 
-import host
+import stereocam
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="stereocam info", description=__doc__.splitlines()[0])
     ap.add_argument("url")
     args = ap.parse_args(argv)
-    with host.open(args.url, timeout=2.0) as cam:
+    with stereocam.open(args.url, timeout=2.0) as cam:
         i = cam.info()
         print(f"model {i.model}\nserial {i.serial}\nfirmware {i.firmware_version}\n"
               f"protocol {i.protocol_version[0]}.{i.protocol_version[1]}\nsensor {i.sensor_width}x{i.sensor_height}\n"

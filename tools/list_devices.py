@@ -5,7 +5,7 @@ import argparse
 import json
 from typing import Sequence
 
-from host.discovery import DeviceEntry, list_devices
+from stereocam.discovery import DeviceEntry, list_devices
 
 COLUMNS = (("URL", "url"), ("TRANSPORT", "transport"), ("SERIAL", "serial"), ("MODEL", "model"),
            ("FIRMWARE", "firmware"), ("WHERE", "location"))

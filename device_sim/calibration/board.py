@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from protocol.calibration import StereoCalibration
+from stereocam.protocol.calibration import StereoCalibration
 from .rays import pixel_rays, project_points
-from protocol.rectification import rodrigues
+from stereocam.protocol.rectification import rodrigues
 
 
 @dataclass(frozen=True)

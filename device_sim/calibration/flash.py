@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from protocol.errors import StereoCamError
+from stereocam.protocol.errors import StereoCamError
 
 SECTOR_SIZE = 4096
 PAGE_SIZE = 256

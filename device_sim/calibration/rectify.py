@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from protocol.calibration import StereoCalibration
-from protocol.rectification import RectifiedGeometry, stereo_rectify
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.rectification import RectifiedGeometry, stereo_rectify
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ import zlib
 from dataclasses import dataclass
 from typing import Literal
 
-from protocol.errors import StereoCamError
+from stereocam.protocol.errors import StereoCamError
 
 from .flash import NorFlash
 

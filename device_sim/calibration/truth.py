@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from protocol.calibration import StereoCalibration
-from protocol.rectification import rodrigues
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.rectification import rodrigues
 
 NOMINAL_FOCAL_PX = 960.0
 NOMINAL_WIDTH = 1280

@@ -1,6 +1,6 @@
 """Device matching core: StereoBM block matching, bit-exact with cv2.StereoBM (OpenCV 4.x/5.x).
 
-    from device_sim.matching import MatchParams, match, Matcher
+    from stereocam.device_sim.matching import MatchParams, match, Matcher
     disp = match(left, right, MatchParams(num_disparities=64, block_size=9))  # int16, d * 16
     m = Matcher(left.shape, params); disp = m.match(left, right)  # keeps scratch per frame
 

@@ -13,6 +13,8 @@ documents the transfer rules (packets, ZLP, timeouts); errors are libusb1's (``e
 """
 from __future__ import annotations
 
+from stereocam.transports.usb import register_backend
+
 from .backend import SimBackend
 from .bus import SimUsbBus
 from .descriptors import (EP_IN, EP_OUT, INTERFACE_NUMBER, MAX_PACKET_SIZE, PRODUCT_ID,
@@ -21,7 +23,8 @@ from .device import SimHandle, SimUsbDevice, UsbFunction
 from .errors import LibusbError, usb_error
 
 BUS = SimUsbBus(number=1)
-"""The process-wide bus that ``plug()`` uses and ``host.transports.usb`` scans."""
+"""The process-wide bus that ``plug()`` uses and ``stereocam.transports.usb`` scans."""
+register_backend("sim", BUS.backend)
 
 
 def plug(sim: UsbFunction, **options: object) -> SimUsbDevice:

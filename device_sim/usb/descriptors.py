@@ -9,22 +9,17 @@ import re
 import struct
 from dataclasses import dataclass, field
 
-VENDOR_ID = 0x1209
-"""pid.codes' shared open-hardware vendor ID."""
-PRODUCT_ID = 0x0001
-"""pid.codes test PID (0x0001-0x0010 are reserved for testing); replace before shipping."""
-MAX_PACKET_SIZE = 512
-"""wMaxPacketSize of a high-speed bulk endpoint (USB 2.0 §5.8.3)."""
-EP_OUT = 0x01
-EP_IN = 0x81
-INTERFACE_NUMBER = 0
+from stereocam.protocol.usb_identity import (EP_IN, EP_OUT, INTERFACE_NUMBER, PRODUCT_ID,  # noqa: F401
+                                             VENDOR_ID)
+from stereocam.protocol.usb_identity import INTERFACE_CLASS as CLASS_VENDOR_SPECIFIC
+from stereocam.protocol.usb_identity import MAX_PACKET_SIZE_HS as MAX_PACKET_SIZE
+
 CONFIGURATION_VALUE = 1
 LANGID_EN_US = 0x0409
 MANUFACTURER = "StereoCam"
 INTERFACE_NAME = "StereoCam bulk stream"
 
 DT_DEVICE, DT_CONFIG, DT_STRING, DT_INTERFACE, DT_ENDPOINT = 1, 2, 3, 4, 5
-CLASS_VENDOR_SPECIFIC = 0xFF
 ATTR_BULK = 0x02
 SPEED_HIGH = 3
 """libusb_speed value for USB 2.0 high speed (480 Mbit/s)."""

@@ -1,27 +1,97 @@
-"""URL → transport, one small module per scheme (like pyserial's ``serial_for_url``).
+"""URL → transport: an open table of URL schemes, one module per scheme (like pyserial's
+``serial_for_url`` and its ``protocol_handler_packages``).
 
-Schemes listed in ``SCHEMES`` go to their module's ``open_transport(url, timeout)``;
-anything else (a device path, ``socket://``, ``rfc2217://``, ``loop://``) goes to pyserial.
+A scheme module provides ``open_transport(url, timeout) -> Transport`` and may provide
+``discover() -> list[DeviceEntry]`` (cameras it can open now) and ``reopen_url(url, serial) -> str``
+(the URL that finds the same unit again after an unplug or a reboot).
+
+Schemes come from three places, first match wins: ``register_scheme`` calls (a package that
+adds a scheme calls it when imported: the simulator registers ``sim://`` and its USB bus this
+way), the built-in table ``SCHEMES``, and the ``stereocam.url_schemes`` entry-point group (so
+``stereocam.open("sim://")`` works in a fresh process without importing the simulator first).
+Anything else (a device path, ``socket://``, ``rfc2217://``, ``loop://``) goes to pyserial.
 """
 from __future__ import annotations
 
 import importlib
+import logging
+import threading
+from importlib.metadata import entry_points
+from types import ModuleType
+from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
 
+from ..protocol.errors import TransportError
 from .base import Transport
 
-SCHEMES: dict[str, str] = {
-    "sim": "host.transports.inprocess",
-    "usb": "host.transports.usb",
-}
-SERIAL_MODULE = "host.transports.serial_port"
+if TYPE_CHECKING:
+    from ..discovery import DeviceEntry
+
+ENTRY_POINT_GROUP = "stereocam.url_schemes"
+SERIAL_MODULE = "stereocam.transports.serial_port"
+SCHEMES: dict[str, str] = {"usb": "stereocam.transports.usb"}
+"""scheme → module name; ``register_scheme`` adds to it."""
+_lock = threading.Lock()
+_log = logging.getLogger(__name__)
+
+
+def register_scheme(scheme: str, module: str) -> None:
+    """Route ``scheme://`` URLs to ``module`` (imported on first use)."""
+    with _lock:
+        SCHEMES[scheme.lower()] = module
+
+
+def scheme_of(url: str) -> str:
+    return urlsplit(url).scheme.lower() if "://" in url else ""
+
+
+def _entry_point(scheme: str) -> str | None:
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name == scheme:
+            return ep.value
+    return None
+
+
+def scheme_module(url: str) -> ModuleType:
+    """The module that handles ``url``'s scheme (pyserial's for anything not in the table)."""
+    scheme = scheme_of(url)
+    with _lock:
+        name = SCHEMES.get(scheme)
+    if name is None and scheme:
+        name = _entry_point(scheme)
+    return importlib.import_module(name or SERIAL_MODULE)
 
 
 def open_transport(url: str, timeout: float = 1.0) -> Transport:
     """Open the transport that ``url`` names."""
-    scheme = urlsplit(url).scheme if "://" in url else ""
-    module = importlib.import_module(SCHEMES.get(scheme, SERIAL_MODULE))
-    return module.open_transport(url, timeout)
+    if not isinstance(url, str) or not url:
+        raise TransportError(f"a camera URL must be a non-empty string, got {url!r}")
+    return scheme_module(url).open_transport(url, timeout)
 
 
-__all__ = ["Transport", "open_transport", "SCHEMES"]
+def reopen_url(url: str, serial: str) -> str:
+    """The URL that finds the unit with ``serial`` again (USB by serial: bus addresses change)."""
+    module = scheme_module(url)
+    reopen = getattr(module, "reopen_url", None)
+    return reopen(url, serial) if reopen is not None else url
+
+
+def discover() -> list["DeviceEntry"]:
+    """Cameras every loaded scheme module can open now; one failing source does not hide the rest."""
+    with _lock:
+        names = list(dict.fromkeys([*SCHEMES.values(), SERIAL_MODULE]))
+    entries: list[DeviceEntry] = []
+    for name in names:
+        module = importlib.import_module(name)
+        find = getattr(module, "discover", None)
+        if find is None:
+            continue
+        try:
+            entries.extend(find())
+        except Exception as exc:  # noqa: BLE001 - discovery must survive a broken bus or driver
+            _log.warning("device discovery via %s failed: %s", name, exc)
+    return entries
+
+
+__all__ = ["Transport", "open_transport", "register_scheme", "scheme_module", "reopen_url", "discover",
+           "SCHEMES", "ENTRY_POINT_GROUP"]

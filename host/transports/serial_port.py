@@ -1,11 +1,18 @@
 """Anything pyserial opens: device paths (a pty, /dev/ttyACM0), ``socket://``, ``rfc2217://``, ``loop://``."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import serial
 
-from protocol.errors import DisconnectedError, TransportError
+from stereocam.protocol.errors import DisconnectedError, TransportError
+
+from stereocam.protocol.usb_identity import CAMERA_IDS
 
 from .base import Transport
+
+if TYPE_CHECKING:
+    from ..discovery import DeviceEntry
 
 
 class SerialTransport(Transport):
@@ -50,3 +57,18 @@ def open_transport(url: str, timeout: float) -> SerialTransport:
     except (serial.SerialException, OSError, ValueError) as exc:
         raise TransportError(f"cannot open {url}: {exc}") from exc
     return SerialTransport(port, url)
+
+
+def discover() -> list["DeviceEntry"]:
+    """Serial ports whose USB VID:PID is a camera's (pyserial's port list)."""
+    from serial.tools import list_ports
+
+    from ..discovery import DeviceEntry
+
+    entries = []
+    for port in sorted(list_ports.comports(), key=lambda p: p.device):
+        if port.vid is None or (port.vid, port.pid) not in CAMERA_IDS:
+            continue
+        entries.append(DeviceEntry(port.device, port.serial_number, port.product, "serial",
+                                   location=port.location or port.hwid))
+    return entries

@@ -2,9 +2,9 @@
 
 URLs: ``usb://`` (first camera), ``usb://1209:0001`` (hex VID:PID), ``usb://?serial=SN``, or
 both (``usb://1209:0001?serial=SN``). Devices come from the real libusb backend (the library
-``libusb-package`` ships, else the system's libusb-1.0) and, when ``device_sim.usb`` is loaded in
-this process, from its simulated bus. The host SDK never imports the simulator itself: a process
-that plugged simulated cameras has imported it already.
+``libusb-package`` ships, else the system's libusb-1.0) and from every backend registered with
+``register_backend`` (the simulator registers its simulated bus this way when it is imported;
+the SDK never imports the simulator).
 
 Reads are bulk IN transfers of ``READ_SIZE`` bytes (a multiple of the 512-byte packet size, so
 no packet can overflow the buffer); a transfer ends at the device's short or zero-length packet,
@@ -18,26 +18,27 @@ import array
 import errno
 import logging
 import math
-import sys
 import threading
 import time
 from dataclasses import dataclass
-from typing import Iterator
+from typing import TYPE_CHECKING, Iterator
 from urllib.parse import parse_qs, urlsplit
 
 import usb.core
 import usb.util
 
-from protocol.errors import CameraTimeoutError, DisconnectedError, TransportError
+from stereocam.protocol.errors import CameraTimeoutError, DisconnectedError, TransportError
+from stereocam.protocol.usb_identity import CAMERA_IDS, INTERFACE_CLASS, MAX_PACKET_SIZE_HS
 
 from .base import Transport
 
+if TYPE_CHECKING:
+    from ..discovery import DeviceEntry
+
 _log = logging.getLogger(__name__)
 
-CAMERA_IDS: tuple[tuple[int, int], ...] = ((0x1209, 0x0001),)
-"""(VID, PID) pairs of StereoCam USB cameras; ``device_sim.usb.descriptors`` uses the first."""
-VENDOR_SPECIFIC = 0xFF
-MAX_PACKET_SIZE = 512
+VENDOR_SPECIFIC = INTERFACE_CLASS
+MAX_PACKET_SIZE = MAX_PACKET_SIZE_HS
 READ_SIZE = 512 * MAX_PACKET_SIZE
 """Bytes per bulk IN transfer: 256 KiB, whole packets."""
 POLL_S = 0.1
@@ -103,15 +104,20 @@ def real_backend() -> object | None:
         return _real_backend
 
 
-def simulated_backend() -> object | None:
-    """The simulated bus's backend, if this process loaded ``device_sim.usb``."""
-    sim = sys.modules.get("device_sim.usb")
-    return sim.get_backend() if sim is not None else None
+_extra_backends: dict[str, object] = {}
+
+
+def register_backend(kind: str, backend: object) -> None:
+    """Scan ``backend`` (a ``usb.backend.IBackend``) beside libusb; ``kind`` names it in listings."""
+    with _backend_lock:
+        _extra_backends[kind] = backend
 
 
 def backends() -> list[tuple[str, object]]:
-    """("libusb" | "sim", backend) for every bus to scan."""
-    found = [("libusb", real_backend()), ("sim", simulated_backend())]
+    """(kind, backend) for every bus to scan: "libusb" first, then the registered ones."""
+    with _backend_lock:
+        extra = list(_extra_backends.items())
+    found = [("libusb", real_backend()), *extra]
     return [(kind, b) for kind, b in found if b is not None]
 
 
@@ -325,3 +331,39 @@ def open_transport(url: str, timeout: float = 1.0) -> UsbTransport:
     if not backends():
         hint += " (no libusb backend: pip install libusb-package)"
     raise TransportError(f"no USB camera {what} could be opened{hint}")
+
+
+# -- discovery ------------------------------------------------------------------------------
+
+def _bcd_to_version(bcd: int) -> str:
+    """bcdDevice 0xJJMN → "J.M.N"."""
+    major = (bcd >> 12) * 10 + ((bcd >> 8) & 0xF)
+    return f"{major}.{(bcd >> 4) & 0xF}.{bcd & 0xF}"
+
+
+def discover() -> list["DeviceEntry"]:
+    """USB cameras on every bus this module scans (libusb and registered backends)."""
+    from ..discovery import DeviceEntry
+
+    entries = []
+    for kind, dev in find_devices(UsbSelector()):
+        try:
+            serial = device_string(dev, "serial_number")
+            model = device_string(dev, "product")
+        finally:
+            usb.util.dispose_resources(dev)
+        ids = f"{dev.idVendor:04x}:{dev.idProduct:04x}"
+        url = f"usb://{ids}?serial={serial}" if serial else f"usb://{ids}"
+        if (dev.idVendor, dev.idProduct) == CAMERA_IDS[0] and serial:
+            url = f"usb://?serial={serial}"
+        simulated = kind != "libusb"
+        entries.append(DeviceEntry(url, serial, model, "usb", _bcd_to_version(dev.bcdDevice),
+                                   simulated=simulated,
+                                   location=f"{kind + ' ' if simulated else ''}bus "
+                                            f"{dev.bus:03d} address {dev.address:03d}"))
+    return entries
+
+
+def reopen_url(url: str, serial: str) -> str:
+    """After a replug the bus address changes; the serial does not."""
+    return f"usb://?serial={serial}"

@@ -1,7 +1,7 @@
 """``sim://`` — a simulated camera in this process, joined by an in-memory byte pipe.
 
 ``sim://?seed=N`` makes a fresh unit (closed with the transport). ``sim://?serial=S`` opens the
-live, unattached simulator with that serial if this process has one (``host.list_devices``
+live, unattached simulator with that serial if this process has one (``stereocam.list_devices``
 lists them), else makes a fresh unit with that serial. Host writes go straight into the firmware's
 ``receive``; the firmware's output lands in a bounded FIFO the host reads (a full FIFO blocks
 the device, as a full USB or TCP buffer would).
@@ -11,9 +11,12 @@ from __future__ import annotations
 import threading
 from urllib.parse import parse_qs, urlsplit
 
-from protocol.errors import ConfigError, DisconnectedError
+from stereocam.protocol.errors import ConfigError, DisconnectedError
 
-from .base import Transport
+from .. import registry
+
+from stereocam.discovery import DeviceEntry
+from stereocam.transports.base import Transport
 
 FIFO_BYTES = 8 << 20
 
@@ -82,8 +85,6 @@ class InProcessTransport(Transport):
 
 
 def open_transport(url: str, timeout: float) -> InProcessTransport:
-    from device_sim import SimulatedCamera, registry  # the simulator is only needed for sim:// URLs
-
     query = parse_qs(urlsplit(url).query)
     unknown = set(query) - {"seed", "serial"}
     if unknown:
@@ -97,4 +98,16 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
         live = registry.find_free(serial)
         if live is not None:
             return InProcessTransport(live, url, owns=False)
+    from ..camera import SimulatedCamera
+
     return InProcessTransport(SimulatedCamera(serial=serial, seed=seed), url)
+
+
+def discover() -> list[DeviceEntry]:
+    """Simulators alive in this process and held by no link (``sim://?serial=SN`` opens one)."""
+    return [DeviceEntry(f"sim://?serial={s.serial}", s.serial, s.model, "sim", s.firmware_version, simulated=True,
+                        location="this process") for s in registry.live_simulators() if not s.attached]
+
+
+def reopen_url(url: str, serial: str) -> str:
+    return f"sim://?serial={serial}"

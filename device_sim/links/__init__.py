@@ -1,0 +1,1 @@
+"""How a simulated unit meets a host: in-process pipe (``sim://``), pty and TCP servers, USB."""
