@@ -1,4 +1,12 @@
-"""Host SDK: ``stereocam.open(url)`` gives a Camera; frames, errors and transports live here."""
+"""stereocam: the host SDK for STOC-class stereo cameras. ``stereocam.open(url)`` gives a Camera.
+
+Beneath it: ``stereocam.protocol`` (the wire protocol, no I/O), ``stereocam.transports`` (one
+module per URL scheme), ``stereocam.device_sim`` (the simulated camera) and ``stereocam.tools``
+(the ``stereocam`` command).
+"""
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _version
+
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DeviceError, DisconnectedError, ErrorCode,
                              ProtocolError, StereoCamError, TransportError, VerificationError,
