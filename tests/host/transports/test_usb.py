@@ -15,11 +15,7 @@ from stereocam.transports import usb as usbt
 from stereocam.protocol.errors import DisconnectedError, StereoCamError, TransportError
 
 
-@pytest.fixture(autouse=True)
-def clean_bus():
-    simusb.unplug_all()
-    yield
-    simusb.unplug_all()
+pytestmark = pytest.mark.sim_only("drives the simulated USB bus")
 
 
 @pytest.fixture

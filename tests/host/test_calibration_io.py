@@ -14,7 +14,9 @@ from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode
 
-from .faults import FaultyTransport, PacketFilter
+from tests.support.faults import FaultyTransport, PacketFilter
+
+pytestmark = pytest.mark.sim_only("reads the simulator's flash and true calibration")
 
 SMALL = dict(width=320, height=240, num_disparities=32, block_size=11)
 

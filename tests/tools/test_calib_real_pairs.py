@@ -6,7 +6,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-PAIRS = Path(__file__).parent / "data" / "opencv_chessboard_pairs"
+from tests.support.paths import DATA
+
+PAIRS = DATA / "opencv_chessboard_pairs"
 
 
 def calibrate(out: Path, *extra: str) -> subprocess.CompletedProcess:

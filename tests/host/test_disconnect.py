@@ -8,6 +8,8 @@ import pytest
 import stereocam
 from stereocam.device_sim.process import ServedSimulator
 
+pytestmark = pytest.mark.sim_only("kills and restarts the simulator process")
+
 
 @pytest.mark.parametrize("spec", ["pty", "tcp:127.0.0.1:0"])
 def test_device_killed_mid_stream(spec):

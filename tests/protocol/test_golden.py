@@ -8,7 +8,7 @@ understand this code. That is almost always a bug, not a reason to update the fi
 Regenerate the file ONLY for a deliberate, versioned protocol change (and bump the protocol
 version / SPEC.md with it):
 
-    .venv/bin/python tests/test_protocol_golden.py --regenerate
+    .venv/bin/python -m tests.protocol.test_golden --regenerate
 
 then review the diff of tests/golden/protocol_v1.json byte by byte.
 
@@ -32,9 +32,10 @@ from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode
 from stereocam.protocol.framing import FLAG_RESEND, HEADER_LEN, MAGIC, TRAILER_LEN, VERSION_MAJOR, VERSION_MINOR, Decoder, Packet
 from stereocam.protocol.params import PARAMS
+from tests.support import paths
 
-GOLDEN = Path(__file__).resolve().parent / "golden" / "protocol_v1.json"
-SPEC = Path(__file__).resolve().parent.parent / "protocol" / "SPEC.md"
+GOLDEN = paths.GOLDEN / "protocol_v1.json"
+SPEC = paths.REPO / "protocol" / "SPEC.md"
 VERSION = (1, 1)  # the version these vectors pin; a change here is a protocol change
 
 _COUNTERS = {name: (i + 1) * 1_000_003 for i, name in enumerate(m.COUNTERS)}
@@ -107,7 +108,7 @@ def fields_json(msg: m.Message) -> dict:
 def build_golden() -> dict:
     return {
         "_comment": "Protocol v1 golden frames. Regenerate ONLY for a deliberate protocol change: "
-                    ".venv/bin/python tests/test_protocol_golden.py --regenerate",
+                    ".venv/bin/python -m tests.protocol.test_golden --regenerate",
         "protocol_version": list(VERSION),
         "vectors": [
             {"message": type(msg).__name__, "msg_type": f"0x{msg.TYPE:04x}", "request_id": rid, "flags": flags,

@@ -16,7 +16,10 @@ from stereocam.tools.calib_solve import SolveConfig
 from stereocam.tools.calibrate import write_outputs
 from stereocam.tools.calibrate_device import (EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_WRITE, calibrate_device)
 
-from .faults import FaultyTransport, PacketFilter
+from tests.support.faults import FaultyTransport, PacketFilter
+
+pytestmark = pytest.mark.sim_only("calibrates simulated units against their true calibration")
+
 
 FAST = dict(size=(640, 480), fps=20)
 

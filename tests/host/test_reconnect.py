@@ -7,6 +7,8 @@ import stereocam.device_sim.usb as simusb
 import stereocam
 from stereocam.device_sim import SimulatedCamera
 
+pytestmark = pytest.mark.sim_only("pulls the simulated unit's USB plug")
+
 
 def test_usb_unplug_replug_reconnect_reapplies_config_and_resumes():
     sim = SimulatedCamera(serial="RECON-1", seed=51)
