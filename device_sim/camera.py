@@ -30,7 +30,7 @@ from .matching import warm_up as matching_warm_up
 from .calib_service import CalibrationService
 from stereocam.protocol.calibration import StereoCalibration
 from .calibration.truth import true_calibration
-from .scene import BOARD_SCENE
+from .scene import Scene
 from .sensor import SENSOR_H, SENSOR_W, Geometry, SensorRig
 from .trigger import TriggerLine
 
@@ -38,7 +38,7 @@ MODEL = "STOC-SIM"
 FIRMWARE_VERSION = "1.1.0"
 CHUNK = 128 * 1024  # FRAME_DATA payload bytes per message
 CAPABILITIES = (m.Capability.DISPARITY | m.Capability.SOFTWARE_TRIGGER | m.Capability.EXTERNAL_TRIGGER
-                | m.Capability.TIME_SYNC | m.Capability.CALIBRATION)
+                | m.Capability.TIME_SYNC | m.Capability.CALIBRATION | m.Capability.RAW_OUTPUT)
 RESEND_CACHE = 64
 GROUND_TRUTH_KEEP = 64
 
@@ -53,7 +53,7 @@ class _Exposure:
     sequence: int
     host_monotonic: float
     scene_time: float
-    scene: int
+    scene: Scene
     rays: np.ndarray  # camera-frame rays of the delivered left image (rectified pinhole or raw lens)
     rot: np.ndarray  # that view's camera→world rotation
     focal_px: float
@@ -74,8 +74,10 @@ class SimulatedCamera:
     """One simulated STOC-class unit (firmware + sensor rig)."""
 
     def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: TriggerLine | None = None,
-                 flash_path: str | Path | None = None, factory_calibrated: bool = True):
-        """``flash_path``: the file behind this unit's flash (kept across runs); None: a private
+                 flash_path: str | Path | None = None, factory_calibrated: bool = True,
+                 scene: Scene | str = Scene.LAB):
+        """``scene``: what the rig looks at ("lab", "wall", "board"; a simulator setting, changeable
+        at run time through ``scene``, never a device parameter). ``flash_path``: the file behind this unit's flash (kept across runs); None: a private
         temporary file. ``factory_calibrated``: the unit left the factory with its true calibration
         stored (False: fresh from assembly, streams raw images until calibrated)."""
         self.seed = seed
@@ -83,6 +85,7 @@ class SimulatedCamera:
         self.model = MODEL
         self.firmware_version = FIRMWARE_VERSION
         self.clock = DeviceClock(seed)
+        self.scene = scene
         self.config = ConfigStore()
         self._truth_cal = true_calibration(seed)
         self.rig = SensorRig(seed, self._truth_cal)
@@ -123,7 +126,7 @@ class SimulatedCamera:
         of the capture path, so the first frames are not stalled. Paid once per process."""
         matching_warm_up()
         self.rig.set_format(64, 48)  # a tiny format: the real one is set by the first capture
-        left, right = self.rig.capture(0.0, 0, 4000, 0, 0)
+        left, right = self.rig.capture(0.0, Scene.LAB, 4000, 0, 0)
         maps, _ = self.calibration.maps(64, 48)
         if maps is not None:
             maps.rectify(left, right)
@@ -168,6 +171,15 @@ class SimulatedCamera:
             self._sink = None
         if self._tmpdir is not None:
             self._tmpdir.cleanup()
+
+    @property
+    def scene(self) -> Scene:
+        """What the rig looks at; set it (a Scene or its name) to change the view from the next capture."""
+        return self._scene
+
+    @scene.setter
+    def scene(self, value: Scene | str) -> None:
+        self._scene = Scene.parse(value)
 
     def true_calibration(self) -> StereoCalibration:
         """This unit's true calibration (full sensor resolution), as the calibration tool writes it."""
@@ -314,7 +326,8 @@ class SimulatedCamera:
         w, h = cfg["width"], cfg["height"]
         self.rig.set_format(w, h)
         t = req.time - self.clock.boot
-        left, right = self.rig.capture(t, cfg["scene"], cfg["exposure_us"], cfg["gain"],
+        view = self._scene
+        left, right = self.rig.capture(t, view, cfg["exposure_us"], cfg["gain"],
                                        req.sequence ^ (self.seed << 20))
         maps, calib_id = self.calibration.maps(w, h)
         if not cfg["rectify"]:
@@ -324,15 +337,15 @@ class SimulatedCamera:
             left, right = maps.rectify(left, right)
             g = maps.geometry
             focal, cx, cy, baseline = g.focal_px, g.cx, g.cy, g.baseline_m
-            view = Geometry(w, h, focal, cx, cy, baseline)
-            if view not in self._view_rays:
-                self._view_rays = {view: view.rays()}  # one table per rectified view, not per frame
-            self._remember(req, cfg["scene"], t, self._view_rays[view], g.R1.T, focal, baseline)
+            geometry = Geometry(w, h, focal, cx, cy, baseline)
+            if geometry not in self._view_rays:
+                self._view_rays = {geometry: geometry.rays()}  # one table per rectified view, not per frame
+            self._remember(req, view, t, self._view_rays[geometry], g.R1.T, focal, baseline)
             flags = m.FRAME_RECTIFIED
         else:  # raw images: no disparity without a calibration
             outputs &= ~Output.DISPARITY
             focal = cx = cy = baseline = 0.0
-            self._remember(req, cfg["scene"], t, self.rig._rays[0], np.eye(3), 0.0, 0.0)
+            self._remember(req, view, t, self.rig._rays[0], np.eye(3), 0.0, 0.0)
             flags = 0
         disp = self._disparity(cfg, left, right) if Output.DISPARITY in outputs else None
         begin = m.FrameBegin(
@@ -366,9 +379,9 @@ class SimulatedCamera:
         with self._sink_lock:
             return self.engine.current(req) and self._emit(wire)
 
-    def _remember(self, req: CaptureRequest, scene_id: int, t: float, rays: np.ndarray, rot: np.ndarray,
+    def _remember(self, req: CaptureRequest, view: Scene, t: float, rays: np.ndarray, rot: np.ndarray,
                   focal: float, baseline: float) -> None:
-        self._truth[req.sequence] = _Exposure(req.sequence, req.time, t, scene_id, rays, rot, focal, baseline)
+        self._truth[req.sequence] = _Exposure(req.sequence, req.time, t, view, rays, rot, focal, baseline)
         while len(self._truth) > GROUND_TRUTH_KEEP:
             self._truth.popitem(last=False)
 
@@ -376,7 +389,7 @@ class SimulatedCamera:
         """Truth for one of the last few captures (None once it has aged out), rendered on demand
         for exactly the view the frame delivered (rectified by the stored calibration, or raw)."""
         e = self._truth.get(sequence)
-        if e is None or e.scene == BOARD_SCENE:
+        if e is None or e.scene == Scene.BOARD:
             return None
         depth = self.rig.depth(e.scene_time, e.scene, e.rays, e.rot)
         with np.errstate(divide="ignore"):

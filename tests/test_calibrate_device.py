@@ -28,7 +28,8 @@ def run(cam, tmp_path, config=SolveConfig(), **kw):
 @pytest.fixture
 def fresh(tmp_path):
     """A unit fresh from assembly: no calibration stored."""
-    sim = SimulatedCamera(serial="LINE-1", seed=71, flash_path=tmp_path / "u.flash", factory_calibrated=False)
+    sim = SimulatedCamera(serial="LINE-1", seed=71, flash_path=tmp_path / "u.flash", factory_calibrated=False,
+                          scene="board")
     cam = Camera(InProcessTransport(sim), timeout=2.0)
     yield cam, sim
     cam.close()
@@ -58,8 +59,9 @@ def test_calibrates_writes_verifies_and_the_device_uses_it(fresh, tmp_path):
 
 
 def test_board_never_found(fresh, tmp_path):
-    cam, _ = fresh
-    code, result, verdict = run(cam, tmp_path, scene=1, pairs=4)
+    cam, sim = fresh
+    sim.scene = "wall"  # the fixture shows no board
+    code, result, verdict = run(cam, tmp_path, pairs=4)
     assert code == EXIT_NO_SOLUTION and result is None
     assert "board" in verdict and "nothing was written" in verdict
     assert cam.read_calibration() is None and cam.info().calibration_id == 0
@@ -83,7 +85,7 @@ def test_failing_gate_writes_nothing(fresh, tmp_path):
 
 
 def test_failed_flash_write_keeps_the_previous_calibration(tmp_path):
-    sim = SimulatedCamera(seed=72, flash_path=tmp_path / "f.flash")  # factory calibrated
+    sim = SimulatedCamera(seed=72, flash_path=tmp_path / "f.flash", scene="board")  # factory calibrated
     with Camera(InProcessTransport(sim), timeout=2.0) as cam:
         before = cam.read_calibration()
         sim.calibration.flash.power_loss_after(1)
@@ -95,7 +97,7 @@ def test_failed_flash_write_keeps_the_previous_calibration(tmp_path):
 
 
 def test_read_back_that_differs_is_not_success(tmp_path):
-    sim = SimulatedCamera(seed=73, flash_path=tmp_path / "r.flash", factory_calibrated=False)
+    sim = SimulatedCamera(seed=73, flash_path=tmp_path / "r.flash", factory_calibrated=False, scene="board")
     link = FaultyTransport(InProcessTransport(sim))
 
     def corrupt(p):
@@ -114,7 +116,7 @@ def test_read_back_that_differs_is_not_success(tmp_path):
 
 
 def test_cli_device_mode(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "sim://?seed=74", "--out", str(tmp_path),
+    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "sim://?seed=74&scene=board", "--out", str(tmp_path),
                         "--size", "640x480", "--max-views", "15", "-q"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "PASSED" in r.stdout and "verified by read-back" in r.stdout
