@@ -17,14 +17,16 @@ from typing import Callable
 import numpy as np
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.errors import DeviceError, ErrorCode, ProtocolError
+from stereocam.protocol.errors import ErrorCode, ProtocolError
 from stereocam.protocol.framing import FLAG_RESEND, MAX_PAYLOAD, VERSION_MAJOR, VERSION_MINOR, Decoder, Packet
 from stereocam.protocol.params import BY_NAME, Output, TriggerMode
+from stereocam.protocol.segmentation import REFERENCE_CHUNK, capture_messages
 
 from . import registry
 from .capture import CaptureEngine, CaptureRequest
 from .clock import DeviceClock
 from .config_store import ConfigStore
+from .link_layer.refusal import Refusal
 from .matching import Matcher, MatchParams
 from .matching import warm_up as matching_warm_up
 from .calib_service import CalibrationService
@@ -36,7 +38,7 @@ from .trigger import TriggerLine
 
 MODEL = "STOC-SIM"
 FIRMWARE_VERSION = "1.1.0"
-CHUNK = 128 * 1024  # FRAME_DATA payload bytes per message
+CHUNK = REFERENCE_CHUNK  # FRAME_DATA data bytes per message
 CAPABILITIES = (m.Capability.DISPARITY | m.Capability.SOFTWARE_TRIGGER | m.Capability.EXTERNAL_TRIGGER
                 | m.Capability.TIME_SYNC | m.Capability.CALIBRATION | m.Capability.RAW_OUTPUT)
 RESEND_CACHE = 64
@@ -198,27 +200,29 @@ class SimulatedCamera:
         if packet.flags & FLAG_RESEND and cached is not None and cached[0] == packet.msg_type:
             self.counters["resends_replayed"] += 1
             return cached[1]
-        handler = self._handlers.get(packet.msg_type)
-        if handler is None:
-            reply: m.Message = self._nack(packet.msg_type, ErrorCode.UNKNOWN_TYPE,
-                                          f"unknown request type 0x{packet.msg_type:04x}")
-        else:
-            try:
-                reply = handler(m.decode_packet(packet))
-            except ProtocolError as exc:
-                reply = self._nack(packet.msg_type, ErrorCode.BAD_PAYLOAD, str(exc))
-            except DeviceError as exc:  # a handler's refusal: the state it guards is unchanged
-                pid = BY_NAME[exc.param].pid if exc.param in BY_NAME else 0
-                reply = self._nack(packet.msg_type, ErrorCode(exc.code), exc.device_message, pid)
-            except Exception as exc:  # a firmware bug still answers, so the host never just times out
-                log.exception("handler for 0x%04x failed", packet.msg_type)
-                reply = self._nack(packet.msg_type, ErrorCode.INTERNAL, f"{type(exc).__name__}: {exc}")
+        try:
+            reply: m.Message = self._execute(packet)
+        except Refusal as exc:  # the one place a refusal becomes a NACK; the state it guards is unchanged
+            reply = self._nack(packet.msg_type, exc.code, exc.message, exc.param_id)
+        except Exception as exc:  # a firmware bug still answers, so the host never just times out
+            log.exception("handler for 0x%04x failed", packet.msg_type)
+            reply = self._nack(packet.msg_type, ErrorCode.INTERNAL, f"{type(exc).__name__}: {exc}")
         wire = m.encode(reply, rid)
         self._replies[rid] = (packet.msg_type, wire)
         self._replies.move_to_end(rid)
         while len(self._replies) > RESEND_CACHE:
             self._replies.popitem(last=False)
         return wire
+
+    def _execute(self, packet: Packet) -> m.Message:
+        handler = self._handlers.get(packet.msg_type)
+        if handler is None:
+            raise Refusal(ErrorCode.UNKNOWN_TYPE, f"unknown request type 0x{packet.msg_type:04x}")
+        try:
+            msg = m.decode_packet(packet)
+        except ProtocolError as exc:
+            raise Refusal(ErrorCode.BAD_PAYLOAD, str(exc)) from exc
+        return handler(msg)
 
     def _nack(self, request_type: int, code: ErrorCode, text: str, param_id: int = 0) -> m.Nack:
         self.counters["nacks"] += 1
@@ -246,22 +250,20 @@ class SimulatedCamera:
         return m.Config(self.config.by_id())
 
     def _set_config(self, msg: m.SetConfig) -> m.Message:
-        rej = self.config.apply(msg.values, self.engine.streaming)
-        if rej:
-            return self._nack(msg.TYPE, rej.code, rej.message, rej.param_id)
+        self.config.apply(msg.values, self.engine.streaming)
         self.engine.set_rate(self.config.snapshot()["fps"])
         return m.ConfigApplied(self.config.by_id())
 
     def _trigger(self, msg: m.Trigger) -> m.Message:
         cfg = self.config.snapshot()
         if cfg["trigger_mode"] != TriggerMode.SOFTWARE:
-            return self._nack(msg.TYPE, ErrorCode.BAD_STATE, "software trigger needs trigger_mode=software",
-                              BY_NAME["trigger_mode"].pid)
+            raise Refusal(ErrorCode.BAD_STATE, "software trigger needs trigger_mode=software",
+                          BY_NAME["trigger_mode"].pid)
         if not self.engine.streaming:
-            return self._nack(msg.TYPE, ErrorCode.BAD_STATE, "software trigger needs a started stream")
+            raise Refusal(ErrorCode.BAD_STATE, "software trigger needs a started stream")
         req = self.engine.trigger(self._soft_triggers + 1, TriggerMode.SOFTWARE)
         if req is None:
-            return self._nack(msg.TYPE, ErrorCode.BUSY, "trigger queue full; previous captures still pending")
+            raise Refusal(ErrorCode.BUSY, "trigger queue full; previous captures still pending")
         self._soft_triggers += 1
         self.counters["triggers"] += 1
         return m.Triggered(req.trigger_id, req.sequence)
@@ -353,23 +355,10 @@ class SimulatedCamera:
             cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
             cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, calib_id,
             focal, cx, cy, baseline)
-        planes = [(Output.LEFT, left), (Output.RIGHT, right), (Output.DISPARITY, disp)]
-        sizes = {}
-        if not self._send_frame_part(req, m.encode(begin)):
-            return
-        for plane, img in planes:
-            sizes[plane] = 0
-            if plane not in outputs:
-                continue
-            raw = memoryview(np.ascontiguousarray(img, dtype=img.dtype.newbyteorder("<"))).cast("B")
-            for off in range(0, len(raw), CHUNK):
-                if not self._send_frame_part(req, m.encode(m.FrameData(req.sequence, int(plane), off,
-                                                                       raw[off:off + CHUNK]))):
-                    return
-            sizes[plane] = len(raw)
-        if not self._send_frame_part(req, m.encode(m.FrameEnd(req.sequence, m.FRAME_OK, sizes[Output.LEFT],
-                                                              sizes[Output.RIGHT], sizes[Output.DISPARITY]))):
-            return
+        images = {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: disp}
+        for msg in capture_messages(begin, images, CHUNK):
+            if not self._send_frame_part(req, m.encode(msg)):
+                return
         self.counters["frames_sent"] += 1
 
     def _send_frame_part(self, req: CaptureRequest, wire: bytes) -> bool:
