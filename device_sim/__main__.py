@@ -8,9 +8,9 @@ import argparse
 import signal
 import sys
 
-from .camera import SimulatedCamera
-from .scene import Scene
-from .serve import PtyServer, TcpServer
+from .firmware import SimulatedCamera
+from .links.servers import PtyServer, TcpServer
+from .rig.scene import Scene
 
 
 def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:

@@ -8,7 +8,7 @@ import sys
 import pytest
 
 from stereocam.device_sim import SimulatedCamera
-from stereocam.device_sim.sensor import BOARD
+from stereocam.device_sim.rig.sensor import BOARD
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.protocol import messages as m

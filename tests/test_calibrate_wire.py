@@ -21,7 +21,7 @@ from stereocam.camera import Camera
 from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.device_sim.process import ServedSimulator
-from stereocam.device_sim.sensor import BOARD
+from stereocam.device_sim.rig.sensor import BOARD
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode
 from stereocam.protocol.framing import Decoder, encode_frame

@@ -8,7 +8,7 @@ import pytest
 
 import stereocam
 from stereocam.device_sim import SimulatedCamera, TriggerLine
-from stereocam.device_sim.scene import WALL_DISTANCE_M
+from stereocam.device_sim.rig.scene import WALL_DISTANCE_M
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 

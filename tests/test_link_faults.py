@@ -129,8 +129,8 @@ def test_garbage_injected_into_the_read_stream(faulty):
 
 def test_version_mismatch_is_refused():
     sim = SimulatedCamera(seed=13)
-    real = sim._get_info
-    sim._handlers[m.MsgType.GET_INFO] = lambda msg: m.Info(**{**real(msg).__dict__, "protocol_version": (2, 0)})
+    real = sim.dispatcher.handlers[m.MsgType.GET_INFO]
+    sim.dispatcher.handlers[m.MsgType.GET_INFO] = lambda msg: m.Info(**{**real(msg).__dict__, "protocol_version": (2, 0)})
     with pytest.raises(stereocam.VersionMismatchError, match="protocol 2.0"):
         Camera(InProcessTransport(sim))
 

@@ -17,12 +17,12 @@ from pathlib import Path
 import numpy as np
 
 from stereocam.device_sim import SimulatedCamera
-from stereocam.device_sim.scene import WALL_DISTANCE_M
+from stereocam.device_sim.rig.scene import WALL_DISTANCE_M
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.tools.calib_solve import SolveConfig
 from stereocam.tools.calibrate_device import calibrate_device
-from stereocam.device_sim.sensor import BOARD
+from stereocam.device_sim.rig.sensor import BOARD
 
 TARGET_PCT, TARGET_EPI_PX, TARGET_DEPTH_PCT = 0.2, 0.1, 1.0
 

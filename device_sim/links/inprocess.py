@@ -15,7 +15,7 @@ from urllib.parse import parse_qs, urlsplit
 from stereocam.protocol.errors import ConfigError, DisconnectedError
 
 from .. import registry
-from ..scene import Scene
+from ..rig.scene import Scene
 
 from stereocam.discovery import DeviceEntry
 from stereocam.transports.base import Transport
@@ -103,7 +103,7 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
             if scene is not None:
                 live.scene = scene
             return InProcessTransport(live, url, owns=False)
-    from ..camera import SimulatedCamera
+    from ..firmware import SimulatedCamera
 
     return InProcessTransport(SimulatedCamera(serial=serial, seed=seed, scene=scene or Scene.LAB), url)
 

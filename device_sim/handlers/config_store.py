@@ -6,7 +6,7 @@ import threading
 from stereocam.protocol.config_rules import ConfigRejected, merge
 from stereocam.protocol.params import PARAMS, defaults
 
-from .link_layer.refusal import Refusal
+from ..link_layer.refusal import Refusal
 
 
 class ConfigStore:

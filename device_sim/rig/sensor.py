@@ -13,9 +13,9 @@ import numba as nb
 import numpy as np
 
 from . import render, scene
-from .calibration.board import BoardPose, BoardSpec, StereoBoardRenderer, board_poses
+from ..calibration.board import BoardPose, BoardSpec, StereoBoardRenderer, board_poses
 from stereocam.protocol.calibration import StereoCalibration
-from .calibration.rays import pixel_rays
+from ..calibration.rays import pixel_rays
 
 SENSOR_W, SENSOR_H = 1280, 960
 EXPOSURE_REF_US = 4000.0

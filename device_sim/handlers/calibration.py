@@ -1,4 +1,5 @@
-"""The firmware's calibration subsystem: flash records, staged writes, rectification maps.
+"""The firmware's calibration subsystem and its requests (SPEC §12): flash records, staged
+writes, rectification maps; CALIB_READ, CALIB_WRITE, CALIB_COMMIT, CALIB_RESTORE.
 
 At boot and after every successful write it loads the record in force (user, else factory) and
 builds the rectification maps for the current output format from it. A refused or failed write
@@ -11,13 +12,14 @@ import zlib
 from pathlib import Path
 
 from stereocam.protocol import messages as m
+from stereocam.protocol.calibration import CalibrationFormatError, StereoCalibration
 from stereocam.protocol.errors import ErrorCode
 
-from .calibration.flash import FlashError, NorFlash
-from stereocam.protocol.calibration import CalibrationFormatError, StereoCalibration
-from .calibration.rectify import RectificationMaps, rectification_maps
-from .calibration.store import CalibrationStore, StoreError, StoredRecord
-from .link_layer.refusal import Refusal
+from ..calibration.flash import FlashError, NorFlash
+from ..calibration.rectify import RectificationMaps, rectification_maps
+from ..calibration.store import CalibrationStore, StoreError, StoredRecord
+from ..link_layer.dispatcher import Handler
+from ..link_layer.refusal import Refusal
 
 MAX_BODY = 4096
 
@@ -80,6 +82,10 @@ class CalibrationService:
         return cls(source, rec.generation if rec else 0, self.calibration_id)
 
     # -- requests -------------------------------------------------------------------------------
+    def handlers(self) -> dict[int, Handler]:
+        return {m.MsgType.CALIB_READ: self.read, m.MsgType.CALIB_WRITE: self.write,
+                m.MsgType.CALIB_COMMIT: self.commit, m.MsgType.CALIB_RESTORE: lambda _: self.restore_factory()}
+
     def read(self, msg: m.CalibRead) -> m.CalibData:
         if msg.source == m.CalibSource.ACTIVE:
             rec = self.record  # the one in force (a stored but unusable record is not)
