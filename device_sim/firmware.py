@@ -59,6 +59,7 @@ class SimulatedCamera:
         self.calibration = CalibrationService(flash_path, self._truth_cal, factory_calibrated)
         self.truth = TruthLog(self.rig)
 
+        # the engine's callbacks reach the pipeline and the watchdog, which themselves need the engine
         self.dispatcher = Dispatcher(self.counters)
         self.engine = CaptureEngine(lambda req: self.pipeline.produce(req), lambda: self.heartbeat.watchdog())
         self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop)

@@ -74,7 +74,7 @@ class CapturePipeline:
         else:  # raw images: no disparity without a calibration
             outputs &= ~Output.DISPARITY
             focal = cx = cy = baseline = 0.0
-            self._truth.remember(Exposure(req.sequence, req.time, t, view, self._rig._rays[0], np.eye(3), 0.0, 0.0))
+            self._truth.remember(Exposure(req.sequence, req.time, t, view, self._rig.left_rays, np.eye(3), 0.0, 0.0))
             flags = 0
         disp = self._stereo.disparity(cfg, left, right) if Output.DISPARITY in outputs else None
         begin = m.FrameBegin(

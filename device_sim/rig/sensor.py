@@ -109,6 +109,11 @@ class SensorRig:
         self._board = None
         self._format = (width, height)
 
+    @property
+    def left_rays(self) -> np.ndarray:
+        """Camera-frame rays of the left imager's raw pixels at the current format (through its lens)."""
+        return self._rays[0]
+
     def _board_view(self, t: float, frame_seed: int) -> tuple[np.ndarray, np.ndarray]:
         if self._board is None:
             self._board = StereoBoardRenderer(self.calibration, BOARD)
