@@ -63,8 +63,11 @@ class RecordingProxy:
                 host_side, _ = self._listener.accept()
             except (socket.timeout, OSError):
                 continue
-            with host_side, socket.create_connection(self._upstream) as device_side:
-                self._pump(host_side, device_side)
+            try:
+                with host_side, socket.create_connection(self._upstream) as device_side:
+                    self._pump(host_side, device_side)
+            except OSError:  # either end went away: wait for the next host
+                continue
 
     def _pump(self, host_side: socket.socket, device_side: socket.socket) -> None:
         decoder = Decoder()
