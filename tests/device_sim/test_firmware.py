@@ -8,7 +8,7 @@ import pytest
 
 import stereocam
 from stereocam.device_sim import SimulatedCamera, TriggerLine
-from stereocam.device_sim.scene import WALL_DISTANCE_M
+from stereocam.device_sim.rig.scene import WALL_DISTANCE_M
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 
@@ -74,9 +74,9 @@ def test_host_time_maps_the_exposure_instant():
 
 
 def test_depth_of_a_flat_wall():
-    sim = SimulatedCamera(seed=24)
+    sim = SimulatedCamera(seed=24, scene="wall")
     with open_sim(sim) as cam:
-        cam.configure(scene=1, width=640, height=480, num_disparities=64, block_size=15)
+        cam.configure(width=640, height=480, num_disparities=64, block_size=15)
         cam.set_trigger_mode("software")
         cam.start()
         cam.trigger()
@@ -114,6 +114,8 @@ def test_sim_url_options_are_checked():
         stereocam.open("sim://?seed=abc")
     with pytest.raises(stereocam.ConfigError, match="colour"):
         stereocam.open("sim://?colour=red")
+    with pytest.raises(stereocam.ConfigError, match="known: lab, wall, board"):
+        stereocam.open("sim://?scene=beach")
     with stereocam.open("sim://?seed=5&serial=ABC123") as cam:
         assert cam.info().serial == "ABC123"
 

@@ -39,7 +39,7 @@ def test_a_client_that_stops_reading_does_not_wedge_the_device():
     import threading
 
     from stereocam.device_sim import SimulatedCamera
-    from stereocam.device_sim.serve import TcpServer
+    from stereocam.device_sim.links.servers import TcpServer
     from stereocam.protocol import messages as m
 
     sim = SimulatedCamera(seed=42)

@@ -894,8 +894,8 @@ def test_stats_dropped_sums_every_loss_counter() -> None:
 def test_param_ids_and_names_are_unique_and_sane() -> None:
     ids = [p.pid for p in PARAMS]
     names = [p.name for p in PARAMS]
-    assert len(set(ids)) == len(ids) == 21
-    assert ids == list(range(1, 22))  # v1.1 appended id 21; ids are never reused or renumbered
+    assert len(set(ids)) == len(ids) == 20
+    assert ids == [*range(1, 20), 21]  # v1.1 appended id 21 and retired 20; ids are never reused or renumbered
     assert len(set(names)) == len(names)
     assert all(1 <= i <= 0xFFFF for i in ids)  # 0 means "no parameter" in a NACK
     assert BY_ID[10].name == "min_disparity" and BY_NAME["width"].pid == 1
@@ -941,13 +941,12 @@ def test_check_rejects_non_multiples_of_step() -> None:
 
 
 def test_v1_1_parameters() -> None:
-    """SPEC §5.1: v1.1 added `rectify` (21) and widened `scene` to 0..2 (2 = calibration board)."""
+    """SPEC §5.1: v1.1 added `rectify` (21); id 20 is retired (no simulator control on the wire)."""
     r = BY_NAME["rectify"]
     assert (r.pid, r.default, r.lo, r.hi, r.step, r.odd) == (21, 1, 0, 1, 1, False)
     assert BY_ID[21] is r and PARAMS[-1] is r
-    s = BY_NAME["scene"]
-    assert (s.pid, s.default, s.lo, s.hi) == (20, 0, 0, 2)
-    assert s.check(2) is None and "outside 0..2" in s.check(3)
+    assert 20 not in BY_ID and "scene" not in BY_NAME
+    assert m.Capability.RAW_OUTPUT == 0x20  # SPEC §4.1 bit 5: the unit implements rectify=0
     assert r.check(0) is None and r.check(1) is None and "outside 0..1" in r.check(2)
     assert defaults()["rectify"] == 1 and list(defaults())[-1] == "rectify"
 

@@ -13,7 +13,8 @@ version / SPEC.md with it):
 then review the diff of tests/golden/protocol_v1.json byte by byte.
 
 History: v1.1 rewrote every vector (header byte 5, ver_minor, 0 -> 1; INFO gained its trailing
-calibration_id) and added the eight CALIB_* messages of SPEC §12.
+calibration_id) and added the eight CALIB_* messages of SPEC §12. Retiring parameter id 20 (a
+simulator control, SPEC §5.1) shortened the CONFIG vector (every parameter of the table) by one entry.
 """
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ import sys
 import pytest
 
 from stereocam.device_sim import SimulatedCamera
-from stereocam.device_sim.sensor import BOARD
+from stereocam.device_sim.rig.sensor import BOARD
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.protocol import messages as m
@@ -31,7 +31,8 @@ def run(cam, tmp_path, config=SolveConfig(), **kw):
 @pytest.fixture
 def fresh(tmp_path):
     """A unit fresh from assembly: no calibration stored."""
-    sim = SimulatedCamera(serial="LINE-1", seed=71, flash_path=tmp_path / "u.flash", factory_calibrated=False)
+    sim = SimulatedCamera(serial="LINE-1", seed=71, flash_path=tmp_path / "u.flash", factory_calibrated=False,
+                          scene="board")
     cam = Camera(InProcessTransport(sim), timeout=2.0)
     yield cam, sim
     cam.close()
@@ -61,8 +62,9 @@ def test_calibrates_writes_verifies_and_the_device_uses_it(fresh, tmp_path):
 
 
 def test_board_never_found(fresh, tmp_path):
-    cam, _ = fresh
-    code, result, verdict = run(cam, tmp_path, scene=1, pairs=4)
+    cam, sim = fresh
+    sim.scene = "wall"  # the fixture shows no board
+    code, result, verdict = run(cam, tmp_path, pairs=4)
     assert code == EXIT_NO_SOLUTION and result is None
     assert "board" in verdict and "nothing was written" in verdict
     assert cam.read_calibration() is None and cam.info().calibration_id == 0
@@ -86,7 +88,7 @@ def test_failing_gate_writes_nothing(fresh, tmp_path):
 
 
 def test_failed_flash_write_keeps_the_previous_calibration(tmp_path):
-    sim = SimulatedCamera(seed=72, flash_path=tmp_path / "f.flash")  # factory calibrated
+    sim = SimulatedCamera(seed=72, flash_path=tmp_path / "f.flash", scene="board")  # factory calibrated
     with Camera(InProcessTransport(sim), timeout=2.0) as cam:
         before = cam.read_calibration()
         sim.calibration.flash.power_loss_after(1)
@@ -98,7 +100,7 @@ def test_failed_flash_write_keeps_the_previous_calibration(tmp_path):
 
 
 def test_read_back_that_differs_is_not_success(tmp_path):
-    sim = SimulatedCamera(seed=73, flash_path=tmp_path / "r.flash", factory_calibrated=False)
+    sim = SimulatedCamera(seed=73, flash_path=tmp_path / "r.flash", factory_calibrated=False, scene="board")
     link = FaultyTransport(InProcessTransport(sim))
 
     def corrupt(p):
@@ -117,7 +119,7 @@ def test_read_back_that_differs_is_not_success(tmp_path):
 
 
 def test_cli_device_mode(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "sim://?seed=74", "--out", str(tmp_path),
+    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "sim://?seed=74&scene=board", "--out", str(tmp_path),
                         "--size", "640x480", "--max-views", "15", "-q"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "PASSED" in r.stdout and "verified by read-back" in r.stdout

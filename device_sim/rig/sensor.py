@@ -13,9 +13,9 @@ import numba as nb
 import numpy as np
 
 from . import render, scene
-from .calibration.board import BoardPose, BoardSpec, StereoBoardRenderer, board_poses
+from ..calibration.board import BoardPose, BoardSpec, StereoBoardRenderer, board_poses
 from stereocam.protocol.calibration import StereoCalibration
-from .calibration.rays import pixel_rays
+from ..calibration.rays import pixel_rays
 
 SENSOR_W, SENSOR_H = 1280, 960
 EXPOSURE_REF_US = 4000.0
@@ -109,6 +109,11 @@ class SensorRig:
         self._board = None
         self._format = (width, height)
 
+    @property
+    def left_rays(self) -> np.ndarray:
+        """Camera-frame rays of the left imager's raw pixels at the current format (through its lens)."""
+        return self._rays[0]
+
     def _board_view(self, t: float, frame_seed: int) -> tuple[np.ndarray, np.ndarray]:
         if self._board is None:
             self._board = StereoBoardRenderer(self.calibration, BOARD)
@@ -117,12 +122,12 @@ class SensorRig:
         pose = self._board_poses[int(t / BOARD_DWELL_S) % len(self._board_poses)]
         return self._board.render(pose, np.random.default_rng(frame_seed))
 
-    def capture(self, t: float, scene_id: int, exposure_us: int, gain: int, frame_seed: int
+    def capture(self, t: float, view: scene.Scene, exposure_us: int, gain: int, frame_seed: int
                 ) -> tuple[np.ndarray, np.ndarray]:
         """Raw left and right images (uint8) exposed at the same instant ``t``."""
-        if scene_id == scene.BOARD_SCENE:
+        if view == scene.Scene.BOARD:
             return self._board_view(t, frame_seed)
-        prims = scene.primitives(scene_id, t)
+        prims = scene.primitives(view, t)
         scale = 255.0 * exposure_us / EXPOSURE_REF_US * 10.0 ** (gain / 200.0)
         scratch = np.empty_like(self._rad)
         images = []
@@ -134,13 +139,13 @@ class SensorRig:
             images.append(img)
         return images[0], images[1]
 
-    def depth(self, t: float, scene_id: int, rays: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    def depth(self, t: float, view: scene.Scene, rays: np.ndarray, rot: np.ndarray) -> np.ndarray:
         """True depth (m, inf = nothing) along the optical axis of a view from the left imager's
         centre with camera-frame ``rays`` and camera→world rotation ``rot``."""
-        if scene_id == scene.BOARD_SCENE:
+        if view == scene.Scene.BOARD:
             raise ValueError("no depth truth for the calibration scene")
         rad = np.empty(rays.shape[:2], np.float32)
         depth = np.empty_like(rad)
-        render.render_radiance(rays, np.zeros(3), np.ascontiguousarray(rot, np.float64), scene.primitives(scene_id, t),
+        render.render_radiance(rays, np.zeros(3), np.ascontiguousarray(rot, np.float64), scene.primitives(view, t),
                                self.texture, self.tex_offsets, self.tex_side, LIGHT, rad, depth)
         return depth

@@ -1,8 +1,9 @@
-"""The firmware's calibration subsystem: flash records, staged writes, rectification maps.
+"""The firmware's calibration subsystem and its requests (SPEC §12): flash records, staged
+writes, rectification maps; CALIB_READ, CALIB_WRITE, CALIB_COMMIT, CALIB_RESTORE.
 
 At boot and after every successful write it loads the record in force (user, else factory) and
 builds the rectification maps for the current output format from it. A refused or failed write
-raises DeviceError (the dispatcher's NACK) and leaves the calibration in force unchanged.
+raises Refusal (the dispatcher's NACK) and leaves the calibration in force unchanged.
 """
 from __future__ import annotations
 
@@ -11,12 +12,14 @@ import zlib
 from pathlib import Path
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.errors import DeviceError, ErrorCode
-
-from .calibration.flash import FlashError, NorFlash
 from stereocam.protocol.calibration import CalibrationFormatError, StereoCalibration
-from .calibration.rectify import RectificationMaps, rectification_maps
-from .calibration.store import CalibrationStore, StoreError, StoredRecord
+from stereocam.protocol.errors import ErrorCode
+
+from ..calibration.flash import FlashError, NorFlash
+from ..calibration.rectify import RectificationMaps, rectification_maps
+from ..calibration.store import CalibrationStore, StoreError, StoredRecord
+from ..link_layer.dispatcher import Handler
+from ..link_layer.refusal import Refusal
 
 MAX_BODY = 4096
 
@@ -79,6 +82,10 @@ class CalibrationService:
         return cls(source, rec.generation if rec else 0, self.calibration_id)
 
     # -- requests -------------------------------------------------------------------------------
+    def handlers(self) -> dict[int, Handler]:
+        return {m.MsgType.CALIB_READ: self.read, m.MsgType.CALIB_WRITE: self.write,
+                m.MsgType.CALIB_COMMIT: self.commit, m.MsgType.CALIB_RESTORE: lambda _: self.restore_factory()}
+
     def read(self, msg: m.CalibRead) -> m.CalibData:
         if msg.source == m.CalibSource.ACTIVE:
             rec = self.record  # the one in force (a stored but unusable record is not)
@@ -88,7 +95,7 @@ class CalibrationService:
             rec = self.store.read()
             rec = rec if rec is not None and rec.region == "user" else None
         else:
-            raise DeviceError(ErrorCode.OUT_OF_RANGE, f"unknown calibration source {msg.source}")
+            raise Refusal(ErrorCode.OUT_OF_RANGE, f"unknown calibration source {msg.source}")
         if rec is None:
             return m.CalibData(m.CalibSource.ACTIVE, 0, 0, 0, msg.offset, b"")
         source = m.CalibSource.FACTORY if rec.region == "factory" else m.CalibSource.USER
@@ -97,31 +104,31 @@ class CalibrationService:
 
     def write(self, msg: m.CalibWrite) -> m.CalibWritten:
         if not 0 < msg.total <= MAX_BODY:
-            raise DeviceError(ErrorCode.OUT_OF_RANGE, f"calibration body of {msg.total} bytes; limit {MAX_BODY}")
+            raise Refusal(ErrorCode.OUT_OF_RANGE, f"calibration body of {msg.total} bytes; limit {MAX_BODY}")
         if msg.offset == 0:
             self._staging, self._staging_total = bytearray(), msg.total
         if msg.total != self._staging_total or msg.offset != len(self._staging):
-            raise DeviceError(ErrorCode.BAD_STATE, f"chunk at {msg.offset} of {msg.total} does not continue the "
+            raise Refusal(ErrorCode.BAD_STATE, f"chunk at {msg.offset} of {msg.total} does not continue the "
                               f"staged {len(self._staging)} of {self._staging_total} bytes; restart at offset 0")
         if msg.offset + len(msg.data) > msg.total:
-            raise DeviceError(ErrorCode.OUT_OF_RANGE, f"chunk runs past the announced {msg.total} bytes")
+            raise Refusal(ErrorCode.OUT_OF_RANGE, f"chunk runs past the announced {msg.total} bytes")
         self._staging += msg.data
         return m.CalibWritten(len(self._staging))
 
     def commit(self, msg: m.CalibCommit) -> m.CalibState:
         if msg.target not in (m.CalibSource.FACTORY, m.CalibSource.USER):
-            raise DeviceError(ErrorCode.OUT_OF_RANGE, f"commit target must be factory (1) or user (2), not {msg.target}")
+            raise Refusal(ErrorCode.OUT_OF_RANGE, f"commit target must be factory (1) or user (2), not {msg.target}")
         if msg.target == m.CalibSource.FACTORY and self.store.factory_locked:
-            raise DeviceError(ErrorCode.BAD_STATE, "the factory calibration is write-protected; write target=user")
+            raise Refusal(ErrorCode.BAD_STATE, "the factory calibration is write-protected; write target=user")
         body = bytes(self._staging)
         self._staging, self._staging_total = bytearray(), 0  # one commit attempt per staging
         if msg.total != len(body) or zlib.crc32(body) != msg.crc:
-            raise DeviceError(ErrorCode.BAD_PAYLOAD, f"staged {len(body)} bytes with CRC {zlib.crc32(body):08x}, "
+            raise Refusal(ErrorCode.BAD_PAYLOAD, f"staged {len(body)} bytes with CRC {zlib.crc32(body):08x}, "
                               f"commit announced {msg.total} bytes with CRC {msg.crc:08x}; nothing written")
         try:
             StereoCalibration.from_bytes(body)
         except CalibrationFormatError as exc:
-            raise DeviceError(ErrorCode.BAD_PAYLOAD, f"not a calibration this firmware can use: {exc}") from exc
+            raise Refusal(ErrorCode.BAD_PAYLOAD, f"not a calibration this firmware can use: {exc}") from exc
         try:
             if msg.target == m.CalibSource.FACTORY:
                 written = self.store.write_factory(body)
@@ -129,28 +136,28 @@ class CalibrationService:
                 written = self.store.write_user(body)
         except (FlashError, StoreError) as exc:
             self._load()  # whatever survived on flash is what is in force
-            raise DeviceError(ErrorCode.STORAGE, f"flash write failed ({exc}); the previous calibration "
+            raise Refusal(ErrorCode.STORAGE, f"flash write failed ({exc}); the previous calibration "
                               "is still in force") from exc
         if msg.target == m.CalibSource.FACTORY:
             try:
                 self.store.lock_factory()
             except FlashError as exc:
                 self._load()
-                raise DeviceError(ErrorCode.STORAGE, f"the factory record was written but write-protecting it "
+                raise Refusal(ErrorCode.STORAGE, f"the factory record was written but write-protecting it "
                                   f"failed ({exc}); it is stored unprotected") from exc
         self._load()
         stored = self.store.read_factory() if msg.target == m.CalibSource.FACTORY else self.record
         if stored is None or stored.body != body or stored.generation != written.generation:
-            raise DeviceError(ErrorCode.STORAGE, "the record read back from flash differs from what was written")
+            raise Refusal(ErrorCode.STORAGE, "the record read back from flash differs from what was written")
         return self._state(m.CalibCommitted)
 
     def restore_factory(self) -> m.CalibState:
         if self.store.read_factory() is None:
-            raise DeviceError(ErrorCode.BAD_STATE, "no factory calibration stored; nothing to restore")
+            raise Refusal(ErrorCode.BAD_STATE, "no factory calibration stored; nothing to restore")
         try:
             self.store.restore_factory()
         except (FlashError, StoreError) as exc:
             self._load()
-            raise DeviceError(ErrorCode.STORAGE, f"flash write failed ({exc})") from exc
+            raise Refusal(ErrorCode.STORAGE, f"flash write failed ({exc})") from exc
         self._load()
         return self._state(m.CalibRestored)

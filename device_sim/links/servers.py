@@ -7,7 +7,7 @@ import socket
 import threading
 import tty
 
-from .camera import SimulatedCamera
+from ..firmware import SimulatedCamera
 
 READ_CHUNK = 65536
 
