@@ -8,9 +8,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
+from stereocam.protocol import messages as m
 from stereocam.protocol.params import BY_NAME, Param, TriggerMode
 
 INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
+RAW_OUTPUT = getattr(m.Capability, "RAW_OUTPUT", 0x20)  # SPEC §4.1 bit 5: rectify=0 gives raw frames
 
 
 @dataclass(frozen=True)
@@ -51,6 +53,12 @@ def effective_hi(p: Param, max_width: int, max_height: int) -> int:
     if cap is None:
         return p.hi
     return min(p.hi, cap - (cap - p.lo) % p.step)
+
+
+def optional_values(capabilities: int) -> set[tuple[str, int]]:
+    """Values within the table that a device may refuse OUT_OF_RANGE because it does not advertise
+    the capability behind them (SPEC §5.1: rectify=0 needs RAW_OUTPUT)."""
+    return set() if capabilities & RAW_OUTPUT else {("rectify", 0)}
 
 
 def limit_probes(p: Param, hi: int) -> tuple[list[int], list[tuple[int, str]]]:

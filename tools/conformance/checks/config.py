@@ -43,7 +43,10 @@ def _limit_check(p: Param) -> CheckFn:
         hi = spec_rules.effective_hi(p, ctx.info.max_width, ctx.info.max_height)
         accept, refuse = spec_rules.limit_probes(p, hi)
         for value in accept:
-            _expect_outcome(ctx, p, value, base)
+            if (p.name, value) in spec_rules.optional_values(ctx.info.capabilities):
+                _accepted_or_refused(ctx, p, value, base)
+            else:
+                _expect_outcome(ctx, p, value, base)
         for value, why in refuse:
             _expect_refused(ctx, p, value, ErrorCode.OUT_OF_RANGE, why)
         return f"{' and '.join(map(str, accept))} accepted; {len(refuse)} values beyond refused OUT_OF_RANGE"
@@ -67,6 +70,18 @@ def _expect_outcome(ctx: Context, p: Param, value: int, base: dict[str, int]) ->
     expect({BY_ID[k].name: v for k, v in r.values.items() if k in BY_ID} == now,
            "CONFIG_APPLIED differs from the GET_CONFIG that follows")
     ctx.apply(**{p.name: base[p.name]})
+
+
+def _accepted_or_refused(ctx: Context, p: Param, value: int, base: dict[str, int]) -> None:
+    """A value a device may lack (its capability not advertised): accepted, or refused OUT_OF_RANGE."""
+    before = ctx.config()
+    r = ctx.set(**{p.name: value})
+    if isinstance(r, m.Nack):
+        expect(r.code == ErrorCode.OUT_OF_RANGE and r.param_id == p.pid,
+               f"{p.name}={value} (capability not advertised): {describe_nack(r)}, expected OUT_OF_RANGE or accepted")
+        expect(ctx.config() == before, f"{p.name}={value} refused but the configuration changed")
+    else:
+        ctx.apply(**{p.name: base[p.name]})
 
 
 def _expect_refused(ctx: Context, p: Param, value: int, code: ErrorCode, why: str, blamed: int | None = None) -> None:

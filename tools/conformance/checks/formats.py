@@ -12,9 +12,9 @@ from ..results import expect
 from .streaming import accounting, capture_problems
 
 STANDARD = ((64, 48), (160, 120), (320, 240), (640, 480), (1280, 960))
-SECONDS = 1.0
-FRAMES = 5
-FPS = 10
+SECONDS = 3.0  # at most, per format
+FRAMES = 3
+FPS = 5  # low enough that a device computing full-size disparity keeps up
 BLOCK = 9
 
 
@@ -39,9 +39,9 @@ def _format_check(w: int, h: int) -> CheckFn:
         num = max(BY_NAME["num_disparities"].lo, min(64, span - span % 16))
         cfg = ctx.apply(width=w, height=h, num_disparities=num, block_size=BLOCK, pre_filter_size=BLOCK,
                         min_disparity=0, trigger_mode=int(TriggerMode.FREE_RUN), fps=FPS)
-        run = ctx.stream(SECONDS * 3, frames=FRAMES)
+        run = ctx.stream(SECONDS, frames=FRAMES)
         whole = [c for c in run.captures if c.end is not None]
-        expect(len(whole) >= 2, f"{len(whole)} whole captures in {run.seconds:.1f} s at {w}x{h}, {FPS} fps")
+        expect(whole, f"no whole capture in {run.seconds:.1f} s at {w}x{h}, {FPS} fps")
         problems = capture_problems(run.captures, cfg) + run.sequence_problems
         expect(run.late_messages == 0, f"{run.late_messages} capture messages after STOPPED")
         bad, summary = accounting(run, ctx)

@@ -83,8 +83,8 @@ def versions(ctx: Context) -> str:
     s = ctx.s
     before = s.call(m.Heartbeat())
     rid = s.new_id()
-    s.send_bytes(frame(m.MsgType.GET_INFO, rid, minor=9, extension=bytes(range(8))))
     s.expect_reply(rid, m.MsgType.GET_INFO)
+    s.send_bytes(frame(m.MsgType.GET_INFO, rid, minor=9, extension=bytes(range(8))))
     expect(isinstance(s.wait_reply(rid).message, m.Info), "GET_INFO of minor 9 with an 8-byte header extension")
     for what, data in (("major 2", frame(m.MsgType.GET_INFO, rid := s.new_id(), major=2)),
                        ("header_len 19", header(m.MsgType.GET_INFO, rid := s.new_id(), 0, header_len=19) + bytes(4)),
