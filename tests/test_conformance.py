@@ -120,8 +120,8 @@ def test_fails_against_a_device_that_applies_a_retried_command_twice(tcp_sim, tm
     assert rc == 1 and not report["passed"]
     assert _failures(report) == {"link.resend_replayed", "link.resend_trigger"}, out
     details = {c["name"]: c["detail"] for c in report["checks"]}
-    assert "executed twice" in details["link.resend_replayed"] or "applied twice" in details["link.resend_replayed"]
-    assert "triggers counter +2" in details["link.resend_trigger"]
+    assert "TIME_SYNC resent" in details["link.resend_replayed"] and "executed twice" in details["link.resend_replayed"]
+    assert "resent TRIGGER executed twice" in details["link.resend_trigger"]
     failed_cases = [c.get("name") for c in ET.parse(junit).getroot().iter("testcase") if c.find("failure") is not None]
     assert sorted(failed_cases) == ["link.resend_replayed", "link.resend_trigger"]
 
@@ -135,6 +135,6 @@ def test_fails_against_a_device_that_accepts_out_of_range_values(tcp_sim):
     limits = {ln.split()[1] for ln in lines if ln.split()[1:2] and ln.split()[1].startswith("config.limits.")}
     assert limits and limits <= failed  # every parameter's out-of-range probe now "accepted"
     assert "config.all_or_nothing" in failed  # fps=0 beside a valid gain went through
-    assert failed <= limits | {"config.all_or_nothing"}, failed
+    assert all(name.startswith("config.") for name in failed), failed  # nothing else is affected
     fps_line = next(ln for ln in lines if ln.split()[1:2] == ["config.limits.fps"])
     assert "fps=0 (below the range) accepted, expected NACK OUT_OF_RANGE" in fps_line

@@ -99,7 +99,7 @@ def resend_trigger(ctx: Context) -> str:
     finally:
         ctx.stop()
     expect(isinstance(first.message, m.Triggered), f"TRIGGER answered {first.message!r}")
-    expect(again.packet == first.packet, f"resent TRIGGER answered {again.message!r}, first {first.message!r}")
+    expect(again.packet == first.packet, f"resent TRIGGER executed twice: answered {again.message!r}, first {first.message!r}")
     d = after.counters["triggers"] - before.counters["triggers"]
     expect(d == 1, f"triggers counter +{d} for one TRIGGER and its RESEND")
     caps = s.captures.snapshot()
