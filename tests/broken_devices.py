@@ -74,8 +74,8 @@ class RewritingProxy:
             except (socket.timeout, OSError):
                 continue
             device = socket.create_connection(self.upstream)
-            for target in (lambda: self._to_device(host, device), lambda: self._pump(device, host)):
-                t = threading.Thread(target=target, daemon=True)
+            for target, args in ((self._to_device, (host, device)), (self._pump, (device, host))):
+                t = threading.Thread(target=target, args=args, daemon=True)
                 t.start()
                 self._threads.append(t)
 

@@ -9,10 +9,16 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ET
 
+import struct
+
 import pytest
 
 from stereocam.device_sim.process import ServedSimulator
+from stereocam.protocol import messages as m
+from stereocam.protocol.framing import Packet
+from stereocam.protocol.params import BY_ID
 from stereocam.tools.conformance import cli
+from stereocam.tools.conformance.checks.config import UNUSED_PARAM_ID
 
 from .broken_devices import RewritingProxy, clamp_into_range, forget_resend, unchanged
 
@@ -77,6 +83,15 @@ def test_conforms_over_tcp_as_a_separate_command(tcp_sim, tmp_path):
     assert int(root.get("tests")) == len(checks) and int(root.get("failures")) == len(failed)
 
 
+def test_the_suite_never_loads_the_simulator(tcp_sim):
+    """It judges through the protocol alone: a fresh process running it imports no device_sim."""
+    code = ("import sys; from stereocam.tools.conformance import run_suite; "
+            f"r = run_suite({tcp_sim.url!r}, only=lambda n: n.startswith(('identity', 'time'))); "
+            "print(r.passed, sorted(n for n in sys.modules if 'device_sim' in n))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout
+    assert out.split() == ["True", "[]"]
+
+
 def test_conforms_over_a_pty():
     with ServedSimulator("pty", seed=32) as sim:
         rc, out = _run_cli([sim.url, "--json"])
@@ -103,13 +118,24 @@ def test_conforms_as_a_usb_device(tmp_path):
     assert len(ET.parse(tmp_path / "usb.xml").getroot().findall("./testsuite/testcase")) == len(report["checks"])
 
 
-def test_the_proxy_alone_breaks_nothing(tcp_sim):
-    """Control for the broken devices below: an identity rewrite passes the same checks."""
-    with RewritingProxy(tcp_sim.url, unchanged) as proxy:
+def test_the_proxy_alone_breaks_nothing_and_only_table_parameters_cross_the_wire(tcp_sim):
+    """Control for the broken devices below: a pass-through proxy passes the same checks. It also
+    records every SET_CONFIG: the suite sets only parameters of the protocol table (plus the one
+    id it sends on purpose to be refused), so nothing simulator-only crosses the wire."""
+    sent: set[int] = set()
+
+    def record(p: Packet) -> Packet:
+        if p.msg_type == m.MsgType.SET_CONFIG:
+            with contextlib.suppress(struct.error):  # the malformed lists the suite sends on purpose
+                sent.update(m.SetConfig.unpack(p.payload).values)
+        return unchanged(p)
+
+    with RewritingProxy(tcp_sim.url, record) as proxy:
         rc, out = _run_cli([proxy.url, "--json", "-k", PROXY_CHECKS])
     report = json.loads(out)
     assert rc == 0 and not _failures(report), out
     assert {"link.resend_replayed", "link.resend_trigger", "config.limits.fps"} <= {c["name"] for c in report["checks"]}
+    assert sent - set(BY_ID) == {UNUSED_PARAM_ID}
 
 
 def test_fails_against_a_device_that_applies_a_retried_command_twice(tcp_sim, tmp_path):
