@@ -164,3 +164,29 @@ def test_fails_against_a_device_that_accepts_out_of_range_values(tcp_sim):
     assert all(name.startswith("config.") for name in failed), failed  # nothing else is affected
     fps_line = next(ln for ln in lines if ln.split()[1:2] == ["config.limits.fps"])
     assert "fps=0 (below the range) accepted, expected NACK OUT_OF_RANGE" in fps_line
+
+
+def test_leaves_a_unit_with_a_user_record_as_found(tcp_sim):
+    """The calibration checks write and restore records; a unit that held a user record holds
+    the same body again afterwards, in force."""
+    import dataclasses
+
+    import stereocam
+
+    with stereocam.open(tcp_sim.url) as cam:
+        factory = cam.read_calibration("factory")
+        k = factory.calibration.K_right.copy()
+        k[1, 1] -= 0.5
+        mine = cam.write_calibration(dataclasses.replace(factory.calibration, K_right=k), "user")
+    try:
+        rc, out = _run_cli([tcp_sim.url, "--json", "-k", r"^(calib|session)"])
+        report = json.loads(out)
+        assert rc == 0 and {c["name"] for c in report["checks"] if c["outcome"] == "PASS"} >= {
+            "calib.read", "calib.write_restore", "calib.refusals", "session.restored"}, out
+        with stereocam.open(tcp_sim.url) as cam:
+            user, active = cam.read_calibration("user"), cam.read_calibration("active")
+            assert user.body == mine.body
+            assert active.calibration_id == mine.calibration_id == cam.info().calibration_id
+    finally:
+        with stereocam.open(tcp_sim.url) as cam:
+            cam.restore_factory_calibration()

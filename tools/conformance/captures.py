@@ -20,7 +20,6 @@ PLANE_BYTES = {int(Output.LEFT): 1, int(Output.RIGHT): 1, int(Output.DISPARITY):
 class Capture:
     begin: m.FrameBegin
     received: float  # host monotonic time the FRAME_BEGIN arrived
-    after_message: int  # capture messages received before its FRAME_BEGIN
     data: dict[int, bytearray] = field(default_factory=dict)  # plane -> bytes, in arrival order
     end: m.FrameEnd | None = None
     problems: list[str] = field(default_factory=list)
@@ -28,10 +27,6 @@ class Capture:
     @property
     def sequence(self) -> int:
         return self.begin.sequence
-
-    @property
-    def complete(self) -> bool:
-        return self.end is not None and not self.problems
 
     def plane_size(self, plane: int) -> int:
         return self.begin.width * self.begin.height * PLANE_BYTES[plane]
@@ -66,7 +61,7 @@ class CaptureLog:
             if isinstance(msg, m.FrameBegin):
                 if cur is not None:
                     cur.problems.append(f"FRAME_BEGIN of sequence {msg.sequence} before this capture's FRAME_END")
-                self.captures.append(Capture(msg, now, self.messages - 1))
+                self.captures.append(Capture(msg, now))
             elif isinstance(msg, m.FrameData):
                 if cur is None or cur.sequence != msg.sequence:
                     self.stray.append(f"FRAME_DATA of sequence {msg.sequence} outside its capture")

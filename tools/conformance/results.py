@@ -53,6 +53,3 @@ class SuiteResult:
     def passed(self) -> bool:
         """True when every applicable check passed (skips do not count against the device)."""
         return bool(self.results) and not any(r.failed for r in self.results)
-
-    def failures(self) -> list[str]:
-        return [r.name for r in self.results if r.failed]

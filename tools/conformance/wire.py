@@ -28,7 +28,6 @@ READ_CHUNK = 1 << 20
 class Reply:
     packet: Packet
     message: m.Message | None  # None: the payload did not decode (a violation is recorded)
-    received: float  # time.monotonic() when it arrived
     events_before: int  # capture messages received before this reply
 
 
@@ -136,7 +135,7 @@ class WireSession:
         if packet.flags:
             self.violations.append(f"device message 0x{packet.msg_type:04x} with flags 0x{packet.flags:02x} (must be 0)")
         if packet.msg_type & m.REPLY_BIT:
-            self._reply(packet, msg, now)
+            self._reply(packet, msg)
         elif packet.msg_type & m.EVENT_BIT:
             if packet.request_id:
                 self.violations.append(f"event 0x{packet.msg_type:04x} with request id {packet.request_id} (must be 0)")
@@ -145,7 +144,7 @@ class WireSession:
         else:
             self.violations.append(f"device sent request type 0x{packet.msg_type:04x}")
 
-    def _reply(self, packet: Packet, msg: m.Message | None, now: float) -> None:
+    def _reply(self, packet: Packet, msg: m.Message | None) -> None:
         with self._cond:
             sent = self._expect.get(packet.request_id)
             if sent is None:
@@ -154,7 +153,7 @@ class WireSession:
                 self.violations.append(f"reply 0x{packet.msg_type:04x} to a request of type 0x{sent:04x}")
             elif isinstance(msg, m.Nack) and msg.request_type != sent:
                 self.violations.append(f"NACK names request type 0x{msg.request_type:04x}, the request was 0x{sent:04x}")
-            self._replies[packet.request_id].append(Reply(packet, msg, now, self.captures.messages))
+            self._replies[packet.request_id].append(Reply(packet, msg, self.captures.messages))
             self._cond.notify_all()
 
     def close(self) -> None:

@@ -10,11 +10,13 @@ from stereocam.calibration_io import StoredCalibration, read_calibration, write_
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.errors import ErrorCode
+from stereocam.protocol.params import TriggerMode
 
 from ..context import Context
 from ..registry import check
 from ..results import CheckSkipped, expect
 from ..wire import describe_nack
+from .triggers import FRAME_WAIT_S
 
 SMALL_CHUNK = 100
 
@@ -64,8 +66,8 @@ def read(ctx: Context) -> str:
 
 @check("calib.write_restore")
 def write_restore(ctx: Context) -> str:
-    """A user record written, committed and read back byte for byte, in force (INFO); restore puts
-    the factory record back in force; then the records found are put back."""
+    """A user record written, committed and read back byte for byte, in force (INFO and the next
+    capture); restore puts the factory record back in force; then the records found are put back."""
     ctx.require(m.Capability.CALIBRATION)
     found = _records(ctx)
     factory, user = found["factory"], found["user"]
@@ -82,6 +84,9 @@ def write_restore(ctx: Context) -> str:
             expect(written.generation == user.generation + 1,
                    f"user generation {written.generation} after {user.generation}, expected +1")
         expect(_info_id(ctx) == written.calibration_id, "INFO does not name the user record just written")
+        carried = _next_capture_calibration_id(ctx)
+        expect(carried in (None, written.calibration_id),
+               f"a capture after the commit carries calibration id {carried:08x}, not {written.calibration_id:08x}")
         restored = ctx.s.call(m.CalibRestore())
         assert isinstance(restored, m.CalibRestored)
         expect((restored.source, restored.calibration_id, restored.generation)
@@ -95,6 +100,26 @@ def write_restore(ctx: Context) -> str:
     expect(left == _id(user or factory), f"the unit holds {left:08x}, it was found holding {_id(user or factory):08x}")
     return (f"user record {written.calibration_id:08x} written and verified, factory restored, "
             f"left with {'the user' if user else 'the factory'} record {left:08x} as found")
+
+
+def _next_capture_calibration_id(ctx: Context) -> int | None:
+    """The calibration id one software-triggered capture carries (None without software trigger)."""
+    if not ctx.has(m.Capability.SOFTWARE_TRIGGER) or "trigger_mode" not in ctx.params:
+        return None
+    ctx.apply(trigger_mode=int(TriggerMode.SOFTWARE))
+    ctx.s.captures.clear()
+    ctx.s.call(m.Start())
+    try:
+        r = ctx.s.call(m.Trigger())
+        assert isinstance(r, m.Triggered)
+        ctx.wait_captures(1, FRAME_WAIT_S)
+    finally:
+        ctx.stop()
+    c = ctx.s.captures.find(r.sequence)
+    expect(c is not None, f"no capture for trigger {r.trigger_id} within {FRAME_WAIT_S} s")
+    assert c is not None
+    ctx.note_captures([c])
+    return c.begin.calibration_id
 
 
 def _leave_as_found(ctx: Context, user: StoredCalibration | None) -> int:
