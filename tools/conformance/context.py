@@ -37,8 +37,10 @@ class StreamRun:
 class Context:
     """The device under test as the suite found it, and the means to drive it."""
 
-    def __init__(self, session: WireSession, info: m.Info, found: dict[int, int]):
+    def __init__(self, url: str, session: WireSession, info: m.Info, found: dict[int, int]):
+        self.url = url
         self.s = session
+        self.reconnects = 0
         self.info = info
         self.found = found  # id -> value, as GET_CONFIG returned it before the suite changed anything
         self.params: dict[str, Param] = {BY_ID[i].name: BY_ID[i] for i in found if i in BY_ID}
@@ -48,13 +50,25 @@ class Context:
         self.memo: dict[str, object] = {}  # recordings several checks judge (e.g. one free-run stream)
 
     @classmethod
-    def connect(cls, session: WireSession) -> "Context":
+    def connect(cls, url: str, session: WireSession) -> "Context":
         """Identify the device and bring it to a known state (stopped), as a host does on connect."""
         info = session.call(m.GetInfo())
         session.call(m.Stop())
         found = session.call(m.GetConfig())
         assert isinstance(info, m.Info) and isinstance(found, m.Config)
-        return cls(session, info, dict(found.values))
+        return cls(url, session, info, dict(found.values))
+
+    def reconnect(self) -> None:
+        """After the device dropped the link (it may drop a silent host): a new link to the same
+        unit; breaches the old link saw stay on record."""
+        old = self.s
+        old.close()
+        self.s = WireSession.open(self.url, old.timeout)
+        self.s.violations = old.violations
+        self.reconnects += 1
+        info = self.s.call(m.GetInfo())
+        assert isinstance(info, m.Info)
+        expect(info.serial == self.info.serial, f"{self.url} reopened as serial {info.serial}, not {self.info.serial}")
 
     def device_dict(self) -> dict[str, object]:
         i = self.info

@@ -6,7 +6,6 @@ import traceback
 from typing import Callable
 
 from stereocam.protocol.errors import StereoCamError
-from stereocam.transports import open_transport
 
 from . import checks  # noqa: F401 - importing the check modules registers them, in order
 from .context import Context
@@ -30,19 +29,21 @@ def run_suite(url: str, timeout: float = 1.0, on_result: OnResult | None = None,
         if on_result is not None:
             on_result(result)
 
-    session = WireSession(open_transport(url, timeout), timeout)
+    session = WireSession.open(url, timeout)
     try:
-        try:
-            ctx = Context.connect(session)
-        except (StereoCamError, TimeoutError) as exc:
-            record(CheckResult("identity.connect", "identity", Outcome.FAIL,
-                               f"GET_INFO / STOP / GET_CONFIG failed: {exc}", time.monotonic() - t0))
-            return suite
+        ctx = Context.connect(url, session)
+    except (StereoCamError, TimeoutError) as exc:
+        session.close()
+        record(CheckResult("identity.connect", "identity", Outcome.FAIL,
+                           f"GET_INFO / STOP / GET_CONFIG failed: {exc}", time.monotonic() - t0))
+        suite.duration_s = time.monotonic() - t0
+        return suite
+    try:
         suite.device = ctx.device_dict()
         _run_all(ctx, record, only or (lambda name: True))
         record(_judge("session.restored", ctx, _restored))
     finally:
-        session.close()
+        ctx.s.close()
         suite.duration_s = time.monotonic() - t0
     return suite
 
@@ -88,9 +89,12 @@ def _judge(name: str, ctx: Context, fn: Callable[[Context], object]) -> CheckRes
 
 
 def _reset(ctx: Context, after: str) -> str | None:
-    """Back to the known state; if the device no longer answers, say so (later checks are not run)."""
+    """Back to the known state, on a new link if the device dropped the old one; if it no longer
+    answers, say so (later checks are not run)."""
     for attempt in range(2):
         try:
+            if not ctx.s.alive:
+                ctx.reconnect()
             ctx.reset()
             return None
         except (StereoCamError, TimeoutError) as exc:

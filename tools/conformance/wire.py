@@ -17,7 +17,7 @@ from stereocam.protocol import messages as m
 from stereocam.protocol.errors import CameraTimeoutError, ErrorCode, ProtocolError, StereoCamError
 from stereocam.protocol.framing import FLAG_RESEND, Decoder, Packet, encode_frame
 from stereocam.protocol.params import BY_ID
-from stereocam.transports import Transport
+from stereocam.transports import Transport, open_transport
 
 from .captures import CaptureLog
 
@@ -48,6 +48,10 @@ class WireSession:
         self._closed = threading.Event()
         self._reader = threading.Thread(target=self._read_loop, name="conformance-reader", daemon=True)
         self._reader.start()
+
+    @classmethod
+    def open(cls, url: str, timeout: float) -> "WireSession":
+        return cls(open_transport(url, timeout), timeout)
 
     # -- sending --------------------------------------------------------------------------------
     def new_id(self) -> int:
@@ -108,6 +112,10 @@ class WireSession:
         if isinstance(reply, m.Nack):
             raise RefusedError(reply, type(msg).__name__)
         return reply
+
+    @property
+    def alive(self) -> bool:
+        return self.error is None and not self._closed.is_set()
 
     def check_alive(self) -> None:
         if self.error is not None:

@@ -14,7 +14,8 @@ def framing(ctx: Context) -> str:
     v = ctx.s.violations
     expect(not v, f"{len(v)} breaches, first: {'; '.join(v[:3])}")
     st = ctx.s.decoder.stats
-    return f"{st.packets} device messages, all well formed; host decoder dropped {st.dropped}"
+    again = f"; link reopened {ctx.reconnects} times after the device dropped it" if ctx.reconnects else ""
+    return f"{st.packets} device messages, all well formed; host decoder dropped {st.dropped}{again}"
 
 
 @check("session.sequences")
