@@ -1,4 +1,4 @@
-"""``stereocam conformance URL [--junit FILE] [--json]``: hold a camera to the protocol.
+"""Hold a camera to the protocol: ``stereocam conformance URL [--junit FILE] [--json]``.
 
 One line per check (PASS / FAIL / SKIP with the reason), then a summary. Exit status 0 only when
 every applicable check passed. The device is left stopped, configured and calibrated as found.
@@ -15,7 +15,7 @@ from .runner import run_suite
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam conformance", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="stereocam conformance", description=__doc__.split("\n\n")[1])
     ap.add_argument("url", help="camera URL (usb://?serial=..., socket://host:port, /dev/ttyACM0, ...)")
     ap.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML")
     ap.add_argument("--json", action="store_true", help="print the results as JSON instead of text")
@@ -25,7 +25,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if not args.timeout > 0:
         ap.error("--timeout must be a positive number of seconds")
-    only = re.compile(args.k).search if args.k else None
+    try:
+        only = re.compile(args.k).search if args.k else None
+    except re.error as exc:
+        ap.error(f"-k: not a regular expression: {exc}")
 
     def show(result: CheckResult) -> None:
         if not args.json:
