@@ -2,12 +2,14 @@
 proxy in front of a served simulator rewrites host-to-device frames with the shared codec, so the
 breakage survives any change to the firmware's internals.
 
-Device-to-host bytes pass unchanged. Host-to-device bytes are decoded and re-encoded (v1.1,
-20-byte header), so what the decoder drops (garbage, foreign versions, oversize headers) never
-reaches the device: judge such a device only on the checks the breakage is about.
+Host-to-device bytes are decoded and re-encoded (v1.1, 20-byte header), so what the decoder drops
+(garbage, foreign versions, oversize headers) never reaches the device: judge such a device only
+on the checks the breakage is about. Device-to-host bytes pass unchanged, or through a rewrite of
+their own.
 """
 from __future__ import annotations
 
+import dataclasses
 import socket
 import struct
 import threading
@@ -53,13 +55,25 @@ def _nearest_legal(prm: Param, v: int) -> int:
     return v
 
 
+def without_capabilities(bits: int) -> Rewrite:
+    """Device-to-host: INFO no longer advertises ``bits`` (a unit built without those features)."""
+    def rewrite(p: Packet) -> Packet:
+        if p.msg_type != m.MsgType.INFO:
+            return p
+        info = m.Info.unpack(p.payload)
+        return Packet(p.msg_type, p.request_id, p.flags,
+                      dataclasses.replace(info, capabilities=info.capabilities & ~bits).pack())
+    return rewrite
+
+
 class RewritingProxy:
     """Listens on 127.0.0.1; each host connection gets its own connection to ``upstream``."""
 
-    def __init__(self, upstream_url: str, rewrite: Rewrite):
+    def __init__(self, upstream_url: str, rewrite: Rewrite, to_host: Rewrite | None = None):
         host, port = upstream_url.removeprefix("socket://").rsplit(":", 1)
         self.upstream = (host, int(port))
         self.rewrite = rewrite
+        self.to_host = to_host
         self._server = socket.create_server(("127.0.0.1", 0))
         self.url = f"socket://127.0.0.1:{self._server.getsockname()[1]}"
         self._stop = threading.Event()
@@ -74,7 +88,8 @@ class RewritingProxy:
             except (socket.timeout, OSError):
                 continue
             device = socket.create_connection(self.upstream)
-            for target, args in ((self._to_device, (host, device)), (self._pump, (device, host))):
+            back = self._pump if self.to_host is None else self._to_host
+            for target, args in ((self._to_device, (host, device)), (back, (device, host))):
                 t = threading.Thread(target=target, args=args, daemon=True)
                 t.start()
                 self._threads.append(t)
@@ -86,6 +101,16 @@ class RewritingProxy:
                 for p in decoder.feed(data):
                     q = self.rewrite(p)
                     dst.sendall(encode_frame(q.msg_type, q.request_id, q.payload, q.flags))
+
+    def _to_host(self, src: socket.socket, dst: socket.socket) -> None:
+        decoder = Decoder()
+        try:
+            while data := _recv(src, self._stop):
+                for p in decoder.feed(data):
+                    q = self.to_host(p)  # type: ignore[misc]
+                    dst.sendall(encode_frame(q.msg_type, q.request_id, q.payload, q.flags))
+        except OSError:
+            pass
 
     def _pump(self, src: socket.socket, dst: socket.socket) -> None:
         try:

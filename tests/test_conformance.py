@@ -20,7 +20,7 @@ from stereocam.protocol.params import BY_ID
 from stereocam.tools.conformance import cli
 from stereocam.tools.conformance.checks.config import UNUSED_PARAM_ID
 
-from .broken_devices import RewritingProxy, clamp_into_range, forget_resend, unchanged
+from .broken_devices import RewritingProxy, clamp_into_range, forget_resend, unchanged, without_capabilities
 
 # Checks the reference simulator fails today, with why. The suite is right about them; the
 # simulator is fixed elsewhere. Remove an entry when its fix lands (the tests then demand a PASS).
@@ -190,3 +190,17 @@ def test_leaves_a_unit_with_a_user_record_as_found(tcp_sim):
     finally:
         with stereocam.open(tcp_sim.url) as cam:
             cam.restore_factory_calibration()
+
+
+def test_what_a_device_does_not_advertise_is_skipped_with_the_reason(tcp_sim):
+    """A unit without external trigger and calibration storage (its INFO says so): those checks
+    are skipped, naming the capability, and the unit still conforms."""
+    no = m.Capability.EXTERNAL_TRIGGER | m.Capability.CALIBRATION
+    with RewritingProxy(tcp_sim.url, unchanged, to_host=without_capabilities(no)) as proxy:
+        rc, out = _run_cli([proxy.url, "-k", r"^(identity|trigger\.external|calib|session)"])
+    lines = out.splitlines()
+    skipped = {ln.split()[1]: ln for ln in lines if ln.startswith("SKIP")}
+    assert set(skipped) == {"trigger.external", "calib.read", "calib.write_restore", "calib.refusals"}, out
+    assert "EXTERNAL_TRIGGER not advertised" in skipped["trigger.external"]
+    assert all("CALIBRATION not advertised" in skipped[n] for n in ("calib.read", "calib.write_restore"))
+    assert rc == 0 and lines[-1].startswith("CONFORMS") and "4 skipped" in lines[-1], out
