@@ -6,7 +6,8 @@ the host check only spares a round trip and names the parameter earlier.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
 from .errors import ConfigError, ErrorCode
 from .params import BY_ID, BY_NAME, TriggerMode
@@ -45,22 +46,50 @@ def merge(current: Mapping[str, int], update: Mapping[int, int], streaming: bool
     return new
 
 
+@dataclass(frozen=True)
+class CrossRule:
+    """One SPEC §5.2 constraint between parameters."""
+
+    name: str
+    names: tuple[str, ...]  # parameters the rule reads
+    blame: tuple[str, ...]  # NACK.param_id: the first of these the update touched, else the first
+    violated: Callable[[Mapping[str, int]], bool]
+    why: Callable[[Mapping[str, int]], str]
+
+
+CROSS_RULES: tuple[CrossRule, ...] = (
+    CrossRule("block_size_vs_image", ("block_size", "width", "height"), ("block_size", "width", "height"),
+              lambda c: c["block_size"] > min(c["width"], c["height"]),
+              lambda c: f"block_size={c['block_size']} larger than the image {c['width']}x{c['height']}"),
+    CrossRule("pre_filter_size_vs_image", ("pre_filter_size", "width", "height"),
+              ("pre_filter_size", "width", "height"),
+              lambda c: c["pre_filter_size"] > min(c["width"], c["height"]),
+              lambda c: f"pre_filter_size={c['pre_filter_size']} larger than the image {c['width']}x{c['height']}"),
+    CrossRule("disparity_range_vs_width", ("min_disparity", "num_disparities", "block_size", "width"),
+              ("num_disparities", "min_disparity", "width"),
+              lambda c: -c["min_disparity"] >= c["width"]
+              or c["min_disparity"] + c["num_disparities"] + c["block_size"] // 2 >= c["width"],
+              lambda c: f"disparity range {c['min_disparity']}..{c['min_disparity'] + c['num_disparities']}"
+                        f" does not fit in width {c['width']}"),
+    CrossRule("exposure_vs_frame_period", ("trigger_mode", "exposure_us", "fps"), ("exposure_us", "fps"),
+              lambda c: c["trigger_mode"] == TriggerMode.FREE_RUN and c["exposure_us"] > 1_000_000 // c["fps"],
+              lambda c: f"exposure_us={c['exposure_us']} longer than the frame period at fps={c['fps']}"),
+)
+"""SPEC §5.2, in the order a device checks them."""
+
+
+def cross_violation(config: Mapping[str, int], touched: set[str]) -> tuple[CrossRule, str] | None:
+    """The first rule ``config`` breaks and the parameter its NACK names, or None. Rules reading a
+    parameter the configuration does not have are not applied."""
+    for rule in CROSS_RULES:
+        if all(n in config for n in rule.names) and rule.violated(config):
+            return rule, next((n for n in rule.blame if n in touched), rule.blame[0])
+    return None
+
+
 def cross_check(c: Mapping[str, int], update: Mapping[int, int]) -> None:
     """SPEC §5.2 on the merged configuration ``c``; blames the first listed parameter ``update`` touched."""
-    def reject(message: str, *blame: str) -> ConfigRejected:
-        pid = next((BY_NAME[n].pid for n in blame if BY_NAME[n].pid in update), BY_NAME[blame[0]].pid)
-        return ConfigRejected(ErrorCode.OUT_OF_RANGE, pid, message)
-
-    if c["block_size"] > min(c["width"], c["height"]):
-        raise reject(f"block_size={c['block_size']} larger than the image {c['width']}x{c['height']}",
-                     "block_size", "width", "height")
-    if c["pre_filter_size"] > min(c["width"], c["height"]):
-        raise reject(f"pre_filter_size={c['pre_filter_size']} larger than the image {c['width']}x{c['height']}",
-                     "pre_filter_size", "width", "height")
-    span = c["min_disparity"] + c["num_disparities"] + c["block_size"] // 2
-    if span >= c["width"] or -c["min_disparity"] >= c["width"]:
-        raise reject(f"disparity range {c['min_disparity']}..{c['min_disparity'] + c['num_disparities']}"
-                     f" does not fit in width {c['width']}", "num_disparities", "min_disparity", "width")
-    if c["trigger_mode"] == TriggerMode.FREE_RUN and c["exposure_us"] > 1_000_000 // c["fps"]:
-        raise reject(f"exposure_us={c['exposure_us']} longer than the frame period at fps={c['fps']}",
-                     "exposure_us", "fps")
+    clash = cross_violation(c, {BY_ID[pid].name for pid in update if pid in BY_ID})
+    if clash is not None:
+        rule, blamed = clash
+        raise ConfigRejected(ErrorCode.OUT_OF_RANGE, BY_NAME[blamed].pid, rule.why(c))

@@ -13,6 +13,7 @@ COMMANDS = {
     "capture": ("stereocam.tools.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
     "calibrate": ("stereocam.tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
     "demo": ("stereocam.tools.demo", "simulator + streaming + outputs in ./out + summary"),
+    "conformance": ("stereocam.tools.conformance.cli", "hold a camera to the protocol: one line per check, JUnit/JSON"),
     "bench": ("stereocam.tools.bench", "benchmarks: protocol decode, transports (incl. USB), matching core"),
 }
 
