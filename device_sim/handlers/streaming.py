@@ -28,7 +28,8 @@ class StreamingHandlers:
             raise Refusal(ErrorCode.BAD_STATE, "software trigger needs trigger_mode=software",
                           BY_NAME["trigger_mode"].pid)
         if not self._engine.streaming:
-            raise Refusal(ErrorCode.BAD_STATE, "software trigger needs a started stream")
+            raise Refusal(ErrorCode.BAD_STATE, "software trigger needs a started stream",
+                          BY_NAME["trigger_mode"].pid)  # SPEC §4.4: both preconditions name parameter 6
         req = self._engine.trigger(self._soft_triggers + 1, TriggerMode.SOFTWARE)
         if req is None:
             raise Refusal(ErrorCode.BUSY, "trigger queue full; previous captures still pending")
