@@ -73,6 +73,13 @@ class Frame:
     status: FrameStatus = FrameStatus.COMPLETE
     calibration: StereoCalibration | None = None  # that calibration, scaled to this frame's size
 
+    def __repr__(self) -> str:
+        planes = "+".join(n for n, a in (("left", self.left), ("right", self.right), ("disparity", self.disparity))
+                          if a is not None) or "no planes"
+        return (f"Frame(sequence={self.sequence}, {self.width}x{self.height}, {planes}, "
+                f"{'rectified' if self.rectified else 'raw'}, status={self.status.value}, "
+                f"device_time_us={self.device_time_us})")
+
     def disparity_px(self) -> np.ndarray:
         """Disparity in pixels, float32, NaN where invalid."""
         if self.disparity is None:
