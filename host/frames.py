@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import collections
 import enum
+import logging
 import queue
 from dataclasses import dataclass, field
 
@@ -126,6 +127,7 @@ class AssemblyStats:
         return self.incomplete + self.size_mismatch + self.device_errors + self.lost + self.queue_overflow
 
 
+_log = logging.getLogger(__name__)
 _PLANES = {Output.LEFT: (np.uint8, 1), Output.RIGHT: (np.uint8, 1), Output.DISPARITY: (np.dtype("<i2"), 2)}
 
 
@@ -176,6 +178,7 @@ class FrameAssembler:
             self._flawed(self._cur, FrameStatus.MISSING_DATA)
         if self._last_seq is not None and b.sequence > self._last_seq + 1:
             self.stats.lost += b.sequence - self._last_seq - 1
+            _log.info("frames %d..%d lost (never seen on the link)", self._last_seq + 1, b.sequence - 1)
         self._last_seq = b.sequence
         n = b.width * b.height
         self._cur = _Building(b, {p: bytearray(n * size) for p, (_, size) in _PLANES.items() if b.planes & p})
@@ -212,6 +215,7 @@ class FrameAssembler:
         counter = {FrameStatus.MISSING_DATA: "incomplete", FrameStatus.SIZE_MISMATCH: "size_mismatch",
                    FrameStatus.DEVICE_ERROR: "device_errors"}[status]
         setattr(self.stats, counter, getattr(self.stats, counter) + 1)
+        _log.info("frame %d dropped: %s", cur.begin.sequence, status.value)
         if self.deliver_incomplete:
             self._deliver(self._frame(cur, status))
 
@@ -236,7 +240,8 @@ class FrameAssembler:
                 return
             except queue.Full:
                 try:
-                    self.frames.get_nowait()
+                    old = self.frames.get_nowait()
                     self.stats.queue_overflow += 1
+                    _log.debug("frame %d discarded: the user did not take it before the queue filled", old.sequence)
                 except queue.Empty:
                     pass
