@@ -218,6 +218,11 @@ class Camera:
         self.request(m.Stop())
         self._streaming = False
 
+    @property
+    def streaming(self) -> bool:
+        """Whether this Camera started the stream (and has not stopped it)."""
+        return self._streaming
+
     def status(self) -> DeviceStatus:
         r = self.request(m.Heartbeat())
         assert isinstance(r, m.Status)

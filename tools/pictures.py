@@ -25,38 +25,40 @@ def colorize(frame: stereocam.Frame) -> np.ndarray:
     return img
 
 
-def depth_ticks(frame: stereocam.Frame, count: int = 6) -> list[tuple[float, float]]:
+def depth_ticks(frame: stereocam.Frame, count: int = 7) -> list[tuple[float, float]]:
     """(disparity px, depth m) pairs for a colour bar labelled in metres: round depths whose
-    disparities fall inside the searched range, near to far."""
+    disparities fall inside the searched range, near to far, at least 1/``count`` of the bar apart."""
     lo, hi = disparity_range(frame)
     fb = frame.geometry.focal_px * frame.geometry.baseline_m
-    lo = max(lo, 0.5)  # zero disparity is infinitely far
-    z_near, z_far = fb / hi, fb / lo
+    if fb <= 0:
+        return []
+    gap = (hi - lo) / count
     candidates = [m * 10.0 ** e for e in range(-2, 3) for m in (1, 1.5, 2, 3, 5, 7)]
-    zs = [z for z in candidates if z_near <= z <= z_far]
-    step = max(1, len(zs) // count)
-    return [(fb / z, z) for z in zs[::step]]
+    ticks: list[tuple[float, float]] = []
+    for z in candidates:
+        d = fb / z
+        if lo < d <= hi and (not ticks or ticks[-1][0] - d >= gap):
+            ticks.append((d, round(z, 3)))
+    return ticks
 
 
 def save_disparity_png(frame: stereocam.Frame, path: Path) -> Path:
     """The colour-mapped disparity with a colour bar whose ticks read depth in metres."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure  # no pyplot: no global state, safe from any thread
 
     lo, hi = disparity_range(frame)
     rgb = cv2.cvtColor(colorize(frame), cv2.COLOR_BGR2RGB)
-    fig, ax = plt.subplots(figsize=(frame.width / 100 + 1.6, frame.height / 100 + 0.6), dpi=100)
+    fig = Figure(figsize=(frame.width / 100 + 1.6, frame.height / 100 + 0.6), dpi=100)
+    ax = fig.add_subplot()
     ax.imshow(rgb)
     ax.set_axis_off()
     ax.set_title(f"disparity, frame {frame.sequence} (black: no match)", fontsize=9)
-    mappable = plt.cm.ScalarMappable(Normalize(lo, hi), cmap="turbo")
+    mappable = ScalarMappable(Normalize(lo, hi), cmap="turbo")
     bar = fig.colorbar(mappable, ax=ax, fraction=0.05, pad=0.02)
     ticks = depth_ticks(frame)
     bar.set_ticks([d for d, _ in ticks], labels=[f"{z:g}" for _, z in ticks])
     bar.set_label("depth (m)")
     fig.savefig(path, bbox_inches="tight")
-    plt.close(fig)
     return path
