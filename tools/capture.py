@@ -1,6 +1,7 @@
 """stereocam capture URL --out DIR: grab frames and write what a user looks at first."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import click
@@ -39,18 +40,24 @@ def save_frame(frame: stereocam.Frame, out: Path, stem: str = "frame") -> dict[s
 @click.option("--count", type=click.IntRange(min=1), default=1, show_default=True, help="Frames to save (at least 1).")
 @click.option("--timeout", type=click.FloatRange(0, min_open=True), default=30.0, show_default=True,
               help="Seconds to wait for each frame (the first pays the matcher's warm-up).")
-def command(url: str, out: Path, count: int, timeout: float) -> int:
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON array (sequence and files per frame) at the end.")
+def command(url: str, out: Path, count: int, timeout: float, as_json: bool) -> int:
     """Software-trigger COUNT frames and save each: left/right PNG, disparity .npy and PNG (colour bar
     in metres), point cloud .ply. The camera's configuration (trigger mode included) is restored after."""
     output_dir(out)
     with stereocam.open(url, timeout=2.0) as cam, preserved_configuration(cam):
         cam.set_trigger_mode("software")
         cam.start()
+        saved = []
         with tqdm(total=count, unit="frame", desc="capture") as bar:
             for _ in range(count):
                 cam.trigger()
                 frame = cam.get_frame(timeout=timeout)
                 paths = save_frame(frame, out, f"frame{frame.sequence:06d}")
-                bar.write(f"sequence {frame.sequence}: " + ", ".join(str(p) for p in paths.values()))
+                saved.append({"sequence": frame.sequence, "files": {k: str(p) for k, p in paths.items()}})
+                if not as_json:
+                    bar.write(f"sequence {frame.sequence}: " + ", ".join(str(p) for p in paths.values()))
                 bar.update()
+    if as_json:
+        click.echo(json.dumps(saved, indent=2))
     return 0

@@ -1,6 +1,7 @@
 """stereocam demo: a simulator, a few seconds of streaming, outputs in ./out/ and a summary."""
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -46,7 +47,8 @@ def keep_up_note(fps: float, asked: int, dropped: int) -> str:
               help="How long to stream.")
 @click.option("--fps", type=click.IntRange(1, 120), default=15, show_default=True, help="Frame rate to ask for.")
 @click.option("--seed", type=int, default=1, show_default=True, help="Which simulated unit.")
-def command(out: Path, seconds: float, fps: int, seed: int) -> int:
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object instead of lines.")
+def command(out: Path, seconds: float, fps: int, seed: int, as_json: bool) -> int:
     """Stream from an in-process simulated camera at 640x480, save the last frame's outputs and print a
     summary: frame rate (and whether this machine kept up), drops, link errors, depth accuracy against
     the simulator's ground truth."""
@@ -54,8 +56,9 @@ def command(out: Path, seconds: float, fps: int, seed: int) -> int:
     sim = SimulatedCamera(seed=seed)
     with Camera(InProcessTransport(sim, f"sim://?seed={seed}")) as cam:
         info = cam.info()
-        click.echo(f"camera: {info.model} serial {info.serial} firmware {info.firmware_version} "
-                   f"protocol {info.protocol_version[0]}.{info.protocol_version[1]}")
+        if not as_json:
+            click.echo(f"camera: {info.model} serial {info.serial} firmware {info.firmware_version} "
+                       f"protocol {info.protocol_version[0]}.{info.protocol_version[1]}")
         cam.configure(width=640, height=480, fps=fps, num_disparities=64, block_size=15)
         cam.start()
         cam.get_frame(timeout=30.0)  # first frame pays the JIT warm-up
@@ -74,11 +77,20 @@ def command(out: Path, seconds: float, fps: int, seed: int) -> int:
         stats = [depth_errors(f, sim.ground_truth(f.sequence)) for f in recent]  # truth after timing
         paths = save_frame(recent[-1], out, "demo")
     valid, med, bad1 = (float(np.mean([s[i] for s in stats])) for i in range(3))
-    click.echo("wrote " + ", ".join(str(p) for p in paths.values()))
     link = host_stats["incomplete"] + host_stats["size_mismatch"] + host_stats["header_crc_errors"] + \
         host_stats["payload_crc_errors"]
+    summary = {"frames": frames, "fps": round(frames / elapsed, 1), "fps_asked": fps,
+               "dropped": host_stats["frames_dropped"], "device_dropped": dev["frames_dropped"],
+               "host_queue_dropped": host_stats["queue_overflow"], "link_errors": link,
+               "valid_disparity_pct": round(valid, 1), "depth_error_median_pct": round(med, 2),
+               "bad1px_pct": round(bad1, 1), "files": {k: str(p) for k, p in paths.items()},
+               "note": keep_up_note(frames / elapsed, fps, host_stats["frames_dropped"])}
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+        return 0
+    click.echo("wrote " + ", ".join(str(p) for p in paths.values()))
     click.echo(f"summary: frames={frames} fps={frames / elapsed:.1f} dropped={host_stats['frames_dropped']} "
                f"device_dropped={dev['frames_dropped']} host_queue_dropped={host_stats['queue_overflow']} "
                f"link_errors={link} valid_disparity={valid:.1f}% depth_error_median={med:.2f}% bad1px={bad1:.1f}%")
-    click.echo(keep_up_note(frames / elapsed, fps, host_stats["frames_dropped"]))
+    click.echo(summary["note"])
     return 0

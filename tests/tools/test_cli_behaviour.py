@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -128,3 +129,14 @@ def test_sim_url_with_an_unknown_serial_does_not_make_a_simulator():
     assert r.returncode == 1 and "not found" in r.stderr and "Traceback" not in r.stderr
     with stereocam.open("sim://?seed=3&serial=NEW-1") as cam:  # a seed makes one, with that serial
         assert cam.info().serial == "NEW-1"
+
+
+def test_capture_and_demo_print_json(tmp_path):
+    r = run("capture", "sim://?seed=3", "--out", str(tmp_path / "c"), "--count", "2", "--json")
+    assert r.returncode == 0, r.stderr
+    saved = json.loads(r.stdout)
+    assert len(saved) == 2 and all(Path(f).exists() for s in saved for f in s["files"].values())
+    r = run("demo", "--seconds", "1", "--out", str(tmp_path / "d"), "--json")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["frames"] >= 1 and doc["fps_asked"] == 15 and ("keep up" in doc["note"] or "kept up" in doc["note"])
