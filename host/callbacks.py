@@ -9,7 +9,7 @@ import logging
 import threading
 from typing import Callable
 
-from stereocam.protocol.errors import CallbackError
+from stereocam.protocol.errors import CallbackError, StereoCamError
 
 from .frames import Frame
 
@@ -48,15 +48,17 @@ class FrameCallbacks:
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            try:
-                frame = self._next_frame(0.1)
-            except Exception as exc:  # noqa: BLE001 - a dead link ends the dispatcher, reported
-                _log.warning("frame callbacks stopped: %s", exc)
-                return
-            if frame is None:
-                continue
-            with self._lock:
+            with self._lock:  # take a frame only while somebody wants it: none is lost to get_frame
                 callbacks = list(self._callbacks)
+                try:
+                    frame = self._next_frame(0.1) if callbacks else None
+                except StereoCamError as exc:  # the link died: nothing more will come
+                    _log.warning("frame callbacks stopped: %s", exc)
+                    return
+            if frame is None:
+                if not callbacks:
+                    self._stop.wait(0.05)
+                continue
             for fn in callbacks:
                 try:
                     fn(frame)

@@ -54,7 +54,7 @@ def test_demo_prints_a_summary(tmp_path):
     assert int(fields["frames"]) >= 1 and float(fields["valid_disparity"].rstrip("%")) > 50
     assert float(fields["depth_error_median"].rstrip("%")) < 2.0
     assert (tmp_path / "demo_points.ply").exists()
-    assert "kept up" in r.stdout  # "kept up: ..." or "this machine could not keep up: ..."
+    assert "kept up: " in r.stdout or "could not keep up: " in r.stdout
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
