@@ -1,4 +1,4 @@
-"""``python -m device_sim --serve pty|tcp:HOST:PORT``: run a simulated camera in its own process.
+"""``python -m stereocam.device_sim --serve pty|tcp:HOST:PORT [--scene board]``: run a simulated camera in its own process.
 
 The first line on stdout is the URL a host opens. Runs until SIGINT or SIGTERM, then exits 0.
 """
@@ -8,8 +8,9 @@ import argparse
 import signal
 import sys
 
-from .camera import SimulatedCamera
-from .serve import PtyServer, TcpServer
+from .firmware import SimulatedCamera
+from .links.servers import PtyServer, TcpServer
+from .rig.scene import Scene
 
 
 def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
@@ -24,12 +25,14 @@ def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m device_sim", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m stereocam.device_sim", description=__doc__.splitlines()[0])
     ap.add_argument("--serve", required=True, metavar="pty|tcp:HOST:PORT")
     ap.add_argument("--seed", type=int, default=0, help="which simulated unit")
     ap.add_argument("--serial", default=None, help="serial number (default derived from the seed)")
+    ap.add_argument("--scene", choices=[s.value for s in Scene], default=Scene.LAB.value,
+                    help="what the rig looks at (board: the calibration fixture's chessboard)")
     args = ap.parse_args(argv)
-    sim = SimulatedCamera(serial=args.serial, seed=args.seed)
+    sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene)
     server = build_server(args.serve, sim)
 
     def stop(signum, frame):  # noqa: ARG001
