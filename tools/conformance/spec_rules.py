@@ -1,49 +1,30 @@
-"""Rules from protocol/SPEC.md that the codec does not hold, restated for the judge.
-
-§5.2 cross-parameter constraints (with their blame order) and the values a limit probe sends.
-Restated here on purpose: the judge must not take the rules from the firmware it judges.
-"""
+"""What the judge expects of a configuration: SPEC §5.2 through the protocol's own rule set
+(protocol/config_rules.py, never the firmware's), the values a limit probe sends, the roomy
+configuration in which every parameter's limits are legal."""
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable
-
 from stereocam.protocol import messages as m
-from stereocam.protocol.params import BY_NAME, Param, TriggerMode
+from stereocam.protocol.config_rules import ConfigRejected, cross_check
+from stereocam.protocol.params import BY_NAME, Param, TriggerMode, defaults
 
 INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
-RAW_OUTPUT = getattr(m.Capability, "RAW_OUTPUT", 0x20)  # SPEC §4.1 bit 5: rectify=0 gives raw frames
 
 
-@dataclass(frozen=True)
-class CrossRule:
-    name: str
-    names: tuple[str, ...]  # parameters the rule reads
-    blame: tuple[str, ...]  # NACK.param_id: the first of these the request contains, else the first
-    violated: Callable[[dict[str, int]], bool]
+CROSS_RULES: dict[str, tuple[str, ...]] = {  # SPEC §5.2, in order: each rule and what it reads
+    "block_size_vs_image": ("block_size", "width", "height"),
+    "pre_filter_size_vs_image": ("pre_filter_size", "width", "height"),
+    "disparity_range_vs_width": ("min_disparity", "num_disparities", "block_size", "width"),
+    "exposure_vs_frame_period": ("trigger_mode", "exposure_us", "fps"),
+}
 
 
-CROSS_RULES: tuple[CrossRule, ...] = (
-    CrossRule("block_size_vs_image", ("block_size", "width", "height"), ("block_size", "width", "height"),
-              lambda c: c["block_size"] > min(c["width"], c["height"])),
-    CrossRule("pre_filter_size_vs_image", ("pre_filter_size", "width", "height"),
-              ("pre_filter_size", "width", "height"),
-              lambda c: c["pre_filter_size"] > min(c["width"], c["height"])),
-    CrossRule("disparity_range_vs_width", ("min_disparity", "num_disparities", "block_size", "width"),
-              ("num_disparities", "min_disparity", "width"),
-              lambda c: (c["min_disparity"] < 0 and -c["min_disparity"] >= c["width"])
-              or c["min_disparity"] + c["num_disparities"] + c["block_size"] // 2 >= c["width"]),
-    CrossRule("exposure_vs_frame_period", ("trigger_mode", "exposure_us", "fps"), ("exposure_us", "fps"),
-              lambda c: c["trigger_mode"] == TriggerMode.FREE_RUN and c["exposure_us"] > 1_000_000 // c["fps"]),
-)
-
-
-def cross_violation(config: dict[str, int], touched: set[str]) -> tuple[CrossRule, str] | None:
-    """The first §5.2 rule ``config`` breaks and the parameter the NACK must name, or None.
-    Rules reading a parameter the device does not have are not applied."""
-    for rule in CROSS_RULES:
-        if all(n in config for n in rule.names) and rule.violated(config):
-            return rule, next((n for n in rule.blame if n in touched), rule.blame[0])
+def cross_refusal(config: dict[str, int], touched: set[str]) -> ConfigRejected | None:
+    """The refusal SPEC §5.2 demands for ``config`` reached by changing ``touched`` (the NACK's
+    parameter and why), or None. Parameters the device lacks take the table's defaults."""
+    try:
+        cross_check({**defaults(), **config}, {BY_NAME[n].pid: config[n] for n in touched})
+    except ConfigRejected as refusal:
+        return refusal
     return None
 
 
@@ -58,7 +39,7 @@ def effective_hi(p: Param, max_width: int, max_height: int) -> int:
 def optional_values(capabilities: int) -> set[tuple[str, int]]:
     """Values within the table that a device may refuse OUT_OF_RANGE because it does not advertise
     the capability behind them (SPEC §5.1: rectify=0 needs RAW_OUTPUT)."""
-    return set() if capabilities & RAW_OUTPUT else {("rectify", 0)}
+    return set() if capabilities & m.Capability.RAW_OUTPUT else {("rectify", 0)}
 
 
 def limit_probes(p: Param, hi: int) -> tuple[list[int], list[tuple[int, str]]]:
