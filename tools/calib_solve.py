@@ -236,7 +236,7 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board
                 view.status = "redundant"
         views.append(view)
         if progress is not None:
-            progress(Progress(view, len(kept), held, selector.coverage()))
+            progress(Progress(view, len(found) - held, held, selector.coverage()))
         if select and len(found) - held >= config.max_views and held >= config.min_holdout:
             break
     if both == 0:
