@@ -85,7 +85,7 @@ def calibrate_mono(model: str, obj: list[np.ndarray], img: list[np.ndarray], siz
             rms, K, D, *_, err = cv2.calibrateCameraExtended(o, i, size, start.K.copy(), D0, flags=flags,
                                                              criteria=SOLVE)
     except cv2.error as exc:
-        raise LensSolveError(f"{model}: {exc.err if hasattr(exc, 'err') else exc}") from exc
+        raise LensSolveError(f"{model}: {exc}") from exc
     D = D.ravel()[:N_DIST[model]]
     if not (np.all(np.isfinite(K)) and np.all(np.isfinite(D)) and np.isfinite(rms)):
         raise LensSolveError(f"{model}: the fit diverged")
