@@ -7,6 +7,8 @@ through the real pyusb core (usb://?serial=...).
 """
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from stereocam.device_sim.process import ServedSimulator
@@ -23,6 +25,18 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
     if "device_url" in metafunc.fixturenames:
         url = metafunc.config.getoption("--device")
         metafunc.parametrize("device_url", [url] if url else list(TRANSPORTS), indirect=True)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def factory_db_in_tmp(tmp_path_factory: pytest.TempPathFactory):
+    """Calibration runs record their attempts in a session-scoped SQLite file, not in the home folder."""
+    old = os.environ.get("STEREOCAM_FACTORY_DB")
+    os.environ["STEREOCAM_FACTORY_DB"] = str(tmp_path_factory.mktemp("factory") / "factory.sqlite")
+    yield
+    if old is None:
+        os.environ.pop("STEREOCAM_FACTORY_DB")
+    else:
+        os.environ["STEREOCAM_FACTORY_DB"] = old
 
 
 @pytest.fixture(scope="session")

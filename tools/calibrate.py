@@ -27,13 +27,18 @@ Outputs in OUTDIR:
 Exit status: 0 passed; 1 the camera could not be reached; 2 bad arguments or unreadable images;
 3 no solution (board never found, too few views); 4 the solution failed the gate (calibration.json
 says passed: false, the YAML files are not written and stale ones from an earlier run are removed);
-5 the write to the camera failed or read back different (the camera keeps its previous calibration).
+5 the write to the camera failed or read back different (the camera keeps its previous calibration);
+6 the outputs could not be saved (in device mode after a successful write: the camera holds the new
+calibration and the factory record says so). --out and --db are checked before anything is
+captured or written; every attempt is recorded in the factory database (tools/factory/).
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
+import socket
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -41,13 +46,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from stereocam.tools.calib_boards import parse_board
+from stereocam.tools.calib_boards import describe, parse_board
+from stereocam.tools.factory.db import FactoryDB, FactoryDBError, default_url
+from stereocam.tools.factory.record import make_attempt, now_utc
 from stereocam.tools.calib_fit import OutlierRules
 from stereocam.tools.calib_lens import ALIASES
 from stereocam.tools.calib_report import write_report
 from stereocam.tools.calib_solve import PARAM_NAMES, CalibrationError, CalibrationResult, Progress, SolveConfig, calibrate_pairs
 
-EXIT_OK, EXIT_USAGE, EXIT_NO_SOLUTION, EXIT_GATE = 0, 2, 3, 4
+EXIT_OK, EXIT_USAGE, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_SAVE = 0, 2, 3, 4, 6
 _NAME = re.compile(r"^(left|right)\D*?(\d+)\.(png|jpe?g|bmp|pgm|ppm|tiff?)$", re.IGNORECASE)
 _PASS_ONLY = ("calibration.yaml", "left.yaml", "right.yaml")
 
@@ -207,6 +214,11 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--outlier-rounds", type=int, default=o.rounds, help="outlier removal rounds")
     ap.add_argument("--max-drop-fraction", type=float, default=o.max_drop_fraction,
                     help="most pairs removed as outliers, fraction")
+    ap.add_argument("--db", default=default_url(),
+                    help="factory database for the record of this attempt: SQLite path or postgresql://...")
+    ap.add_argument("--station", default=socket.gethostname(), help="station name in the factory record")
+    ap.add_argument("--serial", default=None,
+                    help="unit serial in the factory record (default: the camera's; offline the folder name)")
     ap.add_argument("-q", "--quiet", action="store_true", help="no per-pair progress lines")
     return ap
 
@@ -226,8 +238,29 @@ def _fail(code: int, text: str) -> int:
     return code
 
 
+def _writable(path: Path) -> bool:
+    """True when `path` is a writable folder or could be created as one (nothing is created)."""
+    probe = path.resolve()
+    while not probe.exists():
+        probe = probe.parent
+    return probe.is_dir() and os.access(probe, os.W_OK | os.X_OK)
+
+
+def _record(db: FactoryDB, args: argparse.Namespace, serial: str, started: str, result: CalibrationResult | None,
+            code: int, reason: str, blob: bytes | None) -> None:
+    attempt = make_attempt(serial=serial, started_at=started, station=args.station,
+                           mode="device" if args.url else "offline", board=describe(args.board), result=result,
+                           passed=code == EXIT_OK, reason=reason, output_dir=args.out, blob=blob)
+    try:
+        row = db.record(attempt)
+        print(f"factory record: attempt {row} in {db.url}")
+    except FactoryDBError as exc:
+        print(f"stereocam calibrate: warning: {exc}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    started = now_utc()
     if (args.url is None) == (args.images is None):
         return _fail(EXIT_USAGE, "give a camera URL (device mode) or --images DIR (offline), not both")
     charuco = args.board.lower().startswith("charuco:")
@@ -246,40 +279,77 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         return _fail(EXIT_USAGE, str(exc))
     config = _config(args)
-    if args.url is not None:
-        return _device_mode(args, config)
+    if not _writable(args.out):  # checked before anything is captured or written to a camera
+        return _fail(EXIT_USAGE, f"--out {args.out} is not a writable folder; nothing was done")
+    try:
+        db = FactoryDB(args.db)
+    except FactoryDBError as exc:
+        return _fail(EXIT_USAGE, f"{exc}; nothing was done")
+    with db:
+        if args.url is not None:
+            return _device_mode(args, config, db, started)
+        return _offline(args, config, db, started)
+
+
+def _offline(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, started: str) -> int:
+    serial = args.serial or args.images.resolve().name
     try:
         pairs = find_pairs(args.images)
         labels = [f"{l.name}|{r.name}" for _, l, r in pairs]
         result = calibrate_pairs(_load(pairs), args.board, config, labels, None if args.quiet else print_progress,
                                  select=False)
     except CalibrationError as exc:
+        _record(db, args, serial, started, None, EXIT_NO_SOLUTION, str(exc), None)
         return _fail(EXIT_NO_SOLUTION, f"{exc} (nothing written)")
     except ValueError as exc:
         return _fail(EXIT_USAGE, str(exc))
-    paths = write_outputs(result, args.out)
+    code = EXIT_OK if result.passed else EXIT_GATE
+    reason = "passed" if result.passed else "calibration FAILED the gate: " + "; ".join(result.failures)
+    try:
+        paths = write_outputs(result, args.out)
+    except OSError as exc:
+        code, reason = EXIT_SAVE, f"saving the outputs failed: {exc}"
+        paths = []
     print_summary(result)
-    print("wrote " + ", ".join(str(p) for p in paths))
-    if not result.passed:
-        return _fail(EXIT_GATE, "calibration FAILED the gate: " + "; ".join(result.failures))
+    _record(db, args, serial, started, result, code, reason, None)
+    if paths:
+        print("wrote " + ", ".join(str(p) for p in paths))
+    if code:
+        return _fail(code, reason)
     print("calibration PASSED")
     return EXIT_OK
 
 
-def _device_mode(args: argparse.Namespace, config: SolveConfig) -> int:
+def _device_mode(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, started: str) -> int:
     import stereocam
     from stereocam.tools.calibrate_device import calibrate_device
 
+    save_errors: list[OSError] = []
+
+    def save(result: CalibrationResult, outdir: Path) -> None:
+        try:
+            write_outputs(result, outdir)
+        except OSError as exc:  # the camera may already hold the new calibration: say so, keep the record
+            save_errors.append(exc)
+
+    serial = args.serial or args.url
     try:
         with stereocam.open(args.url, timeout=2.0) as cam:
+            serial = args.serial or cam.info().serial
             code, result, verdict = calibrate_device(
                 cam, args.board, config, args.out, target=args.target,
-                pairs=args.pairs, size=args.size, scene=args.scene, write_outputs=write_outputs,
+                pairs=args.pairs, size=args.size, scene=args.scene, write_outputs=save,
                 progress=None if args.quiet else print_progress)
     except stereocam.StereoCamError as exc:
+        _record(db, args, serial, started, None, 1, f"camera {args.url}: {exc}", None)
         return _fail(1, f"camera {args.url}: {exc}")
+    if save_errors:
+        verdict = f"{verdict}; but saving the outputs to {args.out} failed: {save_errors[0]}"
+        code = code or EXIT_SAVE
     if result is not None:
         print_summary(result)
+    blob = result.calibration.to_bytes() if result is not None and result.quality.written else None
+    _record(db, args, serial, started, result, code, verdict, blob)
     if code:
         return _fail(code, verdict)
     print(verdict)
