@@ -9,7 +9,7 @@ from stereocam.device_sim.calibration.board import BoardSpec, StereoBoardRendere
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.device_sim.calibration.rectify import rectification_maps, remap_bilinear, undistort_rectify_map
 from stereocam.device_sim.calibration.truth import true_calibration
-from stereocam.protocol.rectification import _log_rotation, rodrigues, stereo_rectify
+from stereocam.protocol.rectification import _log_rotation, rodrigues, stereo_rectify, undistort_points
 from stereocam.tools.calib_boards import detect_all
 
 
@@ -137,7 +137,6 @@ def test_maps_of_every_lens_model_match_opencv(model: str, D: list[float]) -> No
     np.testing.assert_allclose(m.left_y, my, atol=2e-3)
     # the geometry's undistortion inverts the lens: rectified corners of a pixel grid are consistent
     pts = np.array([[10.0, 12.0], [160.0, 120.0], [300.0, 220.0]])
-    from stereocam.protocol.rectification import undistort_points
     norm = undistort_points(c.K_left, np.array(D), pts, 100, model)
     if model == "equidistant":
         back = cv2.fisheye.distortPoints(norm.reshape(-1, 1, 2), c.K_left, np.array(D)).reshape(-1, 2)

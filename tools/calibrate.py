@@ -23,6 +23,8 @@ Outputs in OUTDIR:
                      lens_model_scores (held-out score per model tried)
   calibration.yaml   OpenCV FileStorage: lens_model K1 D1 K2 D2 R T R1 R2 P1 P2 Q + metrics  (if passed)
   left.yaml, right.yaml   ROS camera_info (plumb_bob, rational_polynomial or equidistant) (if passed)
+  camera_info/left_WxH.yaml, right_WxH.yaml   device mode: camera_info for every stream size the
+                     unit offers (tools/camera_info.py)                              (if passed)
   report.png         per-view errors, coverage, rectified pair with epipolar lines
 Exit status: 0 passed; 1 the camera could not be reached; 2 bad arguments or unreadable images;
 3 no solution (board never found, too few views); 4 the solution failed the gate (calibration.json
@@ -38,6 +40,7 @@ import argparse
 import json
 import os
 import re
+import shutil
 import socket
 import sys
 from collections.abc import Iterator
@@ -47,6 +50,7 @@ import cv2
 import numpy as np
 
 from stereocam.tools.calib_boards import describe, parse_board
+from stereocam.tools.camera_info import ros_camera_info, stream_sizes, write_camera_info
 from stereocam.tools.factory.db import FactoryDB, FactoryDBError, default_url
 from stereocam.tools.factory.record import make_attempt, now_utc
 from stereocam.tools.calib_fit import OutlierRules
@@ -110,28 +114,9 @@ def print_summary(result: CalibrationResult) -> None:
           f"baseline {c.baseline_m * 1000:.3f} mm")
 
 
-def _mat(a: np.ndarray) -> dict[str, object]:
-    a = np.atleast_2d(a)
-    return {"rows": a.shape[0], "cols": a.shape[1], "data": [float(v) for v in a.ravel()]}
-
-
-def ros_camera_info(name: str, size: tuple[int, int], K: np.ndarray, D: np.ndarray,
-                    R: np.ndarray, P: np.ndarray, lens_model: str = "plumb_bob") -> str:
-    """A ROS camera_info YAML document (camera_calibration_parsers layout)."""
-    lines = [f"image_width: {size[0]}", f"image_height: {size[1]}", f"camera_name: {name}"]
-    for key, value in (("camera_matrix", K), ("distortion_model", None), ("distortion_coefficients", D),
-                       ("rectification_matrix", R), ("projection_matrix", P)):
-        if value is None:
-            lines.append(f"distortion_model: {lens_model}")
-            continue
-        m = _mat(value)
-        lines += [f"{key}:", f"  rows: {m['rows']}", f"  cols: {m['cols']}",
-                  "  data: [" + ", ".join(repr(v) for v in m["data"]) + "]"]
-    return "\n".join(lines) + "\n"
-
-
-def write_outputs(result: CalibrationResult, outdir: Path) -> list[Path]:
-    """Write the files listed in the module docstring; returns the paths written."""
+def write_outputs(result: CalibrationResult, outdir: Path,
+                  sizes: list[tuple[int, int]] | None = None) -> list[Path]:
+    """Write the files listed in the module docstring (camera_info/ for `sizes`); returns the paths written."""
     outdir.mkdir(parents=True, exist_ok=True)
     c, q, r = result.calibration, result.quality, result.rectification
     written = [outdir / "calibration.json", outdir / "report.png"]
@@ -143,6 +128,7 @@ def write_outputs(result: CalibrationResult, outdir: Path) -> list[Path]:
     if not result.passed:
         for name in _PASS_ONLY:
             (outdir / name).unlink(missing_ok=True)
+        shutil.rmtree(outdir / "camera_info", ignore_errors=True)
         return written
     fs = cv2.FileStorage(str(outdir / "calibration.yaml"), cv2.FILE_STORAGE_WRITE)
     fs.write("image_width", c.image_size[0])
@@ -157,7 +143,8 @@ def write_outputs(result: CalibrationResult, outdir: Path) -> list[Path]:
     fs.release()
     (outdir / "left.yaml").write_text(ros_camera_info("left", c.image_size, c.K_left, c.D_left, r.R1, r.P1, c.lens_model))
     (outdir / "right.yaml").write_text(ros_camera_info("right", c.image_size, c.K_right, c.D_right, r.R2, r.P2, c.lens_model))
-    return written + [outdir / n for n in _PASS_ONLY]
+    extra = [p for size in sizes or () for p in write_camera_info(c, outdir / "camera_info", size)]
+    return written + [outdir / n for n in _PASS_ONLY] + extra
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -250,7 +237,8 @@ def _record(db: FactoryDB, args: argparse.Namespace, serial: str, started: str, 
             code: int, reason: str, blob: bytes | None) -> None:
     attempt = make_attempt(serial=serial, started_at=started, station=args.station,
                            mode="device" if args.url else "offline", board=describe(args.board), result=result,
-                           passed=code == EXIT_OK, reason=reason, output_dir=args.out, blob=blob)
+                           passed=code == EXIT_OK or (code == EXIT_SAVE and result is not None and result.passed),
+                           reason=reason, output_dir=args.out, blob=blob)
     try:
         row = db.record(attempt)
         print(f"factory record: attempt {row} in {db.url}")
@@ -328,7 +316,7 @@ def _device_mode(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, s
 
     def save(result: CalibrationResult, outdir: Path) -> None:
         try:
-            write_outputs(result, outdir)
+            write_outputs(result, outdir, sizes)
         except OSError as exc:  # the camera may already hold the new calibration: say so, keep the record
             save_errors.append(exc)
 
@@ -336,6 +324,7 @@ def _device_mode(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, s
     try:
         with stereocam.open(args.url, timeout=2.0) as cam:
             serial = args.serial or cam.info().serial
+            sizes = stream_sizes((cam.info().sensor_width, cam.info().sensor_height))
             code, result, verdict = calibrate_device(
                 cam, args.board, config, args.out, target=args.target,
                 pairs=args.pairs, size=args.size, scene=args.scene, write_outputs=save,

@@ -12,6 +12,7 @@ COMMANDS = {
     "info": ("stereocam.tools.info", "print a camera's info, configuration and counters"),
     "capture": ("stereocam.tools.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
     "calibrate": ("stereocam.tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
+    "calibration": ("stereocam.tools.calibration_export", "calibration export URL --size WxH: ROS camera_info from a unit"),
     "factory": ("stereocam.tools.factory.cli", "factory record: yield and metric distributions per day and station"),
     "demo": ("stereocam.tools.demo", "simulator + streaming + outputs in ./out + summary"),
     "bench": ("stereocam.tools.bench", "benchmarks: protocol decode, transports (incl. USB), matching core"),
