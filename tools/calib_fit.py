@@ -81,6 +81,8 @@ def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], sta
         geometry = stereo_rectify(calib)
     except ValueError as exc:
         raise LensSolveError(f"{model}: {exc}") from exc
+    if not (np.all(np.isfinite(geometry.P2)) and geometry.focal_px > 0):
+        raise LensSolveError(f"{model}: the fitted lens does not invert over the whole image (no rectification)")
     return HeadFit(fl, fr, st, calib, geometry)
 
 
