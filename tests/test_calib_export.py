@@ -6,7 +6,6 @@ import re
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from stereocam.device_sim import SimulatedCamera
 from stereocam.protocol.calibration import StereoCalibration

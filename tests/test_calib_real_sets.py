@@ -13,72 +13,16 @@ import subprocess
 import sys
 from pathlib import Path
 
-import cv2
-import numpy as np
 import pytest
 
-from stereocam.tools import calibrate
-from stereocam.tools.calib_boards import parse_board
-from stereocam.tools.calib_fit import PairPoints, epipolar_dy, rms
-from stereocam.tools.calib_lens import SOLVE, calibrate_mono
 from stereocam.protocol.calibration import StereoCalibration
-from stereocam.protocol.rectification import stereo_rectify
-from stereocam.tools.calib_solve import _match, choose_detector, detect_all
+from stereocam.tools.bench_calib_real import SETS as BENCH_SETS
+from stereocam.tools.bench_calib_real import epipolar_all, opencv_all_pairs
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("STEREOCAM_CALIB_SETS", REPO.parent / "shared" / "data" / "calibration"))
-SETS = {
-    "opencv_pairs": (REPO / "tests" / "data" / "opencv_chessboard_pairs", "9x6", "0.025"),
-    "bumblebee2": (SHARED / "boofcv_bumblebee2_chess", "6x4", "0.03"),
-    "trinocular_ecocheck": (SHARED / "boofcv_trinocular_ecocheck", "13x9", "1"),
-    "davinci_charuco": (SHARED / "sksurgery_davinci_charuco", "charuco:19x26:0.005:0.004:DICT_4X4_250", None),
-}
-
-
-class _Head:
-    """Just enough of a HeadFit for epipolar_dy."""
-
-    def __init__(self, calibration: StereoCalibration) -> None:
-        self.calibration, self.geometry = calibration, stereo_rectify(calibration)
-
-
-def opencv_all_pairs(directory: Path, board_text: str, square: str | None, model: str) -> tuple[
-        StereoCalibration, list[PairPoints]]:
-    """OpenCV's solution on every pair where both boards are found (same detections as the tool)."""
-    board = parse_board(board_text, None if square is None else float(square))
-    found = []
-    for n, lp, rp in calibrate.find_pairs(directory):
-        dl, dr = (detect_all(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), board) for p in (lp, rp))
-        if _match(dl, dr, board, ()) is not None:
-            found.append((n, lp.name, dl, dr))
-    size = cv2.imread(str(lp), cv2.IMREAD_GRAYSCALE).shape[::-1]
-    order = (choose_detector(found, size),)
-    pairs = [PairPoints(n, name, *_match(dl, dr, board, order)) for n, name, dl, dr in found]
-    obj = [p.obj for p in pairs]
-    if model == "equidistant":
-        fl, fr = (calibrate_mono(model, obj, [getattr(p, s) for p in pairs], size,
-                                 calibrate_mono("plumb_bob", obj, [getattr(p, s) for p in pairs], size))
-                  for s in ("left", "right"))
-        o = [np.asarray(x, np.float64).reshape(1, -1, 3) for x in obj]
-        L, R = ([np.asarray(getattr(p, s), np.float64).reshape(1, -1, 2) for p in pairs] for s in ("left", "right"))
-        flags = getattr(cv2.fisheye, "CALIB_FIX_INTRINSIC", None) or cv2.CALIB_FIX_INTRINSIC
-        out = cv2.fisheye.stereoCalibrate(o, L, R, fl.K, fl.D, fr.K, fr.D, size, flags=flags, criteria=SOLVE)
-        K1, D1, K2, D2, Rm, T = fl.K, fl.D, fr.K, fr.D, out[5], out[6]
-    else:
-        flags = cv2.CALIB_RATIONAL_MODEL if model == "rational_polynomial" else 0
-        L, R = ([np.asarray(getattr(p, s), np.float32).reshape(-1, 1, 2) for p in pairs] for s in ("left", "right"))
-        o = [np.asarray(x, np.float32) for x in obj]
-        _, K1, D1, *_ = cv2.calibrateCamera(o, L, size, None, None, flags=flags, criteria=SOLVE)
-        _, K2, D2, *_ = cv2.calibrateCamera(o, R, size, None, None, flags=flags, criteria=SOLVE)
-        *_, Rm, T, _, _ = cv2.stereoCalibrate(o, L, R, K1, D1, K2, D2, size, flags=flags | cv2.CALIB_FIX_INTRINSIC,
-                                              criteria=SOLVE)
-    n = {"plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4}[model]
-    return StereoCalibration(size, K1, D1.ravel()[:n], K2, D2.ravel()[:n], Rm, np.ravel(T), model), pairs
-
-
-def epipolar_all(calibration: StereoCalibration, pairs: list[PairPoints]) -> float:
-    head = _Head(calibration)
-    return rms(np.concatenate([epipolar_dy(head, p.left, p.right) for p in pairs]))
+SETS = {name: ((REPO if name == "opencv_pairs" else SHARED) / folder, board, square)
+        for name, (folder, board, square) in BENCH_SETS.items()}
 
 
 @pytest.mark.parametrize("name", list(SETS))

@@ -14,9 +14,9 @@ from stereocam.protocol.calibration import StereoCalibration
 from stereocam.device_sim.calibration.truth import true_calibration
 from stereocam.tools import calibrate
 from stereocam.tools.calib_solve import (
-    BoardNotFoundError, CalibrationError, CoverageSelector, SolveConfig, TooFewViewsError, calibrate_pairs,
-    view_params,
+    BoardNotFoundError, CalibrationError, SolveConfig, TooFewViewsError, calibrate_pairs,
 )
+from stereocam.tools.calib_coverage import CoverageSelector, view_params
 from stereocam.tools.calib_boards import detect_all
 
 TRUTH = true_calibration(11, (640, 480))

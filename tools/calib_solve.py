@@ -29,26 +29,22 @@ the device's raw stream in device mode — and returns a CalibrationResult.
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
-import cv2
 import numpy as np
 
 from stereocam.device_sim.calibration.board import BoardSpec
 from stereocam.protocol.rectification import RectifiedGeometry
 from stereocam.tools.calib_boards import CharucoSpec, Detection, describe, detect_all, gray, match_pair
+from stereocam.tools.calib_coverage import CoverageSelector, view_params
 from stereocam.tools.calib_fit import (
     OutlierRules, PairPoints, choose_model, epipolar_dy, fit_head, rms, robust_fit,
 )
 from stereocam.tools.calib_lens import MODELS, LensSolveError, calibrate_mono
 from stereocam.protocol.calibration import CalibrationQuality, StereoCalibration
 from stereocam.protocol.errors import StereoCamError
-
-PARAM_NAMES = ("X", "Y", "Size", "Skew")
-PARAM_RANGES = (0.7, 0.7, 0.4, 0.5)
 
 ViewStatus = Literal["used", "dropped", "redundant", "no_board"]
 
@@ -133,50 +129,6 @@ class Progress:
     coverage: tuple[float, ...]
 
 
-def view_params(corners: np.ndarray, board: BoardSpec | CharucoSpec, image_size: tuple[int, int]
-                ) -> tuple[float, ...]:
-    """ROS-style (X, Y, size, skew) of one view, each in [0, 1] (ChArUco: hull area, skew 0)."""
-    w, h = image_size
-    c = corners.reshape(-1, 2).astype(np.float64)
-    if isinstance(board, CharucoSpec):
-        area = float(cv2.contourArea(cv2.convexHull(c.astype(np.float32))))
-        border = math.sqrt(area)
-        x = min(1.0, max(0.0, (c[:, 0].mean() - border / 2) / max(w - border, 1.0)))
-        y = min(1.0, max(0.0, (c[:, 1].mean() - border / 2) / max(h - border, 1.0)))
-        return (x, y, math.sqrt(area / (w * h)), 0.0)
-    ul, ur, dr, dl = c[0], c[board.cols - 1], c[-1], c[-board.cols]
-    p, q = (dr - ur) + (dl - dr), (ur - ul) + (dr - ur)
-    area = abs(p[0] * q[1] - p[1] * q[0]) / 2.0
-    border = math.sqrt(area)
-    x = min(1.0, max(0.0, (c[:, 0].mean() - border / 2) / (w - border)))
-    y = min(1.0, max(0.0, (c[:, 1].mean() - border / 2) / (h - border)))
-    a, b = ul - ur, dr - ur
-    angle = math.acos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))
-    return (x, y, math.sqrt(area / (w * h)), min(1.0, 2.0 * abs(math.pi / 2 - angle)))
-
-
-class CoverageSelector:
-    """Keeps views that are far (L1 > min_distance) from all kept ones; tracks coverage."""
-
-    def __init__(self, min_distance: float = 0.2) -> None:
-        self.min_distance = min_distance
-        self.kept: list[tuple[float, ...]] = []
-
-    def offer(self, params: Sequence[float]) -> bool:
-        """True (and remember it) when the view adds coverage."""
-        if any(sum(abs(a - b) for a, b in zip(params, k)) <= self.min_distance for k in self.kept):
-            return False
-        self.kept.append(tuple(params))
-        return True
-
-    def coverage(self) -> tuple[float, ...]:
-        """Per parameter: min(1, spread of kept views / PARAM_RANGES)."""
-        if not self.kept:
-            return (0.0,) * len(PARAM_RANGES)
-        arr = np.array(self.kept)
-        return tuple(float(min(1.0, s / r)) for s, r in zip(arr.max(0) - arr.min(0), PARAM_RANGES))
-
-
 def _gate(calib: StereoCalibration, q: CalibrationQuality, config: SolveConfig) -> list[str]:
     failures = []
     if q.rms_stereo > config.max_stereo_rms_px:
@@ -220,7 +172,7 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board
         dl, dr = detect_all(left, board), detect_all(right, board)
         found_left, found_right = found_left + bool(dl), found_right + bool(dr)
         view = ViewRecord(index, label, "no_board")
-        matched = _match(dl, dr, board, ())
+        matched = match_detections(dl, dr, board, ())
         if matched is not None:
             both += 1
             view.params = view_params(matched[1], board, size)
@@ -249,11 +201,11 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board
         raise TooFewViewsError(f"{len(found)} {what} from {both} pairs with the board; need {need} — "
                                f"move the board to new positions, distances and tilts")
     order = (choose_detector(found, size),)
-    kept = [PairPoints(i, label, *_match(dl, dr, board, order)) for i, label, dl, dr in found]
+    kept = [PairPoints(i, label, *match_detections(dl, dr, board, order)) for i, label, dl, dr in found]
     return _solve(kept, views, size, selector.coverage(), sample, config)
 
 
-def _match(dl: dict[str, Detection], dr: dict[str, Detection], board: BoardSpec | CharucoSpec,
+def match_detections(dl: dict[str, Detection], dr: dict[str, Detection], board: BoardSpec | CharucoSpec,
            order: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Matched points of a pair, each image's corners from the first detector in `order` that found them."""
     if not dl or not dr:
