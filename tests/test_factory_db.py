@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import sqlite3
 from pathlib import Path
 
@@ -66,6 +67,7 @@ def test_every_attempt_is_recorded_and_reported(db_url: str, tmp_path: Path, cap
     with (tmp_path / "r.csv").open() as f:
         table = list(csv.DictReader(f))
     assert [t["station"] for t in table] == ["line-1", "line-2"] and float(table[0]["rms_stereo"]) > 0
+    assert json.loads(table[0]["metrics"])["lens_model_scores"] == ok.metrics["lens_model_scores"]
     assert factory_cli.main(["report", "--db", db_url, "--since", "2999-01-01"]) == 0
     assert "0 attempts" in capsys.readouterr().out
 

@@ -2,13 +2,14 @@
 
 Prints, per day (UTC) and station: attempts, passed, yield, and for the metrics rms_stereo,
 epipolar_rms_px (held-out) and baseline_m their median, 90th percentile and maximum over the
-attempts that have them. --csv writes every attempt (without the calibration blob, as hex length)
-to FILE.
+attempts that have them. --csv writes every attempt to FILE (metrics as JSON; the calibration blob
+as its length in bytes).
 """
 from __future__ import annotations
 
 import argparse
 import csv
+import json
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -57,7 +58,7 @@ def write_csv(attempts: list[Attempt], path: Path) -> None:
         w = csv.writer(f)
         w.writerow(cols)
         for a in attempts:
-            d = vars(a)
+            d = {**vars(a), "metrics": json.dumps(a.metrics, sort_keys=True)}
             w.writerow([d[c] for c in cols[:-1]] + [len(a.calibration or b"")])
 
 
