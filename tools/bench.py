@@ -94,7 +94,7 @@ def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty"
     return out
 
 
-MODES = ("protocol", "transport", "usb", "matching", "calibration", "all")
+MODES = ("protocol", "transport", "usb", "matching", "calibration", "calib-real", "all")
 
 
 @click.command("bench", context_settings={"ignore_unknown_options": True},
@@ -112,6 +112,7 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
     usb          the USB path alone: bulk IN MB/s through pyusb
     matching     the numba matching core against cv2.StereoBM
     calibration  calibration accuracy against the simulator's truth, solver and device tool
+    calib-real   the offline tool on real calibration sets against OpenCV's all-pairs solution
     all          protocol, transport, matching and calibration (default)
 
     Arguments after WHAT that this command does not know go to the usb or matching bench."""
@@ -120,6 +121,8 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
         bench_protocol()
     if what in ("transport", "all"):
         bench_transport(seconds)
+    if what == "calib-real":
+        importlib.import_module("stereocam.tools.bench_calib_real").main(rest)
     if what == "usb":
         importlib.import_module("stereocam.tools.bench_usb").main(rest)
     if what in ("matching", "all"):
