@@ -16,7 +16,7 @@ import numba as nb
 import numpy as np
 
 from .lanes import uidx
-from .sgm_simd import add_min, diag_update, path_step, popcount16, try_lock, unlock
+from .sgm_simd import add_min, cost_run, diag_update, pixel_paths, try_lock, unlock
 from .simd import wta_all
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
@@ -31,11 +31,7 @@ def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int
     """out[x * nd + k] = popcount(cl[y, x0 + x] ^ census_R[y, x0 + x - md - k])."""
     w = cl.shape[1]
     for x in range(cols):
-        a = cl[y, uidx(x0 + x)]
-        base = w - 1 - x0 - x + md
-        o = x * nd
-        for k in range(nd):
-            out[uidx(o + k)] = popcount16(a ^ crr[y, uidx(base + k)])
+        cost_run(cl[y, uidx(x0 + x)], crr[y], w - 1 - x0 - x + md, out, x * nd, nd)
 
 
 @nb.njit(**_JIT)
@@ -47,44 +43,48 @@ def _p2(p1: int, p2: int, adapt: int, a: np.uint8, b: np.uint8) -> int:
 
 
 @nb.njit(**_JIT)
-def _aggregate_row(g: int, y: int, first: bool, img: np.ndarray, cfg: np.ndarray,
-                   cost: np.ndarray, hb: np.ndarray, lcur: np.ndarray, lprev: np.ndarray,
-                   mcur: np.ndarray, mprev: np.ndarray, zero: np.ndarray,
-                   acc: np.ndarray) -> None:
-    """acc = sum over group g's paths of L at row y (lprev/mprev: the previous row's L and
-    per-column minima, unused when first; lcur/mcur receive this row's)."""
+def _aggregate_row(g: int, y: int, step: int, img: np.ndarray, cfg: np.ndarray,
+                   cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
+                   pm: np.ndarray, acc: np.ndarray) -> None:
+    """acc = sum over group g's paths of L at row y, the group's step-th row.
+
+    lbuf runs of nd + 2 (a padding element each side): two for the horizontal path (this
+    pixel's and its predecessor's), one zero run (predecessor of a path's first pixel), then
+    per row parity and vertical/diagonal path one run per column. mv[parity, v, x]: minima."""
     nd, p1, p2, adapt = cfg[C_ND], cfg[C_P1], cfg[C_P2], cfg[C_ADAPT]
     x0, cols = cfg[C_X0], cfg[C_COLS]
-    nv = 1 if cfg[C_PATHS] == 4 else 3
+    npaths = 2 if cfg[C_PATHS] == 4 else 4
     dy = 1 if g == 0 else -1
     stride = nd + 2
-    q1 = np.int16(p1)
-    start = np.int16(p2)  # any P2 >= 0 leaves L = C on a zero predecessor
-    z = np.int16(0)
-    hm = z
+    zero = 2 * stride + 1
+    cur, prv = step & 1, 1 - (step & 1)
     for i in range(cols):
         x = i if g == 0 else cols - 1 - i
         X = x0 + x
-        ci = x * nd
-        cur = i & 1
-        if i == 0:  # horizontal path (0, dy): predecessor x - dy on this row
-            hm = path_step(cost, ci, zero, 1, hb[cur], 1, acc, ci, 1, q1, start, z, nd)
+        # horizontal path (0, dy): predecessor x - dy on this row
+        meta[1] = (i & 1) * stride + 1
+        if i == 0:
+            meta[0], meta[2], meta[3] = zero, p2, 0
         else:
-            e = _p2(p1, p2, adapt, img[y, X], img[y, X - dy])
-            hm = path_step(cost, ci, hb[1 - cur], 1, hb[cur], 1, acc, ci, 1, q1,
-                           np.int16(hm + e), hm, nd)
-        for v in range(nv):  # paths (dy, 0), (dy, 1), (dy, -1): predecessor (y-dy, x-dx)
-            dx = v if v < 2 else -1
+            hm = np.int64(pm[0])
+            meta[0] = (1 - (i & 1)) * stride + 1
+            meta[2] = hm + _p2(p1, p2, adapt, img[y, X], img[y, X - dy])
+            meta[3] = hm
+        for v in range(1, npaths):  # (dy, 0), (dy, 1), (dy, -1): predecessor (y-dy, x-dx)
+            dx = v - 1 if v < 3 else -1
             xq = x - dx
-            oi = x * stride + 1
-            if first or xq < 0 or xq >= cols:
-                m = path_step(cost, ci, zero, 1, lcur[v], oi, acc, ci, 0, q1, start, z, nd)
+            o = 4 * v
+            meta[o + 1] = 3 * stride + ((cur * 3 + v - 1) * cols + x) * stride + 1
+            if step == 0 or xq < 0 or xq >= cols:
+                meta[o], meta[o + 2], meta[o + 3] = zero, p2, 0
             else:
-                mp = mprev[v, xq]
-                e = _p2(p1, p2, adapt, img[y, X], img[y - dy, X - dx])
-                m = path_step(cost, ci, lprev[v], xq * stride + 1, lcur[v], oi, acc, ci, 0,
-                              q1, np.int16(mp + e), mp, nd)
-            mcur[v, x] = m
+                mp = np.int64(mv[prv, v - 1, xq])
+                meta[o] = 3 * stride + ((prv * 3 + v - 1) * cols + xq) * stride + 1
+                meta[o + 2] = mp + _p2(p1, p2, adapt, img[y, X], img[y - dy, X - dx])
+                meta[o + 3] = mp
+        pixel_paths(cost, x * nd, lbuf, meta, npaths, p1, acc, x * nd, nd, pm)
+        for v in range(1, npaths):
+            mv[cur, v - 1, x] = pm[v]
 
 
 @nb.njit(**_JIT)
@@ -132,17 +132,15 @@ def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray,
 @nb.njit(**_JIT)
 def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
            parked: np.ndarray, locks: np.ndarray, done: np.ndarray, disp: np.ndarray,
-           cost: np.ndarray, hb: np.ndarray, lv: np.ndarray, mv: np.ndarray, zero: np.ndarray,
+           cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray, pm: np.ndarray,
            acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray, mins: np.ndarray) -> None:
     """Every row of group g (see the module docstring)."""
     h = img.shape[0]
     nd, md, x0, cols = cfg[C_ND], cfg[C_MIND], cfg[C_X0], cfg[C_COLS]
     for step in range(h):
         y = step if g == 0 else h - 1 - step
-        cur = step & 1
         _cost_row(cl, crr, y, x0, md, nd, cols, cost)
-        _aggregate_row(g, y, step == 0, img, cfg, cost, hb, lv[cur], lv[1 - cur], mv[cur],
-                       mv[1 - cur], zero, acc)
+        _aggregate_row(g, y, step, img, cfg, cost, lbuf, mv, meta, pm, acc)
         while not try_lock(locks, y):
             pass
         first = done[y] == 0
@@ -159,12 +157,12 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
 @nb.njit(parallel=True, **_JIT)
 def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
              parked: np.ndarray, locks: np.ndarray, done: np.ndarray, disp: np.ndarray,
-             cost: np.ndarray, hb: np.ndarray, lv: np.ndarray, mv: np.ndarray,
-             zero: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
+             cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
+             pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
              mins: np.ndarray) -> None:
     """Disparity rows (before the speckle filter) of the census pair (cl, crr mirrored).
 
     Scratch has one slice per group (leading axis 2); locks and done must be zero."""
     for g in nb.prange(2):
-        _group(g, img, cl, crr, cfg, parked, locks, done, disp, cost[g], hb[g], lv[g], mv[g],
-               zero, acc[g], rmin[g], rarg[g], mins[g])
+        _group(g, img, cl, crr, cfg, parked, locks, done, disp, cost[g], lbuf[g], mv[g],
+               meta[g], pm[g], acc[g], rmin[g], rarg[g], mins[g])

@@ -49,16 +49,16 @@ class SGMMatcher:
         self.parked = _aligned((h, cols * nd), np.int16)
         self.locks = np.zeros(h, np.int32)
         self.done = np.zeros(h, np.int32)
-        # per group of paths: cost row, horizontal ping-pong, previous/current rows of the
-        # vertical and diagonal paths (one padding element each side of every pixel's run,
-        # holding a value that stays the largest after adding P1), their per-pixel minima
+        # per group of paths: cost row, path buffers (sgm._aggregate_row; the padding
+        # elements hold a value that stays the largest after adding P1) and their minima
         sentinel = 32767 - p.p1
+        stride = nd + 2
         self.cost = _aligned((2, cols * nd), np.int16)
-        self.hb = np.full((2, 2, nd + 2), sentinel, np.int16)
-        self.lv = np.full((2, 2, 3, cols * (nd + 2)), sentinel, np.int16)
+        self.lbuf = np.full((2, 3 * stride + 6 * cols * stride), sentinel, np.int16)
+        self.lbuf[:, 2 * stride + 1:3 * stride - 1] = 0
         self.mv = np.empty((2, 2, 3, cols), np.int16)
-        self.zero = np.zeros(nd + 2, np.int16)
-        self.zero[[0, -1]] = sentinel
+        self.meta = np.zeros((2, 16), np.int64)
+        self.pm = np.zeros((2, 4), np.int16)
         self.acc = _aligned((2, cols * nd), np.int16)
         self.rmin = np.empty((2, cols + nd - 1), np.int16)
         self.rarg = np.zeros((2, cols + nd - 1), np.int16)
@@ -106,7 +106,7 @@ class SGMMatcher:
         chunk = nb.set_parallel_chunksize(1)
         try:
             _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.parked, self.locks, self.done,
-                          disp, self.cost, self.hb, self.lv, self.mv, self.zero, self.acc,
+                          disp, self.cost, self.lbuf, self.mv, self.meta, self.pm, self.acc,
                           self.rmin, self.rarg, self.mins)
         finally:
             nb.set_parallel_chunksize(chunk)

@@ -2,7 +2,7 @@
 
 Arrays are 1-D int16 with the disparity axis contiguous; ``nd`` is a multiple of 16 and each
 loop walks it in 64/32/16-lane chunks (simd._chunked). Callers guarantee indices are in range,
-including the one padding element before and after each ``prev`` run that path_step reads.
+including the padding element before and after each predecessor run that pixel_paths reads.
 """
 from __future__ import annotations
 
@@ -28,53 +28,6 @@ def _intp(context, builder, sig, args, i):
 
 def _i16(context, builder, sig, args, i):
     return context.cast(builder, args[i], sig.args[i], types.int16)
-
-
-@intrinsic
-def path_step(typingctx, cost, ci, prev, pi, out, oi, acc, ai, init, p1, p2m, mprev, nd):
-    """One SGM path step for all nd disparities of one pixel; returns min_k of the new L:
-
-        L[k] = cost[ci+k] + min(prev[pi+k], min(prev[pi+k-1], prev[pi+k+1]) + p1, p2m) - mprev
-        out[oi+k] = L[k];  acc[ai+k] = L[k] if init else acc[ai+k] + L[k]
-
-    with p2m = mprev + P2 (the caller's effective P2) and mprev = min_k prev[pi+k]."""
-    if not _i16_arrays(cost, prev, out, acc):
-        return None
-
-    def codegen(context, builder, sig, args):
-        st = sig.args
-        civ, piv, oiv, aiv = (_intp(context, builder, sig, args, i) for i in (1, 3, 5, 7))
-        init_b = builder.icmp_signed("!=", _intp(context, builder, sig, args, 8),
-                                     ir.Constant(ir.IntType(64), 0))
-        p1v, p2v, mpv = (_i16(context, builder, sig, args, i) for i in (9, 10, 11))
-        ndv = _intp(context, builder, sig, args, 12)
-        one = ir.Constant(ndv.type, 1)
-        best = cgutils.alloca_once_value(builder, _splat(builder, ir.Constant(_I16, 32767),
-                                              ir.VectorType(_I16, _TAIL)))
-
-        def body(j0, n):
-            vty = ir.VectorType(_I16, n)
-            pj = builder.add(piv, j0)
-            pv = _vload(builder, _ptr(context, builder, st[2], args[2], [pj]), vty)
-            lo = _vload(builder, _ptr(context, builder, st[2], args[2], [builder.sub(pj, one)]),
-                        vty)
-            hi = _vload(builder, _ptr(context, builder, st[2], args[2], [builder.add(pj, one)]),
-                        vty)
-            v = _smin(builder, pv, builder.add(_smin(builder, lo, hi), _splat(builder, p1v, vty)))
-            v = _smin(builder, v, _splat(builder, p2v, vty))
-            c = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(civ, j0)]),
-                       vty)
-            L = builder.sub(builder.add(c, v), _splat(builder, mpv, vty))
-            _vstore(builder, L, _ptr(context, builder, st[4], args[4], [builder.add(oiv, j0)]))
-            pa = _ptr(context, builder, st[6], args[6], [builder.add(aiv, j0)])
-            a = builder.select(init_b, L, builder.add(_vload(builder, pa, vty), L))
-            _vstore(builder, a, pa)
-            builder.store(_smin(builder, builder.load(best), _fold16(builder, L)), best)
-
-        _chunked(builder, ndv, body)
-        return _reduce_min(builder, builder.load(best))
-
-    return types.int16(cost, ci, prev, pi, out, oi, acc, ai, init, p1, p2m, mprev, nd), codegen
 
 
 @intrinsic
@@ -134,18 +87,6 @@ def diag_update(typingctx, s, si, rmin, rarg, ri, nd):
     return types.none(s, si, rmin, rarg, ri, nd), codegen
 
 
-@intrinsic
-def popcount16(typingctx, x):
-    """Number of set bits of a uint64, as int16."""
-    if x != types.uint64:
-        return None
-
-    def codegen(context, builder, sig, args):
-        return builder.trunc(_call(builder, "llvm.ctpop.i64", args[0].type, [args[0]]), _I16)
-
-    return types.int16(x), codegen
-
-
 def _lock_ptr(context, builder, sig, args):
     return _ptr(context, builder, sig.args[0], args[0], [_intp(context, builder, sig, args, 1)])
 
@@ -176,3 +117,99 @@ def unlock(typingctx, locks, i):
         return context.get_dummy_value()
 
     return types.none(locks, i), codegen
+
+
+@intrinsic
+def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
+    """All path steps of one pixel (2 or 4 paths) in one pass over the disparities:
+
+        for path v < npaths, with (po, oo, p2m, mprev) = meta[4v : 4v+4]:
+          L_v[k] = cost[ci+k] + min(P, min(P[-1], P[+1]) + p1, p2m) - mprev,  P = lbuf[po+k]
+          lbuf[oo+k] = L_v[k];  mins[v] = min_k L_v[k]
+        acc[ai+k] = sum_v L_v[k]
+
+    The cost and the sum stay in registers across the paths."""
+    if not (_i16_arrays(cost, lbuf, acc, mins) and isinstance(meta, types.Array)
+            and meta.dtype == types.int64):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        civ, aiv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 7, 8))
+        nmore = builder.icmp_signed(">", _intp(context, builder, sig, args, 4),
+                                    ir.Constant(ir.IntType(64), 2))
+        p1v = _i16(context, builder, sig, args, 5)
+        one = ir.Constant(civ.type, 1)
+        meta_v = [builder.load(_ptr(context, builder, st[3], args[3], [ir.Constant(civ.type, i)]))
+                  for i in range(16)]
+        top = _splat(builder, ir.Constant(_I16, 32767), ir.VectorType(_I16, _TAIL))
+        best = [cgutils.alloca_once_value(builder, top) for _ in range(4)]
+
+        def lb(off, vty):
+            return _vload(builder, _ptr(context, builder, st[2], args[2], [off]), vty)
+
+        def body(j0, n):
+            vty = ir.VectorType(_I16, n)
+            c = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(civ, j0)]),
+                       vty)
+            total = cgutils.alloca_once(builder, vty)
+            p1s = _splat(builder, p1v, vty)
+
+            def step(v):
+                po, oo, p2m, mp = meta_v[4 * v:4 * v + 4]
+                pj = builder.add(po, j0)
+                pv = lb(pj, vty)
+                t = _smin(builder, lb(builder.sub(pj, one), vty), lb(builder.add(pj, one), vty))
+                m = _smin(builder, pv, builder.add(t, p1s))
+                m = _smin(builder, m, _splat(builder, builder.trunc(p2m, _I16), vty))
+                L = builder.sub(builder.add(c, m), _splat(builder, builder.trunc(mp, _I16), vty))
+                _vstore(builder, L, _ptr(context, builder, st[2], args[2], [builder.add(oo, j0)]))
+                builder.store(_smin(builder, builder.load(best[v]), _fold16(builder, L)), best[v])
+                return L
+
+            builder.store(builder.add(step(0), step(1)), total)
+            with builder.if_then(nmore, likely=True):
+                builder.store(builder.add(builder.load(total),
+                                          builder.add(step(2), step(3))), total)
+            _vstore(builder, builder.load(total),
+                    _ptr(context, builder, st[6], args[6], [builder.add(aiv, j0)]))
+
+        _chunked(builder, ndv, body)
+        for v in range(4):
+            if v >= 2:
+                with builder.if_then(nmore, likely=True):
+                    builder.store(_reduce_min(builder, builder.load(best[v])),
+                                  _ptr(context, builder, st[9], args[9],
+                                       [ir.Constant(civ.type, v)]))
+            else:
+                builder.store(_reduce_min(builder, builder.load(best[v])),
+                              _ptr(context, builder, st[9], args[9], [ir.Constant(civ.type, v)]))
+        return context.get_dummy_value()
+
+    return types.none(cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins), codegen
+
+
+@intrinsic
+def cost_run(typingctx, a, crow, base, out, oi, nd):
+    """out[oi+k] = popcount(a ^ crow[base+k]) for k < nd (census codes uint64, out int16)."""
+    if not (a == types.uint64 and isinstance(crow, types.Array) and crow.ndim == 1
+            and crow.dtype == types.uint64 and _i16_arrays(out)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        bv, oiv, ndv = (_intp(context, builder, sig, args, i) for i in (2, 4, 5))
+
+        def body(j0, n):
+            qty = ir.VectorType(ir.IntType(64), n)
+            x = _vload(builder, _ptr(context, builder, st[1], args[1], [builder.add(bv, j0)]),
+                       qty)
+            pc = _call(builder, f"llvm.ctpop.v{n}i64", qty,
+                       [builder.xor(x, _splat(builder, args[0], qty))])
+            _vstore(builder, builder.trunc(pc, ir.VectorType(_I16, n)),
+                    _ptr(context, builder, st[3], args[3], [builder.add(oiv, j0)]))
+
+        _chunked(builder, ndv, body)
+        return context.get_dummy_value()
+
+    return types.none(a, crow, base, out, oi, nd), codegen
