@@ -107,31 +107,29 @@ def aggregate(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray:
 def select(total: np.ndarray, p: SGMParams) -> np.ndarray:
     """Steps 4-7 on S (height, cols, N): disparity * 16 of the matched columns, or invalid."""
     h, w, nd = total.shape
-    inv = p.invalid_value
-    out = np.full((h, w), inv, np.int32)
+    out = np.full((h, w), p.invalid_value, np.int64)
+    xs, ks = np.arange(w), np.arange(nd)
     for y in range(h):
         s = total[y].astype(np.int64)
-        right_best = None
+        k = s.argmin(axis=1)  # first minimum
+        m = s[xs, k]
+        ok = np.ones(w, bool)
+        if p.uniqueness_ratio > 0:
+            thr = m + m * p.uniqueness_ratio // 100
+            others = np.abs(ks[None, :] - k[:, None]) > 1
+            ok &= ~np.any((s <= thr[:, None]) & others, axis=1)
         if p.lr_max_diff >= 0:
             diag = np.full((w + nd - 1, nd), np.iinfo(np.int64).max)
-            for k in range(nd):  # right column j = x + N-1 - k (shifted to start at 0)
-                diag[np.arange(w) + nd - 1 - k, k] = s[:, k]
+            for kk in range(nd):  # right column j = x + N-1 - k (shifted to start at 0)
+                diag[xs + nd - 1 - kk, kk] = s[:, kk]
             right_best = diag.argmin(axis=1)
-        for x in range(w):
-            k = int(s[x].argmin())
-            m = s[x, k]
-            if p.uniqueness_ratio > 0:
-                others = np.abs(np.arange(nd) - k) > 1
-                if np.any(s[x, others] <= m + m * p.uniqueness_ratio // 100):
-                    continue
-            if right_best is not None and abs(right_best[x + nd - 1 - k] - k) > p.lr_max_diff:
-                continue
-            d16 = 16 * (p.min_disparity + k)
-            if 0 < k < nd - 1:
-                a, b = s[x, k - 1], s[x, k + 1]
-                den = max(a + b - 2 * m, 1)
-                d16 += ((a - b) * 16 + den) // (2 * den)
-            out[y, x] = d16
+            ok &= np.abs(right_best[xs + nd - 1 - k] - k) <= p.lr_max_diff
+        inner = (k > 0) & (k < nd - 1)
+        a = s[xs, np.clip(k - 1, 0, nd - 1)]
+        b = s[xs, np.clip(k + 1, 0, nd - 1)]
+        den = np.maximum(a + b - 2 * m, 1)
+        frac = np.where(inner, ((a - b) * 16 + den) // (2 * den), 0)
+        out[y] = np.where(ok, 16 * (p.min_disparity + k) + frac, p.invalid_value)
     return out
 
 

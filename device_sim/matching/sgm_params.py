@@ -23,11 +23,11 @@ class SGMParams:
     census_width: int = 9  # census window (odd, width * height - 1 <= 64 comparison bits)
     census_height: int = 7
     paths: int = 8  # 4 (horizontal + vertical) or 8 (plus the diagonals)
-    p1: int = 9  # penalty for a 1 px disparity change between neighbours along a path
-    p2: int = 96  # penalty for a larger change
-    p2_adapt: int = 16  # > 0: P2 / (1 + |dI| / p2_adapt) along the path (not below p1); 0: off
-    uniqueness_ratio: int = 5  # percent margin the best cost must keep over others (0: off)
-    lr_max_diff: int = 1  # left-right check tolerance in px (< 0: off)
+    p1: int = 15  # penalty for a 1 px disparity change between neighbours along a path
+    p2: int = 128  # penalty for a larger change
+    p2_adapt: int = 32  # > 0: P2 / (1 + |dI| / p2_adapt) along the path (not below p1); 0: off
+    uniqueness_ratio: int = 0  # percent margin the best cost must keep over others (0: off)
+    lr_max_diff: int = -1  # left-right check tolerance in px (< 0: off)
     speckle_window_size: int = 100  # regions of at most this many pixels are removed (0: off)
     speckle_range: int = 2  # px: neighbours differing by more start a new region
 
