@@ -10,7 +10,7 @@ x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k 
    rectangle, else L_r(p, k) = C(p, k) + min(L_r(q, k), L_r(q, k-1) + P1, L_r(q, k+1) + P1,
    m_q + P2') - m_q with q = p - r, m_q = min_k L_r(q, k) and P2' = P2, or with p2_adapt = a > 0
    P2' = max(P1, P2 * a // (a + |I_L(p) - I_L(q)|)). S = sum of the 4 (horizontal, vertical) or
-   8 (plus diagonal) paths.
+   8 (plus diagonal) paths. (L <= census bits + P2 <= 255, as SGMParams demands.)
 4. winner-take-all: k* = first argmin_k S; m = S[k*].
 5. uniqueness (ratio u > 0): invalid when some k with |k - k*| > 1 has S[k] <= m + m * u // 100.
 6. subpixel (0 < k* < N-1, a = S[k*-1], b = S[k*+1]): den = max(a + b - 2m, 1),
@@ -99,9 +99,9 @@ def aggregate(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray:
     cost = cost_volume(left, right, p)
     img = left[:, g.x0:g.x1]
     paths = PATHS4 if p.paths == 4 else PATHS8
-    total = sum(aggregate_path(cost, img, dy, dx, p) for dy, dx in paths)
-    assert total.max() <= 32767  # the engine holds S in int16
-    return total
+    path_costs = [aggregate_path(cost, img, dy, dx, p) for dy, dx in paths]
+    assert max(L.max() for L in path_costs) <= 255  # the engine holds L in uint8
+    return sum(path_costs)
 
 
 def select(total: np.ndarray, p: SGMParams) -> np.ndarray:

@@ -51,8 +51,8 @@ EDGES = [
     dict(uniqueness_ratio=99, lr_max_diff=3, speckle_window_size=0),
     dict(p1=0, p2=0, p2_adapt=0),  # no smoothness: winner-take-all on census costs
     dict(p1=40, p2=40, p2_adapt=1),  # p1 == p2; P2 adapts down to p1
-    dict(p1=5, p2=32767 // 8 - 62),  # largest P2 for 8 paths of 9x7 census
-    dict(census_width=3, census_height=1, p2=300),
+    dict(p1=5, p2=255 - 62),  # largest P2 for a 9x7 census (path costs reach 255)
+    dict(census_width=3, census_height=1, p2=253),
     dict(census_width=1, census_height=3, lr_max_diff=2),
     dict(census_width=13, census_height=5),  # 64 comparison bits
     dict(census_width=5, census_height=5, p2_adapt=1000, uniqueness_ratio=15),

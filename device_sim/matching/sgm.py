@@ -64,11 +64,11 @@ def _aggregate_row(g: int, y: int, step: int, img: np.ndarray, cfg: np.ndarray,
         # horizontal path (0, dy): predecessor x - dy on this row
         meta[1] = (i & 1) * stride + 1
         if i == 0:
-            meta[0], meta[2], meta[3] = zero, p2, 0
+            meta[0], meta[2], meta[3] = zero, 255, 0
         else:
             hm = np.int64(pm[0])
             meta[0] = (1 - (i & 1)) * stride + 1
-            meta[2] = hm + _p2(p1, p2, adapt, img[y, X], img[y, X - dy])
+            meta[2] = min(hm + _p2(p1, p2, adapt, img[y, X], img[y, X - dy]), 255)
             meta[3] = hm
         for v in range(1, npaths):  # (dy, 0), (dy, 1), (dy, -1): predecessor (y-dy, x-dx)
             dx = v - 1 if v < 3 else -1
@@ -76,11 +76,11 @@ def _aggregate_row(g: int, y: int, step: int, img: np.ndarray, cfg: np.ndarray,
             o = 4 * v
             meta[o + 1] = 3 * stride + ((cur * 3 + v - 1) * cols + x) * stride + 1
             if step == 0 or xq < 0 or xq >= cols:
-                meta[o], meta[o + 2], meta[o + 3] = zero, p2, 0
+                meta[o], meta[o + 2], meta[o + 3] = zero, 255, 0
             else:
                 mp = np.int64(mv[prv, v - 1, xq])
                 meta[o] = 3 * stride + ((prv * 3 + v - 1) * cols + xq) * stride + 1
-                meta[o + 2] = mp + _p2(p1, p2, adapt, img[y, X], img[y - dy, X - dx])
+                meta[o + 2] = min(mp + _p2(p1, p2, adapt, img[y, X], img[y - dy, X - dx]), 255)
                 meta[o + 3] = mp
         pixel_paths(cost, x * nd, lbuf, meta, npaths, p1, acc, x * nd, nd, pm)
         for v in range(1, npaths):

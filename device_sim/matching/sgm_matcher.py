@@ -36,7 +36,10 @@ class SGMMatcher:
         h, w = self.shape
         nd, cols = p.num_disparities, g.cols
         n = max(1, nb.config.NUMBA_NUM_THREADS)  # numba.get_thread_id() < this
-        self.census_rows = np.empty((n, p.census_height, w + p.census_width - 1), np.uint8)
+        padded = (h + p.census_height - 1, w + p.census_width - 1 + 64)  # + vector slack
+        self.padl = np.zeros(padded, np.uint8)
+        self.padr = np.zeros(padded, np.uint8)
+        self.census_byte = np.zeros((n, w + 64), np.uint8)
         self.census_code = np.empty((n, w), np.uint64)
         self.cl = np.empty((h, w), np.uint64)
         self.crr = np.empty((h, w), np.uint64)
@@ -49,12 +52,11 @@ class SGMMatcher:
         self.parked = _aligned((h, cols * nd), np.int16)
         self.locks = np.zeros(h, np.int32)
         self.done = np.zeros(h, np.int32)
-        # per group of paths: cost row, path buffers (sgm._aggregate_row; the padding
-        # elements hold a value that stays the largest after adding P1) and their minima
-        sentinel = 32767 - p.p1
+        # per group of paths: cost row, uint8 path buffers (sgm._aggregate_row; the padding
+        # elements hold 255) and their minima
         stride = nd + 2
-        self.cost = _aligned((2, cols * nd), np.int16)
-        self.lbuf = np.full((2, 3 * stride + 6 * cols * stride), sentinel, np.int16)
+        self.cost = _aligned((2, cols * nd), np.uint8)
+        self.lbuf = np.full((2, 3 * stride + 6 * cols * stride), 255, np.uint8)
         self.lbuf[:, 2 * stride + 1:3 * stride - 1] = 0
         self.mv = np.empty((2, 2, 3, cols), np.int16)
         self.meta = np.zeros((2, 16), np.int64)
@@ -91,11 +93,11 @@ class SGMMatcher:
     def run_census(self, left: np.ndarray, right: np.ndarray) -> None:
         """Census codes of the pair into self.cl and self.crr (mirrored rows)."""
         p = self.params
-        bounds = _stripes(0, self.shape[0], STRIPES_PER_THREAD * nb.get_num_threads())
+        bounds = _stripes(0, self.padl.shape[0], STRIPES_PER_THREAD * nb.get_num_threads())
         chunk = nb.set_parallel_chunksize(1)
         try:
-            census_pair(left, right, p.census_width, p.census_height, bounds,
-                        self.census_rows, self.census_code, self.cl, self.crr)
+            census_pair(left, right, p.census_width, p.census_height, bounds, self.padl,
+                        self.padr, self.census_byte, self.census_code, self.cl, self.crr)
         finally:
             nb.set_parallel_chunksize(chunk)
 

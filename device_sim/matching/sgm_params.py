@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from .params import DISP_SHIFT, _check_int
 
 PATH_COUNTS = (4, 8)
-COST_LIMIT = 32767  # the sum of all paths' costs is held in int16
+PATH_COST_LIMIT = 255  # path costs L <= census bits + p2 are held in uint8
 
 
 @dataclass(frozen=True)
@@ -52,9 +52,9 @@ class SGMParams:
         if not 0 <= self.p1 <= self.p2:
             raise ValueError(f"penalties must satisfy 0 <= p1 <= p2, got p1={self.p1} "
                              f"p2={self.p2}")
-        if self.paths * (self.max_cost + self.p2) > COST_LIMIT:
-            raise ValueError(f"p2 {self.p2} too large: {self.paths} paths * (census bits "
-                             f"{self.max_cost} + p2) must not exceed {COST_LIMIT}")
+        if self.max_cost + self.p2 > PATH_COST_LIMIT:
+            raise ValueError(f"p2 {self.p2} too large: census bits {self.max_cost} + p2 must "
+                             f"not exceed {PATH_COST_LIMIT}")
         for name in ("p2_adapt", "uniqueness_ratio", "speckle_window_size", "speckle_range"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be non-negative, got {getattr(self, name)}")

@@ -1,6 +1,6 @@
 """Vector operations over the disparity axis for the SGM kernels, plus a per-row spin lock.
 
-Arrays are 1-D int16 with the disparity axis contiguous; ``nd`` is a multiple of 16 and each
+Arrays are 1-D (uint8 path costs, int16 sums) with the disparity axis contiguous; ``nd`` is a multiple of 16 and each
 loop walks it in 64/32/16-lane chunks (simd._chunked). Callers guarantee indices are in range,
 including the padding element before and after each predecessor run that pixel_paths reads.
 """
@@ -119,53 +119,76 @@ def unlock(typingctx, locks, i):
     return types.none(locks, i), codegen
 
 
+def _u8_arrays(*tys) -> bool:
+    return all(isinstance(t, types.Array) and t.ndim == 1 and t.dtype == types.uint8
+               for t in tys)
+
+
+def _umin(builder, a, b):
+    return builder.select(builder.icmp_unsigned("<", a, b), a, b)
+
+
+def _ufold16(builder, vec):
+    """Lane-wise unsigned min of a 16/32/64-lane vector folded to 16 lanes."""
+    while vec.type.count > _TAIL:
+        half = vec.type.count // 2
+        idx = ir.VectorType(_I32, half)
+        vec = _umin(builder, builder.shuffle_vector(vec, vec, ir.Constant(idx, list(range(half)))),
+                    builder.shuffle_vector(vec, vec, ir.Constant(idx, list(range(half, 2 * half)))))
+    return vec
+
+
 @intrinsic
 def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
     """All path steps of one pixel (2 or 4 paths) in one pass over the disparities:
 
         for path v < npaths, with (po, oo, p2m, mprev) = meta[4v : 4v+4]:
-          L_v[k] = cost[ci+k] + min(P, min(P[-1], P[+1]) + p1, p2m) - mprev,  P = lbuf[po+k]
+          L_v[k] = cost[ci+k] + min(P, min(P[-1], P[+1]) +sat p1, p2m) - mprev,  P = lbuf[po+k]
           lbuf[oo+k] = L_v[k];  mins[v] = min_k L_v[k]
-        acc[ai+k] = sum_v L_v[k]
+        acc[ai+k] = sum_v L_v[k]   (int16)
 
-    The cost and the sum stay in registers across the paths."""
-    if not (_i16_arrays(cost, lbuf, acc, mins) and isinstance(meta, types.Array)
+    Path costs are uint8 (the caller keeps every L <= 255 and passes p2m <= 255; the padding
+    elements hold 255, and +p1 saturates), so one 512-bit register holds 64 disparities. The
+    cost and the sum stay in registers across the paths."""
+    if not (_u8_arrays(cost, lbuf) and _i16_arrays(acc, mins) and isinstance(meta, types.Array)
             and meta.dtype == types.int64):
         return None
 
     def codegen(context, builder, sig, args):
         st = sig.args
+        u8 = ir.IntType(8)
         civ, aiv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 7, 8))
         nmore = builder.icmp_signed(">", _intp(context, builder, sig, args, 4),
                                     ir.Constant(ir.IntType(64), 2))
-        p1v = _i16(context, builder, sig, args, 5)
+        p1v = context.cast(builder, args[5], st[5], types.uint8)
         one = ir.Constant(civ.type, 1)
         meta_v = [builder.load(_ptr(context, builder, st[3], args[3], [ir.Constant(civ.type, i)]))
                   for i in range(16)]
-        top = _splat(builder, ir.Constant(_I16, 32767), ir.VectorType(_I16, _TAIL))
+        top = _splat(builder, ir.Constant(u8, 255), ir.VectorType(u8, _TAIL))
         best = [cgutils.alloca_once_value(builder, top) for _ in range(4)]
 
         def lb(off, vty):
             return _vload(builder, _ptr(context, builder, st[2], args[2], [off]), vty)
 
         def body(j0, n):
-            vty = ir.VectorType(_I16, n)
+            vty, wty = ir.VectorType(u8, n), ir.VectorType(_I16, n)
             c = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(civ, j0)]),
                        vty)
-            total = cgutils.alloca_once(builder, vty)
+            total = cgutils.alloca_once(builder, wty)
             p1s = _splat(builder, p1v, vty)
 
             def step(v):
                 po, oo, p2m, mp = meta_v[4 * v:4 * v + 4]
                 pj = builder.add(po, j0)
-                pv = lb(pj, vty)
-                t = _smin(builder, lb(builder.sub(pj, one), vty), lb(builder.add(pj, one), vty))
-                m = _smin(builder, pv, builder.add(t, p1s))
-                m = _smin(builder, m, _splat(builder, builder.trunc(p2m, _I16), vty))
-                L = builder.sub(builder.add(c, m), _splat(builder, builder.trunc(mp, _I16), vty))
+                t = _umin(builder, lb(builder.sub(pj, one), vty), lb(builder.add(pj, one), vty))
+                t = _call(builder, f"llvm.uadd.sat.v{n}i8", vty, [t, p1s])
+                m = _umin(builder, _umin(builder, lb(pj, vty), t),
+                          _splat(builder, builder.trunc(p2m, u8), vty))
+                L = builder.sub(builder.add(c, m), _splat(builder, builder.trunc(mp, u8), vty))
                 _vstore(builder, L, _ptr(context, builder, st[2], args[2], [builder.add(oo, j0)]))
-                builder.store(_smin(builder, builder.load(best[v]), _fold16(builder, L)), best[v])
-                return L
+                builder.store(_umin(builder, builder.load(best[v]), _ufold16(builder, L)),
+                              best[v])
+                return builder.zext(L, wty)
 
             builder.store(builder.add(step(0), step(1)), total)
             with builder.if_then(nmore, likely=True):
@@ -176,14 +199,16 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
 
         _chunked(builder, ndv, body)
         for v in range(4):
+            def put(v=v):
+                low = _call(builder, f"llvm.vector.reduce.umin.v{_TAIL}i8", u8,
+                            [builder.load(best[v])])
+                builder.store(builder.zext(low, _I16), _ptr(context, builder, st[9], args[9],
+                                                            [ir.Constant(civ.type, v)]))
             if v >= 2:
                 with builder.if_then(nmore, likely=True):
-                    builder.store(_reduce_min(builder, builder.load(best[v])),
-                                  _ptr(context, builder, st[9], args[9],
-                                       [ir.Constant(civ.type, v)]))
+                    put()
             else:
-                builder.store(_reduce_min(builder, builder.load(best[v])),
-                              _ptr(context, builder, st[9], args[9], [ir.Constant(civ.type, v)]))
+                put()
         return context.get_dummy_value()
 
     return types.none(cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins), codegen
@@ -191,9 +216,9 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
 
 @intrinsic
 def cost_run(typingctx, a, crow, base, out, oi, nd):
-    """out[oi+k] = popcount(a ^ crow[base+k]) for k < nd (census codes uint64, out int16)."""
+    """out[oi+k] = popcount(a ^ crow[base+k]) for k < nd (census codes uint64, out uint8)."""
     if not (a == types.uint64 and isinstance(crow, types.Array) and crow.ndim == 1
-            and crow.dtype == types.uint64 and _i16_arrays(out)):
+            and crow.dtype == types.uint64 and _u8_arrays(out)):
         return None
 
     def codegen(context, builder, sig, args):
@@ -206,10 +231,38 @@ def cost_run(typingctx, a, crow, base, out, oi, nd):
                        qty)
             pc = _call(builder, f"llvm.ctpop.v{n}i64", qty,
                        [builder.xor(x, _splat(builder, args[0], qty))])
-            _vstore(builder, builder.trunc(pc, ir.VectorType(_I16, n)),
+            _vstore(builder, builder.trunc(pc, ir.VectorType(ir.IntType(8), n)),
                     _ptr(context, builder, st[3], args[3], [builder.add(oiv, j0)]))
 
         _chunked(builder, ndv, body)
         return context.get_dummy_value()
 
     return types.none(a, crow, base, out, oi, nd), codegen
+
+
+@intrinsic
+def census_bits(typingctx, byte, row, ro, centre, co, bit, n):
+    """byte[x] |= bit where row[ro+x] < centre[co+x], for x < n rounded up to 64 (uint8
+    arrays; the caller pads them so that the rounded range is readable and writable)."""
+    if not (_u8_arrays(byte, row, centre) and isinstance(bit, types.Integer)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        u8 = ir.IntType(8)
+        rov, cov, nv = (_intp(context, builder, sig, args, i) for i in (2, 4, 6))
+        bitv = context.cast(builder, args[5], st[5], types.uint8)
+        vty = ir.VectorType(u8, 64)
+        bits, zero = _splat(builder, bitv, vty), ir.Constant(vty, None)
+        with cgutils.for_range_slice(builder, ir.Constant(nv.type, 0), nv,
+                                     ir.Constant(nv.type, 64)) as (x, _):
+            r = _vload(builder, _ptr(context, builder, st[1], args[1], [builder.add(rov, x)]),
+                       vty)
+            c = _vload(builder, _ptr(context, builder, st[3], args[3], [builder.add(cov, x)]),
+                       vty)
+            pb = _ptr(context, builder, st[0], args[0], [x])
+            hit = builder.select(builder.icmp_unsigned("<", r, c), bits, zero)
+            _vstore(builder, builder.or_(_vload(builder, pb, vty), hit), pb)
+        return context.get_dummy_value()
+
+    return types.none(byte, row, ro, centre, co, bit, n), codegen
