@@ -21,12 +21,12 @@ def _costs(cl, crr, cfg, cost):
 
 
 @nb.njit(cache=True)
-def _aggregate(img, cfg, cost, lbuf, mv, meta, pm, acc):
+def _aggregate(img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc):
     h = img.shape[0]
     for g in range(2):
         for step in range(h):
             y = step if g == 0 else h - 1 - step
-            _sgm._aggregate_row(g, y, step, img, cfg, cost, lbuf, mv, meta, pm, acc)
+            _sgm._aggregate_row(g, y, step, img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc)
 
 
 @nb.njit(cache=True)
@@ -41,7 +41,7 @@ def stage_ms(m, left: np.ndarray, repeat: int) -> dict[str, float]:
     acc = m.acc[0].copy()
     stages = {
         "cost rows": lambda: _costs(m.cl, m.crr, m.cfg, m.cost[0]),
-        "path aggregation": lambda: _aggregate(left, m.cfg, m.cost[0], m.lbuf[0], m.mv[0],
+        "path aggregation": lambda: _aggregate(left, m.cfg, m.p2tab, m.cost[0], m.lbuf[0], m.mv[0],
                                                m.meta[0], m.pm[0], m.acc[0]),
         "sum+wta+uniq+subpix+lr": lambda: _select(m.cfg, acc, m.parked, m.rmin[0], m.rarg[0],
                                                   m.mins[0], disp),

@@ -22,7 +22,7 @@ from .simd import wta_all
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 # layout of the int64 configuration vector passed to sgm_rows
-(C_ND, C_MIND, C_P1, C_P2, C_ADAPT, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_LEN) = range(11)
+(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_LEN) = range(9)
 
 
 @nb.njit(**_JIT)
@@ -35,23 +35,16 @@ def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int
 
 
 @nb.njit(**_JIT)
-def _p2(p1: int, p2: int, adapt: int, a: np.uint8, b: np.uint8) -> int:
-    """Effective P2 between pixels of intensities a and b."""
-    if adapt == 0:
-        return p2
-    return max(p1, p2 * adapt // (adapt + abs(np.int64(a) - np.int64(b))))
-
-
-@nb.njit(**_JIT)
 def _aggregate_row(g: int, y: int, step: int, img: np.ndarray, cfg: np.ndarray,
-                   cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
-                   pm: np.ndarray, acc: np.ndarray) -> None:
+                   p2tab: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+                   meta: np.ndarray, pm: np.ndarray, acc: np.ndarray) -> None:
     """acc = sum over group g's paths of L at row y, the group's step-th row.
 
     lbuf runs of nd + 2 (a padding element each side): two for the horizontal path (this
     pixel's and its predecessor's), one zero run (predecessor of a path's first pixel), then
-    per row parity and vertical/diagonal path one run per column. mv[parity, v, x]: minima."""
-    nd, p1, p2, adapt = cfg[C_ND], cfg[C_P1], cfg[C_P2], cfg[C_ADAPT]
+    per row parity and vertical/diagonal path one run per column. mv[parity, v, x]: minima.
+    p2tab[|I(p) - I(q)|]: the effective P2 between neighbours of those intensities."""
+    nd, p1 = cfg[C_ND], cfg[C_P1]
     x0, cols = cfg[C_X0], cfg[C_COLS]
     npaths = 2 if cfg[C_PATHS] == 4 else 4
     dy = 1 if g == 0 else -1
@@ -68,7 +61,7 @@ def _aggregate_row(g: int, y: int, step: int, img: np.ndarray, cfg: np.ndarray,
         else:
             hm = np.int64(pm[0])
             meta[0] = (1 - (i & 1)) * stride + 1
-            meta[2] = min(hm + _p2(p1, p2, adapt, img[y, X], img[y, X - dy]), 255)
+            meta[2] = min(hm + p2tab[abs(np.int64(img[y, X]) - img[y, X - dy])], 255)
             meta[3] = hm
         for v in range(1, npaths):  # (dy, 0), (dy, 1), (dy, -1): predecessor (y-dy, x-dx)
             dx = v - 1 if v < 3 else -1
@@ -80,7 +73,8 @@ def _aggregate_row(g: int, y: int, step: int, img: np.ndarray, cfg: np.ndarray,
             else:
                 mp = np.int64(mv[prv, v - 1, xq])
                 meta[o] = 3 * stride + ((prv * 3 + v - 1) * cols + xq) * stride + 1
-                meta[o + 2] = min(mp + _p2(p1, p2, adapt, img[y, X], img[y - dy, X - dx]), 255)
+                meta[o + 2] = min(mp + p2tab[abs(np.int64(img[y, X]) - img[y - dy, X - dx])],
+                                  255)
                 meta[o + 3] = mp
         pixel_paths(cost, x * nd, lbuf, meta, npaths, p1, acc, x * nd, nd, pm)
         for v in range(1, npaths):
@@ -131,7 +125,7 @@ def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray,
 
 @nb.njit(**_JIT)
 def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
-           parked: np.ndarray, locks: np.ndarray, done: np.ndarray, disp: np.ndarray,
+           p2tab: np.ndarray, parked: np.ndarray, locks: np.ndarray, done: np.ndarray, disp: np.ndarray,
            cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray, pm: np.ndarray,
            acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray, mins: np.ndarray) -> None:
     """Every row of group g (see the module docstring)."""
@@ -140,7 +134,7 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
     for step in range(h):
         y = step if g == 0 else h - 1 - step
         _cost_row(cl, crr, y, x0, md, nd, cols, cost)
-        _aggregate_row(g, y, step, img, cfg, cost, lbuf, mv, meta, pm, acc)
+        _aggregate_row(g, y, step, img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc)
         while not try_lock(locks, y):
             pass
         first = done[y] == 0
@@ -156,7 +150,7 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
 
 @nb.njit(parallel=True, **_JIT)
 def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
-             parked: np.ndarray, locks: np.ndarray, done: np.ndarray, disp: np.ndarray,
+             p2tab: np.ndarray, parked: np.ndarray, locks: np.ndarray, done: np.ndarray, disp: np.ndarray,
              cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
              pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
              mins: np.ndarray) -> None:
@@ -164,5 +158,5 @@ def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
 
     Scratch has one slice per group (leading axis 2); locks and done must be zero."""
     for g in nb.prange(2):
-        _group(g, img, cl, crr, cfg, parked, locks, done, disp, cost[g], lbuf[g], mv[g],
+        _group(g, img, cl, crr, cfg, p2tab, parked, locks, done, disp, cost[g], lbuf[g], mv[g],
                meta[g], pm[g], acc[g], rmin[g], rarg[g], mins[g])

@@ -44,11 +44,13 @@ class SGMMatcher:
         self.cl = np.empty((h, w), np.uint64)
         self.crr = np.empty((h, w), np.uint64)
         cfg = np.zeros(_sgm.C_LEN, np.int64)
-        cfg[[_sgm.C_ND, _sgm.C_MIND, _sgm.C_P1, _sgm.C_P2, _sgm.C_ADAPT, _sgm.C_URATIO,
-             _sgm.C_LRDIFF, _sgm.C_X0, _sgm.C_COLS, _sgm.C_PATHS]] = [
-            nd, p.min_disparity, p.p1, p.p2, p.p2_adapt, p.uniqueness_ratio, p.lr_max_diff,
-            g.x0, cols, p.paths]
+        cfg[[_sgm.C_ND, _sgm.C_MIND, _sgm.C_P1, _sgm.C_URATIO, _sgm.C_LRDIFF, _sgm.C_X0,
+             _sgm.C_COLS, _sgm.C_PATHS]] = [
+            nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths]
         self.cfg = cfg
+        grad = np.arange(256)  # effective P2 per intensity step between path neighbours
+        self.p2tab = (np.full(256, p.p2) if p.p2_adapt == 0 else
+                      np.maximum(p.p1, p.p2 * p.p2_adapt // (p.p2_adapt + grad))).astype(np.int64)
         self.parked = _aligned((h, cols * nd), np.int16)
         self.locks = np.zeros(h, np.int32)
         self.done = np.zeros(h, np.int32)
@@ -107,7 +109,7 @@ class SGMMatcher:
         self.done[:] = 0
         chunk = nb.set_parallel_chunksize(1)
         try:
-            _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.parked, self.locks, self.done,
+            _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.p2tab, self.parked, self.locks, self.done,
                           disp, self.cost, self.lbuf, self.mv, self.meta, self.pm, self.acc,
                           self.rmin, self.rarg, self.mins)
         finally:

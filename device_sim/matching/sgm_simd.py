@@ -128,16 +128,6 @@ def _umin(builder, a, b):
     return builder.select(builder.icmp_unsigned("<", a, b), a, b)
 
 
-def _ufold16(builder, vec):
-    """Lane-wise unsigned min of a 16/32/64-lane vector folded to 16 lanes."""
-    while vec.type.count > _TAIL:
-        half = vec.type.count // 2
-        idx = ir.VectorType(_I32, half)
-        vec = _umin(builder, builder.shuffle_vector(vec, vec, ir.Constant(idx, list(range(half)))),
-                    builder.shuffle_vector(vec, vec, ir.Constant(idx, list(range(half, 2 * half)))))
-    return vec
-
-
 @intrinsic
 def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
     """All path steps of one pixel (2 or 4 paths) in one pass over the disparities:
@@ -164,8 +154,9 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
         one = ir.Constant(civ.type, 1)
         meta_v = [builder.load(_ptr(context, builder, st[3], args[3], [ir.Constant(civ.type, i)]))
                   for i in range(16)]
-        top = _splat(builder, ir.Constant(u8, 255), ir.VectorType(u8, _TAIL))
-        best = [cgutils.alloca_once_value(builder, top) for _ in range(4)]
+        wide = ir.VectorType(u8, 64)
+        best = [cgutils.alloca_once_value(builder, ir.Constant(wide, [255] * 64))
+                for _ in range(4)]
 
         def lb(off, vty):
             return _vload(builder, _ptr(context, builder, st[2], args[2], [off]), vty)
@@ -186,8 +177,10 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
                           _splat(builder, builder.trunc(p2m, u8), vty))
                 L = builder.sub(builder.add(c, m), _splat(builder, builder.trunc(mp, u8), vty))
                 _vstore(builder, L, _ptr(context, builder, st[2], args[2], [builder.add(oo, j0)]))
-                builder.store(_umin(builder, builder.load(best[v]), _ufold16(builder, L)),
-                              best[v])
+                lw = L if n == 64 else builder.shuffle_vector(  # pad with 255 to 64 lanes
+                    L, ir.Constant(vty, [255] * n),
+                    ir.Constant(ir.VectorType(_I32, 64), list(range(n)) + [n] * (64 - n)))
+                builder.store(_umin(builder, builder.load(best[v]), lw), best[v])
                 return builder.zext(L, wty)
 
             builder.store(builder.add(step(0), step(1)), total)
@@ -200,7 +193,7 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
         _chunked(builder, ndv, body)
         for v in range(4):
             def put(v=v):
-                low = _call(builder, f"llvm.vector.reduce.umin.v{_TAIL}i8", u8,
+                low = _call(builder, "llvm.vector.reduce.umin.v64i8", u8,
                             [builder.load(best[v])])
                 builder.store(builder.zext(low, _I16), _ptr(context, builder, st[9], args[9],
                                                             [ir.Constant(civ.type, v)]))
