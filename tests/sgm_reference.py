@@ -9,8 +9,8 @@ x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k 
 3. for each path direction r = (dy, dx): L_r(p) = C(p) where p - r leaves the matched
    rectangle, else L_r(p, k) = C(p, k) + min(L_r(q, k), L_r(q, k-1) + P1, L_r(q, k+1) + P1,
    m_q + P2') - m_q with q = p - r, m_q = min_k L_r(q, k) and P2' = P2, or with p2_adapt = a > 0
-   P2' = max(P1, P2 * a // (a + |I_L(p) - I_L(q)|)). S = sum of the 4 (horizontal, vertical) or
-   8 (plus diagonal) paths. (L <= census bits + P2 <= 255, as SGMParams demands.)
+   P2' = min(P2, max(P1, P2 * a // (a + |I_L(p) - I_L(q)|))). S = sum of the 4 (horizontal,
+   vertical) or 8 (plus diagonal) paths. (L <= census bits + P2 <= 255, as SGMParams demands.)
 4. winner-take-all: k* = first argmin_k S; m = S[k*].
 5. uniqueness (ratio u > 0): invalid when some k with |k - k*| > 1 has S[k] <= m + m * u // 100.
 6. subpixel (0 < k* < N-1, a = S[k*-1], b = S[k*+1]): den = max(a + b - 2m, 1),
@@ -18,7 +18,7 @@ x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k 
 7. left-right (lr_max_diff >= 0): the right image's winner for right column j is the first
    argmin over k of S at the left pixel x = j + k (same row); invalid when it differs from k*
    by more than lr_max_diff.
-8. speckle filter: cv2.filterSpeckles(out, invalid, speckle_window_size, 16 * speckle_range).
+8. speckle filter: cv2.filterSpeckles(out, invalid, speckle_window_size, speckle_range).
 """
 from __future__ import annotations
 
@@ -65,7 +65,7 @@ def _step(cost: np.ndarray, prev: np.ndarray, grad: np.ndarray, p: SGMParams) ->
     m = prev.min(axis=1, keepdims=True)
     p2 = np.full(grad.shape, p.p2, np.int64)
     if p.p2_adapt > 0:
-        p2 = np.maximum(p.p1, p.p2 * p.p2_adapt // (p.p2_adapt + grad))
+        p2 = np.minimum(p.p2, np.maximum(p.p1, p.p2 * p.p2_adapt // (p.p2_adapt + grad)))
     lower = np.pad(prev, ((0, 0), (1, 0)), constant_values=big)[:, :-1]  # L(q, k-1)
     upper = np.pad(prev, ((0, 0), (0, 1)), constant_values=big)[:, 1:]  # L(q, k+1)
     best = np.minimum(np.minimum(prev, np.minimum(lower, upper) + p.p1), m + p2[:, None])
@@ -139,5 +139,5 @@ def sgm(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray:
     disp = np.full(left.shape, p.invalid_value, np.int16)
     disp[:, g.x0:g.x1] = select(aggregate(left, right, p), p)
     if p.use_speckle:
-        cv2.filterSpeckles(disp, p.invalid_value, p.speckle_window_size, 16 * p.speckle_range)
+        cv2.filterSpeckles(disp, p.invalid_value, p.speckle_window_size, p.speckle_range)
     return disp

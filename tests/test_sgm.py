@@ -51,6 +51,7 @@ EDGES = [
     dict(uniqueness_ratio=99, lr_max_diff=3, speckle_window_size=0),
     dict(p1=0, p2=0, p2_adapt=0),  # no smoothness: winner-take-all on census costs
     dict(p1=40, p2=40, p2_adapt=1),  # p1 == p2; P2 adapts down to p1
+    dict(p1=255, p2=20, uniqueness_ratio=100),  # p1 > p2 (saturating); largest p1
     dict(p1=5, p2=255 - 62),  # largest P2 for a 9x7 census (path costs reach 255)
     dict(census_width=3, census_height=1, p2=253),
     dict(census_width=1, census_height=3, lr_max_diff=2),
@@ -59,7 +60,7 @@ EDGES = [
     dict(min_disparity=-9, num_disparities=32, lr_max_diff=1),
     dict(min_disparity=5, num_disparities=16, uniqueness_ratio=5),
     dict(min_disparity=-20, num_disparities=16),  # the whole range negative
-    dict(num_disparities=48, speckle_window_size=20, speckle_range=1),
+    dict(num_disparities=48, speckle_window_size=20, speckle_range=16),
     dict(num_disparities=80, lr_max_diff=1),  # 64 + 16 lanes
 ]
 SHAPES = [(23, 97), (37, 121), (50, 131), (31, 160)]
@@ -159,9 +160,10 @@ def test_thread_count_and_reuse_do_not_change_output() -> None:
     (dict(census_width=8), "census window"),
     (dict(census_width=11, census_height=7), "census window"),
     (dict(paths=6), "paths"),
-    (dict(p1=10, p2=5), "p1 <= p2"),
-    (dict(p2=5000), "too large"),
-    (dict(uniqueness_ratio=100), "uniqueness_ratio"),
+    (dict(p1=256), "p1 <= 255"),
+    (dict(p2=-1), "p2 >= 0"),
+    (dict(p2=194), "too large"),
+    (dict(uniqueness_ratio=-1), "uniqueness_ratio"),
     (dict(speckle_range=-1), "speckle_range"),
     (dict(p1=1.5), "must be an int"),
     (dict(min_disparity=-2100), "int16"),

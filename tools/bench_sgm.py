@@ -155,7 +155,7 @@ def profile(left: np.ndarray, right: np.ndarray, nd: int, repeat: int, variants)
                "aggregate+select (2 threads)": med(lambda: m.run_sgm(left, disp))}
         if p.use_speckle:
             out["speckle (1 thread)"] = med(lambda: filter_speckles(
-                disp.copy(), p.invalid_value, p.speckle_window_size, 16 * p.speckle_range,
+                disp.copy(), p.invalid_value, p.speckle_window_size, p.speckle_range,
                 m.labels, m.stack, m.rtype))
         out.update({f"{k} (1 thread, both groups)": v for k, v in stage_ms(m, left, repeat).items()})
         out["total"] = med(lambda: m.match(left, right))

@@ -48,9 +48,10 @@ class SGMMatcher:
              _sgm.C_COLS, _sgm.C_PATHS]] = [
             nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths]
         self.cfg = cfg
-        grad = np.arange(256)  # effective P2 per intensity step between path neighbours
-        self.p2tab = (np.full(256, p.p2) if p.p2_adapt == 0 else
-                      np.maximum(p.p1, p.p2 * p.p2_adapt // (p.p2_adapt + grad))).astype(np.int64)
+        self.p2tab = np.full(256, p.p2, np.int64)  # effective P2 per intensity step |dI|
+        if p.p2_adapt > 0:
+            a = p.p2_adapt
+            self.p2tab[:] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + np.arange(256))))
         self.parked = _aligned((h, cols * nd), np.int16)
         self.locks = np.zeros(h, np.int32)
         self.done = np.zeros(h, np.int32)
@@ -88,8 +89,8 @@ class SGMMatcher:
             self.run_census(left, right)
             self.run_sgm(left, disp)
             if p.use_speckle:
-                filter_speckles(disp, p.invalid_value, p.speckle_window_size,
-                                16 * p.speckle_range, self.labels, self.stack, self.rtype)
+                filter_speckles(disp, p.invalid_value, p.speckle_window_size, p.speckle_range,
+                                self.labels, self.stack, self.rtype)
         return disp
 
     def run_census(self, left: np.ndarray, right: np.ndarray) -> None:

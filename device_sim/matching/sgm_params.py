@@ -25,11 +25,12 @@ class SGMParams:
     paths: int = 8  # 4 (horizontal + vertical) or 8 (plus the diagonals)
     p1: int = 15  # penalty for a 1 px disparity change between neighbours along a path
     p2: int = 128  # penalty for a larger change
-    p2_adapt: int = 32  # > 0: P2 / (1 + |dI| / p2_adapt) along the path (not below p1); 0: off
+    p2_adapt: int = 32  # > 0: P2 / (1 + |dI| / p2_adapt) along the path, not below p1 (nor
+    # above p2); 0: off
     uniqueness_ratio: int = 0  # percent margin the best cost must keep over others (0: off)
     lr_max_diff: int = -1  # left-right check tolerance in px (< 0: off)
     speckle_window_size: int = 100  # regions of at most this many pixels are removed (0: off)
-    speckle_range: int = 2  # px: neighbours differing by more start a new region
+    speckle_range: int = 32  # 1/16 px: neighbours differing by more start a new region
 
     def __post_init__(self) -> None:
         self.validate()
@@ -49,17 +50,15 @@ class SGMParams:
                              f"got {cw}x{ch}")
         if self.paths not in PATH_COUNTS:
             raise ValueError(f"paths must be one of {PATH_COUNTS}, got {self.paths}")
-        if not 0 <= self.p1 <= self.p2:
-            raise ValueError(f"penalties must satisfy 0 <= p1 <= p2, got p1={self.p1} "
-                             f"p2={self.p2}")
+        if not 0 <= self.p1 <= PATH_COST_LIMIT or self.p2 < 0:
+            raise ValueError(f"penalties must satisfy 0 <= p1 <= {PATH_COST_LIMIT} and "
+                             f"p2 >= 0, got p1={self.p1} p2={self.p2}")
         if self.max_cost + self.p2 > PATH_COST_LIMIT:
             raise ValueError(f"p2 {self.p2} too large: census bits {self.max_cost} + p2 must "
                              f"not exceed {PATH_COST_LIMIT}")
         for name in ("p2_adapt", "uniqueness_ratio", "speckle_window_size", "speckle_range"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be non-negative, got {getattr(self, name)}")
-        if self.uniqueness_ratio >= 100:
-            raise ValueError(f"uniqueness_ratio must be below 100, got {self.uniqueness_ratio}")
         lo, hi = (self.min_disparity - 1) * 16, (self.min_disparity + nd) * 16
         if lo < -32768 or hi > 32767:
             raise ValueError(f"min_disparity {self.min_disparity} with num_disparities {nd} "
