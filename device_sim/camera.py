@@ -25,7 +25,8 @@ from . import registry
 from .capture import CaptureEngine, CaptureRequest
 from .clock import DeviceClock
 from .config_store import ConfigStore
-from .matching import Matcher, MatchParams
+from .matching import Matcher, SGMMatcher
+from .matching.device_config import matcher_for
 from .matching import warm_up as matching_warm_up
 from .calib_service import CalibrationService
 from stereocam.protocol.calibration import StereoCalibration
@@ -99,7 +100,7 @@ class SimulatedCamera:
         self._replies: collections.OrderedDict[int, tuple[int, bytes]] = collections.OrderedDict()
         self._truth: collections.OrderedDict[int, _Exposure] = collections.OrderedDict()
         self._view_rays: dict[Geometry, np.ndarray] = {}
-        self._matcher: Matcher | None = None
+        self._matcher: Matcher | SGMMatcher | None = None
         self._last_rx = time.monotonic()
         self._soft_triggers = 0
         self.engine = CaptureEngine(self._produce, self._watchdog)
@@ -293,20 +294,8 @@ class SimulatedCamera:
             self.counters["heartbeat_timeouts"] += 1
             self.engine.stop()
 
-    def _match_params(self, cfg: dict[str, int]) -> MatchParams:
-        return MatchParams(
-            num_disparities=cfg["num_disparities"], block_size=cfg["block_size"],
-            min_disparity=cfg["min_disparity"],
-            pre_filter_type="normalized" if cfg["pre_filter_type"] else "xsobel",
-            pre_filter_size=cfg["pre_filter_size"], pre_filter_cap=cfg["pre_filter_cap"],
-            texture_threshold=cfg["texture_threshold"], uniqueness_ratio=cfg["uniqueness_ratio"],
-            speckle_window_size=cfg["speckle_window_size"], speckle_range=cfg["speckle_range"],
-            disp12_max_diff=cfg["disp12_max_diff"])
-
     def _disparity(self, cfg: dict[str, int], left: np.ndarray, right: np.ndarray) -> np.ndarray:
-        params = self._match_params(cfg)
-        if self._matcher is None or self._matcher.params != params or self._matcher.shape != left.shape:
-            self._matcher = Matcher(left.shape, params)
+        self._matcher = matcher_for(cfg, left.shape, self._matcher)  # block matching or SGM
         return self._matcher.match(left, right)
 
     def _produce(self, req: CaptureRequest) -> None:

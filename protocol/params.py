@@ -68,6 +68,14 @@ PARAMS: tuple[Param, ...] = (
     Param(19, "heartbeat_timeout_ms", 3000, 0, 600_000, unit="ms"),  # 0: never time out
     Param(20, "scene", 0, 0, 2),  # 0 animated lab, 1 textured wall at 1 m, 2 calibration board
     Param(21, "rectify", 1, 0, 1),  # 1: rectified images + disparity; 0: raw images, no disparity
+    # matching algorithm and the semi-global matcher's own parameters (SGM also uses 8, 10, 15..18)
+    Param(22, "algorithm", 0, 0, 1),  # 0 block matching (StereoBM), 1 semi-global matching
+    Param(23, "sgm_p1", 15, 0, 255),  # SGM penalty for a 1 px disparity step along a path
+    Param(24, "sgm_p2", 128, 0, 193),  # SGM penalty for larger steps (census bits + p2 <= 255)
+    Param(25, "sgm_p2_adapt", 32, 0, 255),  # > 0: p2 / (1 + |dI| / this), not below p1; 0 off
+    Param(26, "sgm_paths", 8, 4, 8, step=4),  # 4 (horizontal + vertical) or 8 (+ diagonals)
+    Param(27, "census_width", 9, 3, 9, odd=True, unit="px"),  # SGM census window
+    Param(28, "census_height", 7, 1, 7, odd=True, unit="px"),
 )
 
 BY_ID: dict[int, Param] = {p.pid: p for p in PARAMS}
