@@ -31,3 +31,17 @@ def test_device_streams_sgm_disparity(cam):
     bm = Matcher(g.left.shape, params_from_config(cfg)).match(g.left, g.right)
     assert np.array_equal(g.disparity, bm)
     assert not np.array_equal(g.disparity, SGMMatcher(g.left.shape, params).match(g.left, g.right))
+
+
+def test_device_table_defaults_are_the_library_defaults():
+    from stereocam.protocol.params import BY_NAME, defaults
+
+    d = SGMParams()
+    sgm = params_from_config({**defaults(), "algorithm": 1})
+    assert (sgm.p1, sgm.p2, sgm.p2_adapt, sgm.paths, sgm.census_width, sgm.census_height) == (
+        d.p1, d.p2, d.p2_adapt, d.paths, d.census_width, d.census_height)
+    assert BY_NAME["sgm_p2"].hi + d.max_cost == 255  # every census window the table allows
+    for w in range(3, 10, 2):
+        for h in range(1, 8, 2):
+            params_from_config({**defaults(), "algorithm": 1, "census_width": w,
+                                "census_height": h, "sgm_p2": BY_NAME["sgm_p2"].hi})
