@@ -110,9 +110,9 @@ class SGMMatcher:
         self.done[:] = 0
         chunk = nb.set_parallel_chunksize(1)
         try:
-            _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.p2tab, self.parked, self.locks, self.done,
-                          disp, self.cost, self.lbuf, self.mv, self.meta, self.pm, self.acc,
-                          self.rmin, self.rarg, self.mins)
+            _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.p2tab, self.parked, self.locks,
+                          self.done, disp, self.cost, self.lbuf, self.mv, self.meta, self.pm,
+                          self.acc, self.rmin, self.rarg, self.mins)
         finally:
             nb.set_parallel_chunksize(chunk)
 

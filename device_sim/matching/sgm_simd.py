@@ -1,8 +1,9 @@
 """Vector operations over the disparity axis for the SGM kernels, plus a per-row spin lock.
 
-Arrays are 1-D (uint8 path costs, int16 sums) with the disparity axis contiguous; ``nd`` is a multiple of 16 and each
-loop walks it in 64/32/16-lane chunks (simd._chunked). Callers guarantee indices are in range,
-including the padding element before and after each predecessor run that pixel_paths reads.
+Arrays are 1-D (uint8 path costs, int16 sums) with the disparity axis contiguous; ``nd`` is a
+multiple of 16 and each loop walks it in 64/32/16-lane chunks (simd._chunked). Callers guarantee
+indices are in range, including the padding element before and after each predecessor run that
+pixel_paths reads.
 """
 from __future__ import annotations
 
@@ -171,9 +172,20 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
             def step(v):
                 po, oo, p2m, mp = meta_v[4 * v:4 * v + 4]
                 pj = builder.add(po, j0)
-                t = _umin(builder, lb(builder.sub(pj, one), vty), lb(builder.add(pj, one), vty))
-                t = _call(builder, f"llvm.uadd.sat.v{n}i8", vty, [t, p1s])
-                m = _umin(builder, _umin(builder, lb(pj, vty), t),
+                # P[k-1] and P[k+1] by shifting the chunk (loaded where it was stored, so a
+                # just-written predecessor forwards) with the neighbouring element (padding 255
+                # at either end of the run)
+                pv = lb(pj, vty)
+                before = builder.load(_ptr(context, builder, st[2], args[2],
+                                           [builder.sub(pj, one)]))
+                after = builder.load(_ptr(context, builder, st[2], args[2],
+                                          [builder.add(pj, ir.Constant(pj.type, n))]))
+                lo = builder.shuffle_vector(pv, _splat(builder, before, vty), ir.Constant(
+                    ir.VectorType(_I32, n), [n] + list(range(n - 1))))
+                hi = builder.shuffle_vector(pv, _splat(builder, after, vty), ir.Constant(
+                    ir.VectorType(_I32, n), list(range(1, n)) + [n]))
+                t = _call(builder, f"llvm.uadd.sat.v{n}i8", vty, [_umin(builder, lo, hi), p1s])
+                m = _umin(builder, _umin(builder, pv, t),
                           _splat(builder, builder.trunc(p2m, u8), vty))
                 L = builder.sub(builder.add(c, m), _splat(builder, builder.trunc(mp, u8), vty))
                 _vstore(builder, L, _ptr(context, builder, st[2], args[2], [builder.add(oo, j0)]))
