@@ -127,7 +127,8 @@ def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray,
 def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
            p2tab: np.ndarray, parked: np.ndarray, locks: np.ndarray, done: np.ndarray,
            disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
-           meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray, mins: np.ndarray) -> None:
+           meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
+           rarg: np.ndarray, mins: np.ndarray) -> None:
     """Every row of group g (see the module docstring)."""
     h = img.shape[0]
     nd, md, x0, cols = cfg[C_ND], cfg[C_MIND], cfg[C_X0], cfg[C_COLS]
