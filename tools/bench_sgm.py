@@ -158,7 +158,7 @@ def profile(left: np.ndarray, right: np.ndarray, nd: int, repeat: int, variants)
                 disp.copy(), p.invalid_value, p.speckle_window_size, p.speckle_range,
                 m.labels, m.stack, m.rtype))
         stages = stage_ms(m, left, repeat)
-        out.update({f"{k} (1 thread, both groups)": v for k, v in stages.items()})
+        out.update({f"{k} (CPU, 1 thread, both groups)": v for k, v in stages.items()})
         out["total"] = med(lambda: m.match(left, right))
         print(f"profile {label} {left.shape[1]}x{left.shape[0]}x{nd} (ms): "
               + ", ".join(f"{k} {v:.1f}" for k, v in out.items()))

@@ -36,7 +36,8 @@ def _select(cfg, acc, parked, rmin, rarg, mins, disp):
 
 
 def stage_ms(m, left: np.ndarray, repeat: int) -> dict[str, float]:
-    """Median ms per stage of SGMMatcher m (after one m.match, so its buffers hold a frame)."""
+    """Median CPU ms (process time, robust to a busy machine) per stage of SGMMatcher m, after
+    one m.match so that its buffers hold a frame."""
     disp = np.empty(m.shape, np.int16)
     acc = m.acc[0].copy()
     stages = {
@@ -54,9 +55,9 @@ def stage_ms(m, left: np.ndarray, repeat: int) -> dict[str, float]:
             fn()
             ts = []
             for _ in range(repeat):
-                t0 = time.perf_counter()
+                t0 = time.process_time()
                 fn()
-                ts.append((time.perf_counter() - t0) * 1e3)
+                ts.append((time.process_time() - t0) * 1e3)
             out[name] = statistics.median(ts)
     finally:
         nb.set_num_threads(with_threads)

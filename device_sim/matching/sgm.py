@@ -9,6 +9,9 @@ contiguous, int16) and sums them. The first group to finish a row parks its sum 
 second adds it and finishes that row (winner-take-all ... left-right) into ``disp``. A per-row
 spin lock decides who is first; nobody ever waits for the other group's progress, so one
 thread runs the same code (group 0, then group 1) with the same result.
+
+numba caches this module's kernels on disk keyed on *this* file only: after editing
+sgm_simd.py, touch this file and census.py (or delete __pycache__) so the cache is rebuilt.
 """
 from __future__ import annotations
 
