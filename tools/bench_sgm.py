@@ -133,12 +133,19 @@ def run(scenes, nd: int, repeat: int, variants: dict[str, dict]) -> None:
 
 
 def profile(left: np.ndarray, right: np.ndarray, nd: int, repeat: int, variants) -> None:
-    """Per-stage median ms of our SGM (stages as the matcher runs them)."""
+    """Per-stage median ms of our SGM (stages as the matcher runs them), and CPU ms per frame
+    on one thread of ours and of cv2 SGBM_3WAY (process time: robust to a busy machine)."""
+    import cv2
+
     from stereocam.device_sim.matching import SGMMatcher, SGMParams
     from stereocam.device_sim.matching.postfilter import filter_speckles
 
-    from .sgm_profile import stage_ms
+    from .sgm_profile import cpu_ms, stage_ms
 
+    three_way = cv2.StereoSGBM_create(0, nd, 5, 8 * 25, 32 * 25, 0, 0, 10, 100, 2,
+                                      SGBM_MODES["SGBM_3WAY"])
+    print(f"profile: cv2 SGBM_3WAY, CPU ms per frame on 1 thread: "
+          f"{cpu_ms(lambda: three_way.compute(left, right), repeat):.1f}")
     for label, kw in variants.items():
         p = SGMParams(num_disparities=nd, **kw)
         m = SGMMatcher(left.shape, p)
@@ -159,7 +166,8 @@ def profile(left: np.ndarray, right: np.ndarray, nd: int, repeat: int, variants)
                 m.labels, m.stack, m.rtype))
         stages = stage_ms(m, left, repeat)
         out.update({f"{k} (CPU, 1 thread, both groups)": v for k, v in stages.items()})
-        out["total"] = med(lambda: m.match(left, right))
+        out["total (2 threads)"] = med(lambda: m.match(left, right))
+        out["total (CPU, 1 thread)"] = cpu_ms(lambda: m.match(left, right), repeat)
         print(f"profile {label} {left.shape[1]}x{left.shape[0]}x{nd} (ms): "
               + ", ".join(f"{k} {v:.1f}" for k, v in out.items()))
 

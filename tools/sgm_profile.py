@@ -35,6 +35,25 @@ def _select(cfg, acc, parked, rmin, rarg, mins, disp):
         _sgm._finish_row(y, cfg, acc, parked[y], rmin, rarg, mins, disp[y])
 
 
+def cpu_ms(fn, repeat: int) -> float:
+    """Median CPU ms (process time) of fn() on one thread, numba's and OpenCV's."""
+    import cv2
+    threads = nb.get_num_threads(), cv2.getNumThreads()
+    nb.set_num_threads(1)
+    cv2.setNumThreads(1)
+    try:
+        fn()
+        ts = []
+        for _ in range(repeat):
+            t0 = time.process_time()
+            fn()
+            ts.append((time.process_time() - t0) * 1e3)
+        return statistics.median(ts)
+    finally:
+        nb.set_num_threads(threads[0])
+        cv2.setNumThreads(threads[1])
+
+
 def stage_ms(m, left: np.ndarray, repeat: int) -> dict[str, float]:
     """Median CPU ms (process time, robust to a busy machine) per stage of SGMMatcher m, after
     one m.match so that its buffers hold a frame."""
@@ -42,23 +61,9 @@ def stage_ms(m, left: np.ndarray, repeat: int) -> dict[str, float]:
     acc = m.acc[0].copy()
     stages = {
         "cost rows": lambda: _costs(m.cl, m.crr, m.cfg, m.cost[0]),
-        "path aggregation": lambda: _aggregate(left, m.cfg, m.p2tab, m.cost[0], m.lbuf[0], m.mv[0],
-                                               m.meta[0], m.pm[0], m.acc[0]),
+        "path aggregation": lambda: _aggregate(left, m.cfg, m.p2tab, m.cost[0], m.lbuf[0],
+                                               m.mv[0], m.meta[0], m.pm[0], m.acc[0]),
         "sum+wta+uniq+subpix+lr": lambda: _select(m.cfg, acc, m.parked, m.rmin[0], m.rarg[0],
                                                   m.mins[0], disp),
     }
-    out = {}
-    with_threads = nb.get_num_threads()
-    nb.set_num_threads(1)
-    try:
-        for name, fn in stages.items():
-            fn()
-            ts = []
-            for _ in range(repeat):
-                t0 = time.process_time()
-                fn()
-                ts.append((time.process_time() - t0) * 1e3)
-            out[name] = statistics.median(ts)
-    finally:
-        nb.set_num_threads(with_threads)
-    return out
+    return {name: cpu_ms(fn, repeat) for name, fn in stages.items()}
