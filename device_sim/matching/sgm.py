@@ -4,9 +4,9 @@ left-right check, bit-exact with tests/sgm_reference.py.
 Work split: two groups run in parallel (``prange(2)``). Group 0 walks the rows top to bottom
 and owns the paths arriving from the left, from above and from the two upper diagonals; group
 1 walks bottom to top with the mirrored paths. Per row a group computes its cost row from the
-census codes, steps each of its paths (previous row's L kept per path, disparity axis
-contiguous, int16) and sums them. The first group to finish a row parks its sum in ``S``; the
-second adds it and finishes that row (winner-take-all ... left-right) into ``disp``. A per-row
+census codes, steps all its paths in one pass per pixel (sgm_simd.pixel_paths: uint8 path
+costs, the previous row's kept per path, the disparity axis contiguous) and sums them in
+int16. The first group to finish a row parks its sum in ``parked``; the second adds it and finishes that row (winner-take-all ... left-right) into ``disp``. A per-row
 spin lock decides who is first; nobody ever waits for the other group's progress, so one
 thread runs the same code (group 0, then group 1) with the same result.
 
