@@ -6,9 +6,10 @@ and owns the paths arriving from the left, from above and from the two upper dia
 1 walks bottom to top with the mirrored paths. Per row a group computes its cost row from the
 census codes, steps all its paths in one pass per pixel (sgm_simd.pixel_paths: uint8 path
 costs, the previous row's kept per path, the disparity axis contiguous) and sums them in
-int16. The first group to finish a row parks its sum in ``parked``; the second adds it and finishes that row (winner-take-all ... left-right) into ``disp``. A per-row
-spin lock decides who is first; nobody ever waits for the other group's progress, so one
-thread runs the same code (group 0, then group 1) with the same result.
+int16. The first group to finish a row parks its sum in ``parked``; the second adds it and
+finishes that row (winner-take-all ... left-right) into ``disp``. A per-row spin lock decides
+who is first; nobody ever waits for the other group's progress, so one thread runs the same
+code (group 0, then group 1) with the same result.
 
 numba caches this module's kernels on disk keyed on *this* file only: after editing
 sgm_simd.py, touch this file and census.py (or delete __pycache__) so the cache is rebuilt.
