@@ -133,19 +133,13 @@ def run(scenes, nd: int, repeat: int, variants: dict[str, dict]) -> None:
 
 
 def profile(left: np.ndarray, right: np.ndarray, nd: int, repeat: int, variants) -> None:
-    """Per-stage median ms of our SGM (stages as the matcher runs them), and CPU ms per frame
-    on one thread of ours and of cv2 SGBM_3WAY (process time: robust to a busy machine)."""
-    import cv2
-
+    """Per-stage median ms of our SGM (stages as the matcher runs them; CPU ms on one thread,
+    process time, where marked: robust to a busy machine)."""
     from stereocam.device_sim.matching import SGMMatcher, SGMParams
     from stereocam.device_sim.matching.postfilter import filter_speckles
 
     from .sgm_profile import cpu_ms, stage_ms
 
-    three_way = cv2.StereoSGBM_create(0, nd, 5, 8 * 25, 32 * 25, 0, 0, 10, 100, 2,
-                                      SGBM_MODES["SGBM_3WAY"])
-    print(f"profile: cv2 SGBM_3WAY, CPU ms per frame on 1 thread: "
-          f"{cpu_ms(lambda: three_way.compute(left, right), repeat):.1f}")
     for label, kw in variants.items():
         p = SGMParams(num_disparities=nd, **kw)
         m = SGMMatcher(left.shape, p)
@@ -170,6 +164,29 @@ def profile(left: np.ndarray, right: np.ndarray, nd: int, repeat: int, variants)
         out["total (CPU, 1 thread)"] = cpu_ms(lambda: m.match(left, right), repeat)
         print(f"profile {label} {left.shape[1]}x{left.shape[0]}x{nd} (ms): "
               + ", ".join(f"{k} {v:.1f}" for k, v in out.items()))
+
+
+def cpu_table(scenes, nd: int, repeat: int, variants: dict[str, dict]) -> None:
+    """CPU ms per frame on one thread (process time, so other load on the machine does not
+    count), ours per variant vs cv2 SGBM_3WAY, per scene."""
+    import cv2
+
+    from stereocam.device_sim.matching import SGMMatcher, SGMParams
+
+    from .sgm_profile import cpu_ms
+
+    three_way = cv2.StereoSGBM_create(0, nd, 5, 8 * 25, 32 * 25, 0, 0, 10, 100, 2,
+                                      SGBM_MODES["SGBM_3WAY"])
+    print("CPU ms per frame on 1 thread (ours / cv2 SGBM_3WAY):")
+    for name, left, right, _ in scenes:
+        t3 = cpu_ms(lambda: three_way.compute(left, right), repeat)
+        cells = []
+        for label, kw in variants.items():
+            m = SGMMatcher(left.shape, SGMParams(num_disparities=nd, **kw))
+            t = cpu_ms(lambda: m.match(left, right), repeat)
+            cells.append(f"{label} {t:.1f} ({t / t3:.2f}x)")
+        print(f"  {name:<22} 3WAY {t3:.1f}; " + "; ".join(cells))
+    print()
 
 
 def main(args) -> int:
@@ -197,6 +214,7 @@ def main(args) -> int:
     nd = 128
     if args.profile:
         profile(*scenes[0][1:3], nd, args.repeat, variants)
+        cpu_table(scenes, nd, args.repeat, variants)
     run(scenes, nd, args.repeat, variants)
     print(f"load average at the end: {os.getloadavg()[0]:.2f}")
     return 0
