@@ -38,6 +38,8 @@ class DeviceInfo:
     sensor_height: int
     max_payload: int
     calibration_id: int  # the calibration in force when this was read; 0 = uncalibrated
+    max_width: int = 0  # largest frame width the device may send (INFO)
+    max_height: int = 0
 
 
 @dataclass(frozen=True)
@@ -79,6 +81,7 @@ class Camera:
         self.link = Link(transport, timeout=self.timeout, retries=self._retries, on_event=self.assembler.on_message)
         try:
             self._info = self._fetch_info()
+            self.assembler.set_limits(self._info.max_width, self._info.max_height)
             self.request(m.Stop())  # a known state: no stale stream from a previous session
             self.clock.reset()  # the unit may have rebooted: its clock starts over
             self.sync_clock(SYNC_SAMPLES)
@@ -123,7 +126,8 @@ class Camera:
             raise VersionMismatchError(f"device speaks protocol {r.protocol_version[0]}.{r.protocol_version[1]}, "
                                        f"this host speaks {VERSION_MAJOR}.x")
         return DeviceInfo(r.model, r.serial, r.firmware_version, r.protocol_version, r.capabilities,
-                          r.sensor_width, r.sensor_height, r.max_payload, r.calibration_id)
+                          r.sensor_width, r.sensor_height, r.max_payload, r.calibration_id, r.max_width,
+                          r.max_height)
 
     def sync_clock(self, samples: int = 1) -> None:
         """Take ``samples`` time-sync round trips into the device→host clock map."""
@@ -143,6 +147,8 @@ class Camera:
                     self.sync_clock(1)
             except StereoCamError:
                 pass  # a dead link shows in the user's next call; reconnect() brings a new one
+            except Exception as exc:  # noqa: BLE001 - a bug here ends the link visibly, not silently
+                self.link.fail(exc)
 
     # -- API --------------------------------------------------------------------------------
     def info(self) -> DeviceInfo:

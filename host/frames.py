@@ -110,16 +110,19 @@ class AssemblyStats:
     size_mismatch: int = 0  # chunk outside its plane or trailer disagrees
     device_errors: int = 0  # the device's trailer status was not OK
     orphan_chunks: int = 0  # chunks of a capture whose leader was lost
+    bad_leaders: int = 0  # FRAME_BEGINs claiming sizes beyond the INFO limits: dropped, nothing allocated
     lost: int = 0  # sequence numbers never seen (dropped on the device or on the link)
     queue_overflow: int = 0  # delivered frames discarded because the user did not keep up
 
     @property
     def dropped(self) -> int:
         """Captures the user did not get whole (delivered flawed ones included)."""
-        return self.incomplete + self.size_mismatch + self.device_errors + self.lost + self.queue_overflow
+        return (self.incomplete + self.size_mismatch + self.device_errors + self.lost + self.queue_overflow
+                + self.bad_leaders)
 
 
 _PLANES = {Output.LEFT: (np.uint8, 1), Output.RIGHT: (np.uint8, 1), Output.DISPARITY: (np.dtype("<i2"), 2)}
+_ALL_PLANES = int(Output.LEFT | Output.RIGHT | Output.DISPARITY)
 
 
 @dataclass
@@ -144,6 +147,11 @@ class FrameAssembler:
         self._clock_map = clock_map
         self._cur: _Building | None = None
         self._last_seq: int | None = None
+        self._limits: tuple[int, int] | None = None  # (max_width, max_height) from INFO
+
+    def set_limits(self, max_width: int, max_height: int) -> None:
+        """What the device said in INFO; a FRAME_BEGIN beyond it (or before it is known) is dropped."""
+        self._limits = (max_width, max_height)
 
     def reset(self) -> None:
         """Before a new stream: forget the last sequence (a gap across start is no loss), a capture
@@ -167,11 +175,21 @@ class FrameAssembler:
     def _begin(self, b: m.FrameBegin) -> None:
         if self._cur is not None:  # its FRAME_END never came
             self._flawed(self._cur, FrameStatus.MISSING_DATA)
+            self._cur = None
+        if not self._plausible(b):  # checked before a byte is allocated
+            self.stats.bad_leaders += 1
+            return
         if self._last_seq is not None and b.sequence > self._last_seq + 1:
             self.stats.lost += b.sequence - self._last_seq - 1
         self._last_seq = b.sequence
         n = b.width * b.height
         self._cur = _Building(b, {p: bytearray(n * size) for p, (_, size) in _PLANES.items() if b.planes & p})
+
+    def _plausible(self, b: m.FrameBegin) -> bool:
+        if self._limits is None:
+            return False
+        max_w, max_h = self._limits
+        return 0 < b.width <= max_w and 0 < b.height <= max_h and not b.planes & ~_ALL_PLANES
 
     def _data(self, d: m.FrameData) -> None:
         cur = self._cur

@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.errors import (CameraTimeoutError, DeviceError, DisconnectedError, ProtocolError, StereoCamError,
-                             TransportError)
+from stereocam.protocol.errors import (CameraTimeoutError, DeviceError, DisconnectedError, LinkFailedError,
+                                      ProtocolError, StereoCamError, TransportError)
 from stereocam.protocol.framing import FLAG_RESEND, Decoder, Packet
 from stereocam.protocol.params import BY_ID
 
@@ -124,18 +124,30 @@ class Link:
 
     # -- reader ---------------------------------------------------------------------------------
     def _read_loop(self) -> None:
+        """Any failure here ends the link with a typed error: waiting requests fail at once,
+        later calls raise it, and ``Camera(auto_reconnect=True)`` reconnects on it."""
         while not self._closed.is_set():
             try:
                 data = self.transport.read(READ_CHUNK, 0.05)
+                if data:
+                    for packet in self.decoder.feed(data):
+                        self._dispatch(packet)
             except StereoCamError as exc:
                 self._die(exc)
                 return
             except OSError as exc:
                 self._die(DisconnectedError(f"read from {self.transport.url} failed: {exc}"))
                 return
-            if data:
-                for packet in self.decoder.feed(data):
-                    self._dispatch(packet)
+            except Exception as exc:  # noqa: BLE001 - a bug or MemoryError must not leave a zombie link
+                self.fail(exc)
+                return
+
+    def fail(self, exc: BaseException) -> None:
+        """End the link because a background thread serving it failed with ``exc``."""
+        err = LinkFailedError(f"link to {self.transport.url} failed in a background thread: "
+                              f"{type(exc).__name__}: {exc}")
+        err.__cause__ = exc
+        self._die(err)
 
     def _dispatch(self, packet: Packet) -> None:
         try:

@@ -1,0 +1,98 @@
+"""A hostile or broken device must not silently kill the host (issue 9, items 3, 4)."""
+from __future__ import annotations
+
+import time
+
+import pytest
+
+import stereocam
+from stereocam.camera import Camera
+from stereocam.device_sim import SimulatedCamera
+from stereocam.device_sim.links.inprocess import InProcessTransport
+from stereocam.frames import FrameAssembler
+from stereocam.clock import ClockMap
+from stereocam.link import Link
+from stereocam.protocol import messages as m
+
+from .faults import FaultyTransport
+
+
+def _begin(width: int, height: int, planes: int = 7, sequence: int = 1) -> m.FrameBegin:
+    return m.FrameBegin(sequence, 0, 0, 1000, 0, width, height, planes, 0, m.DISPARITY_S16_Q4, 16, 0, 64, -16, 0,
+                        0.0, 0.0, 0.0, 0.0)
+
+
+def _inject_once(wire: bytes):
+    sent = []
+
+    def manipulator(b: bytes) -> bytes:
+        if not sent:
+            sent.append(True)
+            return wire + b
+        return b
+    return manipulator
+
+
+def test_an_exception_in_the_event_path_ends_the_link_with_a_typed_error():
+    sim = SimulatedCamera(seed=21)
+    link_t = FaultyTransport(InProcessTransport(sim))
+
+    def explode(msg: m.Message) -> None:
+        raise MemoryError("simulated allocation failure in the event path")
+
+    lk = Link(link_t, timeout=0.3, retries=0, on_event=explode)
+    try:
+        assert isinstance(lk.request(m.GetInfo()), m.Info)
+        link_t.set_manipulator(read=_inject_once(m.encode(_begin(64, 48))))
+        deadline = time.monotonic() + 5
+        while lk.alive and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert not lk.alive
+        assert isinstance(lk.error, stereocam.DisconnectedError)  # auto_reconnect acts on it
+        assert isinstance(lk.error.__cause__, MemoryError)
+        with pytest.raises(stereocam.DisconnectedError, match="MemoryError"):
+            lk.request(m.GetInfo())  # at once, not after a timeout
+    finally:
+        lk.close()
+
+
+@pytest.mark.parametrize("width,height,planes", [(65535, 65535, 7), (1281, 480, 1), (640, 961, 1), (0, 480, 1),
+                                                 (640, 480, 0x80)])
+def test_frame_begin_beyond_the_negotiated_limits_is_dropped_not_allocated(width, height, planes):
+    asm = FrameAssembler(ClockMap())
+    asm.set_limits(max_width=1280, max_height=960)
+    asm.on_message(_begin(width, height, planes))
+    asm.on_message(m.FrameData(1, 1, 0, b"\x00" * 16))
+    asm.on_message(m.FrameEnd(1, m.FRAME_OK, width * height, 0, 0))
+    assert asm.stats.bad_leaders == 1
+    assert asm._cur is None and asm.frames.empty()
+
+
+def test_frame_data_outside_its_plane_marks_the_capture_bad():
+    asm = FrameAssembler(ClockMap())
+    asm.set_limits(max_width=1280, max_height=960)
+    asm.on_message(_begin(16, 8, 1))
+    asm.on_message(m.FrameData(1, 1, 0xFFFFFFF0, b"\x01" * 32))
+    asm.on_message(m.FrameEnd(1, m.FRAME_OK, 128, 0, 0))
+    assert asm.stats.size_mismatch == 1 and asm.frames.empty()
+
+
+def test_no_frame_is_assembled_before_the_limits_are_known():
+    asm = FrameAssembler(ClockMap())
+    asm.on_message(_begin(16, 8, 1))
+    assert asm.stats.bad_leaders == 1
+
+
+def test_a_camera_survives_a_huge_frame_begin_and_keeps_streaming():
+    sim = SimulatedCamera(seed=22)
+    t = FaultyTransport(InProcessTransport(sim))
+    cam = Camera(t, timeout=1.0)
+    try:
+        cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=10)
+        t.set_manipulator(read=_inject_once(m.encode(_begin(65535, 65535, 7, sequence=999))))
+        cam.start()
+        frame = cam.get_frame(timeout=10)
+        assert frame.width == 320 and cam.link.alive
+        assert cam.stats["bad_leaders"] == 1
+    finally:
+        cam.close()
