@@ -17,6 +17,7 @@ from stereocam.protocol.params import BY_ID, BY_NAME, TriggerMode
 from stereocam.protocol.rectification import stereo_rectify
 
 from . import calibration_io
+from .arguments import int32_arg, timeout_arg
 from .calibration_io import StoredCalibration
 from .clock import ClockMap, SyncSample
 from .frames import AssemblyStats, Frame, FrameAssembler, StereoGeometry
@@ -60,7 +61,8 @@ class Camera:
         within their own timeout instead of raising DisconnectedError at once."""
         self.url = transport.url
         self.auto_reconnect = auto_reconnect
-        self.timeout = timeout
+        self.timeout = timeout_arg(timeout)
+        heartbeat_interval = timeout_arg(heartbeat_interval, "heartbeat_interval")
         self._retries = retries
         self.clock = ClockMap()
         self.assembler = FrameAssembler(self.clock, queue_depth, deliver_incomplete)
@@ -93,6 +95,7 @@ class Camera:
         """After a disconnect: find the same unit again (by serial), re-apply every parameter this
         Camera set, and resume streaming if it was streaming. Retries with exponential backoff
         until ``timeout``; DisconnectedError if the unit does not come back in time."""
+        timeout, backoff = timeout_arg(timeout), timeout_arg(backoff, "backoff")
         serial = self._info.serial
         url = reopen_url(self.url, serial)
         deadline = time.monotonic() + timeout
@@ -182,12 +185,7 @@ class Camera:
             p = BY_NAME.get(name)
             if p is None:
                 raise ConfigError(f"unknown parameter {name!r}; known: {', '.join(BY_NAME)}")
-            if isinstance(value, bool) or not isinstance(value, int):
-                if isinstance(value, TriggerMode) or (isinstance(value, float) and value.is_integer()):
-                    value = int(value)
-                else:
-                    raise ConfigError(f"{name} must be an integer, got {value!r}")
-            update[p.pid] = int(value)
+            update[p.pid] = int32_arg(value, name)
         r = self.request(m.SetConfig(update))
         self._applied.update({BY_ID[k].name: v for k, v in update.items()})
         return _names(r.values)  # type: ignore[attr-defined]
@@ -222,8 +220,9 @@ class Camera:
         return DeviceStatus(r.uptime_us, r.streaming, TriggerMode(r.trigger_mode), r.counters)
 
     def get_frame(self, timeout: float | None = None) -> Frame:
-        """The next complete frame; CameraTimeoutError (a TimeoutError) if none within ``timeout``."""
-        timeout = self.timeout if timeout is None else timeout
+        """The next complete frame; CameraTimeoutError (a TimeoutError) if none within ``timeout``
+        (finite seconds >= 0; ConfigError otherwise)."""
+        timeout = self.timeout if timeout is None else timeout_arg(timeout)
         deadline = time.monotonic() + timeout
         while True:
             try:
@@ -311,4 +310,5 @@ def _fields(obj: LinkStats | AssemblyStats) -> dict[str, int]:
 
 def open(url: str, timeout: float = 1.0, **kwargs) -> Camera:  # noqa: A001 - mirrors serial_for_url
     """Open the camera at ``url`` (sim://, usb://, socket://host:port, a device path, ...)."""
+    timeout = timeout_arg(timeout)
     return Camera(open_transport(url, timeout), timeout=timeout, **kwargs)

@@ -16,6 +16,7 @@ from stereocam.protocol.errors import (CameraTimeoutError, DeviceError, Disconne
 from stereocam.protocol.framing import FLAG_RESEND, Decoder, Packet
 from stereocam.protocol.params import BY_ID
 
+from .arguments import timeout_arg
 from .transports.base import Transport
 
 READ_CHUNK = 1 << 20
@@ -44,7 +45,7 @@ class Link:
     def __init__(self, transport: Transport, *, timeout: float = 1.0, retries: int = 2,
                  on_event: Callable[[m.Message], None] | None = None, first_request_id: int = 1):
         self.transport = transport
-        self.timeout = timeout
+        self.timeout = timeout_arg(timeout)
         self.retries = retries
         self.decoder = Decoder()
         self.stats = LinkStats()
@@ -67,7 +68,7 @@ class Link:
 
     def request(self, msg: m.Message, timeout: float | None = None, retries: int | None = None) -> m.Message:
         """Send ``msg``, return the device's reply; DeviceError on NACK, CameraTimeoutError after retries."""
-        timeout = self.timeout if timeout is None else timeout
+        timeout = self.timeout if timeout is None else timeout_arg(timeout)
         retries = self.retries if retries is None else retries
         self.check_alive()
         rid = self._allocate_id()
