@@ -73,3 +73,36 @@ def test_configure_accepts_numpy_integers(cam):
 def test_configure_refuses_non_integers_naming_the_parameter(cam, value):
     with pytest.raises(stereocam.ConfigError, match="width"):
         cam.configure(width=value)
+
+
+@pytest.mark.parametrize("url,problem", [
+    ("sim://?seed=-1", "seed"), ("sim://?seed=12345678901234567890", "seed"), ("sim://?seed=", "seed"),
+    ("sim://?seed=1&seed=2", "seed"), ("sim://?seed=x", "seed"),
+    ("socket://127.0.0.1", "port"), ("socket://127.0.0.1:99999", "port"), ("socket://127.0.0.1:x", "port"),
+    ("socket://:80x", "port"), ("rfc2217://host", "port"),
+])
+def test_malformed_urls_get_a_typed_error_naming_the_problem(url, problem):
+    with pytest.raises(stereocam.ConfigError, match=problem):
+        _returns_within(30, stereocam.open, url, timeout=0.5)
+
+
+def test_a_url_pyserial_chokes_on_stays_in_the_error_tree():
+    with pytest.raises(stereocam.StereoCamError, match="loop://"):
+        stereocam.open("loop://?logging=nonsense", timeout=0.5)
+
+
+@pytest.mark.parametrize("source", ["bogus", None, 3])
+def test_read_calibration_source_is_checked(cam, source):
+    with pytest.raises(stereocam.ConfigError, match="source"):
+        cam.read_calibration(source)
+
+
+@pytest.mark.parametrize("calibration", [None, "cal", b"\x00" * 248])
+def test_write_calibration_needs_a_calibration(cam, calibration):
+    with pytest.raises(stereocam.ConfigError, match="StereoCalibration"):
+        cam.write_calibration(calibration)
+
+
+def test_write_calibration_target_is_checked(cam):
+    with pytest.raises(stereocam.ConfigError, match="target"):
+        cam.write_calibration(cam.read_calibration().calibration, target="bogus")
