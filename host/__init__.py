@@ -9,7 +9,7 @@ from importlib.metadata import version as _version
 
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DeviceError, DisconnectedError, ErrorCode,
-                             LinkFailedError, ProtocolError, StereoCamError, TransportError, VerificationError,
+                             LinkFailedError, ProtocolError, StreamStoppedError, StereoCamError, TransportError, VerificationError,
                              VersionMismatchError)
 from stereocam.protocol.params import Output, TriggerMode
 
@@ -29,5 +29,5 @@ __all__ = [
     "open", "list_devices", "DeviceEntry", "Camera", "DeviceInfo", "DeviceStatus", "Frame", "FrameStatus",
     "DisparityFormat", "StereoGeometry", "StereoCalibration", "StoredCalibration", "TriggerMode", "Output",
     "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError",
-    "ErrorCode", "TransportError", "DisconnectedError", "LinkFailedError", "CameraTimeoutError", "VerificationError",
+    "ErrorCode", "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError", "CameraTimeoutError", "VerificationError",
 ]

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 from typing import Iterator
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError, TransportError,
-                             VersionMismatchError)
+from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError,
+                                      StreamStoppedError, TransportError, VersionMismatchError)
 from stereocam.protocol.framing import VERSION_MAJOR
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.params import BY_ID, BY_NAME, TriggerMode
@@ -71,7 +71,11 @@ class Camera:
         self._applied: dict[str, int] = {}  # every parameter this Camera set, for reconnect
         self._geometries: dict[tuple[int, int, int], tuple[StereoCalibration, StereoGeometry]] = {}
         self.geometry_mismatches = 0  # frames whose carried geometry disagreed with the stored calibration
-        self._streaming = False
+        self._streaming = False  # what the user asked for
+        self._stream_lock = threading.Lock()  # orders user start/stop against a watchdog restart
+        self._stream_epoch = 0  # bumped by every user start/stop: an older STATUS is not acted on
+        self._stream_error: StreamStoppedError | None = None
+        self.stream_restarts = 0  # streams the device stopped (watchdog) that the host restarted
         self.last_status: DeviceStatus | None = None
         self._connect(transport)
         self._heartbeat_interval = heartbeat_interval
@@ -145,13 +149,35 @@ class Camera:
     def _heartbeat_loop(self) -> None:
         while not self._closed.wait(self._heartbeat_interval):
             try:
+                epoch = self._stream_epoch
                 self.last_status = self.status()
+                if not self.last_status.streaming:
+                    self._restart_stopped_stream(epoch)
                 if time.monotonic() - self._last_sync > SYNC_PERIOD:
                     self.sync_clock(1)
             except StereoCamError:
                 pass  # a dead link shows in the user's next call; reconnect() brings a new one
             except Exception as exc:  # noqa: BLE001 - a bug here ends the link visibly, not silently
                 self.link.fail(exc)
+
+    def _restart_stopped_stream(self, epoch: int) -> None:
+        """The rule for a stream the device stopped on its own (SPEC §9): the host sends START once
+        for each STATUS that shows it stopped while the user wants it streaming, and counts it in
+        ``stream_restarts``. If that START is refused or unanswered on a live link, ``get_frame``
+        raises StreamStoppedError until the user calls ``start`` (or ``stop``) again."""
+        with self._stream_lock:
+            if (not self._streaming or self._stream_error is not None or epoch != self._stream_epoch
+                    or self._closed.is_set()):
+                return
+            try:
+                self.request(m.Start())
+            except StereoCamError as exc:
+                if self.link.alive:  # a dead link is reconnect()'s business, which restarts the stream
+                    err = StreamStoppedError(f"{self.url} stopped streaming on its own and did not restart: {exc}")
+                    err.__cause__ = exc
+                    self._stream_error = err
+                return
+            self.stream_restarts += 1
 
     # -- API --------------------------------------------------------------------------------
     def info(self) -> DeviceInfo:
@@ -206,13 +232,19 @@ class Camera:
 
     def start(self) -> None:
         """Start streaming; frames still queued from an earlier stream are discarded."""
-        self.assembler.reset()
-        self.request(m.Start())
-        self._streaming = True
+        with self._stream_lock:
+            self._stream_epoch += 1
+            self.assembler.reset()
+            self.request(m.Start())
+            self._streaming = True
+            self._stream_error = None
 
     def stop(self) -> None:
-        self.request(m.Stop())
-        self._streaming = False
+        with self._stream_lock:
+            self._stream_epoch += 1
+            self.request(m.Stop())
+            self._streaming = False
+            self._stream_error = None
 
     def status(self) -> DeviceStatus:
         r = self.request(m.Heartbeat())
@@ -221,10 +253,13 @@ class Camera:
 
     def get_frame(self, timeout: float | None = None) -> Frame:
         """The next complete frame; CameraTimeoutError (a TimeoutError) if none within ``timeout``
-        (finite seconds >= 0; ConfigError otherwise)."""
+        (finite seconds >= 0; ConfigError otherwise); StreamStoppedError if the device stopped the
+        stream and would not restart (see ``_restart_stopped_stream``)."""
         timeout = self.timeout if timeout is None else timeout_arg(timeout)
         deadline = time.monotonic() + timeout
         while True:
+            if self._stream_error is not None:
+                raise self._stream_error
             try:
                 self.link.check_alive()
             except DisconnectedError:

@@ -62,6 +62,10 @@ class LinkFailedError(DisconnectedError):
     """The host's link ended because its reader or event path failed (the cause is chained)."""
 
 
+class StreamStoppedError(StereoCamError):
+    """The device stopped a stream the host had started (watchdog) and restarting it failed."""
+
+
 class VerificationError(StereoCamError):
     """Data read back from the device differs from what was written."""
 

@@ -96,3 +96,64 @@ def test_a_camera_survives_a_huge_frame_begin_and_keeps_streaming():
         assert cam.stats["bad_leaders"] == 1
     finally:
         cam.close()
+
+
+def _watchdog_stop(cam: Camera, t: FaultyTransport, sim: SimulatedCamera) -> None:
+    """Lose every host-to-device byte until the device's watchdog stops the stream, then heal."""
+    t.set_manipulator(write=lambda b: b"")
+    deadline = time.monotonic() + 10
+    while sim.counters["heartbeat_timeouts"] == 0 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert sim.counters["heartbeat_timeouts"] == 1 and not sim.engine.streaming
+    t.set_manipulator(write=lambda b: b)
+
+
+@pytest.fixture
+def streaming():
+    sim = SimulatedCamera(seed=23)
+    t = FaultyTransport(InProcessTransport(sim))
+    cam = Camera(t, timeout=0.3, retries=1, heartbeat_interval=0.1)
+    cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=20, heartbeat_timeout_ms=400)
+    cam.start()
+    cam.get_frame(timeout=10)
+    yield cam, t, sim
+    cam.close()
+
+
+def test_a_stream_the_device_watchdog_stopped_is_restarted(streaming):
+    cam, t, sim = streaming
+    _watchdog_stop(cam, t, sim)
+    at_stop = sim.engine.sequence
+    frame = cam.get_frame(timeout=10)
+    while frame.sequence <= at_stop:  # frames queued before the stop
+        frame = cam.get_frame(timeout=10)  # then the heartbeat saw streaming=False and sent START once
+    assert sim.engine.streaming and cam.stream_restarts == 1
+
+
+def test_a_stream_that_cannot_be_restarted_raises(streaming):
+    cam, t, sim = streaming
+
+    def refuse(_msg):
+        raise stereocam.DeviceError(stereocam.ErrorCode.BAD_STATE, "sensor fault")
+    sim._handlers[m.MsgType.START] = refuse
+    _watchdog_stop(cam, t, sim)
+    with pytest.raises(stereocam.StreamStoppedError, match="sensor fault"):
+        for _ in range(100):
+            cam.get_frame(timeout=10)
+    assert cam.stream_restarts == 0
+    with pytest.raises(stereocam.StreamStoppedError):
+        cam.get_frame(timeout=1)  # until the user starts again
+    sim._handlers[m.MsgType.START] = sim._start
+    cam.start()
+    assert cam.get_frame(timeout=10).width == 320
+
+
+def test_a_stop_by_the_user_is_not_undone(streaming):
+    cam, t, sim = streaming
+    for _ in range(20):
+        cam.stop()
+        time.sleep(0.03)
+        cam.start()
+    cam.stop()
+    time.sleep(0.5)
+    assert not sim.engine.streaming and cam.stream_restarts == 0
