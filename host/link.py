@@ -13,7 +13,7 @@ from typing import Callable
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import (CameraTimeoutError, DeviceError, DisconnectedError, LinkFailedError,
                                       ProtocolError, StereoCamError, TransportError)
-from stereocam.protocol.framing import FLAG_RESEND, Decoder, Packet
+from stereocam.protocol.framing import FLAG_RESEND, HOST_MESSAGE_TIMEOUT, Decoder, Packet
 from stereocam.protocol.params import BY_ID
 
 from .arguments import timeout_arg
@@ -47,7 +47,7 @@ class Link:
         self.transport = transport
         self.timeout = timeout_arg(timeout)
         self.retries = retries
-        self.decoder = Decoder()
+        self.decoder = Decoder(message_timeout=HOST_MESSAGE_TIMEOUT)
         self.stats = LinkStats()
         self._on_event = on_event
         self._lock = threading.Lock()
@@ -130,9 +130,8 @@ class Link:
         while not self._closed.is_set():
             try:
                 data = self.transport.read(READ_CHUNK, 0.05)
-                if data:
-                    for packet in self.decoder.feed(data):
-                        self._dispatch(packet)
+                for packet in self.decoder.feed(data) if data else self.decoder.expire():
+                    self._dispatch(packet)
             except StereoCamError as exc:
                 self._die(exc)
                 return

@@ -885,9 +885,9 @@ def test_decoder_max_payload_in_range(ok: int) -> None:
 
 def test_stats_dropped_sums_every_loss_counter() -> None:
     s = DecoderStats(bytes_in=1, packets=2, garbage_bytes=3, header_crc_errors=4, bad_headers=5,
-                     payload_crc_errors=6, oversize=7, unsupported_version=8)
-    assert s.dropped == 30
-    assert s.as_dict()["unsupported_version"] == 8 and "dropped" not in s.as_dict() and len(s.as_dict()) == 8
+                     payload_crc_errors=6, oversize=7, unsupported_version=8, message_timeouts=9)
+    assert s.dropped == 39
+    assert s.as_dict()["unsupported_version"] == 8 and "dropped" not in s.as_dict() and len(s.as_dict()) == 9
 
 
 # -- the parameter table -----------------------------------------------------------------------

@@ -1,6 +1,7 @@
 """``stereocam bench [protocol|transport|matching|all]``: figures, not pass/fail.
 
 protocol  — decoder throughput (MB/s) on a stream of 640x480 frame messages fed in 64 KiB chunks.
+decoder   — the decoder's cost per byte on adversarial streams against its clean cost (tools/bench_decoder.py).
 transport — end-to-end frames/s and MB/s at 640x480 (left, right, disparity) per transport (sim,
             pty, tcp, usb), the simulator rendering and matching every frame; side by side in one run.
 usb       — the USB path alone: bulk IN MB/s through pyusb and the transport (tools/bench_usb.py).
@@ -104,13 +105,15 @@ def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty"
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="stereocam bench", description=__doc__.splitlines()[0])
     ap.add_argument("what", nargs="?", default="all",
-                    choices=["protocol", "transport", "usb", "matching", "calibration", "all"])
+                    choices=["protocol", "decoder", "transport", "usb", "matching", "calibration", "all"])
     ap.add_argument("--seconds", type=float, default=5.0)
     args, rest = ap.parse_known_args(argv)
     if args.what in ("protocol", "all"):
         bench_protocol()
     if args.what in ("transport", "all"):
         bench_transport(args.seconds)
+    if args.what in ("decoder", "all"):
+        importlib.import_module("stereocam.tools.bench_decoder").main(rest)
     if args.what == "usb":
         importlib.import_module("stereocam.tools.bench_usb").main(rest)
     if args.what in ("matching", "all"):
