@@ -19,6 +19,7 @@ import numpy as np
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import DeviceError, ErrorCode, ProtocolError
 from stereocam.protocol.framing import FLAG_RESEND, MAX_PAYLOAD, VERSION_MAJOR, VERSION_MINOR, Decoder, Packet
+from stereocam.protocol.framing import DEVICE_MESSAGE_TIMEOUT
 from stereocam.protocol.params import BY_NAME, Output, TriggerMode
 
 from . import registry
@@ -91,7 +92,7 @@ class SimulatedCamera:
             self._tmpdir = tempfile.TemporaryDirectory(prefix="stereocam-flash-")
             flash_path = Path(self._tmpdir.name) / f"{self.serial}.flash"
         self.calibration = CalibrationService(flash_path, self._truth_cal, factory_calibrated)
-        self.decoder = Decoder()
+        self.decoder = Decoder(message_timeout=DEVICE_MESSAGE_TIMEOUT)
         self.counters: collections.Counter[str] = collections.Counter()
         self._sink: Sink | None = None
         self._sink_lock = threading.Lock()
@@ -135,7 +136,7 @@ class SimulatedCamera:
             self._sink = sink
         with self._rx_lock:  # a new host: its request ids say nothing about the last one's
             self._replies.clear()
-            self.decoder = Decoder(stats=self.decoder.stats)
+            self.decoder = Decoder(stats=self.decoder.stats, message_timeout=DEVICE_MESSAGE_TIMEOUT)
         self._last_rx = time.monotonic()
 
     @property
