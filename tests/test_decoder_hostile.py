@@ -98,3 +98,21 @@ def test_crc_of_any_range_from_the_index_matches_zlib():
         assert idx.crc(data, 0, a, b) == zlib.crc32(data[a:b])
     idx.drop_before(data, 0, 9000)
     assert idx.crc(data, 0, 9001, 15000) == zlib.crc32(data[9001:15000])
+
+
+@pytest.mark.parametrize("spec", ["pty", "tcp:127.0.0.1:0"])
+def test_one_stray_header_does_not_deafen_the_served_device(spec):
+    """Issue 9 item 1: a CRC-valid 1 MiB header written by a stray writer used to leave the
+    device waiting for a megabyte, so every later host.open timed out."""
+    import serial
+
+    import stereocam
+    from stereocam.device_sim.process import ServedSimulator
+
+    with ServedSimulator(spec, seed=31) as server:
+        stray = serial.serial_for_url(server.url, timeout=0.5)
+        stray.write(shapes.valid_header(MAX_PAYLOAD))
+        stray.flush()
+        stray.close()
+        with stereocam.open(server.url, timeout=1.0) as cam:  # 3 tries of 1 s > the device's 1 s limit
+            assert cam.info().serial
