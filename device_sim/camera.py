@@ -26,6 +26,7 @@ from . import registry
 from .capture import CaptureEngine, CaptureRequest
 from .clock import DeviceClock
 from .config_store import ConfigStore
+from .frame_resend import FrameResender
 from .matching import Matcher, MatchParams
 from .matching import warm_up as matching_warm_up
 from .calib_service import CalibrationService
@@ -37,9 +38,8 @@ from .trigger import TriggerLine
 
 MODEL = "STOC-SIM"
 FIRMWARE_VERSION = "1.1.0"
-CHUNK = 128 * 1024  # FRAME_DATA payload bytes per message
 CAPABILITIES = (m.Capability.DISPARITY | m.Capability.SOFTWARE_TRIGGER | m.Capability.EXTERNAL_TRIGGER
-                | m.Capability.TIME_SYNC | m.Capability.CALIBRATION)
+                | m.Capability.TIME_SYNC | m.Capability.CALIBRATION | m.Capability.FRAME_REPAIR)
 RESEND_CACHE = 64
 GROUND_TRUTH_KEEP = 64
 
@@ -104,6 +104,7 @@ class SimulatedCamera:
         self._last_rx = time.monotonic()
         self._soft_triggers = 0
         self.engine = CaptureEngine(self._produce, self._watchdog)
+        self.resender = FrameResender()
         self.trigger_line = trigger_line
         if trigger_line is not None:
             trigger_line.attach(self._on_pulse)
@@ -115,6 +116,8 @@ class SimulatedCamera:
             m.MsgType.CALIB_READ: self.calibration.read, m.MsgType.CALIB_WRITE: self.calibration.write,
             m.MsgType.CALIB_COMMIT: self.calibration.commit,
             m.MsgType.CALIB_RESTORE: lambda _: self.calibration.restore_factory(),
+            m.MsgType.SET_FRAME_LINK: self.resender.set_link,
+            m.MsgType.FRAME_RESEND: lambda msg: self.resender.resend(msg, self._emit_locked),
         }
         self._boot()
         registry.register(self)
@@ -136,6 +139,7 @@ class SimulatedCamera:
             self._sink = sink
         with self._rx_lock:  # a new host: its request ids say nothing about the last one's
             self._replies.clear()
+            self.resender.reset()
             self.decoder = Decoder(stats=self.decoder.stats, message_timeout=DEVICE_MESSAGE_TIMEOUT)
         self._last_rx = time.monotonic()
 
@@ -212,6 +216,10 @@ class SimulatedCamera:
     def _nack(self, request_type: int, code: ErrorCode, text: str, param_id: int = 0) -> m.Nack:
         self.counters["nacks"] += 1
         return m.Nack(request_type, code, param_id, text)
+
+    def _emit_locked(self, wire: bytes) -> bool:
+        with self._sink_lock:
+            return self._emit(wire)
 
     def _emit(self, wire: bytes) -> bool:
         """Write under ``_sink_lock``; a failing sink means the link is gone: detach and stop."""
@@ -342,19 +350,17 @@ class SimulatedCamera:
             cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, calib_id,
             focal, cx, cy, baseline)
         planes = [(Output.LEFT, left), (Output.RIGHT, right), (Output.DISPARITY, disp)]
-        sizes = {}
+        raws = {int(p): memoryview(np.ascontiguousarray(img, dtype=img.dtype.newbyteorder("<")).tobytes())
+                for p, img in planes if p in outputs}  # copies: kept for FRAME_RESEND (frame_resend.py)
+        self.resender.remember(req.sequence, raws)
+        sizes = dict.fromkeys((Output.LEFT, Output.RIGHT, Output.DISPARITY), 0)
         if not self._send_frame_part(req, m.encode(begin)):
             return
-        for plane, img in planes:
-            sizes[plane] = 0
-            if plane not in outputs:
-                continue
-            raw = memoryview(np.ascontiguousarray(img, dtype=img.dtype.newbyteorder("<"))).cast("B")
-            for off in range(0, len(raw), CHUNK):
-                if not self._send_frame_part(req, m.encode(m.FrameData(req.sequence, int(plane), off,
-                                                                       raw[off:off + CHUNK]))):
+        for plane, raw in raws.items():
+            for wire in self.resender.chunks(req.sequence, plane, raw):
+                if not self._send_frame_part(req, wire):
                     return
-            sizes[plane] = len(raw)
+            sizes[Output(plane)] = len(raw)
         if not self._send_frame_part(req, m.encode(m.FrameEnd(req.sequence, m.FRAME_OK, sizes[Output.LEFT],
                                                               sizes[Output.RIGHT], sizes[Output.DISPARITY]))):
             return
