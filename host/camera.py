@@ -20,6 +20,7 @@ from . import calibration_io
 from .arguments import int32_arg, timeout_arg
 from .calibration_io import StoredCalibration
 from .clock import ClockMap, SyncSample
+from .frame_repair import RepairWorker
 from .frames import AssemblyStats, Frame, FrameAssembler, StereoGeometry
 from .link import Link, LinkStats
 from .transports import Transport, open_transport, reopen_url
@@ -77,7 +78,14 @@ class Camera:
         self._stream_error: StreamStoppedError | None = None
         self.stream_restarts = 0  # streams the device stopped (watchdog) that the host restarted
         self.last_status: DeviceStatus | None = None
-        self._connect(transport)
+        self._repairer = RepairWorker(lambda msg: self.link.request(msg, min(self.timeout, 0.5), 2),
+                                      self.assembler.on_resent,
+                                      lambda exc: self.link.fail(exc))
+        try:
+            self._connect(transport)
+        except BaseException:
+            self._repairer.close()
+            raise
         self._heartbeat_interval = heartbeat_interval
         self._heartbeat = threading.Thread(target=self._heartbeat_loop, name="stereocam-heartbeat", daemon=True)
         self._heartbeat.start()
@@ -88,12 +96,21 @@ class Camera:
         try:
             self._info = self._fetch_info()
             self.assembler.set_limits(self._info.max_width, self._info.max_height)
+            self._set_up_repair(transport)
             self.request(m.Stop())  # a known state: no stale stream from a previous session
             self.clock.reset()  # the unit may have rebooted: its clock starts over
             self.sync_clock(SYNC_SAMPLES)
         except BaseException:
             self.link.close()
             raise
+
+    def _set_up_repair(self, transport: Transport) -> None:
+        """Protocol 1.2 (SPEC §13): ask for this transport's chunk size and let the assembler request
+        resends of damaged parts; with an older device frames travel and drop as in 1.1."""
+        self.assembler.repair = None
+        if self._info.capabilities & m.Capability.FRAME_REPAIR:
+            self.request(m.SetFrameLink(transport.frame_chunk or 0))
+            self.assembler.repair = self._repairer.submit
 
     def reconnect(self, timeout: float = 10.0, backoff: float = 0.1) -> None:
         """After a disconnect: find the same unit again (by serial), re-apply every parameter this
@@ -326,6 +343,7 @@ class Camera:
             except StereoCamError:
                 pass
         self._heartbeat.join(timeout=2)
+        self._repairer.close()
         self.link.close()
 
     def __enter__(self) -> "Camera":

@@ -6,16 +6,21 @@ dropped and counted by reason; a gap in sequence numbers is counted as lost. Not
 """
 from __future__ import annotations
 
-import collections
+import bisect
 import enum
 import queue
+import threading
+import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.params import Output
+
+from .frame_repair import MAX_REPAIRING, MAX_ROUNDS, REPAIR_WINDOW, Coverage, Ranges
 
 
 class FrameStatus(enum.Enum):
@@ -113,6 +118,8 @@ class AssemblyStats:
     bad_leaders: int = 0  # FRAME_BEGINs claiming sizes beyond the INFO limits: dropped, nothing allocated
     lost: int = 0  # sequence numbers never seen (dropped on the device or on the link)
     queue_overflow: int = 0  # delivered frames discarded because the user did not keep up
+    repair_requests: int = 0  # FRAME_RESEND requests sent (protocol 1.2)
+    repaired: int = 0  # captures delivered complete thanks to resent parts
 
     @property
     def dropped(self) -> int:
@@ -129,8 +136,10 @@ _ALL_PLANES = int(Output.LEFT | Output.RIGHT | Output.DISPARITY)
 class _Building:
     begin: m.FrameBegin
     buffers: dict[int, bytearray]
-    received: dict[int, int] = field(default_factory=lambda: collections.defaultdict(int))
+    coverage: Coverage
     bad: bool = False
+    deadline: float = 0.0  # while under repair
+    rounds: int = 0
 
 
 class FrameAssembler:
@@ -148,6 +157,11 @@ class FrameAssembler:
         self._cur: _Building | None = None
         self._last_seq: int | None = None
         self._limits: tuple[int, int] | None = None  # (max_width, max_height) from INFO
+        self._lock = threading.RLock()  # messages come from the reader, repair outcomes from the worker
+        self.repair: Callable[[int, Ranges], None] | None = None  # set when the device can resend (1.2)
+        self.repair_window = REPAIR_WINDOW
+        self._repairing: dict[int, _Building] = {}
+        self._held: list[tuple[int, Frame]] = []  # complete frames waiting behind an older one under repair
 
     def set_limits(self, max_width: int, max_height: int) -> None:
         """What the device said in INFO; a FRAME_BEGIN beyond it (or before it is known) is dropped."""
@@ -156,8 +170,11 @@ class FrameAssembler:
     def reset(self) -> None:
         """Before a new stream: forget the last sequence (a gap across start is no loss), a capture
         cut off by the stop, and the frames still queued."""
-        self._last_seq = None
-        self._cur = None
+        with self._lock:
+            self._last_seq = None
+            self._cur = None
+            self._repairing.clear()
+            self._held.clear()
         while True:
             try:
                 self.frames.get_nowait()
@@ -165,16 +182,17 @@ class FrameAssembler:
                 return
 
     def on_message(self, msg: m.Message) -> None:
-        if isinstance(msg, m.FrameBegin):
-            self._begin(msg)
-        elif isinstance(msg, m.FrameData):
-            self._data(msg)
-        elif isinstance(msg, m.FrameEnd):
-            self._end(msg)
+        with self._lock:
+            if isinstance(msg, m.FrameBegin):
+                self._begin(msg)
+            elif isinstance(msg, m.FrameData):
+                self._data(msg)
+            elif isinstance(msg, m.FrameEnd):
+                self._end(msg)
 
     def _begin(self, b: m.FrameBegin) -> None:
         if self._cur is not None:  # its FRAME_END never came
-            self._flawed(self._cur, FrameStatus.MISSING_DATA)
+            self._incomplete(self._cur)
             self._cur = None
         if not self._plausible(b):  # checked before a byte is allocated
             self.stats.bad_leaders += 1
@@ -183,7 +201,8 @@ class FrameAssembler:
             self.stats.lost += b.sequence - self._last_seq - 1
         self._last_seq = b.sequence
         n = b.width * b.height
-        self._cur = _Building(b, {p: bytearray(n * size) for p, (_, size) in _PLANES.items() if b.planes & p})
+        sizes = {p: n * size for p, (_, size) in _PLANES.items() if b.planes & p}
+        self._cur = _Building(b, {p: bytearray(k) for p, k in sizes.items()}, Coverage(sizes))
 
     def _plausible(self, b: m.FrameBegin) -> bool:
         if self._limits is None:
@@ -194,6 +213,8 @@ class FrameAssembler:
     def _data(self, d: m.FrameData) -> None:
         cur = self._cur
         if cur is None or cur.begin.sequence != d.sequence:
+            cur = self._repairing.get(d.sequence)
+        if cur is None:
             self.stats.orphan_chunks += 1
             return
         buf = cur.buffers.get(d.plane)
@@ -201,23 +222,64 @@ class FrameAssembler:
             cur.bad = True
             return
         buf[d.offset:d.offset + len(d.data)] = d.data
-        cur.received[d.plane] += len(d.data)
+        cur.coverage.add(d.plane, d.offset, len(d.data))
 
     def _end(self, e: m.FrameEnd) -> None:
         cur, self._cur = self._cur, None
         if cur is None or cur.begin.sequence != e.sequence:
             if cur is not None:
-                self._flawed(cur, FrameStatus.MISSING_DATA)
+                self._incomplete(cur)
             return
         sent = {Output.LEFT: e.left_bytes, Output.RIGHT: e.right_bytes, Output.DISPARITY: e.disparity_bytes}
         if e.status != m.FRAME_OK:
             self._flawed(cur, FrameStatus.DEVICE_ERROR)
         elif cur.bad or any(sent[p] != len(buf) for p, buf in cur.buffers.items()):
             self._flawed(cur, FrameStatus.SIZE_MISMATCH)
-        elif any(cur.received[p] != len(buf) for p, buf in cur.buffers.items()):
-            self._flawed(cur, FrameStatus.MISSING_DATA)
+        elif not cur.coverage.complete():
+            self._incomplete(cur)
         else:
             self._deliver(self._frame(cur, FrameStatus.COMPLETE))
+
+    # -- repair (SPEC §13) --------------------------------------------------------------------
+    def _incomplete(self, cur: _Building) -> None:
+        """A capture with bytes (or its trailer) missing: repaired if the device can resend, else dropped."""
+        if self.repair is None or cur.bad:
+            self._flawed(cur, FrameStatus.MISSING_DATA)
+            return
+        cur.deadline = time.monotonic() + self.repair_window
+        self._repairing[cur.begin.sequence] = cur
+        while len(self._repairing) > MAX_REPAIRING:
+            self._give_up(min(self._repairing))
+        self._ask(cur)
+
+    def _ask(self, cur: _Building) -> None:
+        assert self.repair is not None
+        cur.rounds += 1
+        self.stats.repair_requests += 1
+        self.repair(cur.begin.sequence, cur.coverage.missing())
+
+    def on_resent(self, sequence: int, reply: m.FrameResent | None) -> None:
+        """The outcome of one FRAME_RESEND (None: no usable reply). The resent chunks came before it."""
+        with self._lock:
+            cur = self._repairing.get(sequence)
+            if cur is None:
+                return
+            if reply is not None and reply.result == m.RESEND_SENT and reply.frame_status != m.FRAME_OK:
+                self._give_up(sequence, FrameStatus.DEVICE_ERROR)
+            elif reply is not None and reply.result == m.RESEND_SENT and cur.coverage.complete() and not cur.bad:
+                del self._repairing[sequence]
+                self.stats.repaired += 1
+                self._deliver(self._frame(cur, FrameStatus.COMPLETE))
+            elif ((reply is not None and reply.result == m.RESEND_GONE) or cur.bad or cur.rounds >= MAX_ROUNDS
+                  or time.monotonic() > cur.deadline):
+                self._give_up(sequence)
+            else:
+                self._ask(cur)
+            self._release_held()
+
+    def _give_up(self, sequence: int, status: FrameStatus = FrameStatus.MISSING_DATA) -> None:
+        self._flawed(self._repairing.pop(sequence), status)
+        self._release_held()
 
     def _flawed(self, cur: _Building, status: FrameStatus) -> None:
         counter = {FrameStatus.MISSING_DATA: "incomplete", FrameStatus.SIZE_MISMATCH: "size_mismatch",
@@ -240,6 +302,18 @@ class FrameAssembler:
             StereoGeometry(b.focal_px, b.cx, b.cy, b.baseline_m, b.calibration_id), status)
 
     def _deliver(self, frame: Frame) -> None:
+        """In sequence order: a frame waits behind an older capture still under repair."""
+        if self._repairing and min(self._repairing) < frame.sequence:
+            bisect.insort(self._held, (frame.sequence, frame), key=lambda h: h[0])
+            return
+        self._enqueue(frame)
+
+    def _release_held(self) -> None:
+        oldest = min(self._repairing, default=None)
+        while self._held and (oldest is None or self._held[0][0] < oldest):
+            self._enqueue(self._held.pop(0)[1])
+
+    def _enqueue(self, frame: Frame) -> None:
         self.stats.frames += frame.status is FrameStatus.COMPLETE
         while True:
             try:

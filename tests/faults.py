@@ -17,6 +17,7 @@ class FaultyTransport(Transport):
     def __init__(self, inner: Transport):
         self.inner = inner
         self.url = inner.url
+        self.frame_chunk = inner.frame_chunk  # a test may ask for serial-sized chunks on any link
         self.on_write: Manipulator = lambda b: b
         self.on_read: Manipulator = lambda b: b
         self.max_read: int | None = None  # deliver reads in pieces no larger than this
@@ -51,3 +52,27 @@ class PacketFilter:
             replaced = self.rule(p)
             out.append(encode_frame(p.msg_type, p.request_id, p.payload, p.flags) if replaced is None else replaced)
         return b"".join(out)
+
+
+class ByteFlipper:
+    """A manipulator for a noisy line: each byte is replaced by a different value with probability
+    ``rate`` (independently), from a seeded generator; counts what it flipped."""
+
+    def __init__(self, rate: float, seed: int = 0):
+        import numpy as np
+
+        self.rate = rate
+        self.flipped = 0
+        self._rng = np.random.default_rng(seed)
+
+    def __call__(self, data: bytes) -> bytes:
+        import numpy as np
+
+        k = self._rng.binomial(len(data), self.rate) if data else 0
+        if not k:
+            return data
+        b = np.frombuffer(data, dtype=np.uint8).copy()
+        where = self._rng.integers(0, len(b), k)
+        b[where] ^= self._rng.integers(1, 256, k, dtype=np.uint8)
+        self.flipped += k
+        return b.tobytes()

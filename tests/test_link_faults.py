@@ -15,11 +15,23 @@ from stereocam.protocol.framing import FLAG_RESEND, Decoder
 from .faults import FaultyTransport, PacketFilter
 
 
+def as_v1_1_device(sim: SimulatedCamera) -> None:
+    """Make ``sim`` answer like a protocol 1.1 device: no FRAME_REPAIR capability, no 1.2 requests."""
+    real = sim._get_info
+    sim._handlers[m.MsgType.GET_INFO] = lambda msg: m.Info(**{
+        **real(msg).__dict__, "protocol_version": (1, 1),
+        "capabilities": real(msg).capabilities & ~m.Capability.FRAME_REPAIR})
+    del sim._handlers[m.MsgType.SET_FRAME_LINK], sim._handlers[m.MsgType.FRAME_RESEND]
+
+
 @pytest.fixture
 def faulty(request):
+    opts = getattr(request, "param", {})
     sim = SimulatedCamera(seed=11)
+    if opts.get("v1_1"):
+        as_v1_1_device(sim)
     link = FaultyTransport(InProcessTransport(sim))
-    cam = Camera(link, timeout=0.5, retries=2, deliver_incomplete=getattr(request, "param", False))
+    cam = Camera(link, timeout=0.5, retries=2, deliver_incomplete=opts.get("deliver_incomplete", False))
     cam.configure(width=320, height=240, num_disparities=32, block_size=11)
     yield cam, link, sim
     cam.close()
@@ -69,8 +81,10 @@ def test_request_ids_wrap_and_skip_zero():
     assert ids == [0xFFFE, 0xFFFF, 1, 2]
 
 
-@pytest.mark.parametrize("faulty", [False, True], ids=["dropped", "delivered"], indirect=True)
+@pytest.mark.parametrize("faulty", [{"v1_1": True}, {"v1_1": True, "deliver_incomplete": True}],
+                         ids=["dropped", "delivered"], indirect=True)
 def test_corrupted_frame_is_dropped_and_counted(faulty):
+    """Against a 1.1 device (no repair) a damaged chunk costs its capture."""
     cam, link, sim = faulty
     hits = []
 

@@ -16,12 +16,17 @@ if TYPE_CHECKING:
     from ..discovery import DeviceEntry
 
 
+SERIAL_FRAME_CHUNK = 1024  # a noisy serial line loses (and resends) a small chunk, not 128 KiB
+
+
 class SerialTransport(Transport):
-    """A pyserial port as a byte pipe."""
+    """A pyserial port as a byte pipe; a serial line (a device path, not a network URL) asks for
+    small frame chunks."""
 
     def __init__(self, port: serial.SerialBase, url: str):
         self.port = port
         self.url = url
+        self.frame_chunk = None if "://" in url else SERIAL_FRAME_CHUNK
 
     def write(self, data: bytes) -> None:
         try:
