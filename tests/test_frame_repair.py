@@ -16,6 +16,7 @@ from stereocam.protocol import messages as m
 from stereocam.protocol.framing import encode_frame
 
 from .faults import ByteFlipper, FaultyTransport, PacketFilter
+from .test_link_faults import as_v1_1_device
 
 
 def test_coverage_lists_missing_runs_in_order():
@@ -46,8 +47,10 @@ class _Recorder:
         return all(zlib.crc32(got[p].tobytes()) == crc for p, crc in self.sent[frame.sequence].items())
 
 
-def _camera(chunk: int | None = None, seed: int = 51):
+def _camera(chunk: int | None = None, seed: int = 51, v1_1: bool = False):
     sim = SimulatedCamera(seed=seed)
+    if v1_1:
+        as_v1_1_device(sim)
     link = FaultyTransport(InProcessTransport(sim))
     link.frame_chunk = chunk
     return sim, link, _Recorder(sim)
@@ -112,10 +115,10 @@ def test_a_host_that_never_asks_gets_the_1_1_chunks():
         sim.close()
 
 
-def stream_through_noise(rate: float, frames: int, seed: int = 53) -> tuple[int, int, int]:
+def stream_through_noise(rate: float, frames: int, seed: int = 53, v1_1: bool = False) -> tuple[int, int, int]:
     """VGA captures over a serial-class link (1 KiB chunks) flipping bytes at ``rate`` both ways:
-    (sent, delivered intact, delivered damaged)."""
-    sim, link, rec = _camera(chunk=1024, seed=seed)
+    (sent, delivered intact, delivered damaged). ``v1_1``: against a device without repair."""
+    sim, link, rec = _camera(chunk=1024, seed=seed, v1_1=v1_1)
     cam = Camera(link, timeout=1.0, retries=3)
     try:
         cam.configure(width=640, height=480, num_disparities=64, block_size=15, fps=4)
@@ -147,3 +150,9 @@ def test_vga_frames_survive_a_noisy_serial_line(rate, goal):
     sent, ok, bad = stream_through_noise(rate, frames=12)
     assert bad == 0
     assert ok >= goal * sent, (ok, sent)
+
+
+def test_without_repair_the_same_line_delivers_almost_nothing():
+    """The break as issue 9 found it: a 1.1 device (128 KiB chunks, no resend) on that line."""
+    sent, ok, bad = stream_through_noise(1e-4, frames=6, v1_1=True)
+    assert bad == 0 and ok <= 1, (ok, sent)
