@@ -15,7 +15,7 @@ from stereocam.link import Link
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import encode_frame
 
-from .faults import ByteFlipper, FaultyTransport, PacketFilter
+from .faults import FaultyTransport, LineNoise, PacketFilter
 from .test_link_faults import as_v1_1_device
 
 
@@ -122,7 +122,7 @@ def stream_through_noise(rate: float, frames: int, seed: int = 53, v1_1: bool = 
     cam = Camera(link, timeout=1.0, retries=3)
     try:
         cam.configure(width=640, height=480, num_disparities=64, block_size=15, fps=4)
-        link.set_manipulator(read=ByteFlipper(rate, seed), write=ByteFlipper(rate, seed + 1))
+        link.set_manipulator(read=LineNoise(flip=rate, seed=seed), write=LineNoise(flip=rate, seed=seed + 1))
         cam.start()
         got = []
         deadline = time.monotonic() + frames * 3 + 20

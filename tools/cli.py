@@ -14,6 +14,7 @@ COMMANDS = {
     "calibrate": ("stereocam.tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
     "demo": ("stereocam.tools.demo", "simulator + streaming + outputs in ./out + summary"),
     "bench": ("stereocam.tools.bench", "benchmarks: protocol decode, transports (incl. USB), matching core"),
+    "soak": ("stereocam.tools.soak", "long fuzz + faulty-link streaming run with crash/hang/frame counts"),
 }
 
 
