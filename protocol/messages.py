@@ -165,6 +165,7 @@ COUNTERS: tuple[str, ...] = (
     "frames_captured", "frames_sent", "frames_dropped", "triggers", "rx_bytes", "rx_packets",
     "rx_garbage_bytes", "rx_header_crc_errors", "rx_payload_crc_errors", "rx_oversize",
     "rx_unsupported_version", "nacks", "resends_replayed", "heartbeat_timeouts",
+    "rx_message_timeouts",  # since 1.2
 )
 
 
