@@ -157,3 +157,21 @@ def test_a_stop_by_the_user_is_not_undone(streaming):
     cam.stop()
     time.sleep(0.5)
     assert not sim.engine.streaming and cam.stream_restarts == 0
+
+
+def test_auto_reconnect_rides_through_a_failed_event_path():
+    cam = stereocam.open("sim://?seed=24", timeout=1.0, auto_reconnect=True)
+    try:
+        cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=10)
+        cam.start()
+        cam.get_frame(timeout=10)
+        broken = cam.link
+
+        def explode(msg: m.Message) -> None:
+            raise RuntimeError("bug in a frame listener")
+        broken._on_event = explode  # this link's event path fails at the next frame message
+        frame = cam.get_frame(timeout=15)  # LinkFailedError is a DisconnectedError: reconnect, resume
+        assert isinstance(broken.error, stereocam.LinkFailedError) and not broken.alive
+        assert cam.link is not broken and cam.link.alive and frame.width == 320
+    finally:
+        cam.close()
