@@ -196,12 +196,14 @@ def stream_with_faults(url: str, seconds: float, flip: float, drop: float = 0.0,
         cam.close()
     st = cam.stats
     sent = after["frames_sent"] - before["frames_sent"]
-    device_side = sent + after["frames_dropped"] - before["frames_dropped"]
-    host_side = st["frames"] + st["incomplete"] + st["size_mismatch"] + st["device_errors"] + st["bad_leaders"] + st["lost"]
+    device_dropped = after["frames_dropped"] - before["frames_dropped"]  # exposures the busy pipeline missed
+    host_dropped = st["incomplete"] + st["size_mismatch"] + st["device_errors"] + st["bad_leaders"] + st["lost"]
+    device_side, host_side = sent + device_dropped, st["frames"] + host_dropped
     rep.inputs = sent
     rep.figures.update({
         "frames sent": sent, "delivered": delivered, "corrupted": corrupted if truth else "n/a (not a sim:// URL)",
-        "dropped": st["frames_dropped"], "repaired": st["repaired"], "delivery": f"{delivered / max(sent, 1):.1%}",
+        "dropped": f"{host_dropped - device_dropped} on the link, {device_dropped} exposures missed on the device",
+        "repaired": st["repaired"], "delivery": f"{delivered / max(sent, 1):.1%} of frames sent",
         "counters add up": f"{'yes' if abs(device_side - host_side) <= 2 else 'NO'} (device sent+dropped "
                            f"{device_side}, host delivered+dropped+lost {host_side})"})
     return rep
