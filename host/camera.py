@@ -343,8 +343,8 @@ class Camera:
             except StereoCamError:
                 pass
         self._heartbeat.join(timeout=2)
+        self.link.close()  # first: a resend request in flight then fails at once
         self._repairer.close()
-        self.link.close()
 
     def __enter__(self) -> "Camera":
         return self
