@@ -27,7 +27,7 @@ class LinkStats:
     requests: int = 0
     retries: int = 0
     timeouts: int = 0
-    stray_replies: int = 0  # replies nobody waited for (late answers to timed-out requests)
+    stray_replies: int = 0  # replies nobody waited for (late answers to timed-out requests, stale ones)
     undecodable: int = 0  # packets with a valid CRC but an unknown type or malformed payload
 
 
@@ -37,6 +37,13 @@ class _Pending:
     event: threading.Event = field(default_factory=threading.Event)
     reply: m.Message | None = None
     error: StereoCamError | None = None
+
+
+def _answers(pending: _Pending, msg_type: int, msg: m.Message | None) -> bool:
+    """Whether a reply with this request id answers ``pending`` (request ids repeat across sessions)."""
+    if msg_type == m.MsgType.NACK:
+        return not isinstance(msg, m.Nack) or msg.request_type == pending.expect & ~m.REPLY_BIT
+    return msg_type == pending.expect
 
 
 class Link:
@@ -159,7 +166,9 @@ class Link:
         if packet.msg_type & m.REPLY_BIT:
             with self._lock:
                 pending = self._pending.get(packet.request_id)
-            if pending is None or pending.event.is_set():
+            if pending is None or pending.event.is_set() or not _answers(pending, packet.msg_type, msg):
+                # nobody waits for it, or it answers another request that had this id (a late reply
+                # from before a timeout, or one left in a pty by an earlier session): not this one's
                 self.stats.stray_replies += 1
                 return
             if bad is not None:  # the answer came but cannot be read: fail now, do not wait
@@ -167,9 +176,6 @@ class Link:
             elif isinstance(msg, m.Nack):
                 param = BY_ID[msg.param_id].name if msg.param_id in BY_ID else None
                 pending.error = DeviceError(msg.code, msg.message, param, msg.request_type)
-            elif packet.msg_type != pending.expect:
-                pending.error = ProtocolError(f"reply type 0x{packet.msg_type:04x} to a request expecting "
-                                              f"0x{pending.expect:04x}")
             else:
                 pending.reply = msg
             pending.event.set()

@@ -175,3 +175,26 @@ def test_auto_reconnect_rides_through_a_failed_event_path():
         assert cam.link is not broken and cam.link.alive and frame.width == 320
     finally:
         cam.close()
+
+
+def test_a_stale_reply_of_another_type_is_stray_not_an_error():
+    """A reply left in a pty by an earlier session (same request id, other type) must not fail the
+    new session's request: it is counted stray and the real reply is awaited."""
+    sim = SimulatedCamera(seed=25)
+    t = FaultyTransport(InProcessTransport(sim))
+    done = []
+
+    def stale_first(b: bytes) -> bytes:
+        if b and not done:
+            done.append(True)
+            stale_nack = m.Nack(m.MsgType.STOP, int(stereocam.ErrorCode.BUSY), 0, "an earlier session's")
+            return m.encode(m.Stopped(), 1) + m.encode(stale_nack, 1) + b
+        return b
+    t.set_manipulator(read=stale_first)
+    lk = Link(t, timeout=1.0, retries=0)
+    try:
+        assert isinstance(lk.request(m.GetInfo()), m.Info)
+        assert lk.stats.stray_replies == 2
+    finally:
+        lk.close()
+        sim.close()

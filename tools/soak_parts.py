@@ -122,7 +122,11 @@ def fuzz_device(url: str, inputs: int, seed: int = 0, reply_timeout: float = 3.0
             else:
                 answered += 1
                 nacks += got.msg_type == m.MsgType.NACK
-        transport.write(encode_frame(m.MsgType.STOP, 1, b""))
+        transport.write(encode_frame(m.MsgType.STOP, 0xFFFF, b""))
+        deadline = time.monotonic() + reply_timeout  # leave nothing in flight for the next session
+        while time.monotonic() < deadline and not any(
+                p.request_id == 0xFFFF and p.msg_type & m.REPLY_BIT for p in dec.feed(transport.read(1 << 20, 0.05))):
+            pass
     finally:
         transport.close()
     rep.figures.update(answered=answered, nacks=nacks)
