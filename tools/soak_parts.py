@@ -206,7 +206,7 @@ def stream_with_faults(url: str, seconds: float, flip: float, drop: float = 0.0,
     rep.inputs = sent
     rep.figures.update({
         "frames sent": sent, "delivered": delivered, "corrupted": corrupted if truth else "n/a (not a sim:// URL)",
-        "dropped": f"{host_dropped - device_dropped} on the link, {device_dropped} exposures missed on the device",
+        "dropped": f"{max(host_dropped - device_dropped, 0)} on the link, {device_dropped} exposures missed on the device",
         "repaired": st["repaired"], "delivery": f"{delivered / max(sent, 1):.1%} of frames sent",
         "counters add up": f"{'yes' if abs(device_side - host_side) <= 2 else 'NO'} (device sent+dropped "
                            f"{device_side}, host delivered+dropped+lost {host_side})"})
