@@ -99,7 +99,7 @@ def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty"
     return out
 
 
-MODES = ("protocol", "transport", "usb", "matching", "calibration", "calib-real", "all")
+MODES = ("protocol", "decoder", "transport", "usb", "matching", "calibration", "calib-real", "all")
 
 
 @click.command("bench", context_settings={"ignore_unknown_options": True},
@@ -113,6 +113,7 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
 
     \b
     protocol     decoder throughput (MB/s): 640x480 frame messages fed in 64 KiB chunks
+    decoder      the decoder's cost per byte on adversarial streams against its clean cost
     transport    end-to-end fps and MB/s at 640x480 over sim, pty, tcp and usb, side by side
     usb          the USB path alone: bulk IN MB/s through pyusb
     matching     the numba matching core against cv2.StereoBM
@@ -124,6 +125,8 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
     rest = list(extra)
     if what in ("protocol", "all"):
         bench_protocol()
+    if what in ("decoder", "all"):
+        importlib.import_module("stereocam.tools.bench_decoder").main([])
     if what in ("transport", "all"):
         bench_transport(seconds)
     if what == "calib-real":

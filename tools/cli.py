@@ -28,6 +28,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "conformance": ("stereocam.tools.conformance.cli", "hold a camera to the protocol: one line per check, JUnit/JSON"),
     "sim": ("stereocam.device_sim.__main__", "serve a simulated camera over a pty or TCP"),
     "bench": ("stereocam.tools.bench", "benchmarks: protocol, transports, USB, matching core, calibration"),
+    "soak": ("stereocam.tools.soak", "long fuzz + faulty-link streaming run with crash/hang/frame counts"),
 }
 """name -> (module, one-line help). The module provides ``command`` or ``main(argv)``."""
 
