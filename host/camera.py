@@ -25,7 +25,8 @@ from .link import Link, LinkStats
 from .transports import Transport, open_transport, reopen_url
 
 SYNC_SAMPLES = 8
-SYNC_PERIOD = 5.0  # seconds between background time-sync samples
+SYNC_PERIOD = 1.0  # seconds between background time-sync bursts (the map needs them to follow drift)
+SYNC_BURST = 3  # round trips per burst: one of them usually finds the link free of frame data
 
 
 @dataclass(frozen=True)
@@ -141,7 +142,7 @@ class Camera:
             try:
                 self.last_status = self.status()
                 if time.monotonic() - self._last_sync > SYNC_PERIOD:
-                    self.sync_clock(1)
+                    self.sync_clock(SYNC_BURST)
             except StereoCamError:
                 pass  # a dead link shows in the user's next call; reconnect() brings a new one
 
