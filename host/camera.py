@@ -19,7 +19,7 @@ from stereocam.protocol.rectification import stereo_rectify
 
 from . import calibration_io
 from .calibration_io import StoredCalibration
-from .clock import ClockMap, SyncSample
+from .clock import ArrivalStamp, ClockMap, SyncSample
 from .frames import AssemblyStats, Frame, FrameAssembler, StereoGeometry
 from .link import Link, LinkStats
 from .transports import Transport, open_transport, reopen_url
@@ -78,7 +78,8 @@ class Camera:
 
     def _connect(self, transport: Transport) -> None:
         """Bring up a link on ``transport``: identify, stop any stale stream, map the clock."""
-        self.link = Link(transport, timeout=self.timeout, retries=self._retries, on_event=self.assembler.on_message)
+        self._arrivals = ArrivalStamp(transport)
+        self.link = Link(self._arrivals, timeout=self.timeout, retries=self._retries, on_event=self.assembler.on_message)
         try:
             self._info = self._fetch_info()
             self.request(m.Stop())  # a known state: no stale stream from a previous session
@@ -133,6 +134,7 @@ class Camera:
             t0 = time.monotonic()
             r = self.request(m.TimeSync())
             t1 = time.monotonic()
+            t1 = self._arrivals.last if t0 < self._arrivals.last < t1 else t1  # when the reply came in
             assert isinstance(r, m.Time)
             self.clock.add(SyncSample(t0, r.device_time_us, t1))
         self._last_sync = time.monotonic()

@@ -9,7 +9,10 @@ crowd together, and fits host = a + b·device through them weighted by 1/rtt² (
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
+
+from .transports.base import Transport
 
 KEEP = 32
 WINDOW_US = 120_000_000  # older samples are forgotten: a crystal's drift wanders with temperature
@@ -117,3 +120,31 @@ def _fit(samples: list[SyncSample]) -> tuple[float, float, int, MapError]:
     a = sum(w * (y - b * x) for w, x, y in zip(ws, xs, ys)) / sw
     resid = math.sqrt(sum(w * (y - a - b * x) ** 2 for w, x, y in zip(ws, xs, ys)) / sw)
     return a, b, ref, MapError(resid, best.rtt / 2, len(samples), span / 1e6)
+
+
+class ArrivalStamp(Transport):
+    """A transport that notes when each read brought bytes (``last``, host monotonic).
+
+    A time-sync reply arrived no later than the read that carried it, however long the requesting
+    thread then takes to be woken: the receive side of a round trip is timed there, at the lowest
+    layer the host has, so thread hand-offs do not lengthen the trip or skew its midpoint."""
+
+    def __init__(self, inner: Transport):
+        self.inner = inner
+        self.url = inner.url
+        self.last = -math.inf
+
+    def write(self, data: bytes) -> None:
+        self.inner.write(data)
+
+    def read(self, max_bytes: int, timeout: float) -> bytes:
+        data = self.inner.read(max_bytes, timeout)
+        if data:
+            self.last = time.monotonic()
+        return data
+
+    def close(self) -> None:
+        self.inner.close()
+
+    def __getattr__(self, name: str):  # the wrapped transport's own attributes (sim, port, ...)
+        return getattr(self.inner, name)

@@ -8,6 +8,8 @@ matching  — the numba matching core against cv2.StereoBM (tools/bench_matching
 calibration — calibration accuracy against the simulator's truth: the solver on rendered views
             (tools/bench_calibration.py) and the factory tool through the protocol on uncalibrated
             units, plus metric depth at 1 m through the stored result (tools/bench_device_calibration.py).
+sync      — three heads on one trigger line through CameraGroup: skew within matched sets and each
+            clock map's error against the simulator's truth, per transport (tools/bench_sync.py).
 """
 from __future__ import annotations
 
@@ -104,13 +106,16 @@ def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty"
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="stereocam bench", description=__doc__.splitlines()[0])
     ap.add_argument("what", nargs="?", default="all",
-                    choices=["protocol", "transport", "usb", "matching", "calibration", "all"])
+                    choices=["protocol", "transport", "usb", "matching", "calibration", "sync", "all"])
     ap.add_argument("--seconds", type=float, default=5.0)
     args, rest = ap.parse_known_args(argv)
     if args.what in ("protocol", "all"):
         bench_protocol()
     if args.what in ("transport", "all"):
         bench_transport(args.seconds)
+    if args.what == "sync":  # minutes of capture: only when asked for
+        given = any(a.startswith("--seconds") for a in (argv or []))  # else its own default (minutes)
+        importlib.import_module("stereocam.tools.bench_sync").main(rest + (["--seconds", str(args.seconds)] if given else []))
     if args.what == "usb":
         importlib.import_module("stereocam.tools.bench_usb").main(rest)
     if args.what in ("matching", "all"):
