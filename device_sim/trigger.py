@@ -64,19 +64,26 @@ class TriggerLine:
 class TriggerInput:
     """One unit's trigger input: the exposure starts a few µs (per unit, from its seed) after the edge.
 
-    ``delay_frames`` is a simulator fault: the unit latches each pulse's id but exposes on a later
-    pulse, so its frames carry the right id and the wrong instant (a head one frame behind).
+    Two simulator faults: ``miss_next`` — the unit misses that many coming edges (no exposure; their
+    ids are appended to ``missed``); ``delay_frames`` — it latches each pulse's id but exposes on
+    a later pulse, so its frames carry the right id and the wrong instant (a head a frame behind).
     """
 
     def __init__(self, seed: int, expose: OnPulse):
         rnd = random.Random(seed ^ 0x7A1C)
         self.latency_s = rnd.uniform(*LATENCY_RANGE_S)
         self.delay_frames = 0
+        self.miss_next = 0
+        self.missed: list[int] = []
         self._expose = expose
         self._noise = random.Random(seed ^ 0x7A1D)
         self._held: collections.deque[int] = collections.deque()
 
     def on_pulse(self, trigger_id: int, instant: float) -> None:
+        if self.miss_next > 0:
+            self.miss_next -= 1
+            self.missed.append(trigger_id)
+            return
         at = instant + self.latency_s + self._noise.gauss(0.0, LATENCY_JITTER_S)
         if self.delay_frames:
             self._held.append(trigger_id)
