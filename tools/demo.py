@@ -12,6 +12,7 @@ from stereocam.device_sim.ground_truth import GROUND_TRUTH_KEEP
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 
+from . import demo_group
 from .capture import save_frame
 
 
@@ -31,7 +32,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seconds", type=float, default=4.0)
     ap.add_argument("--fps", type=int, default=15)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--heads", type=int, default=1, help="several heads on one trigger line (tools/demo_group.py)")
     args = ap.parse_args(argv)
+    if args.heads > 1:
+        return demo_group.run(args.heads, args.seconds, args.fps, args.seed, args.out)
 
     sim = SimulatedCamera(seed=args.seed)
     with Camera(InProcessTransport(sim, f"sim://?seed={args.seed}")) as cam:
