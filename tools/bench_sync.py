@@ -30,7 +30,7 @@ from stereocam.frame_sets import MatchedSet
 from stereocam.protocol.params import Output
 
 SEEDS = (4, 14, 25)  # units with large drifts of both signs (-46, +50, +45 ppm)
-CONFIG = dict(width=320, height=240, outputs=int(Output.LEFT))  # timing, not imaging: keep the CPU for it
+CONFIG = dict(width=160, height=120, outputs=int(Output.LEFT))  # timing, not imaging: keep the CPU for it
 
 
 @dataclass
