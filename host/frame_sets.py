@@ -98,7 +98,7 @@ class SetMatcher:
         past the deadline, the first any camera did); earlier frames are discarded."""
         if len(self._first) == len(self.names):
             self._start = max(self._first.values())
-        elif self._since is not None and now - self._since > self.deadline:
+        elif self._pending and self._since is not None and now - self._since > self.deadline:
             self._start = min(self._pending)
         else:
             return False

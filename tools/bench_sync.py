@@ -26,6 +26,7 @@ import stereocam
 from stereocam.device_sim import SimulatedCamera, TriggerLine
 from stereocam.device_sim.process import ServedSimulator
 from stereocam.device_sim.trigger import TriggerMaster
+from stereocam.clock import MapError
 from stereocam.frame_sets import MatchedSet
 from stereocam.protocol.params import Output
 
@@ -39,7 +40,7 @@ class Run:
 
     sets: list[tuple[int, dict[str, tuple[int, float]]]] = field(default_factory=list)
     incomplete: list[tuple[int, tuple[str, ...]]] = field(default_factory=list)
-    map_errors: dict[str, stereocam.clock.MapError] = field(default_factory=dict)
+    map_errors: dict[str, MapError] = field(default_factory=dict)
 
 
 def capture(urls: list[str], seconds: float, deadline: float = 0.5) -> Run:
