@@ -9,6 +9,7 @@ crowd together, and fits host = a + b·device through them weighted by 1/rtt² (
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import dataclass
 
@@ -58,28 +59,31 @@ class MapError:
 class ClockMap:
     """Maps device microseconds to host ``time.monotonic()`` seconds.
 
-    Written by the thread taking sync samples, read by the threads stamping frames: the fit is
-    published as one tuple, so a reader never sees half of an update.
+    Written by the threads taking sync samples (one at a time), read by the threads stamping
+    frames: the fit is published as one tuple, so a reader never sees half of an update.
     """
 
     def __init__(self) -> None:
+        self._lock = threading.Lock()
         self.samples: list[SyncSample] = []
         self._fit: tuple[float, float, int, MapError] | None = None  # (host s at ref, s per µs, ref µs, error)
 
     def reset(self) -> None:
         """Forget everything (the device may have rebooted: its clock starts over)."""
-        self.samples = []
-        self._fit = None
+        with self._lock:
+            self.samples = []
+            self._fit = None
 
     def add(self, sample: SyncSample) -> None:
-        samples = sorted(self.samples + [sample], key=lambda s: s.device_us)
-        newest = samples[-1].device_us
-        samples = [s for s in samples[:-2] if newest - s.device_us <= WINDOW_US] + samples[-2:]
-        while len(samples) > KEEP:  # thin where samples crowd: of the closest two, keep the shorter trip
-            i = min(range(len(samples) - 1), key=lambda j: samples[j + 1].device_us - samples[j].device_us)
-            del samples[i if samples[i].rtt > samples[i + 1].rtt else i + 1]
-        self.samples = samples
-        self._fit = _fit(samples)
+        with self._lock:
+            samples = sorted(self.samples + [sample], key=lambda s: s.device_us)
+            newest = samples[-1].device_us
+            samples = [s for s in samples[:-2] if newest - s.device_us <= WINDOW_US] + samples[-2:]
+            while len(samples) > KEEP:  # thin where samples crowd: of the closest two, keep the shorter trip
+                i = min(range(len(samples) - 1), key=lambda j: samples[j + 1].device_us - samples[j].device_us)
+                del samples[i if samples[i].rtt > samples[i + 1].rtt else i + 1]
+            self.samples = samples
+            self._fit = _fit(samples)
 
     def to_host(self, device_us: int) -> float:
         fit = self._fit

@@ -3,8 +3,8 @@
 The group opens every camera, configures them alike (plus per-camera settings), sets
 ``trigger_mode=external`` on all and starts them. It does not pick a master: whatever drives the
 trigger line does. On a real rig that is the unit wired as sync source or a signal generator;
-with simulators it is ``python -m stereocam.device_sim ... --trigger-line NAME --trigger-master
-FPS`` (or a ``TriggerMaster`` on an in-process ``TriggerLine``). Every pulse carries the line's
+with simulators it is the one served with ``--trigger-line NAME --trigger-master FPS`` (``stereocam
+sim``), or a ``TriggerMaster`` on an in-process ``TriggerLine``. Every pulse carries the line's
 pulse number, which each head puts in its frames' ``trigger_id``; that is what the group matches
 on. Each frame's ``host_time`` is its own camera's device timestamp through that camera's clock
 map, so the spread of a set measures the sync; ``clock_errors`` says how far each map is trusted.
