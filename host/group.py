@@ -8,6 +8,14 @@ sim``), or a ``TriggerMaster`` on an in-process ``TriggerLine``. Every pulse car
 pulse number, which each head puts in its frames' ``trigger_id``; that is what the group matches
 on. Each frame's ``host_time`` is its own camera's device timestamp through that camera's clock
 map, so the spread of a set measures the sync; ``clock_errors`` says how far each map is trusted.
+
+    with stereocam.CameraGroup(["socket://10.0.0.2:5000", "socket://10.0.0.3:5000"],
+                               config={"fps": 30}, deadline=0.5) as group:
+        for s in group:
+            if not s.complete:
+                print(f"trigger {s.trigger_id}: no frame from {', '.join(s.missing)}")
+            for name, frame in s.frames.items():
+                use(name, frame, frame.host_time)
 """
 from __future__ import annotations
 
