@@ -30,13 +30,13 @@ from .pipeline.capture_engine import CaptureEngine, CaptureRequest
 from .pipeline.capture_pipeline import CapturePipeline
 from .rig.scene import Scene
 from .rig.sensor import SensorRig
-from .trigger import TriggerLine
+from .trigger import Line, TriggerInput
 
 
 class SimulatedCamera:
     """One simulated STOC-class unit (firmware + sensor rig)."""
 
-    def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: TriggerLine | None = None,
+    def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: Line | None = None,
                  flash_path: str | Path | None = None, factory_calibrated: bool = True,
                  scene: Scene | str = Scene.LAB):
         """``scene``: what the rig looks at ("lab", "wall", "board"; a simulator setting, changeable
@@ -74,9 +74,10 @@ class SimulatedCamera:
                       ConfigHandlers(self.config, self.engine), self.streaming, self.heartbeat, self.calibration,
                       self.repair):
             self.dispatcher.register(group.handlers())
+        self.trigger_input = TriggerInput(seed, self.streaming.on_pulse)  # its own latency after an edge
         self.trigger_line = trigger_line
         if trigger_line is not None:
-            trigger_line.attach(self.streaming.on_pulse)
+            trigger_line.attach(self.trigger_input.on_pulse)
         self.pipeline.warm_up()
         registry.register(self)
 
@@ -129,7 +130,7 @@ class SimulatedCamera:
         registry.unregister(self)
         self.engine.close()
         if self.trigger_line is not None:
-            self.trigger_line.detach(self.streaming.on_pulse)
+            self.trigger_line.detach(self.trigger_input.on_pulse)
         self.link.close()
         if self._tmpdir is not None:
             self._tmpdir.cleanup()

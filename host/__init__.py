@@ -18,6 +18,7 @@ from .calibration_io import StoredCalibration
 from .camera import Camera, DeviceInfo, DeviceStatus, open
 from .discovery import DeviceEntry, list_devices
 from .frames import DisparityFormat, Frame, FrameStatus, StereoGeometry
+from .group import CameraGroup  # noqa: F401  (several cameras on one trigger line)
 from .pointcloud import write_ply
 
 try:

@@ -24,14 +24,15 @@ from . import calibration_io, presets
 from .arguments import int32_arg, timeout_arg
 from .calibration_io import StoredCalibration
 from .callbacks import FrameCallback, FrameCallbacks
-from .clock import ClockMap, SyncSample
+from .clock import ArrivalStamp, ClockMap, SyncSample
 from .frame_repair import RepairWorker
 from .frames import AssemblyStats, Frame, FrameAssembler, StereoGeometry
 from .link import Link, LinkStats
 from .transports import Transport, open_transport, reopen_url
 
 SYNC_SAMPLES = 8
-SYNC_PERIOD = 5.0  # seconds between background time-sync samples
+SYNC_PERIOD = 1.0  # seconds between background time-sync bursts (the map needs them to follow drift)
+SYNC_BURST = 3  # round trips per burst: one of them usually finds the link free of frame data
 _log = logging.getLogger(__name__)
 
 
@@ -99,7 +100,8 @@ class Camera:
 
     def _connect(self, transport: Transport) -> None:
         """Bring up a link on ``transport``: identify, stop any stale stream, map the clock."""
-        self.link = Link(transport, timeout=self.timeout, retries=self._retries, on_event=self.assembler.on_message)
+        self._arrivals = ArrivalStamp(transport)
+        self.link = Link(self._arrivals, timeout=self.timeout, retries=self._retries, on_event=self.assembler.on_message)
         try:
             self._info = self._fetch_info()
             self.assembler.set_limits(self._info.max_width, self._info.max_height)
@@ -169,6 +171,7 @@ class Camera:
             t0 = time.monotonic()
             r = self.request(m.TimeSync())
             t1 = time.monotonic()
+            t1 = self._arrivals.last if t0 < self._arrivals.last < t1 else t1  # when the reply came in
             assert isinstance(r, m.Time)
             self.clock.add(SyncSample(t0, r.device_time_us, t1))
         self._last_sync = time.monotonic()
@@ -181,7 +184,7 @@ class Camera:
                 if not self.last_status.streaming:
                     self._restart_stopped_stream(epoch)
                 if time.monotonic() - self._last_sync > SYNC_PERIOD:
-                    self.sync_clock(1)
+                    self.sync_clock(SYNC_BURST)
             except StereoCamError:
                 pass  # a dead link shows in the user's next call; reconnect() brings a new one
             except Exception as exc:  # noqa: BLE001 - a bug here ends the link visibly, not silently

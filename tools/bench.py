@@ -99,7 +99,7 @@ def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty"
     return out
 
 
-MODES = ("protocol", "decoder", "transport", "usb", "matching", "calibration", "calib-real", "all")
+MODES = ("protocol", "decoder", "transport", "usb", "matching", "calibration", "calib-real", "sync", "all")
 
 
 @click.command("bench", context_settings={"ignore_unknown_options": True},
@@ -119,6 +119,7 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
     matching     the numba matching core against cv2.StereoBM
     calibration  calibration accuracy against the simulator's truth, solver and device tool
     calib-real   the offline tool on real calibration sets against OpenCV's all-pairs solution
+    sync         three heads on one trigger line: skew within matched sets, clock-map error vs truth
     all          protocol, transport, matching and calibration (default)
 
     Arguments after WHAT that this command does not know go to the usb or matching bench."""
@@ -129,6 +130,8 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
         importlib.import_module("stereocam.tools.bench_decoder").main([])
     if what in ("transport", "all"):
         bench_transport(seconds)
+    if what == "sync":  # minutes of capture: only when asked for; --seconds given after WHAT goes to it
+        importlib.import_module("stereocam.tools.bench_sync").main(rest)
     if what == "calib-real":
         importlib.import_module("stereocam.tools.bench_calib_real").main(rest)
     if what == "usb":
