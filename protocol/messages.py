@@ -17,6 +17,10 @@ from .errors import ProtocolError
 from .frame_messages import (DISPARITY_S16_Q4, FRAME_OK, FRAME_RECTIFIED, FRAME_SENSOR_OVERRUN, FrameBegin,
                              FrameData, FrameEnd)
 from .framing import Packet, encode_frame
+from .update_messages import (BEGIN_REPLACE, MAX_UPDATE_CHUNK, UPDATE_MESSAGES, UPDATE_REPLIES, BootMode, SlotInfo,
+                              SlotReport, SlotState, UpdateActivate, UpdateActivating, UpdateBegin, UpdateBegun,
+                              UpdateConfirm, UpdateConfirmed, UpdateData, UpdateProgress, UpdateState, UpdateStatus,
+                              UpdateVerified, UpdateVerify, UpdateWritten)
 from .message_base import EVENT_BIT, REPLY_BIT, Message, MsgType, _Empty, _read_str, _str, reply_type
 
 
@@ -74,6 +78,7 @@ class Capability:
     TIME_SYNC = 0x08
     CALIBRATION = 0x10  # since 1.1: CALIB_* messages (SPEC §12)
     RAW_OUTPUT = 0x20  # since 1.1: `rectify` = 0 gives raw (unrectified) frames (SPEC §5.1, §8.2)
+    FIRMWARE_UPDATE = 0x40  # since 1.2: UPDATE_* messages (SPEC §13)
 
 
 @dataclass(frozen=True)
@@ -226,7 +231,8 @@ MESSAGES: dict[int, type[Message]] = {
     cls.TYPE: cls for cls in (
         GetInfo, GetConfig, SetConfig, Trigger, Start, Stop, Heartbeat, TimeSync, Info, Config,
         ConfigApplied, Triggered, Started, Stopped, Status, Time, Nack, FrameBegin, FrameData, FrameEnd,
-        CalibRead, CalibData, CalibWrite, CalibWritten, CalibCommit, CalibRestore, CalibCommitted, CalibRestored)
+        CalibRead, CalibData, CalibWrite, CalibWritten, CalibCommit, CalibRestore, CalibCommitted, CalibRestored,
+        *UPDATE_MESSAGES)
 }
 
 # request type -> reply class
@@ -235,6 +241,7 @@ REPLIES: dict[int, type[Message]] = {
     MsgType.TRIGGER: Triggered, MsgType.START: Started, MsgType.STOP: Stopped,
     MsgType.HEARTBEAT: Status, MsgType.TIME_SYNC: Time, MsgType.CALIB_READ: CalibData,
     MsgType.CALIB_WRITE: CalibWritten, MsgType.CALIB_COMMIT: CalibCommitted, MsgType.CALIB_RESTORE: CalibRestored,
+    **UPDATE_REPLIES,
 }
 
 
@@ -269,4 +276,7 @@ __all__ = [  # the whole message catalogue, whichever module defines each part
     "FrameBegin", "FrameData", "FrameEnd", "DISPARITY_S16_Q4", "FRAME_RECTIFIED", "FRAME_OK", "FRAME_SENSOR_OVERRUN",
     "CalibSource", "CalibRead", "CalibData", "CalibWrite", "CalibWritten", "CalibCommit", "CalibRestore",
     "CalibState", "CalibCommitted", "CalibRestored", "MAX_CALIB_CHUNK", "calib_id",
+    "UpdateBegin", "UpdateBegun", "UpdateData", "UpdateWritten", "UpdateProgress", "UpdateVerify", "UpdateVerified",
+    "UpdateActivate", "UpdateActivating", "UpdateConfirm", "UpdateConfirmed", "UpdateStatus", "UpdateState",
+    "SlotInfo", "SlotReport", "SlotState", "BootMode", "MAX_UPDATE_CHUNK", "BEGIN_REPLACE",
 ]
