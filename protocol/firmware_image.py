@@ -163,7 +163,7 @@ def check_length(total: int, payload_size: int) -> None:
 
 def verify_image(data: bytes, trusted: Ed25519PublicKey, target: str, min_counter: int = 0) -> FirmwareImage:
     """The parsed image if it is whole, signed by ``trusted``, built for ``target`` and not a rollback."""
-    size, counter, version, img_target, kid, digest = parse_header(data)
+    size, counter, _, img_target, kid, digest = parse_header(data)
     check_length(len(data), size)
     if img_target != target:
         raise ImageError(ImageFault.WRONG_TARGET, f"built for {img_target!r}, this unit is {target!r}")
@@ -178,10 +178,17 @@ def verify_image(data: bytes, trusted: Ed25519PublicKey, target: str, min_counte
         raise ImageError(ImageFault.TAMPERED, "the signature does not verify") from exc
     if counter < min_counter:
         raise ImageError(ImageFault.ROLLBACK, f"security counter {counter} is below the unit's {min_counter}")
-    (blen,) = _BUILD_LEN.unpack_from(signed, HEADER_LEN)
-    build = FirmwareBuild.from_json(signed[HEADER_LEN + 4:HEADER_LEN + 4 + blen])
-    return FirmwareImage(counter, version, img_target, kid, build, size - 4 - blen, len(data),
-                         hashlib.sha256(data).digest())
+    return inspect_image(data)
+
+
+def inspect_image(data: bytes) -> FirmwareImage:
+    """The image's fields and build as its header and payload say, signature NOT checked (for hosts,
+    which do not hold the unit's trusted key; the unit verifies)."""
+    size, counter, version, target, kid, _ = parse_header(data)
+    check_length(len(data), size)
+    (blen,) = _BUILD_LEN.unpack_from(data, HEADER_LEN)
+    build = FirmwareBuild.from_json(data[HEADER_LEN + 4:HEADER_LEN + 4 + blen])
+    return FirmwareImage(counter, version, target, kid, build, size - 4 - blen, len(data), hashlib.sha256(data).digest())
 
 
 def load_private_key(pem: bytes) -> Ed25519PrivateKey:

@@ -64,7 +64,14 @@ class InProcessTransport(Transport):
         self.url = url
         self._owns = owns
         self._fifo = ByteFifo()
+        self._unsubscribe = sim.on_power(self._on_power)
         sim.attach(self._fifo.put)
+
+    def _on_power(self, event: str) -> None:
+        """The unit went down (reboot, power cut): this link is gone; the host reconnects by serial."""
+        if event == "down":
+            self._unsubscribe()
+            self._fifo.close()
 
     def write(self, data: bytes) -> None:
         if self._fifo.closed:
@@ -81,6 +88,7 @@ class InProcessTransport(Transport):
         if self._fifo.closed:
             return
         self._fifo.close()
+        self._unsubscribe()
         self.sim.detach()
         if self._owns:
             self.sim.close()
