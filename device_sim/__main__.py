@@ -7,7 +7,11 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from pathlib import Path
 
+from stereocam.protocol.firmware_image import load_private_key
+
+from .boot.factory import DEV_SIGNING_KEY
 from .firmware import SimulatedCamera
 from .links.servers import PtyServer, TcpServer
 from .rig.scene import Scene
@@ -31,8 +35,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--serial", default=None, help="serial number (default derived from the seed)")
     ap.add_argument("--scene", choices=[s.value for s in Scene], default=Scene.LAB.value,
                     help="what the rig looks at (board: the calibration fixture's chessboard)")
+    ap.add_argument("--vendor-key", type=Path, default=None,
+                    help="PEM Ed25519 key the factory provisions and signs the shipped image with "
+                         "(default: the simulator's development key)")
     args = ap.parse_args(argv)
-    sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene)
+    key = load_private_key(args.vendor_key.read_bytes()) if args.vendor_key else DEV_SIGNING_KEY
+    sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene, vendor_key=key)
     server = build_server(args.serve, sim)
 
     def stop(signum, frame):  # noqa: ARG001

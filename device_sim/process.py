@@ -10,9 +10,9 @@ import sys
 class ServedSimulator:
     """Starts the child and reads the URL it prints first; ``stop`` sends SIGTERM and waits."""
 
-    def __init__(self, spec: str, seed: int = 7, scene: str = "lab"):
+    def __init__(self, spec: str, seed: int = 7, scene: str = "lab", extra: tuple[str, ...] = ()):
         self.proc = subprocess.Popen([sys.executable, "-m", "stereocam.device_sim", "--serve", spec, "--seed", str(seed),
-                                      "--scene", scene],
+                                      "--scene", scene, *extra],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                      env={**os.environ, "PYTHONUNBUFFERED": "1"})
         self.url = self.proc.stdout.readline().strip()

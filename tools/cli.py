@@ -12,6 +12,7 @@ COMMANDS = {
     "info": ("stereocam.tools.info", "print a camera's info, configuration and counters"),
     "capture": ("stereocam.tools.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
     "calibrate": ("stereocam.tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
+    "firmware": ("stereocam.tools.firmware", "signed firmware images: keygen, sign, update a camera, slot status"),
     "demo": ("stereocam.tools.demo", "simulator + streaming + outputs in ./out + summary"),
     "bench": ("stereocam.tools.bench", "benchmarks: protocol decode, transports (incl. USB), matching core"),
 }
