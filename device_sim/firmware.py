@@ -103,14 +103,14 @@ class SimulatedCamera:
         if key is None:
             raise RuntimeError(f"unit {self.serial} has no trusted key provisioned")
         slots, states = Slots(self.layout, key, MODEL), BootStateStore(self.layout)
-        self.booted: Booted = BootStage(slots, states).boot(recovery)
-        build = self.booted.image.build if self.booted.image else RECOVERY_BUILD
+        booted = BootStage(slots, states).boot(recovery)
+        build = booted.image.build if booted.image else RECOVERY_BUILD
         self.build, self.firmware_version = build, build.version
         self.config.reset(build.parameter_defaults)
-        self.update = UpdateService(slots, states, self.booted)
+        self.update = UpdateService(slots, states, booted)
         identity = Identity(self.model, self.serial, build.version, build.protocol_minor, build.capabilities)
         groups: list[dict] = [InfoHandler(identity, self.calibration).handlers(), self.heartbeat.handlers()]
-        if self.booted.image is None:
+        if booted.image is None:
             groups.append({m.MsgType.STOP: self.streaming.handlers()[m.MsgType.STOP]})
         else:
             groups += [ConfigHandlers(self.config, self.engine).handlers(), self.streaming.handlers()]
@@ -121,6 +121,11 @@ class SimulatedCamera:
         self.dispatcher.handlers.clear()
         for handlers in groups:
             self.dispatcher.register(handlers)
+
+    @property
+    def booted(self) -> Booted:
+        """What the boot stage started (its mode turns NORMAL once the host confirms a trial)."""
+        return self.update.booted
 
     def on_power(self, listener: Callable[[str], None]) -> Callable[[], None]:
         """Call ``listener("down")`` when the unit goes down (reset, power cut) and ``("up")`` when it

@@ -23,7 +23,7 @@ def test_usage_lists_commands():
 def test_info():
     r = stereocam("info", "sim://?seed=2")
     assert r.returncode == 0, r.stderr
-    assert "serial SIM00002" in r.stdout and "protocol 1.1" in r.stdout and "config.num_disparities 64" in r.stdout
+    assert "serial SIM00002" in r.stdout and "protocol 1.2" in r.stdout and "config.num_disparities 64" in r.stdout
 
 
 def test_info_on_a_dead_url_is_a_clean_error():
