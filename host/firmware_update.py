@@ -108,7 +108,7 @@ def update(cam, image: bytes, *, progress: Progress | None = None, replace: bool
         raise FirmwareUpdateError(f"{cam.url} does not offer firmware updates (no FIRMWARE_UPDATE capability)")
     slot, start = transfer(cam.request, image, progress, replace)
     cam.request(m.UpdateActivate())
-    _await_reboot(cam, reboot_timeout)
+    await_reboot(cam, reboot_timeout)
     info = cam.info()
     st = status(cam.request)
     running = next((s for s in st.slots if s.slot == st.running), None)
@@ -128,7 +128,7 @@ def update(cam, image: bytes, *, progress: Progress | None = None, replace: bool
     return UpdateResult(info.firmware_version, running.slot, running.sha256, start, time.monotonic() - t0)
 
 
-def _await_reboot(cam, timeout: float) -> None:
+def await_reboot(cam, timeout: float) -> None:
     """Wait for the link to drop (the unit resets), then reconnect to the same serial."""
     deadline = time.monotonic() + timeout
     while cam.link.alive:

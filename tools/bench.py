@@ -8,6 +8,7 @@ matching  — the numba matching core against cv2.StereoBM (tools/bench_matching
 calibration — calibration accuracy against the simulator's truth: the solver on rendered views
             (tools/bench_calibration.py) and the factory tool through the protocol on uncalibrated
             units, plus metric depth at 1 m through the stored result (tools/bench_device_calibration.py).
+firmware  — a 2 MiB signed image installed per transport, and one update's state trace (tools/bench_firmware.py).
 """
 from __future__ import annotations
 
@@ -104,7 +105,7 @@ def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty"
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="stereocam bench", description=__doc__.splitlines()[0])
     ap.add_argument("what", nargs="?", default="all",
-                    choices=["protocol", "transport", "usb", "matching", "calibration", "all"])
+                    choices=["protocol", "transport", "usb", "matching", "calibration", "firmware", "all"])
     ap.add_argument("--seconds", type=float, default=5.0)
     args, rest = ap.parse_known_args(argv)
     if args.what in ("protocol", "all"):
@@ -115,6 +116,8 @@ def main(argv: list[str] | None = None) -> int:
         importlib.import_module("stereocam.tools.bench_usb").main(rest)
     if args.what in ("matching", "all"):
         importlib.import_module("stereocam.tools.bench_matching").main(rest)
+    if args.what in ("firmware", "all"):
+        importlib.import_module("stereocam.tools.bench_firmware").main([])
     if args.what in ("calibration", "all"):
         importlib.import_module("stereocam.tools.bench_calibration").main([])
         importlib.import_module("stereocam.tools.bench_device_calibration").main([])

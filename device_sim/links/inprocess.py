@@ -107,6 +107,8 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
     serial = query.get("serial", [None])[0]
     if serial is not None and "seed" not in query:
         live = registry.find_free(serial)
+        if live is not None and not live.powered:
+            raise DisconnectedError(f"simulated unit {serial} is off or rebooting")
         if live is not None:
             if scene is not None:
                 live.scene = scene
