@@ -77,6 +77,7 @@ class SimulatedCamera:
         self._power_lock = threading.RLock()
         self._power_listeners: list[Callable[[str], None]] = []
         self.powered = True
+        self._closed = False
         self.truth = TruthLog(self.rig)
 
         # the engine's callbacks reach the pipeline and the watchdog, which themselves need the engine
@@ -153,6 +154,8 @@ class SimulatedCamera:
         """Reset: the link drops, the boot stage runs again from flash (``recovery``: the recovery
         strap is held), the unit comes back as what it booted."""
         with self._power_lock:
+            if self._closed:  # a reboot scheduled by ACTIVATE may fire after close()
+                return
             self._down()
             self._up(recovery)
 
@@ -214,6 +217,8 @@ class SimulatedCamera:
 
     # -- lifetime -------------------------------------------------------------------------------
     def close(self) -> None:
+        with self._power_lock:
+            self._closed = True
         registry.unregister(self)
         self.engine.close()
         if self.trigger_line is not None:

@@ -3,6 +3,7 @@ NACK naming the reason, takes one update at a time, keeps streaming during the t
 through unplugs (USB power) at random moments of an update with a valid image every time."""
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import random
 import threading
@@ -14,13 +15,13 @@ import stereocam
 import stereocam.device_sim.usb as simusb
 from stereocam import firmware_update as fw
 from stereocam.device_sim import SimulatedCamera
-from stereocam.device_sim.links.inprocess import InProcessTransport
+from stereocam.device_sim.boot.factory import DEV_SIGNING_KEY
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import DeviceError, ErrorCode, StereoCamError
-from stereocam.protocol.firmware_image import ImageFault, auto_security_counter
+from stereocam.protocol.firmware_image import ImageFault, auto_security_counter, build_image
 from stereocam.protocol.update_messages import BootMode, SlotState
 from tests.support.device import SMALL
-from tests.support.firmware import OTHER_KEY, image
+from tests.support.firmware import OTHER_KEY, build, image
 
 pytestmark = pytest.mark.sim_only("reboots and power-cycles the simulated unit")
 
@@ -55,23 +56,29 @@ def test_update_changes_what_the_unit_reports_and_does_and_a_signed_rollback_goe
 
 
 def test_capabilities_follow_the_booted_build(unit):
-    sim, cam = unit
+    _, cam = unit
     assert cam.read_calibration() is not None
-    lean = image("1.3.0")
-    build = lean  # an image whose build drops calibration storage
-    from tests.support.firmware import build as make_build
-    from stereocam.protocol.firmware_image import build_image
-    from stereocam.device_sim.boot.factory import DEV_SIGNING_KEY
-    import dataclasses
-
-    b = make_build("1.3.0")
-    build = build_image(dataclasses.replace(b, capabilities=b.capabilities & ~m.Capability.CALIBRATION),
-                        DEV_SIGNING_KEY, target="STOC-SIM")
-    cam.update_firmware(build)
+    b = build("1.3.0")
+    lean = build_image(dataclasses.replace(b, capabilities=b.capabilities & ~m.Capability.CALIBRATION),
+                       DEV_SIGNING_KEY, target="STOC-SIM")  # a build without calibration storage
+    cam.update_firmware(lean)
     assert not cam.info().capabilities & m.Capability.CALIBRATION
     with pytest.raises(DeviceError) as info:
         cam.request(m.CalibRead(0, 0, 16))
     assert info.value.code == ErrorCode.UNKNOWN_TYPE
+
+
+def test_recovery_is_always_there_and_takes_an_update(unit):
+    sim, cam = unit
+    sim.reboot(recovery=True)  # the recovery strap held at power-on
+    cam.reconnect()
+    info = cam.info()
+    assert (info.firmware_version, info.capabilities) == ("recovery", m.Capability.FIRMWARE_UPDATE)
+    with pytest.raises(DeviceError) as refused:
+        cam.start()
+    assert refused.value.code == ErrorCode.UNKNOWN_TYPE
+    assert cam.firmware_status().running == "recovery"
+    assert cam.update_firmware(image("1.2.0")).version == cam.info().firmware_version == "1.2.0"
 
 
 @pytest.mark.parametrize("bad, fault", [

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import shutil
 from pathlib import Path
 
@@ -73,8 +74,6 @@ class Unit:
         return self.booted
 
     def transfer(self, data: bytes, chunk: int = 1024) -> None:
-        import hashlib
-
         s = self.service.begin(len(data), hashlib.sha256(data).digest(), False)
         for off in range(s.total_received, len(data), chunk):
             self.service.data(off, data[off:off + chunk])

@@ -20,6 +20,7 @@ from stereocam.protocol.update_messages import BootMode
 from tests.support.firmware import Unit, copy_flash, image
 
 NEW = image("1.2.0", code_size=3000)  # 12 pages of payload: a few KiB keeps the exhaustive run fast
+NEWER = image("1.3.0", code_size=3000)  # the second update: into slot A, over the previous image
 
 Phase = tuple[str, Callable[[Unit], None]]
 
@@ -39,14 +40,26 @@ def _revert(u: Unit) -> None:
 UPDATE: list[Phase] = [("transfer", lambda u: u.transfer(NEW)), ("activate", lambda u: u.service.activate()),
                        ("first boot", _first_boot), ("confirm", _confirm)]
 REVERT: list[Phase] = UPDATE[:3] + [("revert", _revert)]
+SECOND: list[Phase] = [("transfer", lambda u: u.transfer(NEWER))] + UPDATE[1:]
 
 
 @pytest.fixture(scope="module")
-def template(tmp_path_factory) -> tuple[Path, bytes]:
-    """A factory-fresh unit's flash file and the sha256 of its image."""
-    path = tmp_path_factory.mktemp("fw") / "unit.flash"
+def templates(tmp_path_factory) -> dict[str, tuple[Path, bytes, bytes]]:
+    """Flash files to start from: (path, sha256 of the image running, of the image the scenario installs).
+    "factory": as shipped (slot A); "updated": after one confirmed update (B runs, A holds the old image)."""
+    path = tmp_path_factory.mktemp("fw") / "factory.flash"
     unit = Unit.factory(path)
-    return path, unit.boot().image.sha256
+    factory_sha = unit.boot().image.sha256
+    updated = path.with_name("updated.flash")
+    copy_flash(path, updated)
+    u = Unit(updated)
+    u.boot()
+    for _, run in UPDATE:
+        run(u)
+    new_sha = verify_image(NEW, DEV_SIGNING_KEY.public_key(), "STOC-SIM").sha256
+    newer_sha = verify_image(NEWER, DEV_SIGNING_KEY.public_key(), "STOC-SIM").sha256
+    return {"update": (path, factory_sha, new_sha), "revert": (path, factory_sha, new_sha),
+            "second update": (updated, new_sha, newer_sha)}
 
 
 def _steps_per_phase(path: Path, phases: list[Phase]) -> list[tuple[str, int]]:
@@ -82,14 +95,13 @@ def _cut_and_check(path: Path, phases: list[Phase], cut: int, tear: bool, allowe
     return name
 
 
-@pytest.mark.parametrize("scenario", ["update", "revert"])
-def test_power_cut_at_every_flash_step(template, tmp_path: Path, scenario: str) -> None:
-    src, old_sha = template
-    phases = UPDATE if scenario == "update" else REVERT
+@pytest.mark.parametrize("scenario", ["update", "revert", "second update"])
+def test_power_cut_at_every_flash_step(templates, tmp_path: Path, scenario: str) -> None:
+    src, old_sha, new_sha = templates[scenario]
+    phases = {"update": UPDATE, "revert": REVERT, "second update": SECOND}[scenario]
     copy_flash(src, tmp_path / "probe.flash")
     per_phase = _steps_per_phase(tmp_path / "probe.flash", phases)
     total = sum(n for _, n in per_phase)
-    new_sha = verify_image(NEW, DEV_SIGNING_KEY.public_key(), "STOC-SIM").sha256
     tried: collections.Counter[str] = collections.Counter()
     for tear in (False, True):
         for cut in range(total):
@@ -109,4 +121,4 @@ def test_power_cut_at_every_flash_step(template, tmp_path: Path, scenario: str) 
     u.boot()
     for _, run in phases:
         run(u)
-    assert Unit(tmp_path / "full.flash").boot().image.sha256 == (new_sha if scenario == "update" else old_sha)
+    assert Unit(tmp_path / "full.flash").boot().image.sha256 == (old_sha if scenario == "revert" else new_sha)
