@@ -99,14 +99,15 @@ class SimulatedCamera:
     # -- boot, reboot, power --------------------------------------------------------------------
     def _boot(self, recovery: bool) -> None:
         """Run the boot stage and become what it booted: its build's version, protocol minor,
-        capabilities, parameter defaults and request handlers (recovery: INFO, HEARTBEAT, STOP, UPDATE_*)."""
+        capabilities, parameter defaults and request handlers (recovery: INFO, HEARTBEAT, TIME_SYNC, STOP,
+        UPDATE_*)."""
         key = trusted_key(self.flash)
         if key is None:
             raise RuntimeError(f"unit {self.serial} has no trusted key provisioned")
         slots, states = Slots(self.layout, key, MODEL), BootStateStore(self.layout)
         booted = BootStage(slots, states).boot(recovery)
         build = booted.image.build if booted.image else RECOVERY_BUILD
-        self.build, self.firmware_version = build, build.version
+        self.firmware_version = build.version
         self.config.reset(build.parameter_defaults)
         self.update = UpdateService(slots, states, booted)
         identity = Identity(self.model, self.serial, build.version, build.protocol_minor, build.capabilities)
