@@ -25,7 +25,7 @@ from .boot.factory import DEV_SIGNING_KEY, provision, trusted_key
 from .boot.layout import FLASH_SIZE, FlashLayout
 from .boot.slots import Slots
 from .boot.update_service import UpdateService
-from .calibration.flash import NorFlash
+from .calibration.flash import NorFlash, PowerLossError
 from .calibration.truth import true_calibration
 from .clock import DeviceClock
 from .ground_truth import GroundTruth, TruthLog
@@ -145,7 +145,6 @@ class SimulatedCamera:
         self.link.detach()
 
     def _up(self, recovery: bool) -> None:
-        self.flash.power_loss_after(None)
         self.calibration.reload()
         self._boot(recovery)
         self.powered = True
@@ -158,7 +157,10 @@ class SimulatedCamera:
             if self._closed:  # a reboot scheduled by ACTIVATE may fire after close()
                 return
             self._down()
-            self._up(recovery)
+            try:
+                self._up(recovery)
+            except PowerLossError:  # the supply failed during the boot: the unit stays off until power_on()
+                pass
 
     def power_cut(self) -> None:
         """Simulator control: the supply fails now; a flash step in progress or started later fails."""
@@ -169,6 +171,7 @@ class SimulatedCamera:
     def power_on(self, recovery: bool = False) -> None:
         """Simulator control: power returns after ``power_cut`` (or a PowerLossError): boot from flash."""
         with self._power_lock:
+            self.flash.power_loss_after(None)
             self._up(recovery)
 
     # -- the host link ------------------------------------------------------------------------
