@@ -101,14 +101,24 @@ def transfer(request, image: bytes, progress: Progress | None = None, replace: b
 
 def update(cam, image: bytes, *, progress: Progress | None = None, replace: bool = False,
            reboot_timeout: float = 30.0) -> UpdateResult:
-    """Install ``image`` on the camera ``cam`` (a stereocam.Camera) and confirm it once it runs."""
+    """Install ``image`` on the camera ``cam`` (a stereocam.Camera) and confirm it once it runs.
+    A unit already running this image on trial (an update cut after its reboot) is checked and
+    confirmed without a new transfer; one running another image on trial is refused."""
     t0 = time.monotonic()
     expected = inspect_image(image)  # a malformed file fails here, before the unit is touched
     if not cam.info().capabilities & m.Capability.FIRMWARE_UPDATE:
         raise FirmwareUpdateError(f"{cam.url} does not offer firmware updates (no FIRMWARE_UPDATE capability)")
-    slot, start = transfer(cam.request, image, progress, replace)
-    cam.request(m.UpdateActivate())
-    await_reboot(cam, reboot_timeout)
+    before = status(cam.request)
+    trial = next((s for s in before.slots if s.slot == before.running), None)
+    if before.mode == m.BootMode.TRIAL and trial is not None and trial.sha256 == expected.sha256.hex():
+        slot, start = "AB".index(trial.slot), len(image)  # finish the update that was cut after its reboot
+    elif before.mode == m.BootMode.TRIAL:
+        raise FirmwareUpdateError(f"{cam.url} runs {trial.version if trial else '?'} on trial, from an update not "
+                                  "confirmed yet: finish that update, or reset the unit to revert it")
+    else:
+        slot, start = transfer(cam.request, image, progress, replace)
+        cam.request(m.UpdateActivate())
+        await_reboot(cam, reboot_timeout)
     info = cam.info()
     st = status(cam.request)
     running = next((s for s in st.slots if s.slot == st.running), None)

@@ -115,6 +115,19 @@ def test_a_second_update_while_one_is_in_progress_is_refused(unit):
     assert cam.update_firmware(first).resumed_from == 1000  # the same image resumes
 
 
+def test_an_update_cut_after_its_reboot_is_finished_by_the_next_run(unit):
+    sim, cam = unit
+    new = image("1.2.0", code_size=2000)
+    fw.transfer(cam.request, new)
+    cam.request(m.UpdateActivate())
+    fw.await_reboot(cam, 10.0)  # the host dies here: the unit runs 1.2.0 on trial, unconfirmed
+    assert cam.firmware_status().mode == BootMode.TRIAL
+    with pytest.raises(fw.FirmwareUpdateError, match="on trial"):
+        cam.update_firmware(image("1.3.0"))
+    result = cam.update_firmware(new)
+    assert (result.version, result.resumed_from) == ("1.2.0", len(new)) and sim.booted.mode == BootMode.NORMAL
+
+
 def test_the_running_image_keeps_streaming_during_the_transfer(unit):
     _, cam = unit
     cam.configure(**SMALL, fps=20)
@@ -143,7 +156,7 @@ def test_the_running_image_keeps_streaming_during_the_transfer(unit):
 def test_unplug_at_random_moments_of_a_usb_update(usb_bus):
     sim = SimulatedCamera(serial="FW-USB-CUT", seed=22)
     calibration = sim.calibration.record.body
-    images = [image(f"1.2.{i}", code_size=192 * 1024) for i in range(14)]  # each try a newer one
+    images = [image(f"1.2.{i}", code_size=192 * 1024) for i in range(13)]  # each try a newer one
     allowed = {sim.booted.image.sha256, *(hashlib.sha256(i).digest() for i in images)}
     rng = random.Random(1313)
     handle = simusb.plug(sim)
@@ -167,7 +180,9 @@ def test_unplug_at_random_moments_of_a_usb_update(usb_bus):
         outcomes[-1] += f" -> boots {sim.firmware_version} ({sim.booted.mode.name.lower()})"
     handle = simusb.plug(sim)
     with stereocam.open("usb://?serial=FW-USB-CUT", timeout=1.0) as cam:
-        assert cam.update_firmware(images[-1]).version == cam.info().firmware_version == "1.2.13"
+        # the last image again: installed, or (cut after its reboot) checked and confirmed where it runs on trial
+        assert cam.update_firmware(images[-1]).version == cam.info().firmware_version == "1.2.12"
+        assert cam.firmware_status().mode == BootMode.NORMAL
     handle.unplug()
     sim.close()
     print(f"\nUSB unplug at random moments of a {full:.2f} s update: " + "; ".join(outcomes))
