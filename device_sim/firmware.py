@@ -78,6 +78,7 @@ class SimulatedCamera:
         self._power_listeners: list[Callable[[str], None]] = []
         self.powered = True
         self._closed = False
+        self._epoch = 0
         self.truth = TruthLog(self.rig)
 
         # the engine's callbacks reach the pipeline and the watchdog, which themselves need the engine
@@ -119,7 +120,7 @@ class SimulatedCamera:
             if build.capabilities & m.Capability.CALIBRATION:
                 groups.append(self.calibration.handlers())
         if build.capabilities & m.Capability.FIRMWARE_UPDATE:
-            groups.append(UpdateHandlers(self.update, self.reboot, self.power_cut).handlers())
+            groups.append(UpdateHandlers(self.update, self._reset_from(self._epoch), self.power_cut).handlers())
         self.dispatcher.handlers.clear()
         for handlers in groups:
             self.dispatcher.register(handlers)
@@ -139,7 +140,16 @@ class SimulatedCamera:
         for listener in list(self._power_listeners):
             listener(event)
 
+    def _reset_from(self, epoch: int) -> Callable[[], None]:
+        """The reset the running firmware requests (ACTIVATE): void if the unit went down meanwhile."""
+        def reset() -> None:
+            with self._power_lock:
+                if self._epoch == epoch:
+                    self.reboot()
+        return reset
+
     def _down(self) -> None:
+        self._epoch += 1  # whatever the firmware that ran scheduled dies with it
         self.powered = False
         self._notify("down")
         self.link.detach()
