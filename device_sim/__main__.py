@@ -11,10 +11,14 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from pathlib import Path
 
 from stereocam.transports.announced import announce
 from stereocam.protocol.errors import ConfigError
 
+from stereocam.protocol.firmware_image import load_private_key
+
+from .boot.factory import DEV_SIGNING_KEY
 from .firmware import SimulatedCamera
 from .links.servers import PtyServer, TcpServer
 from .rig.scene import Scene
@@ -45,6 +49,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--trigger-line", metavar="NAME", help="join the machine-wide trigger line NAME")
     ap.add_argument("--trigger-master", type=float, metavar="FPS", help="drive the trigger line at FPS")
     ap.add_argument("--truth-log", metavar="PATH", help="append each exposure's true instant to PATH")
+    ap.add_argument("--vendor-key", type=Path, default=None,
+                    help="PEM Ed25519 key the factory provisions and signs the shipped image with "
+                         "(default: the simulator's development key)")
     args = ap.parse_args(argv)
     if args.trigger_master is not None and (args.trigger_line is None or not args.trigger_master > 0):
         raise SystemExit("--trigger-master FPS needs --trigger-line NAME and FPS > 0")
@@ -52,7 +59,8 @@ def main(argv: list[str] | None = None) -> int:
         line = SharedTriggerLine(args.trigger_line) if args.trigger_line else None
     except ConfigError as exc:
         raise SystemExit(f"--trigger-line: {exc}") from exc
-    sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene, trigger_line=line)
+    key = load_private_key(args.vendor_key.read_bytes()) if args.vendor_key else DEV_SIGNING_KEY
+    sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene, trigger_line=line, vendor_key=key)
     truth_log = open(args.truth_log, "a", buffering=1) if args.truth_log else None  # noqa: SIM115
     if truth_log is not None:
         sim.truth.on_exposure = lambda seq, t: truth_log.write(f"{seq} {t!r}\n")

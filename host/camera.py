@@ -20,7 +20,7 @@ from stereocam.protocol.config_rules import merge
 from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, Param, TriggerMode
 from stereocam.protocol.rectification import stereo_rectify
 
-from . import calibration_io, presets
+from . import calibration_io, firmware_update, presets
 from .arguments import int32_arg, timeout_arg
 from .calibration_io import StoredCalibration
 from .callbacks import FrameCallback, FrameCallbacks
@@ -226,6 +226,15 @@ class Camera:
 
     def restore_factory_calibration(self) -> StoredCalibration | None:
         return calibration_io.restore_factory(self.request)
+
+    def firmware_status(self) -> firmware_update.FirmwareStatus:
+        """Both image slots (version, state, hash read back by the unit) and what runs."""
+        return firmware_update.status(self.request)
+
+    def update_firmware(self, image: bytes, progress: firmware_update.Progress | None = None,
+                        replace: bool = False) -> firmware_update.UpdateResult:
+        """Install a signed image; returns once the unit runs it and it is confirmed (host/firmware_update.py)."""
+        return firmware_update.update(self, image, progress=progress, replace=replace)
 
     def config(self) -> dict[str, int]:
         r = self.request(m.GetConfig())

@@ -28,6 +28,7 @@ class ErrorCode(enum.IntEnum):
     INTERNAL = 7
     UNSUPPORTED_VERSION = 8
     STORAGE = 9  # flash write or verify failed; the previous stored data is still in force
+    IMAGE_REJECTED = 10  # since 1.2: a firmware image refused; the text starts with the reason (SPEC §13.4)
 
 
 class DeviceError(StereoCamError):

@@ -99,7 +99,8 @@ def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty"
     return out
 
 
-MODES = ("protocol", "decoder", "transport", "usb", "matching", "calibration", "calib-real", "sync", "all")
+MODES = ("protocol", "decoder", "transport", "usb", "matching", "calibration", "calib-real", "sync", "firmware",
+         "all")
 
 
 @click.command("bench", context_settings={"ignore_unknown_options": True},
@@ -120,6 +121,7 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
     calibration  calibration accuracy against the simulator's truth, solver and device tool
     calib-real   the offline tool on real calibration sets against OpenCV's all-pairs solution
     sync         three heads on one trigger line: skew within matched sets, clock-map error vs truth
+    firmware     a 2 MiB signed image installed per transport, and one update's state trace
     all          protocol, transport, matching and calibration (default)
 
     Arguments after WHAT that this command does not know go to the usb or matching bench."""
@@ -132,6 +134,8 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
         bench_transport(seconds)
     if what == "sync":  # minutes of capture: only when asked for; --seconds given after WHAT goes to it
         importlib.import_module("stereocam.tools.bench_sync").main(rest)
+    if what == "firmware":
+        importlib.import_module("stereocam.tools.bench_firmware").main(rest)
     if what == "calib-real":
         importlib.import_module("stereocam.tools.bench_calib_real").main(rest)
     if what == "usb":

@@ -24,6 +24,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("stereocam.tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
     "calibration": ("stereocam.tools.calibration_export", "calibration export URL --size WxH: ROS camera_info from a unit"),
     "factory": ("stereocam.tools.factory.cli", "factory record: yield and metric distributions per day and station"),
+    "firmware": ("stereocam.tools.firmware", "signed firmware images: keygen, sign, update a camera, slot status"),
     "demo": ("stereocam.tools.demo", "simulator + streaming + outputs in ./out + summary"),
     "conformance": ("stereocam.tools.conformance.cli", "hold a camera to the protocol: one line per check, JUnit/JSON"),
     "sim": ("stereocam.device_sim.__main__", "serve a simulated camera over a pty or TCP"),

@@ -15,7 +15,8 @@ then review the diff of tests/golden/protocol_v1.json byte by byte.
 History: v1.1 rewrote every vector (header byte 5, ver_minor, 0 -> 1; INFO gained its trailing
 calibration_id) and added the eight CALIB_* messages of SPEC §12. Retiring parameter id 20 (a
 simulator control, SPEC §5.1) shortened the CONFIG vector (every parameter of the table) by one entry.
-v1.2 rewrote every vector again (ver_minor 1 -> 2) and added the four frame-repair messages of SPEC §13.
+v1.2 rewrote every vector again (ver_minor 1 -> 2) and added the four frame-repair messages of SPEC §13
+and the twelve UPDATE_* messages of SPEC §14.
 """
 from __future__ import annotations
 
@@ -90,6 +91,25 @@ CASES: list[tuple[m.Message, int, int]] = [
     (m.FrameLink(chunk_size=1024, kept_captures=8), 0x0D0D, 0),
     (m.FrameResend(sequence=0x01020304, ranges=((1, 0x400, 0x400), (4, 0x00012340, 0x0001FFFF))), 0x0E0E, FLAG_RESEND),
     (m.FrameResent(sequence=0x01020304, result=m.RESEND_SENT, frame_status=m.FRAME_OK, chunks=0x00000021), 0x0E0E, 0),
+    # v1.2: firmware update (SPEC §14)
+    (m.UpdateBegin(size=0x00200123, sha256=bytes(range(32)), flags=m.BEGIN_REPLACE), 0x0D0D, 0),
+    (m.UpdateBegun(slot=1, received=0x0001F000, size=0x00200123), 0x0D0D, 0),
+    (m.UpdateData(offset=0x0001F000, data=b"SCFW" + MAGIC + bytes(range(250, 256)) + b"\x00"), 0x0E0E, FLAG_RESEND),
+    (m.UpdateWritten(slot=0, received=0x0001F00F, size=0x00200123), 0x0E0E, 0),
+    (m.UpdateVerify(), 0x0F0F, 0),
+    (m.UpdateVerified(m.SlotInfo(slot=1, state=m.SlotState.STANDBY, security_counter=0x01020000,
+                                 sha256=bytes(range(255, 223, -1)), version="1.2.0+ß")), 0x0F0F, 0),
+    (m.UpdateActivate(), 0x1010, 0),
+    (m.UpdateActivating(m.SlotInfo(slot=1, state=m.SlotState.PENDING, security_counter=0x01020000,
+                                   sha256=bytes(32), version="1.2.0")), 0x1010, 0),
+    (m.UpdateConfirm(), 0x1111, 0),
+    (m.UpdateConfirmed(m.SlotInfo(slot=1, state=m.SlotState.ACTIVE, security_counter=0xFFFFFFFF,
+                                  sha256=b"\xff" * 32, version="")), 0x1111, 0),
+    (m.UpdateStatus(), 0x1212, 0),
+    (m.UpdateState(running_slot=1, boot_mode=m.BootMode.TRIAL, received=4096, size=0x00200123,
+                   sha256=bytes(range(32)), security_counter=0x01010000,
+                   slots=(m.SlotInfo(0, m.SlotState.STANDBY, 0x01010000, b"\xa5" * 32, "1.1.0"),
+                          m.SlotInfo(1, m.SlotState.TRIAL, 0x01020000, b"\x5a" * 32, "1.2.0"))), 0x1212, 0),
 ]
 BY_NAME = {type(msg).__name__: (msg, rid, flags) for msg, rid, flags in CASES}
 
@@ -101,6 +121,8 @@ def _jsonable(v):
         return int(v)
     if isinstance(v, (bytes, bytearray, memoryview)):
         return {"hex": bytes(v).hex()}
+    if dataclasses.is_dataclass(v):
+        return fields_json(v)
     if isinstance(v, (tuple, list)):
         return [_jsonable(x) for x in v]
     if isinstance(v, dict):
@@ -140,7 +162,7 @@ def vector(name: str) -> dict:
 # -- coverage ----------------------------------------------------------------------------------
 def test_every_message_class_has_exactly_one_vector() -> None:
     classes = sorted(cls.__name__ for cls in m.MESSAGES.values())
-    assert len(classes) == 32  # v1.0: 20; v1.1 added the eight CALIB_* messages; v1.2 four repair messages
+    assert len(classes) == 44  # v1.0: 20; v1.1 added the eight CALIB_* messages; v1.2 four repair, twelve UPDATE_*
     assert sorted(BY_NAME) == classes
     assert len(CASES) == len(BY_NAME)
     assert sorted(NAMES) == classes
