@@ -327,12 +327,13 @@ def test_calibration_types_sources_and_codes() -> None:
 
 
 def test_update_types_replies_and_codes() -> None:
-    """SPEC §13: requests 0x000D..0x0012, replies request | 0x8000; error code 10."""
-    assert {int(k): v for k, v in m.REPLIES.items() if k >= 0x000D} == {
-        0x000D: m.UpdateBegun, 0x000E: m.UpdateWritten, 0x000F: m.UpdateVerified, 0x0010: m.UpdateActivating,
-        0x0011: m.UpdateConfirmed, 0x0012: m.UpdateState}
+    """SPEC §14: requests 0x000F..0x0014 (after frame repair's 0x000D, 0x000E), replies request | 0x8000;
+    error code 10."""
+    assert {int(k): v for k, v in m.REPLIES.items() if k >= 0x000F} == {
+        0x000F: m.UpdateBegun, 0x0010: m.UpdateWritten, 0x0011: m.UpdateVerified, 0x0012: m.UpdateActivating,
+        0x0013: m.UpdateConfirmed, 0x0014: m.UpdateState}
     assert int(ErrorCode.IMAGE_REJECTED) == 10 and max(ErrorCode) is ErrorCode.IMAGE_REJECTED
-    assert m.Capability.FIRMWARE_UPDATE == 0x40
+    assert m.Capability.FIRMWARE_UPDATE == 0x80
     assert m.MAX_UPDATE_CHUNK + 4 <= MAX_PAYLOAD
 
 
