@@ -35,14 +35,20 @@ def header(ns: int, frame_id: str) -> dict:
 
 
 def image(ns: int, frame_id: str, plane: np.ndarray) -> dict:
+    """A mono8 Image; its ``data`` is set by the caller (see ``schemas.encode_with_blob``)."""
     h, w = plane.shape
     return {"header": header(ns, frame_id), "height": h, "width": w, "encoding": "mono8", "is_bigendian": 0,
-            "step": w, "data": plane.tobytes()}
+            "step": w}
+
+
+def blob(plane: np.ndarray) -> memoryview:
+    """A plane's bytes without a copy."""
+    return memoryview(np.ascontiguousarray(plane)).cast("B")
 
 
 def disparity_to_float(frame: Frame) -> np.ndarray:
     """The camera's int16 Q4 plane in pixels (exact in float32; invalid → min_disparity - 1)."""
-    return frame.disparity.astype(np.float32) * np.float32(DISPARITY_STEP)
+    return np.multiply(frame.disparity, np.float32(DISPARITY_STEP), dtype=np.float32)
 
 
 def disparity_from_float(pixels: np.ndarray) -> np.ndarray:
@@ -51,11 +57,11 @@ def disparity_from_float(pixels: np.ndarray) -> np.ndarray:
 
 
 def disparity(ns: int, frame: Frame) -> dict:
+    """A DisparityImage; its ``image["data"]`` is set by the caller (float32 from ``disparity_to_float``)."""
     fmt, g = frame.disparity_format, frame.geometry
-    d = disparity_to_float(frame)
-    h, w = d.shape
+    h, w = frame.disparity.shape
     img = {"header": header(ns, FRAME_IDS["left"]), "height": h, "width": w, "encoding": "32FC1",
-           "is_bigendian": 0, "step": 4 * w, "data": d.tobytes()}
+           "is_bigendian": 0, "step": 4 * w}
     return {"header": header(ns, FRAME_IDS["left"]), "image": img, "f": g.focal_px, "t": g.baseline_m,
             "valid_window": {"x_offset": 0, "y_offset": 0, "height": h, "width": w, "do_rectify": False},
             "min_disparity": float(fmt.min_disparity),

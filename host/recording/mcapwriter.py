@@ -18,12 +18,12 @@ import zlib
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, Sequence, Union
 
 import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import (Attachment, AttachmentIndex, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message,
+from mcap.records import (Attachment, AttachmentIndex, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header,
                           MessageIndex, Metadata, MetadataIndex, Schema, Statistics, SummaryOffset)
 from mcap.well_known import Profile
 
@@ -32,17 +32,31 @@ DEFAULT_CHUNK_BYTES = 4 << 20
 DEFAULT_LEVEL = 1
 
 
+Buffers = Sequence[Union[bytes, memoryview]]
+_MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log time, publish time
+
+
 @dataclass
 class _OpenChunk:
-    records: RecordBuilder = field(default_factory=RecordBuilder)
+    """The chunk being filled: its records as a list of buffers, never joined (zstd streams them)."""
+
+    pieces: list = field(default_factory=list)
+    size: int = 0
     indexes: dict[int, MessageIndex] = field(default_factory=dict)
     start: int = 0
     end: int = 0
     messages: int = 0
 
 
-def _compress(raw: bytes, level: int) -> tuple[bytes, int]:
-    return zstandard.ZstdCompressor(level=level).compress(raw), zlib.crc32(raw)
+def _compress(pieces: Buffers, level: int) -> tuple[bytes, int]:
+    """zstd frame and CRC-32 of the concatenated ``pieces`` (both release the GIL)."""
+    z = zstandard.ZstdCompressor(level=level).compressobj()
+    out, crc = [], 0
+    for p in pieces:
+        out.append(z.compress(p))
+        crc = zlib.crc32(p, crc)
+    out.append(z.flush())
+    return b"".join(out), crc
 
 
 class ChunkedWriter:
@@ -119,7 +133,8 @@ class ChunkedWriter:
         self.stats.attachment_count += 1
 
     # -- messages -----------------------------------------------------------------------------
-    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0) -> None:
+    def add_message(self, channel_id: int, log_time: int, data: Buffers, publish_time: int, sequence: int = 0) -> None:
+        """One message; ``data`` is its bytes as a sequence of buffers (kept, not copied, until written)."""
         c = self._chunk
         if c.messages == 0:
             c.start = c.end = log_time
@@ -127,24 +142,26 @@ class ChunkedWriter:
         index = c.indexes.get(channel_id)
         if index is None:
             index = c.indexes[channel_id] = MessageIndex(channel_id=channel_id, records=[])
-        index.records.append((log_time, c.records.count))
-        Message(channel_id=channel_id, sequence=sequence, log_time=log_time, publish_time=publish_time,
-                data=data).write(c.records)
+        index.records.append((log_time, c.size))
+        length = sum(len(p) for p in data)
+        # a Message record (MCAP spec): its fixed fields as mcap.records.Message writes them, then the data
+        c.pieces.append(_MESSAGE_HEAD.pack(Opcode.MESSAGE, 22 + length, channel_id, sequence, log_time, publish_time))
+        c.pieces.extend(data)
+        c.size += _MESSAGE_HEAD.size + length
         c.messages += 1
         st = self.stats
         st.message_start_time = log_time if st.message_count == 0 else min(st.message_start_time, log_time)
         st.message_end_time = max(st.message_end_time, log_time)
         st.message_count += 1
         st.channel_message_counts[channel_id] += 1
-        if c.records.count >= self._chunk_bytes:
+        if c.size >= self._chunk_bytes:
             self._close_chunk()
 
     def _close_chunk(self) -> None:
         c, self._chunk = self._chunk, _OpenChunk()
         if c.messages == 0:
             return
-        raw = c.records.end()
-        self._pending.append((self._pool.submit(_compress, raw, self._level), c, len(raw)))
+        self._pending.append((self._pool.submit(_compress, c.pieces, self._level), c, c.size))
         self._drain(block=len(self._pending) > self._max_pending)
 
     def _drain(self, block: bool) -> None:

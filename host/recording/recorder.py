@@ -177,15 +177,20 @@ class Recorder:
         for topic, body, side in ((schemas.LEFT_INFO, self._infos[key][0], "left"),
                                   (schemas.RIGHT_INFO, self._infos[key][1], "right")):
             msgs.append((topic, {**body, "header": convert.header(ns, schemas.FRAME_IDS[side])}))
-        if frame.left is not None:
-            msgs.append((schemas.LEFT, convert.image(ns, schemas.FRAME_IDS["left"], frame.left)))
-        if frame.right is not None:
-            msgs.append((schemas.RIGHT, convert.image(ns, schemas.FRAME_IDS["right"], frame.right)))
-        if frame.disparity is not None:
-            msgs.append((schemas.DISPARITY_TOPIC, convert.disparity(ns, frame)))
         for topic, body in msgs:
-            data = self._encoders[schemas.TOPICS[topic]](body)
-            self._writer.add_message(self._channels[topic], ns, data, ns, frame.sequence)
+            self._writer.add_message(self._channels[topic], ns, [self._encoders[schemas.TOPICS[topic]](body)], ns,
+                                     frame.sequence)
+        blobs = []
+        for topic, side, plane in ((schemas.LEFT, "left", frame.left), (schemas.RIGHT, "right", frame.right)):
+            if plane is not None:
+                body = convert.image(ns, schemas.FRAME_IDS[side], plane)
+                blobs.append((topic, body, body, convert.blob(plane)))
+        if frame.disparity is not None:
+            body = convert.disparity(ns, frame)
+            blobs.append((schemas.DISPARITY_TOPIC, body, body["image"], convert.blob(convert.disparity_to_float(frame))))
+        for topic, body, slot, data in blobs:
+            encoded = schemas.encode_with_blob(self._encoders[schemas.TOPICS[topic]], body, slot, data)
+            self._writer.add_message(self._channels[topic], ns, encoded, ns, frame.sequence)
         self._log_times.append(ns)
         st = self.stats
         st.frames += 1

@@ -94,3 +94,21 @@ TOPICS: dict[str, str] = {
 }
 LEFT, RIGHT, LEFT_INFO, RIGHT_INFO, DISPARITY_TOPIC, CAPTURE = TOPICS
 FRAME_IDS = {"left": "stereocam_left", "right": "stereocam_right"}
+
+
+def encode_with_blob(encode: EncoderFunction, body: dict, slot: dict, blob: memoryview) -> list:
+    """CDR of ``body`` whose ``slot["data"]`` (a uint8[]) is the large ``blob``, as buffers, without
+    copying the blob: the library's encoder writes the message with an empty array and the blob is
+    spliced in where the array's length went. Checked against a 4-byte array so the splice is only
+    taken where it is exact (the array last, or followed by fields aligned to at most 4 bytes and a
+    blob whose length is a multiple of 4); otherwise the message is encoded whole."""
+    slot["data"] = b""
+    empty = encode(body)
+    slot["data"] = b"\0\0\0\0"
+    four = encode(body)
+    pos = next((i for i, (a, b) in enumerate(zip(empty, four)) if a != b), None)
+    tail = empty[pos + 4:] if pos is not None else b""
+    if pos is None or four[pos + 4:pos + 8] != b"\0\0\0\0" or four[pos + 8:] != tail or (tail and len(blob) % 4):
+        slot["data"] = bytes(blob)
+        return [encode(body)]
+    return [empty[:pos], len(blob).to_bytes(4, "little"), blob, tail]
