@@ -1,6 +1,6 @@
 """The simulated STOC-class camera: firmware, sensor rig, matching core and its servers.
 
-Importing it registers the ``sim://`` URL scheme and the simulated USB bus with the SDK.
+Importing it registers the ``sim://`` and ``replay://`` URL schemes and the simulated USB bus with the SDK.
 """
 from stereocam.transports import register_scheme
 
@@ -8,5 +8,6 @@ from .camera import GroundTruth, SimulatedCamera
 from .trigger import TriggerLine
 
 register_scheme("sim", "stereocam.device_sim.links.inprocess")
+register_scheme("replay", "stereocam.device_sim.links.replay")
 
 __all__ = ["SimulatedCamera", "GroundTruth", "TriggerLine"]
