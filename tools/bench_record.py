@@ -5,6 +5,7 @@ as fast as it takes them (waiting for room, so nothing is dropped), to a real fi
 captures/s and MB/s of camera data (planes as the camera sends them: 1 + 1 + 2 bytes per pixel).
 The issue's yardstick is 1280x960, three planes at 30 fps ≈ 110 MB/s: the ceiling must reach 2×.
 Live: a simulator at 640x480 recorded for a few seconds through the SDK; recorder drops must be 0.
+Seek: random frames of a 10 000-frame recording, each read through the file's indexes alone.
 """
 from __future__ import annotations
 
@@ -13,10 +14,12 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import zstandard
 
 import stereocam
-from stereocam.recording import Recorder, convert, describe
+from stereocam.recording import Recorder, UnitDescription, convert, describe
+from stereocam.recording.reader import Recording
 
 YARDSTICK_MBPS = 1280 * 960 * 3 * 30 / 1e6  # the issue's "1280x960, three planes, 30 fps"
 
@@ -83,14 +86,52 @@ def bench_live(seconds: float, out_dir: Path) -> dict[str, float]:
     return {"live_fps": fps, "live_recorder_dropped": stats.recorder_dropped}
 
 
+def synthetic_recording(path: Path, frames: int, width: int = 64, height: int = 48) -> None:
+    """A recording of ``frames`` small synthetic captures (distinct noise planes, 30 fps timing)."""
+    rng = np.random.default_rng(0)
+    planes = [(rng.integers(0, 256, (height, width), np.uint8), rng.integers(0, 256, (height, width), np.uint8),
+               rng.integers(-16, 64 * 16, (height, width)).astype(np.int16)) for _ in range(16)]
+    info = {"model": "STOC-SYNTH", "serial": "SYNTH0001", "firmware_version": "0", "protocol_version": "1.1"}
+    unit = UnitDescription(info, {"width": width, "height": height, "fps": 30}, None)
+    with Recorder(path, unit) as rec:
+        for i in range(frames):
+            left, right, disp = planes[i % len(planes)]
+            rec.put_wait(stereocam.Frame(i + 1, 0, 1_000_000 + i * 33_333, 100.0 + i / 30, left, right, disp, 4000, 0,
+                                         width, height, True, stereocam.DisparityFormat(16, 0, 64, -16),
+                                         stereocam.StereoGeometry(60.0, width / 2, height / 2, 0.1)))
+
+
+def bench_seek(frames: int, out_dir: Path, probes: int = 20) -> dict[str, float]:
+    path = out_dir / "long.mcap"
+    t0 = time.perf_counter()
+    synthetic_recording(path, frames)
+    built = time.perf_counter() - t0
+    rng = np.random.default_rng(1)
+    t0 = time.perf_counter()
+    with Recording(path) as rec:
+        opened = time.perf_counter() - t0
+        times = []
+        for i in rng.integers(0, frames, probes):
+            t = time.perf_counter()
+            assert rec.capture(int(i)).info.sequence == i + 1
+            times.append(time.perf_counter() - t)
+        chunks = len(rec.summary.chunk_indexes)
+    print(f"seek by frame index in a {frames}-frame recording ({chunks} chunks, 64x48, written in {built:.1f} s): "
+          f"open {opened * 1e3:.1f} ms, then median {np.median(times) * 1e3:.1f} ms, max {max(times) * 1e3:.1f} ms "
+          f"per random frame ({probes} probes)")
+    return {"seek_median_ms": float(np.median(times) * 1e3), "open_ms": opened * 1e3}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="stereocam bench record", description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--level", type=int, default=1)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--seek-frames", type=int, default=10_000, help="length of the recording to seek in")
     ap.add_argument("--dir", default=None, help="where to write the files (default: a temporary folder)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="stereocam-bench-", dir=args.dir) as tmp:
         bench_ceiling(args.seconds, args.level, args.threads, Path(tmp))
         bench_live(args.seconds, Path(tmp))
+        bench_seek(args.seek_frames, Path(tmp))
     return 0
