@@ -30,11 +30,7 @@ from stereocam.protocol.params import Output, TriggerMode
 from stereocam.recording.reader import RecordedCapture, Recording
 
 from .capture import CaptureEngine, CaptureRequest
-
-MATCH_KEYS = ("num_disparities", "block_size", "min_disparity", "pre_filter_type", "pre_filter_size",
-              "pre_filter_cap", "texture_threshold", "uniqueness_ratio", "speckle_window_size", "speckle_range",
-              "disp12_max_diff")
-"""The configuration that decides the disparity plane: a change to any of them means re-matching."""
+from .matching.params import CONFIG_KEYS
 
 Matcher = Callable[[dict, np.ndarray, np.ndarray], np.ndarray]
 
@@ -124,7 +120,7 @@ class ReplaySource:
         i = cap.info
         wanted = Output(cfg["outputs"]) & Output(i.planes | (Output.DISPARITY if i.rectified else 0))
         planes = {Output.LEFT: cap.left, Output.RIGHT: cap.right}
-        same = all(cfg[k] == self.config.get(k) for k in MATCH_KEYS)
+        same = all(cfg[k] == self.config.get(k) for k in CONFIG_KEYS)  # the recorded matching
         if Output.DISPARITY in wanted and same and cap.disparity is not None:
             planes[Output.DISPARITY] = cap.disparity
             fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)

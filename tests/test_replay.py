@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import stereocam
-from stereocam.device_sim.matching import Matcher, MatchParams
+from stereocam.device_sim.matching import Matcher, from_config
 from stereocam.recording.reader import Recording
 from stereocam.tools.bench_record import synthetic_recording
 
@@ -82,12 +82,7 @@ def test_other_matching_config_rematches_on_board(recording):
     assert not np.array_equal(f.disparity, c.disparity)
     with Recording(path) as rec:
         cfg = rec.config | {"block_size": 21}
-    params = MatchParams(num_disparities=cfg["num_disparities"], block_size=21, min_disparity=cfg["min_disparity"],
-                         pre_filter_type="normalized" if cfg["pre_filter_type"] else "xsobel",
-                         pre_filter_size=cfg["pre_filter_size"], pre_filter_cap=cfg["pre_filter_cap"],
-                         texture_threshold=cfg["texture_threshold"], uniqueness_ratio=cfg["uniqueness_ratio"],
-                         speckle_window_size=cfg["speckle_window_size"], speckle_range=cfg["speckle_range"],
-                         disp12_max_diff=cfg["disp12_max_diff"])
+    params = from_config(cfg)
     expected = Matcher(c.left.shape, params).match(c.left, c.right)
     assert np.array_equal(f.disparity, expected)
 

@@ -8,7 +8,8 @@ matching  — the numba matching core against cv2.StereoBM (tools/bench_matching
 calibration — calibration accuracy against the simulator's truth: the solver on rendered views
             (tools/bench_calibration.py) and the factory tool through the protocol on uncalibrated
             units, plus metric depth at 1 m through the stored result (tools/bench_device_calibration.py).
-record    — the recorder's ceiling in MB/s and a live recording at full rate (tools/bench_record.py).
+record    — the recorder's ceiling in MB/s, a live recording at full rate, seek time (tools/bench_record.py).
+rematch   — stereocam rematch frames/s with 1 and 2 local Dask workers (tools/bench_rematch.py).
 """
 from __future__ import annotations
 
@@ -105,7 +106,7 @@ def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty"
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="stereocam bench", description=__doc__.splitlines()[0])
     ap.add_argument("what", nargs="?", default="all",
-                    choices=["protocol", "transport", "usb", "matching", "calibration", "record", "all"])
+                    choices=["protocol", "transport", "usb", "matching", "calibration", "record", "rematch", "all"])
     ap.add_argument("--seconds", type=float, default=5.0)
     args, rest = ap.parse_known_args(argv)
     if args.what in ("protocol", "all"):
@@ -114,6 +115,8 @@ def main(argv: list[str] | None = None) -> int:
         bench_transport(args.seconds)
     if args.what == "record":
         importlib.import_module("stereocam.tools.bench_record").main(rest + ["--seconds", str(args.seconds)])
+    if args.what == "rematch":
+        importlib.import_module("stereocam.tools.bench_rematch").main(rest)
     if args.what == "usb":
         importlib.import_module("stereocam.tools.bench_usb").main(rest)
     if args.what in ("matching", "all"):

@@ -20,7 +20,7 @@ from stereocam.protocol.calibration import StereoCalibration
 
 from . import schemas
 from .convert import disparity_from_float
-from .recorder import FRAME_INDEX, RecordingError
+from .recorder import FRAME_INDEX, RecordingError, UnitDescription
 
 
 @dataclass
@@ -85,6 +85,20 @@ class Recording:
         body = bytes.fromhex(c["body_hex"])
         return StoredCalibration(StereoCalibration.from_bytes(body), body, c["source"], int(c["generation"]),
                                  int(c["calibration_id"]))
+
+    @property
+    def unit(self) -> UnitDescription:
+        return UnitDescription(self.device, self.config, self.calibration)
+
+    @property
+    def clock_offset_ns(self) -> int:
+        """Host wall clock minus monotonic clock while recording (stamps = host time + this)."""
+        return int(self.metadata.get("stereocam.recording", {}).get("clock_offset_ns", 0))
+
+    def chunk_frame_starts(self) -> list[int]:
+        """For each chunk in file order, the first frame whose stamp is at or after its start."""
+        starts = sorted(c.message_start_time for c in self.summary.chunk_indexes)
+        return sorted(set(int(i) for i in np.searchsorted(self.log_times, starts)) - {len(self)})
 
     @property
     def topics(self) -> dict[str, int]:

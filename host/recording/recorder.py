@@ -58,7 +58,10 @@ class Recorder:
     """Write captures of one unit to an MCAP file (ROS 2 profile). ``put`` frames, then ``close``."""
 
     def __init__(self, path: str | Path, unit: UnitDescription, *, queue_bytes: int = DEFAULT_QUEUE_BYTES,
-                 level: int = DEFAULT_LEVEL, threads: int = 2, chunk_bytes: int = DEFAULT_CHUNK_BYTES):
+                 level: int = DEFAULT_LEVEL, threads: int = 2, chunk_bytes: int = DEFAULT_CHUNK_BYTES,
+                 clock_offset_ns: int | None = None, extra_metadata: dict[str, dict[str, str]] | None = None):
+        """``clock_offset_ns``: host wall clock minus monotonic clock for the stamps (default: now;
+        re-writing a recording passes the original's so every stamp stays the same)."""
         self.path = Path(path)
         try:
             self._writer = ChunkedWriter(self.path, library=f"stereocam {stereocam.__version__}", level=level,
@@ -67,15 +70,18 @@ class Recorder:
             raise RecordingError(f"cannot write {self.path}: {exc}") from exc
         self.unit = unit
         self.stats = RecorderStats()
-        self.clock_offset_ns = time.time_ns() - time.monotonic_ns()  # host monotonic -> wall clock
+        self.clock_offset_ns = time.time_ns() - time.monotonic_ns() if clock_offset_ns is None else clock_offset_ns
         self._encoders = {name: schemas.encoder(name) for name in set(schemas.TOPICS.values())}
         ids = {name: self._writer.register_schema(name, SchemaEncoding.ROS2, schemas.msgdef(name).encode())
                for name in self._encoders}
         self._channels = {topic: self._writer.register_channel(topic, MessageEncoding.CDR, ids[name])
                           for topic, name in schemas.TOPICS.items()}
         self._write_unit(unit)
+        for name, data in (extra_metadata or {}).items():
+            self._writer.add_metadata(name, data)
         self._infos: dict[tuple[int, int, int, bool], tuple[dict, dict]] = {}
         self._log_times: list[int] = []
+        self._upstream_dropped = 0
         self._queue: collections.deque[tuple[Frame, convert.LinkCounters]] = collections.deque()
         self._queued_bytes = 0
         self._queue_bytes = queue_bytes
@@ -168,7 +174,9 @@ class Recorder:
         ns = int(frame.host_time * 1e9) + self.clock_offset_ns
         if self._log_times and ns <= self._log_times[-1]:
             ns = self._log_times[-1] + 1  # log times stay unique and increasing: one per capture
-        counters = convert.LinkCounters(**{**counters.__dict__, "recorder_dropped": self.stats.recorder_dropped})
+        self._upstream_dropped = counters.recorder_dropped  # an earlier writer's drops (re-written files)
+        counters = convert.LinkCounters(**{**counters.__dict__, "recorder_dropped": counters.recorder_dropped
+                                           + self.stats.recorder_dropped})
         msgs = [(schemas.CAPTURE, convert.capture_info(ns, frame, counters))]
         key = (frame.geometry.calibration_id, frame.width, frame.height, frame.rectified)
         if key not in self._infos:
@@ -205,6 +213,6 @@ class Recorder:
         self._writer.add_metadata("stereocam.summary", {
             "frames": str(st.frames), "camera_bytes": str(st.camera_bytes),
             **{k: str(v) for k, v in asdict(st.counters).items()},
-            "recorder_dropped": str(st.recorder_dropped)})
+            "recorder_dropped": str(self._upstream_dropped + st.recorder_dropped)})
         self._writer.finish()
         st.file_bytes = self._writer.position

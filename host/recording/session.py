@@ -42,11 +42,12 @@ def describe(camera: "Camera") -> UnitDescription:
     return UnitDescription(info, camera.config(), camera.read_calibration())
 
 
-def counters_of(camera: "Camera", recorder_dropped: int) -> LinkCounters:
+def counters_of(camera: "Camera") -> LinkCounters:
+    """The camera's and the link's drop counters so far (the recorder adds its own)."""
     st = camera.assembler.stats
     status = camera.last_status
     return LinkCounters(st.lost, st.incomplete + st.size_mismatch + st.device_errors, st.queue_overflow,
-                        status.counters.get("frames_dropped", 0) if status else 0, recorder_dropped)
+                        status.counters.get("frames_dropped", 0) if status else 0)
 
 
 def record(camera: "Camera", path: str | Path, *, frames: int | None = None, seconds: float | None = None,
@@ -69,7 +70,7 @@ def record(camera: "Camera", path: str | Path, *, frames: int | None = None, sec
             except CameraTimeoutError:
                 break
             n += 1
-            recorder.put(frame, counters_of(camera, recorder.stats.recorder_dropped))
+            recorder.put(frame, counters_of(camera))
             now = time.monotonic()
             if progress is not None and now >= next_report:
                 next_report = now + PROGRESS_PERIOD
