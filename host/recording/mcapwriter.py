@@ -3,8 +3,9 @@
 It writes what ``mcap.writer.Writer`` writes (chunks, message indexes, a summary with chunk and
 metadata indexes, statistics and summary offsets) with three differences that recording needs:
 
-* chunks are zstd-compressed on a small thread pool at a chosen level (zstd releases the GIL),
-  while the caller goes on filling the next chunk; chunks still reach the file in order;
+* a chunk is a list of buffers (the planes themselves, not copies) until it is full; it is then
+  zstd-compressed on a small thread pool at a chosen level (zstd releases the GIL) while the
+  caller fills the next one; chunks still reach the file in order;
 * each chunk is handed to the operating system as soon as it is written, and schemas, channels
   and metadata go out at once, outside chunks: a process killed at any moment leaves a file that
   reads up to its last complete chunk (``repair`` then rewrites its summary);
@@ -38,7 +39,7 @@ _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequ
 
 @dataclass
 class _OpenChunk:
-    """The chunk being filled: its records as a list of buffers, never joined (zstd streams them)."""
+    """The chunk being filled: its records as a list of buffers, joined only when compressed."""
 
     pieces: list = field(default_factory=list)
     size: int = 0
@@ -49,14 +50,10 @@ class _OpenChunk:
 
 
 def _compress(pieces: Buffers, level: int) -> tuple[bytes, int]:
-    """zstd frame and CRC-32 of the concatenated ``pieces`` (both release the GIL)."""
-    z = zstandard.ZstdCompressor(level=level).compressobj()
-    out, crc = [], 0
-    for p in pieces:
-        out.append(z.compress(p))
-        crc = zlib.crc32(p, crc)
-    out.append(z.flush())
-    return b"".join(out), crc
+    """zstd frame and CRC-32 of the concatenated ``pieces`` (zstd and zlib release the GIL). One
+    join, then zstd in one shot: faster than streaming the pieces through a compressor object."""
+    raw = b"".join(pieces)
+    return zstandard.ZstdCompressor(level=level).compress(raw), zlib.crc32(raw)
 
 
 class ChunkedWriter:
