@@ -85,9 +85,10 @@ class ReplaySource:
 
     # -- the engine's side: what to capture next, and when -------------------------------------
     def restart(self) -> None:
-        """A new stream: play from ``start`` again."""
+        """A new stream: play from ``start`` again (a capture taken for the old stream stays pending:
+        the firmware finds it no longer current and does not send it)."""
         with self._lock:
-            self._iter, self._pending, self._t0 = None, None, None
+            self._iter, self._t0 = None, None
 
     def next_request(self, epoch: int) -> CaptureRequest | None:
         """The next capture as a request (recorded sequence and trigger id), once it is due; None at

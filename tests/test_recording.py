@@ -1,7 +1,6 @@
 """Recordings checked by independent readers: mcap's summary and index, rosbags' ROS 2 types."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -2,7 +2,6 @@
 chunk as it is, and ``stereocam recording repair`` makes it whole (summary, indexes, every capture)."""
 from __future__ import annotations
 
-import os
 import random
 import signal
 import subprocess

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from mcap.reader import make_reader
 
-from stereocam.device_sim.matching import Matcher, from_config  # noqa: F401 - from_config: validation in rematch
+from stereocam.device_sim.matching import Matcher, from_config
 from stereocam.frames import DisparityFormat
 from stereocam.recording import LinkCounters, Recorder
 from stereocam.recording.mcapwriter import ChunkedWriter

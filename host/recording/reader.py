@@ -6,11 +6,13 @@ chunk is read. Messages are decoded by the ``mcap`` reader and ``mcap-ros2-suppo
 """
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
+from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap_ros2.decoder import DecoderFactory
 
@@ -56,7 +58,7 @@ class Recording:
             self._file = open(self.path, "rb")  # noqa: SIM115 - closed by close()
             self._reader = SeekingReader(self._file, decoder_factories=[DecoderFactory()])
             self.summary = self._reader.get_summary()
-        except (OSError, Exception) as exc:
+        except (OSError, McapError, ValueError, EOFError, struct.error) as exc:
             raise RecordingError(f"{self.path} is not a readable MCAP file: {exc}") from exc
         if self.summary is None or not self.summary.chunk_indexes and self.summary.statistics.message_count:
             self.close()

@@ -17,7 +17,7 @@ from typing import Any, Iterator
 import numpy as np
 import zstandard
 from mcap.exceptions import McapError
-from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
+from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap_ros2.decoder import DecoderFactory
 
@@ -105,7 +105,7 @@ def repair(path: str | Path, out: str | Path | None = None) -> RepairReport:
                     other_meta.append(record)
             elif isinstance(record, Attachment) and record.name != FRAME_INDEX:
                 writer.add_attachment(record.name, record.media_type, record.data, record.log_time)
-            elif type(record).__name__ == "Footer":
+            elif isinstance(record, Footer):
                 complete = True
         if writer is None:
             raise RecordingError(f"{path} does not start with an MCAP header: nothing to repair")
