@@ -135,3 +135,31 @@ def test_bad_files_give_typed_errors(tmp_path):
         Recording(tmp_path / "missing.mcap")
     with stereocam.open("sim://?seed=1") as cam, pytest.raises(RecordingError):
         cam.record(tmp_path / "nodir" / "x.mcap", frames=1)
+
+
+@pytest.mark.parametrize("n", [0, 1, 3, 4, 7, 4096])
+def test_spliced_cdr_equals_the_library_encoding(n):
+    rng = np.random.default_rng(n)
+    blob = rng.integers(0, 256, n, np.uint8).tobytes()
+    for name, body, slot in (
+            (schemas.IMAGE, {"header": {"stamp": {"sec": 1, "nanosec": 2}, "frame_id": "odd"}, "height": 1,
+                             "width": n, "encoding": "mono8", "step": n}, None),
+            (schemas.DISPARITY, {"header": {"frame_id": "x"}, "image": {"encoding": "32FC1"}, "f": 1.5, "t": 0.1,
+                                 "valid_window": {"width": 3}, "min_disparity": -1.0, "max_disparity": 63.0,
+                                 "delta_d": 0.0625}, "image")):
+        encode = schemas.encoder(name)
+        target = body[slot] if slot else body
+        spliced = b"".join(schemas.encode_with_blob(encode, body, target, memoryview(blob)))
+        target["data"] = blob
+        assert spliced == encode(body)
+
+
+def test_record_cli_limits_and_output(tmp_path, capsys):
+    from stereocam.tools import cli
+
+    assert cli.main(["record", "sim://?seed=2", "--out", str(tmp_path / "a.mcap"), "--frames", "0"]) == 1
+    assert cli.main(["record", "sim://?seed=2", "--out", str(tmp_path / "a.mcap"), "--frames", "2", "--set",
+                     "width=320", "--set", "height=240"]) == 0
+    captured = capsys.readouterr()
+    assert "2 frames" in captured.out and "recorder 0" in captured.out
+    assert "fps" in captured.err and "MB/s" in captured.err  # the progress line
