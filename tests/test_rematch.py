@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 from dask.distributed import Client, LocalCluster
+from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
@@ -43,6 +44,9 @@ def _check(source, out, block_size):
             assert np.array_equal(cb.disparity, matcher.match(ca.left, ca.right))
             assert not np.array_equal(cb.disparity, ca.disparity)
     assert [p.name for p in out.parent.iterdir()] == [out.name]  # no parts or temporary files left
+    with open(out, "rb") as f:  # chunks copied from the parts: their CRCs and the summary agree
+        reader = make_reader(f, validate_crcs=True)
+        assert sum(1 for _ in reader.iter_messages()) == reader.get_summary().statistics.message_count == N * 6
     with AnyReader([out], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
         disp = [c for c in reader.connections if c.topic == "/stereo/disparity"]
         assert sum(1 for _ in reader.messages(connections=disp)) == N

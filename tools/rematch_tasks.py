@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 from mcap.reader import make_reader
+from mcap.records import Chunk, MessageIndex
+from mcap.stream_reader import StreamReader
 
 from stereocam.device_sim.matching import Matcher, from_config
 from stereocam.frames import DisparityFormat
@@ -65,15 +67,32 @@ def rematch_range(path: str, start: int, stop: int, overrides: dict[str, int], p
     return stop - start, time.perf_counter() - t0
 
 
+def _copy_chunks(records, writer: ChunkedWriter) -> None:
+    """Every chunk of a file with its message indexes, compressed bytes copied as they are."""
+    chunk, indexes = None, []
+    for record in records:
+        if isinstance(record, MessageIndex) and chunk is not None:
+            indexes.append(record)
+            continue
+        if chunk is not None:
+            writer.copy_chunk(chunk, indexes)
+            chunk, indexes = None, []
+        if isinstance(record, Chunk):
+            chunk = record
+    if chunk is not None:
+        writer.copy_chunk(chunk, indexes)
+
+
 def join(source: str, parts: list[str], out: str, provenance: dict[str, str]) -> int:
-    """The parts, in order, as one recording ``out`` (messages copied as they are); its frame count."""
+    """The parts, in order, as one recording ``out`` (their chunks copied as they are, not
+    decompressed); its frame count."""
     target = Path(out)
     tmp = _atomic(target)
     writer: ChunkedWriter | None = None
     times: list[np.ndarray] = []
     summary: dict[str, str] = {}
     try:
-        for n, part in enumerate(parts):
+        for part in parts:
             with open(part, "rb") as f:
                 reader = make_reader(f)
                 s = reader.get_summary()
@@ -86,10 +105,10 @@ def join(source: str, parts: list[str], out: str, provenance: dict[str, str]) ->
                         if meta.name != "stereocam.summary":
                             writer.add_metadata(meta.name, dict(meta.metadata))
                     writer.add_metadata("stereocam.rematch", {**provenance, "source": source})
-                topic_ids = {c.topic: chans[cid] for cid, c in s.channels.items()}
-                for _, channel, msg in reader.iter_messages(log_time_order=False):
-                    writer.add_message(topic_ids[channel.topic], msg.log_time, [msg.data], msg.publish_time,
-                                       msg.sequence)
+                if any(chans.get(cid) != cid or writer.channels[cid].topic != c.topic for cid, c in s.channels.items()):
+                    raise ValueError(f"{part} numbers its channels unlike the first part")
+                f.seek(0)
+                _copy_chunks(StreamReader(f, emit_chunks=True).records, writer)
                 times += [np.frombuffer(a.data, "<i8") for a in reader.iter_attachments() if a.name == FRAME_INDEX]
                 last = next((dict(m.metadata) for m in reader.iter_metadata() if m.name == "stereocam.summary"), {})
                 camera_bytes = int(summary.get("camera_bytes", 0)) + int(last.get("camera_bytes", 0))

@@ -166,24 +166,43 @@ class ChunkedWriter:
         while self._pending and (block or self._pending[0][0].done()):
             future, c, size = self._pending.popleft()
             data, crc = future.result()
-            offset, length = self._pos, 0
-            builder = RecordBuilder()
-            Chunk(message_start_time=c.start, message_end_time=c.end, uncompressed_size=size,
-                  uncompressed_crc=crc, compression="zstd", data=data).write(builder)
-            length = builder.count
-            offsets = {}
-            for channel_id, index in c.indexes.items():
-                offsets[channel_id] = offset + builder.count
-                index.write(builder)
-            self._write(builder.end())
-            self._out.flush()
-            self._chunk_indexes.append(ChunkIndex(
-                message_start_time=c.start, message_end_time=c.end, chunk_start_offset=offset,
-                chunk_length=length, message_index_offsets=offsets,
-                message_index_length=self._pos - offset - length, compression="zstd",
-                compressed_size=len(data), uncompressed_size=size))
-            self.stats.chunk_count += 1
+            self._write_chunk(Chunk(message_start_time=c.start, message_end_time=c.end, uncompressed_size=size,
+                                    uncompressed_crc=crc, compression="zstd", data=data), list(c.indexes.values()))
             block = False
+
+    def _write_chunk(self, chunk: Chunk, indexes: list[MessageIndex]) -> None:
+        """A chunk record and its message indexes, handed to the OS; remembered for the summary."""
+        offset = self._pos
+        builder = RecordBuilder()
+        chunk.write(builder)
+        length = builder.count
+        offsets = {}
+        for index in indexes:
+            offsets[index.channel_id] = offset + builder.count
+            index.write(builder)
+        self._write(builder.end())
+        self._out.flush()
+        self._chunk_indexes.append(ChunkIndex(
+            message_start_time=chunk.message_start_time, message_end_time=chunk.message_end_time,
+            chunk_start_offset=offset, chunk_length=length, message_index_offsets=offsets,
+            message_index_length=self._pos - offset - length, compression=chunk.compression,
+            compressed_size=len(chunk.data), uncompressed_size=chunk.uncompressed_size))
+        self.stats.chunk_count += 1
+
+    def copy_chunk(self, chunk: Chunk, indexes: list[MessageIndex]) -> None:
+        """Take a chunk of another file as it is (compressed bytes, message indexes): joining files
+        without decompressing them. Its channel ids must mean the same channels in this file."""
+        self.flush()
+        st = self.stats
+        for index in indexes:
+            if index.channel_id not in self.channels:
+                raise ValueError(f"chunk refers to channel {index.channel_id}, not registered here")
+            for log_time, _ in index.records:
+                st.message_start_time = log_time if st.message_count == 0 else min(st.message_start_time, log_time)
+                st.message_end_time = max(st.message_end_time, log_time)
+                st.message_count += 1
+            st.channel_message_counts[index.channel_id] += len(index.records)
+        self._write_chunk(chunk, indexes)
 
     def flush(self) -> None:
         """Close the open chunk and write every chunk still being compressed."""
