@@ -25,13 +25,14 @@ from . import registry
 from .capture import CaptureEngine, CaptureRequest
 from .clock import DeviceClock
 from .config_store import ConfigStore
-from .matching import Matcher, MatchParams
+from .matching import Matcher, MatchParams, from_config
 from .matching import warm_up as matching_warm_up
 from .calib_service import CalibrationService
 from stereocam.protocol.calibration import StereoCalibration
 from .calibration.truth import true_calibration
 from .scene import BOARD_SCENE
 from .sensor import SENSOR_H, SENSOR_W, Geometry, SensorRig
+from .replay import ReplayEngine, ReplaySource
 from .trigger import TriggerLine
 
 MODEL = "STOC-SIM"
@@ -74,17 +75,24 @@ class SimulatedCamera:
     """One simulated STOC-class unit (firmware + sensor rig)."""
 
     def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: TriggerLine | None = None,
-                 flash_path: str | Path | None = None, factory_calibrated: bool = True):
+                 flash_path: str | Path | None = None, factory_calibrated: bool = True,
+                 source: ReplaySource | None = None):
         """``flash_path``: the file behind this unit's flash (kept across runs); None: a private
         temporary file. ``factory_calibrated``: the unit left the factory with its true calibration
-        stored (False: fresh from assembly, streams raw images until calibrated)."""
+        stored (False: fresh from assembly, streams raw images until calibrated). ``source``: a
+        recording that stands in for the sensor rig (its unit's identity, calibration, configuration)."""
         self.seed = seed
-        self.serial = serial or f"SIM{seed:05d}"
-        self.model = MODEL
-        self.firmware_version = FIRMWARE_VERSION
-        self.clock = DeviceClock(seed)
+        self.source = source
+        self.serial = source.serial if source else serial or f"SIM{seed:05d}"
+        self.model = source.model if source else MODEL
+        self.firmware_version = source.firmware_version if source else FIRMWARE_VERSION
+        self.clock = source.clock if source else DeviceClock(seed)
         self.config = ConfigStore()
         self._truth_cal = true_calibration(seed)
+        if source:
+            self.config.apply({BY_NAME[k].pid: v for k, v in source.config.items() if k in BY_NAME}, False)
+            factory_calibrated = source.calibration is not None
+            self._truth_cal = source.calibration or self._truth_cal
         self.rig = SensorRig(seed, self._truth_cal)
         self._tmpdir = None
         if flash_path is None:
@@ -102,7 +110,8 @@ class SimulatedCamera:
         self._matcher: Matcher | None = None
         self._last_rx = time.monotonic()
         self._soft_triggers = 0
-        self.engine = CaptureEngine(self._produce, self._watchdog)
+        self.engine = ReplayEngine(source, self._produce, self._watchdog) if source else \
+            CaptureEngine(self._produce, self._watchdog)
         self.trigger_line = trigger_line
         if trigger_line is not None:
             trigger_line.attach(self._on_pulse)
@@ -168,6 +177,8 @@ class SimulatedCamera:
             self._sink = None
         if self._tmpdir is not None:
             self._tmpdir.cleanup()
+        if self.source is not None:
+            self.source.close()
 
     def true_calibration(self) -> StereoCalibration:
         """This unit's true calibration (full sensor resolution), as the calibration tool writes it."""
@@ -294,14 +305,7 @@ class SimulatedCamera:
             self.engine.stop()
 
     def _match_params(self, cfg: dict[str, int]) -> MatchParams:
-        return MatchParams(
-            num_disparities=cfg["num_disparities"], block_size=cfg["block_size"],
-            min_disparity=cfg["min_disparity"],
-            pre_filter_type="normalized" if cfg["pre_filter_type"] else "xsobel",
-            pre_filter_size=cfg["pre_filter_size"], pre_filter_cap=cfg["pre_filter_cap"],
-            texture_threshold=cfg["texture_threshold"], uniqueness_ratio=cfg["uniqueness_ratio"],
-            speckle_window_size=cfg["speckle_window_size"], speckle_range=cfg["speckle_range"],
-            disp12_max_diff=cfg["disp12_max_diff"])
+        return from_config(cfg)
 
     def _disparity(self, cfg: dict[str, int], left: np.ndarray, right: np.ndarray) -> np.ndarray:
         params = self._match_params(cfg)
@@ -311,6 +315,9 @@ class SimulatedCamera:
 
     def _produce(self, req: CaptureRequest) -> None:
         cfg = self.config.snapshot()
+        if self.source is not None:
+            replayed = self.source.capture(req, cfg, self._disparity)
+            return self._send_capture(req, replayed.begin, replayed.planes)
         w, h = cfg["width"], cfg["height"]
         self.rig.set_format(w, h)
         t = req.time - self.clock.boot
@@ -340,13 +347,18 @@ class SimulatedCamera:
             cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
             cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, calib_id,
             focal, cx, cy, baseline)
-        planes = [(Output.LEFT, left), (Output.RIGHT, right), (Output.DISPARITY, disp)]
+        planes = {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: disp}
+        self._send_capture(req, begin, {p: img for p, img in planes.items() if p in outputs})
+
+    def _send_capture(self, req: CaptureRequest, begin: m.FrameBegin, planes: dict[Output, np.ndarray]) -> None:
+        """FRAME_BEGIN, the ``planes`` in FRAME_DATA chunks, FRAME_END."""
         sizes = {}
         if not self._send_frame_part(req, m.encode(begin)):
             return
-        for plane, img in planes:
+        for plane in (Output.LEFT, Output.RIGHT, Output.DISPARITY):
             sizes[plane] = 0
-            if plane not in outputs:
+            img = planes.get(plane)
+            if img is None:
                 continue
             raw = memoryview(np.ascontiguousarray(img, dtype=img.dtype.newbyteorder("<"))).cast("B")
             for off in range(0, len(raw), CHUNK):
