@@ -4,7 +4,8 @@ Importing it registers the ``sim://`` and ``replay://`` URL schemes and the simu
 """
 from stereocam.transports import register_scheme
 
-from .camera import GroundTruth, SimulatedCamera
+from .firmware import SimulatedCamera
+from .ground_truth import GroundTruth
 from .trigger import TriggerLine
 
 register_scheme("sim", "stereocam.device_sim.links.inprocess")

@@ -1,6 +1,4 @@
-"""``python -m device_sim --serve pty|tcp:HOST:PORT [--replay FILE]``: run a simulated camera in its own process.
-
-With ``--replay`` the unit plays a recording back (``--fast``, ``--loop``, ``--start N``; see device_sim/replay.py).
+"""``python -m stereocam.device_sim --serve pty|tcp:HOST:PORT [--scene board]``: run a simulated camera in its own process.
 
 The first line on stdout is the URL a host opens. Runs until SIGINT or SIGTERM, then exits 0.
 """
@@ -10,8 +8,9 @@ import argparse
 import signal
 import sys
 
-from .camera import SimulatedCamera
-from .serve import PtyServer, TcpServer
+from .firmware import SimulatedCamera
+from .links.servers import PtyServer, TcpServer
+from .rig.scene import Scene
 
 
 def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
@@ -26,21 +25,14 @@ def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m device_sim", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m stereocam.device_sim", description=__doc__.splitlines()[0])
     ap.add_argument("--serve", required=True, metavar="pty|tcp:HOST:PORT")
     ap.add_argument("--seed", type=int, default=0, help="which simulated unit")
     ap.add_argument("--serial", default=None, help="serial number (default derived from the seed)")
-    ap.add_argument("--replay", default=None, metavar="FILE", help="play this recording back as the unit")
-    ap.add_argument("--fast", action="store_true", help="replay as fast as the host reads (default: recorded speed)")
-    ap.add_argument("--loop", action="store_true", help="replay in a loop (default: once)")
-    ap.add_argument("--start", type=int, default=0, help="replay from this frame index")
+    ap.add_argument("--scene", choices=[s.value for s in Scene], default=Scene.LAB.value,
+                    help="what the rig looks at (board: the calibration fixture's chessboard)")
     args = ap.parse_args(argv)
-    source = None
-    if args.replay:
-        from .replay import ReplaySource
-
-        source = ReplaySource(args.replay, realtime=not args.fast, loop=args.loop, start=args.start)
-    sim = SimulatedCamera(serial=args.serial, seed=args.seed, source=source)
+    sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene)
     server = build_server(args.serve, sim)
 
     def stop(signum, frame):  # noqa: ARG001

@@ -1,4 +1,4 @@
-"""A simulator in a child process (``python -m device_sim --serve SPEC``), for tests and benches."""
+"""A simulator in a child process (``python -m stereocam.device_sim --serve SPEC``), for tests and benches."""
 from __future__ import annotations
 
 import os
@@ -10,8 +10,9 @@ import sys
 class ServedSimulator:
     """Starts the child and reads the URL it prints first; ``stop`` sends SIGTERM and waits."""
 
-    def __init__(self, spec: str, seed: int = 7):
-        self.proc = subprocess.Popen([sys.executable, "-m", "stereocam.device_sim", "--serve", spec, "--seed", str(seed)],
+    def __init__(self, spec: str, seed: int = 7, scene: str = "lab"):
+        self.proc = subprocess.Popen([sys.executable, "-m", "stereocam.device_sim", "--serve", spec, "--seed", str(seed),
+                                      "--scene", scene],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                      env={**os.environ, "PYTHONUNBUFFERED": "1"})
         self.url = self.proc.stdout.readline().strip()

@@ -6,7 +6,7 @@ import weakref
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .camera import SimulatedCamera
+    from .firmware import SimulatedCamera
 
 _live: "weakref.WeakSet[SimulatedCamera]" = weakref.WeakSet()
 _lock = threading.Lock()

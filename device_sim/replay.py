@@ -29,8 +29,8 @@ from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.params import Output, TriggerMode
 from stereocam.recording.reader import RecordedCapture, Recording
 
-from .capture import CaptureEngine, CaptureRequest
-from .matching.params import CONFIG_KEYS
+from .pipeline.capture_engine import CaptureEngine, CaptureRequest
+from .pipeline.stereo import match_params
 
 Matcher = Callable[[dict, np.ndarray, np.ndarray], np.ndarray]
 
@@ -121,7 +121,7 @@ class ReplaySource:
         i = cap.info
         wanted = Output(cfg["outputs"]) & Output(i.planes | (Output.DISPARITY if i.rectified else 0))
         planes = {Output.LEFT: cap.left, Output.RIGHT: cap.right}
-        same = all(cfg[k] == self.config.get(k) for k in CONFIG_KEYS)  # the recorded matching
+        same = match_params(cfg) == match_params(self.config)  # the recorded matching
         if Output.DISPARITY in wanted and same and cap.disparity is not None:
             planes[Output.DISPARITY] = cap.disparity
             fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)

@@ -1,7 +1,7 @@
 """stereocam: the host SDK for STOC-class stereo cameras. ``stereocam.open(url)`` gives a Camera.
 
 Beneath it: ``stereocam.protocol`` (the wire protocol, no I/O), ``stereocam.transports`` (one
-module per URL scheme), ``stereocam.device_sim`` (the simulated camera) and ``stereocam.tools``
+module per URL scheme), the simulated camera (a subpackage the SDK never imports) and ``stereocam.tools``
 (the ``stereocam`` command).
 """
 from importlib.metadata import PackageNotFoundError

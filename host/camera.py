@@ -13,6 +13,7 @@ from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, Disconne
                              VersionMismatchError)
 from stereocam.protocol.framing import VERSION_MAJOR
 from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.config_rules import merge
 from stereocam.protocol.params import BY_ID, BY_NAME, TriggerMode
 from stereocam.protocol.rectification import stereo_rectify
 
@@ -171,20 +172,17 @@ class Camera:
 
         All or nothing: the device checks the whole set and a refusal changes nothing.
         """
-        update = {}
-        for name, value in params.items():
-            p = BY_NAME.get(name)
-            if p is None:
-                raise ConfigError(f"unknown parameter {name!r}; known: {', '.join(BY_NAME)}")
-            if isinstance(value, bool) or not isinstance(value, int):
-                if isinstance(value, TriggerMode) or (isinstance(value, float) and value.is_integer()):
-                    value = int(value)
-                else:
-                    raise ConfigError(f"{name} must be an integer, got {value!r}")
-            update[p.pid] = int(value)
+        update = _wire_update(params)
         r = self.request(m.SetConfig(update))
         self._applied.update({BY_ID[k].name: v for k, v in update.items()})
         return _names(r.values)  # type: ignore[attr-defined]
+
+    def check_config(self, **params: int) -> dict[str, int]:
+        """The configuration ``configure(**params)`` would give, checked here against the
+        protocol's rules (protocol/config_rules.py) without changing the device; ConfigRejected
+        (a ConfigError naming the parameter, ``.param``, and the NACK code) if the device would
+        refuse it. The device stays the authority: ``configure`` still sends the request."""
+        return merge(self.config(), _wire_update(params), self._streaming)
 
     def set_trigger_mode(self, mode: TriggerMode | str) -> None:
         if isinstance(mode, str):
@@ -299,6 +297,23 @@ class Camera:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _wire_update(params: dict[str, int]) -> dict[int, int]:
+    """Parameters by name as a SET_CONFIG update (wire id → int); ConfigError for an unknown name
+    or a value that is not an integer."""
+    update = {}
+    for name, value in params.items():
+        p = BY_NAME.get(name)
+        if p is None:
+            raise ConfigError(f"unknown parameter {name!r}; known: {', '.join(BY_NAME)}")
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, TriggerMode) or (isinstance(value, float) and value.is_integer()):
+                value = int(value)
+            else:
+                raise ConfigError(f"{name} must be an integer, got {value!r}")
+        update[p.pid] = int(value)
+    return update
 
 
 def _names(values: dict[int, int]) -> dict[str, int]:

@@ -16,6 +16,7 @@ import numpy as np
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.params import Output
+from stereocam.protocol.segmentation import PLANE_DTYPE, plane_size, planes_of
 
 
 class FrameStatus(enum.Enum):
@@ -119,9 +120,6 @@ class AssemblyStats:
         return self.incomplete + self.size_mismatch + self.device_errors + self.lost + self.queue_overflow
 
 
-_PLANES = {Output.LEFT: (np.uint8, 1), Output.RIGHT: (np.uint8, 1), Output.DISPARITY: (np.dtype("<i2"), 2)}
-
-
 @dataclass
 class _Building:
     begin: m.FrameBegin
@@ -170,8 +168,7 @@ class FrameAssembler:
         if self._last_seq is not None and b.sequence > self._last_seq + 1:
             self.stats.lost += b.sequence - self._last_seq - 1
         self._last_seq = b.sequence
-        n = b.width * b.height
-        self._cur = _Building(b, {p: bytearray(n * size) for p, (_, size) in _PLANES.items() if b.planes & p})
+        self._cur = _Building(b, {p: bytearray(plane_size(p, b.width, b.height)) for p in planes_of(b)})
 
     def _data(self, d: m.FrameData) -> None:
         cur = self._cur
@@ -210,7 +207,7 @@ class FrameAssembler:
 
     def _frame(self, cur: _Building, status: FrameStatus) -> Frame:
         b = cur.begin
-        planes = {p: np.frombuffer(buf, dtype=_PLANES[p][0]).reshape(b.height, b.width)
+        planes = {p: np.frombuffer(buf, dtype=PLANE_DTYPE[p]).reshape(b.height, b.width)
                   for p, buf in cur.buffers.items()}
         disp = planes.get(Output.DISPARITY)
         return Frame(

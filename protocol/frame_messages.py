@@ -47,6 +47,7 @@ class FrameBegin(Message):
 
 
 _FD = struct.Struct("<IBI")
+FRAME_DATA_HEAD = _FD.size  # payload bytes before the data: sequence, plane, offset
 
 
 @dataclass(frozen=True)

@@ -73,6 +73,7 @@ class Capability:
     EXTERNAL_TRIGGER = 0x04
     TIME_SYNC = 0x08
     CALIBRATION = 0x10  # since 1.1: CALIB_* messages (SPEC §12)
+    RAW_OUTPUT = 0x20  # since 1.1: `rectify` = 0 gives raw (unrectified) frames (SPEC §5.1, §8.2)
 
 
 @dataclass(frozen=True)

@@ -66,8 +66,8 @@ PARAMS: tuple[Param, ...] = (
     Param(17, "speckle_range", 0, 0, 1 << 14, unit="1/16 px"),
     Param(18, "disp12_max_diff", -1, -1, 1 << 14, unit="px"),
     Param(19, "heartbeat_timeout_ms", 3000, 0, 600_000, unit="ms"),  # 0: never time out
-    Param(20, "scene", 0, 0, 2),  # 0 animated lab, 1 textured wall at 1 m, 2 calibration board
-    Param(21, "rectify", 1, 0, 1),  # 1: rectified images + disparity; 0: raw images, no disparity
+    # id 20 is retired (a simulator control in drafts of 1.1); never reused
+    Param(21, "rectify", 1, 0, 1),  # 1: rectified images + disparity; 0: raw images (INFO RAW_OUTPUT)
 )
 
 BY_ID: dict[int, Param] = {p.pid: p for p in PARAMS}

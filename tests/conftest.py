@@ -1,28 +1,67 @@
 """Shared fixtures: the same integration tests run over every transport, or against ``--device URL``.
 
-Without ``--device`` each test runs back-to-back over: an in-process simulator (sim://), a
-simulator in a second process behind a real pseudo-terminal opened by pyserial, one behind a
+Without ``--device`` each device test runs back-to-back over: an in-process simulator (sim://),
+a simulator in a second process behind a real pseudo-terminal opened by pyserial, one behind a
 real TCP socket (pyserial's socket://), and one plugged into the simulated USB bus and opened
-through the real pyusb core (usb://?serial=...).
+through the real pyusb core (usb://?serial=...). With ``--device URL`` they run against that
+camera only, and tests marked ``sim_only`` (they need the simulator's internals: its ground
+truth, its flash, pulling its plug) are skipped with their reason.
+
+Every test gets its own simulated USB bus, so tests can run in any order.
 """
 from __future__ import annotations
 
 import pytest
 
 from stereocam.device_sim.process import ServedSimulator
+from tests.support.device import SMALL
 
 TRANSPORTS = ("sim", "pty", "tcp", "usb")
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--device", action="store", default=None, metavar="URL",
-                     help="run the integration tests against this camera URL instead of simulators")
+                     help="run the device tests against this camera URL instead of simulators")
 
 
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
     if "device_url" in metafunc.fixturenames:
         url = metafunc.config.getoption("--device")
         metafunc.parametrize("device_url", [url] if url else list(TRANSPORTS), indirect=True)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    external = config.getoption("--device")
+    for item in items:
+        if "device_url" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.device)
+        if "device_sim" in item.path.relative_to(item.config.rootpath).parts:
+            item.add_marker(pytest.mark.sim_only("tests the simulator itself"))
+        marker = item.get_closest_marker("sim_only")
+        if external and marker is not None:
+            reason = marker.args[0] if marker.args else marker.kwargs.get("reason", "needs the simulator")
+            item.add_marker(pytest.mark.skip(reason=f"simulator only: {reason}"))
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    if "device" not in report.keywords:
+        return
+    if report.when == "call" or (report.when == "setup" and report.outcome != "passed"):
+        _DEVICE_OUTCOMES[report.outcome] = _DEVICE_OUTCOMES.get(report.outcome, 0) + 1
+
+
+_DEVICE_OUTCOMES: dict[str, int] = {}
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Config) -> None:  # noqa: ARG001
+    url = config.getoption("--device")
+    if not url or not _DEVICE_OUTCOMES:
+        return
+    ran = _DEVICE_OUTCOMES.get("passed", 0) + _DEVICE_OUTCOMES.get("failed", 0)
+    terminalreporter.write_sep("=", f"{ran} tests ran against the device at {url}: "
+                                    f"{_DEVICE_OUTCOMES.get('passed', 0)} passed, "
+                                    f"{_DEVICE_OUTCOMES.get('failed', 0)} failed, "
+                                    f"{_DEVICE_OUTCOMES.get('skipped', 0)} skipped")
 
 
 @pytest.fixture(scope="session")
@@ -40,14 +79,30 @@ def served():
         s.stop()
 
 
-@pytest.fixture(scope="session")
-def usb_camera():
-    """A simulated camera plugged into the simulated USB bus for the whole session."""
+@pytest.fixture(autouse=True)
+def usb_bus(monkeypatch):
+    """A simulated USB bus of this test's own: ``simusb.plug`` and ``usb://`` see only it."""
     import stereocam.device_sim.usb as simusb
+    from stereocam.transports import usb as usb_transport
+
+    original = simusb.BUS
+    bus = simusb.SimUsbBus(number=1)
+    monkeypatch.setattr(simusb, "BUS", bus)
+    usb_transport.register_backend("sim", bus.backend)
+    try:
+        yield bus
+    finally:
+        bus.unplug_all()
+        usb_transport.register_backend("sim", original.backend)
+
+
+@pytest.fixture
+def usb_camera(usb_bus):
+    """A simulated camera plugged into this test's USB bus; its usb:// URL."""
     from stereocam.device_sim import SimulatedCamera
 
     sim = SimulatedCamera(serial="IT-USB-7", seed=7)
-    handle = simusb.plug(sim)
+    handle = usb_bus.plug(sim)
     yield f"usb://?serial={sim.serial}"
     handle.unplug()
     sim.close()
@@ -73,7 +128,7 @@ def cam(device_url):
 
     camera = stereocam.open(device_url, timeout=2.0)
     try:
-        camera.configure(**{**defaults(), "width": 320, "height": 240, "num_disparities": 32, "block_size": 11})
+        camera.configure(**{**defaults(), **SMALL})
         yield camera
     finally:
         camera.close()

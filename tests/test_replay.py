@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import stereocam
-from stereocam.device_sim.matching import Matcher, from_config
+from stereocam.device_sim.matching import Matcher
+from stereocam.device_sim.pipeline.stereo import match_params
 from stereocam.recording.reader import Recording
 from stereocam.tools.bench_record import synthetic_recording
 
@@ -82,7 +83,7 @@ def test_other_matching_config_rematches_on_board(recording):
     assert not np.array_equal(f.disparity, c.disparity)
     with Recording(path) as rec:
         cfg = rec.config | {"block_size": 21}
-    params = from_config(cfg)
+    params = match_params(cfg)
     expected = Matcher(c.left.shape, params).match(c.left, c.right)
     assert np.array_equal(f.disparity, expected)
 

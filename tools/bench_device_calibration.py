@@ -17,12 +17,12 @@ from pathlib import Path
 import numpy as np
 
 from stereocam.device_sim import SimulatedCamera
-from stereocam.device_sim.scene import WALL_DISTANCE_M
+from stereocam.device_sim.rig.scene import WALL_DISTANCE_M
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.tools.calib_solve import SolveConfig
 from stereocam.tools.calibrate_device import calibrate_device
-from stereocam.device_sim.sensor import BOARD
+from stereocam.device_sim.rig.sensor import BOARD
 
 TARGET_PCT, TARGET_EPI_PX, TARGET_DEPTH_PCT = 0.2, 0.1, 1.0
 
@@ -33,7 +33,7 @@ def rel(a: float, b: float) -> float:
 
 def one_unit(seed: int, workdir: Path) -> dict[str, float]:
     sim = SimulatedCamera(serial=f"CAL{seed:03d}", seed=seed, flash_path=workdir / f"{seed}.flash",
-                          factory_calibrated=False)
+                          factory_calibrated=False, scene="board")
     with Camera(InProcessTransport(sim), timeout=2.0) as cam:
         t0 = time.monotonic()
         code, result, verdict = calibrate_device(cam, BOARD, SolveConfig(), workdir / str(seed), target="factory")
@@ -42,7 +42,8 @@ def one_unit(seed: int, workdir: Path) -> dict[str, float]:
             raise RuntimeError(f"seed {seed}: {verdict}")
         stored = cam.read_calibration().calibration
         truth = sim.true_calibration()
-        cam.configure(scene=1, rectify=1, width=640, height=480, num_disparities=64, block_size=15,
+        sim.scene = "wall"
+        cam.configure(rectify=1, width=640, height=480, num_disparities=64, block_size=15,
                       trigger_mode=1)
         cam.start()
         cam.trigger()

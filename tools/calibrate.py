@@ -5,8 +5,10 @@
 
 Device mode (tools/calibrate_device.py) captures raw pairs of the calibration board, solves, gates,
 writes the result to the camera, reads it back and compares it byte for byte before it reports
-success; calibration.json then says written/verified true. The simulator's board is 9x6 inner
-corners of 30 mm, the device-mode default.
+success; calibration.json then says written/verified true. The operator or a fixture presents the
+board; the tool sends only protocol parameters (SPEC §5). Against a simulator, serve it showing its
+board (``python -m stereocam.device_sim --scene board`` or ``sim://?scene=board``); its board is 9x6
+inner corners of 30 mm, the device-mode default.
 
 DIR holds pairs named left<N>.<ext> / right<N>.<ext> (any text between the side and the number,
 e.g. left_003.png ↔ right3.png); they are paired by the integer N. The engine and the metric
@@ -21,7 +23,8 @@ Outputs in OUTDIR:
 Exit status: 0 passed; 1 the camera could not be reached; 2 bad arguments or unreadable images;
 3 no solution (board never found, too few views); 4 the solution failed the gate (calibration.json
 says passed: false, the YAML files are not written and stale ones from an earlier run are removed);
-5 the write to the camera failed or read back different (the camera keeps its previous calibration).
+5 the write to the camera failed or read back different (the camera keeps its previous calibration);
+6 the camera does not advertise raw output (INFO capability RAW_OUTPUT).
 """
 from __future__ import annotations
 
@@ -147,7 +150,6 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--pairs", type=int, default=200, help="device mode: most pairs to capture")
     ap.add_argument("--size", type=_board, default=None, metavar="WxH",
                     help="device mode: capture format (default the full sensor)")
-    ap.add_argument("--scene", type=int, default=2, help=argparse.SUPPRESS)  # simulator: which scene to show
     d = SolveConfig()
     ap.add_argument("--max-stereo-rms", type=float, default=d.max_stereo_rms_px, help="gate, px")
     ap.add_argument("--max-epipolar", type=float, default=d.max_epipolar_rms_px, help="gate, px (held-out)")
@@ -208,7 +210,7 @@ def _device_mode(args: argparse.Namespace, config: SolveConfig) -> int:
         with stereocam.open(args.url, timeout=2.0) as cam:
             code, result, verdict = calibrate_device(
                 cam, BoardSpec(*args.board, args.square_size), config, args.out, target=args.target,
-                pairs=args.pairs, size=args.size, scene=args.scene, write_outputs=write_outputs,
+                pairs=args.pairs, size=args.size, write_outputs=write_outputs,
                 progress=None if args.quiet else print_progress)
     except stereocam.StereoCamError as exc:
         return _fail(1, f"camera {args.url}: {exc}")

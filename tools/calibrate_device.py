@@ -1,7 +1,9 @@
 """Device mode of ``stereocam calibrate URL --out DIR``: calibrate a camera on the line and store it.
 
-Steps: switch the camera to raw (unrectified) free-run images of the calibration scene; feed the
-pairs to the solver (tools/calib_solve.py) until it has enough distinct views; gate; on a pass,
+Steps: switch the camera to raw (unrectified) free-run images (``rectify`` = 0, which the camera
+advertises with INFO capability RAW_OUTPUT) while the operator or a fixture presents the board
+(against the simulator: ``--scene board`` or ``sim://?scene=board``); feed the pairs to the solver
+(tools/calib_solve.py) until it has enough distinct views; gate; on a pass,
 write the calibration to the device, read it back and compare byte for byte, and only then report
 success. On any failure nothing is written (or the device keeps its previous calibration) and the
 reason is printed. The camera's own configuration is restored afterwards.
@@ -15,10 +17,10 @@ from pathlib import Path
 import numpy as np
 
 import stereocam
+from stereocam.protocol import messages as m
 from stereocam.tools.calib_solve import CalibrationError, CalibrationResult, SolveConfig, calibrate_pairs
 
-EXIT_OK, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_WRITE = 0, 3, 4, 5
-CALIBRATION_SCENE = 2  # the simulator's chessboard fixture (device_sim/scene.py)
+EXIT_OK, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_WRITE, EXIT_UNSUPPORTED = 0, 3, 4, 5, 6
 
 
 def raw_pairs(cam: stereocam.Camera, count: int, timeout: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
@@ -31,15 +33,16 @@ def raw_pairs(cam: stereocam.Camera, count: int, timeout: float) -> Iterator[tup
 
 
 def calibrate_device(cam: stereocam.Camera, board, config: SolveConfig, outdir: Path, *, target: str = "user",
-                     pairs: int = 200, fps: int = 10, size: tuple[int, int] | None = None, scene: int | None =
-                     CALIBRATION_SCENE, progress=None, write_outputs=None, frame_timeout: float = 60.0
-                     ) -> tuple[int, CalibrationResult | None, str]:
+                     pairs: int = 200, fps: int = 10, size: tuple[int, int] | None = None, progress=None,
+                     write_outputs=None, frame_timeout: float = 60.0) -> tuple[int, CalibrationResult | None, str]:
     """Returns (exit code, result or None, one-line verdict)."""
+    info = cam.info()
+    if not info.capabilities & m.Capability.RAW_OUTPUT:
+        return (EXIT_UNSUPPORTED, None, f"{info.model} {info.serial} does not advertise raw output (INFO "
+                "capability RAW_OUTPUT); it cannot be calibrated in device mode; nothing was written to the camera")
     before = cam.config()
-    width, height = size or (cam.info().sensor_width, cam.info().sensor_height)
+    width, height = size or (info.sensor_width, info.sensor_height)
     setup = dict(rectify=0, width=width, height=height, fps=fps, trigger_mode=int(stereocam.TriggerMode.FREE_RUN))
-    if scene is not None:
-        setup["scene"] = scene
     cam.configure(**setup)
     try:
         cam.start()

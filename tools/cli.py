@@ -13,6 +13,7 @@ COMMANDS = {
     "capture": ("stereocam.tools.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
     "calibrate": ("stereocam.tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
     "demo": ("stereocam.tools.demo", "simulator + streaming + outputs in ./out + summary"),
+    "conformance": ("stereocam.tools.conformance.cli", "hold a camera to the protocol: one line per check, JUnit/JSON"),
     "record": ("stereocam.tools.record", "record a camera to an MCAP file (ROS 2 profile)"),
     "recording": ("stereocam.tools.recording", "recording files: info, repair, export"),
     "rematch": ("stereocam.tools.rematch", "re-run matching over recordings on a Dask cluster"),

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from stereocam.device_sim import SimulatedCamera
-from stereocam.device_sim.camera import GROUND_TRUTH_KEEP
+from stereocam.device_sim.ground_truth import GROUND_TRUTH_KEEP
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 

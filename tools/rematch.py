@@ -15,7 +15,7 @@ import argparse
 import time
 from pathlib import Path
 
-from stereocam.device_sim.matching import from_config
+from stereocam.device_sim.pipeline.stereo import match_params
 from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.params import BY_NAME
 from stereocam.recording.reader import Recording
@@ -49,7 +49,7 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
     for path in recordings:
         with Recording(path) as rec:  # a bad file or a bad combination fails here, before any work
             try:
-                from_config(rec.config | overrides)
+                match_params(rec.config | overrides)
             except ValueError as exc:
                 raise ConfigError(f"{path}: {exc}") from exc
     out.mkdir(parents=True, exist_ok=True)

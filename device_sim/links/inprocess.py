@@ -2,7 +2,8 @@
 
 ``sim://?seed=N`` makes a fresh unit (closed with the transport). ``sim://?serial=S`` opens the
 live, unattached simulator with that serial if this process has one (``stereocam.list_devices``
-lists them), else makes a fresh unit with that serial. Host writes go straight into the firmware's
+lists them), else makes a fresh unit with that serial. ``scene=lab|wall|board`` sets what the
+unit looks at (a simulator setting, not a device parameter; also applied to a live unit). Host writes go straight into the firmware's
 ``receive``; the firmware's output lands in a bounded FIFO the host reads (a full FIFO blocks
 the device, as a full USB or TCP buffer would).
 """
@@ -14,6 +15,7 @@ from urllib.parse import parse_qs, urlsplit
 from stereocam.protocol.errors import ConfigError, DisconnectedError
 
 from .. import registry
+from ..rig.scene import Scene
 
 from stereocam.discovery import DeviceEntry
 from stereocam.transports.base import Transport
@@ -86,21 +88,24 @@ class InProcessTransport(Transport):
 
 def open_transport(url: str, timeout: float) -> InProcessTransport:
     query = parse_qs(urlsplit(url).query)
-    unknown = set(query) - {"seed", "serial"}
+    unknown = set(query) - {"seed", "serial", "scene"}
     if unknown:
-        raise ConfigError(f"sim:// URL: unknown option(s) {sorted(unknown)}; known: seed, serial")
+        raise ConfigError(f"sim:// URL: unknown option(s) {sorted(unknown)}; known: seed, serial, scene")
     try:
         seed = int(query.get("seed", ["0"])[0])
     except ValueError as exc:
         raise ConfigError(f"sim:// URL: seed must be an integer, got {query['seed'][0]!r}") from exc
+    scene = Scene.parse(query["scene"][0]) if "scene" in query else None
     serial = query.get("serial", [None])[0]
     if serial is not None and "seed" not in query:
         live = registry.find_free(serial)
         if live is not None:
+            if scene is not None:
+                live.scene = scene
             return InProcessTransport(live, url, owns=False)
-    from ..camera import SimulatedCamera
+    from ..firmware import SimulatedCamera
 
-    return InProcessTransport(SimulatedCamera(serial=serial, seed=seed), url)
+    return InProcessTransport(SimulatedCamera(serial=serial, seed=seed, scene=scene or Scene.LAB), url)
 
 
 def discover() -> list[DeviceEntry]:

@@ -36,7 +36,7 @@ def parse(url: str) -> tuple[str, dict]:
 
 
 def open_transport(url: str, timeout: float) -> InProcessTransport:
-    from ..camera import SimulatedCamera
+    from ..firmware import SimulatedCamera
     from ..replay import ReplaySource
 
     path, options = parse(url)

@@ -19,6 +19,6 @@ Where OpenCV's own output is not well defined we do the following instead:
     deterministically and is reproduced; spills across its thread stripes race, we drop them.
 """
 from .matcher import Matcher, check_pair, match, warm_up
-from .params import MatchParams, from_config, geometry
+from .params import MatchParams, geometry
 
-__all__ = ["MatchParams", "Matcher", "match", "warm_up", "check_pair", "geometry", "from_config"]
+__all__ = ["MatchParams", "Matcher", "match", "warm_up", "check_pair", "geometry"]

@@ -87,19 +87,6 @@ class MatchParams:
         return 2 * self.pre_filter_cap * self.block_size * self.block_size
 
 
-CONFIG_KEYS = ("num_disparities", "block_size", "min_disparity", "pre_filter_type", "pre_filter_size",
-               "pre_filter_cap", "texture_threshold", "uniqueness_ratio", "speckle_window_size", "speckle_range",
-               "disp12_max_diff")
-"""The device configuration parameters (protocol/params.py) that set the matcher."""
-
-
-def from_config(cfg: dict[str, int]) -> MatchParams:
-    """The matcher parameters a device configuration (by parameter name) asks for."""
-    values = {k: cfg[k] for k in CONFIG_KEYS}
-    values["pre_filter_type"] = PREFILTER_TYPES[cfg["pre_filter_type"]]
-    return MatchParams(**values)
-
-
 @dataclass(frozen=True)
 class Geometry:
     """Column/row ranges of one (height, width, params) combination, OpenCV's names."""

@@ -1,0 +1,33 @@
+"""The device's configuration store: validated, all-or-nothing updates (rules: protocol/config_rules.py)."""
+from __future__ import annotations
+
+import threading
+
+from stereocam.protocol.config_rules import ConfigRejected, merge
+from stereocam.protocol.params import PARAMS, defaults
+
+from ..link_layer.refusal import Refusal
+
+
+class ConfigStore:
+    """Current configuration by name; ``apply`` checks a whole update before changing anything."""
+
+    def __init__(self) -> None:
+        self._values = defaults()
+        self._lock = threading.Lock()
+
+    def snapshot(self) -> dict[str, int]:
+        with self._lock:
+            return dict(self._values)
+
+    def by_id(self) -> dict[int, int]:
+        snap = self.snapshot()
+        return {p.pid: snap[p.name] for p in PARAMS}
+
+    def apply(self, update: dict[int, int], streaming: bool) -> None:
+        """Apply ``update`` (wire id → value) atomically; a Refusal leaves the store as it was."""
+        with self._lock:
+            try:
+                self._values = merge(self._values, update, streaming)
+            except ConfigRejected as exc:
+                raise Refusal.from_config(exc) from exc

@@ -1,0 +1,39 @@
+"""GET_INFO → INFO (SPEC §4.1): who this unit is and what it can do."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from stereocam.protocol import messages as m
+from stereocam.protocol.framing import MAX_PAYLOAD, VERSION_MAJOR, VERSION_MINOR
+from stereocam.protocol.params import BY_NAME
+
+from ..link_layer.dispatcher import Handler
+from ..rig.sensor import SENSOR_H, SENSOR_W
+from .calibration import CalibrationService
+
+MODEL = "STOC-SIM"
+FIRMWARE_VERSION = "1.1.0"
+CAPABILITIES = (m.Capability.DISPARITY | m.Capability.SOFTWARE_TRIGGER | m.Capability.EXTERNAL_TRIGGER
+                | m.Capability.TIME_SYNC | m.Capability.CALIBRATION | m.Capability.RAW_OUTPUT)
+
+
+@dataclass(frozen=True)
+class Identity:
+    model: str
+    serial: str
+    firmware_version: str
+
+
+class InfoHandler:
+    def __init__(self, identity: Identity, calibration: CalibrationService):
+        self._identity = identity
+        self._calibration = calibration
+
+    def handlers(self) -> dict[int, Handler]:
+        return {m.MsgType.GET_INFO: self.get_info}
+
+    def get_info(self, _: m.Message) -> m.Info:
+        i = self._identity
+        return m.Info(i.model, i.serial, i.firmware_version, (VERSION_MAJOR, VERSION_MINOR), CAPABILITIES,
+                      SENSOR_W, SENSOR_H, MAX_PAYLOAD, BY_NAME["width"].hi, BY_NAME["height"].hi,
+                      self._calibration.calibration_id)

@@ -1,0 +1,1 @@
+"""The firmware's link layer: bytes in, decoded requests, the replay cache, refusals as NACKs, bytes out."""

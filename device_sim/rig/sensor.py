@@ -1,0 +1,151 @@
+"""The sensor rig: two synchronised imagers behind real lenses, and their pixels.
+
+Photometry: radiance (0..1) → signal in DN = radiance · 255 · (exposure / EXPOSURE_REF_US) · gain,
+then shot noise (variance = signal / CONVERSION) and read noise (READ_NOISE_DN), quantised and
+clipped to 8 bits. Both imagers expose at the same instant (one capture time for both).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from . import render, scene
+from ..calibration.board import BoardPose, BoardSpec, StereoBoardRenderer, board_poses
+from stereocam.protocol.calibration import StereoCalibration
+from ..calibration.rays import pixel_rays
+
+SENSOR_W, SENSOR_H = 1280, 960
+EXPOSURE_REF_US = 4000.0
+CONVERSION = 4.0  # DN per sqrt(DN) of shot noise: variance = signal / CONVERSION
+READ_NOISE_DN = 0.8
+LIGHT = np.array([0.3, 0.45, 1.0]) / np.linalg.norm([0.3, 0.45, 1.0])  # travelling direction
+BOARD = BoardSpec(cols=9, rows=6, square_m=0.03)  # the calibration scene's chessboard
+BOARD_POSES = 120
+BOARD_DWELL_S = 0.15  # a fixture robot: it holds each pose this long, then moves on
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """A rectified pinhole view (what turns disparity into depth): Z = f * B / d."""
+
+    width: int
+    height: int
+    focal_px: float
+    cx: float
+    cy: float
+    baseline_m: float
+
+    def rays(self) -> np.ndarray:
+        """Camera-frame ray directions (x, y, 1) for every pixel centre, float32 (H, W, 3)."""
+        xs = (np.arange(self.width) - self.cx) / self.focal_px
+        ys = (np.arange(self.height) - self.cy) / self.focal_px
+        r = np.ones((self.height, self.width, 3), np.float32)
+        r[..., 0] = xs[None, :]
+        r[..., 1] = ys[:, None]
+        return r
+
+
+@nb.njit(cache=True, inline="always")
+def _hash(k: np.uint64) -> np.uint64:
+    """splitmix64 finaliser: a counter-based generator, reproducible per (frame, pixel)."""
+    k ^= k >> np.uint64(30)
+    k *= np.uint64(0xBF58476D1CE4E5B9)
+    k ^= k >> np.uint64(27)
+    k *= np.uint64(0x94D049BB133111EB)
+    k ^= k >> np.uint64(31)
+    return k
+
+
+@nb.njit(cache=True, parallel=True, nogil=True)
+def expose(radiance, scale, seed, out):
+    """Radiance → 8-bit pixels with shot and read noise.
+
+    The unit Gaussian is the Irwin–Hall sum of the four 16-bit quarters of one 64-bit hash
+    (mean 2, variance 4/12), rescaled: no transcendental per pixel, tails cut at ±3.5 σ.
+    """
+    h, w = radiance.shape
+    base = np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15)
+    m16 = np.uint64(0xFFFF)
+    for y in nb.prange(h):
+        for x in range(w):
+            r = _hash(base + np.uint64(y * w + x))
+            s4 = float(r & m16) + float((r >> np.uint64(16)) & m16) + float((r >> np.uint64(32)) & m16) \
+                + float(r >> np.uint64(48))
+            g = (s4 / 65536.0 - 2.0) * 1.7320508075688772
+            s = radiance[y, x] * scale
+            v = s + g * math.sqrt(READ_NOISE_DN * READ_NOISE_DN + max(s, 0.0) / CONVERSION)
+            v = math.floor(v + 0.5)
+            out[y, x] = 0 if v < 0 else (255 if v > 255 else np.uint8(v))
+
+
+class SensorRig:
+    """Both imagers of one unit, seen through its true lenses (distortion, misalignment).
+
+    The world frame is the left imager's frame; the right imager sits at -Rᵀ·T looking along Rᵀ
+    (R, T as cv2.stereoCalibrate defines them). Images come out raw: distorted, unrectified.
+    """
+
+    def __init__(self, seed: int, truth: StereoCalibration):
+        self.seed = seed
+        self.truth = truth
+        self.texture, self.tex_offsets = render.pack_pyramid(render.make_texture(seed))
+        self.tex_side = 512
+        self._format: tuple[int, int] | None = None
+        self._board: StereoBoardRenderer | None = None
+        self._board_poses: list[BoardPose] = []
+
+    def set_format(self, width: int, height: int) -> None:
+        if self._format == (width, height):
+            return
+        cal = self.truth.scaled(width, height)
+        self.calibration = cal
+        self._rays = [pixel_rays(cal.K_left, cal.D_left, width, height),
+                      pixel_rays(cal.K_right, cal.D_right, width, height)]
+        self._poses = [(np.zeros(3), np.eye(3)), (-cal.R.T @ cal.T.ravel(), cal.R.T)]
+        self._rad = np.empty((height, width), np.float32)
+        self._board = None
+        self._format = (width, height)
+
+    @property
+    def left_rays(self) -> np.ndarray:
+        """Camera-frame rays of the left imager's raw pixels at the current format (through its lens)."""
+        return self._rays[0]
+
+    def _board_view(self, t: float, frame_seed: int) -> tuple[np.ndarray, np.ndarray]:
+        if self._board is None:
+            self._board = StereoBoardRenderer(self.calibration, BOARD)
+            self._board_poses = list(board_poses(self.seed, BOARD_POSES, BOARD, self.calibration,
+                                                 distance_m=(0.45, 1.2)))
+        pose = self._board_poses[int(t / BOARD_DWELL_S) % len(self._board_poses)]
+        return self._board.render(pose, np.random.default_rng(frame_seed))
+
+    def capture(self, t: float, view: scene.Scene, exposure_us: int, gain: int, frame_seed: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Raw left and right images (uint8) exposed at the same instant ``t``."""
+        if view == scene.Scene.BOARD:
+            return self._board_view(t, frame_seed)
+        prims = scene.primitives(view, t)
+        scale = 255.0 * exposure_us / EXPOSURE_REF_US * 10.0 ** (gain / 200.0)
+        scratch = np.empty_like(self._rad)
+        images = []
+        for eye, (origin, rot) in enumerate(self._poses):
+            render.render_radiance(self._rays[eye], origin, rot, prims, self.texture, self.tex_offsets,
+                                   self.tex_side, LIGHT, self._rad, scratch)
+            img = np.empty(self._rad.shape, np.uint8)
+            expose(self._rad, scale, (frame_seed * 2 + eye) ^ (self.seed << 32), img)
+            images.append(img)
+        return images[0], images[1]
+
+    def depth(self, t: float, view: scene.Scene, rays: np.ndarray, rot: np.ndarray) -> np.ndarray:
+        """True depth (m, inf = nothing) along the optical axis of a view from the left imager's
+        centre with camera-frame ``rays`` and camera→world rotation ``rot``."""
+        if view == scene.Scene.BOARD:
+            raise ValueError("no depth truth for the calibration scene")
+        rad = np.empty(rays.shape[:2], np.float32)
+        depth = np.empty_like(rad)
+        render.render_radiance(rays, np.zeros(3), np.ascontiguousarray(rot, np.float64), scene.primitives(view, t),
+                               self.texture, self.tex_offsets, self.tex_side, LIGHT, rad, depth)
+        return depth

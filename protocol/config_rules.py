@@ -1,0 +1,95 @@
+"""Which configurations a device accepts (SPEC §4.3 steps 2–3, §5.2): one rule set for both sides.
+
+The device's config store applies an update with ``merge``; the host checks a would-be
+configuration with it before sending (``Camera.check_config``). The device stays the authority:
+the host check only spares a round trip and names the parameter earlier.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+from .errors import ConfigError, ErrorCode
+from .params import BY_ID, BY_NAME, TriggerMode
+
+
+class ConfigRejected(ConfigError):
+    """A configuration the device refuses: the NACK code it sends, the parameter it names, why."""
+
+    def __init__(self, code: ErrorCode, param_id: int, message: str):
+        super().__init__(message)
+        self.code = code
+        self.param_id = param_id
+
+    @property
+    def param(self) -> str:
+        """The offending parameter's name (``param_<id>`` for an id the table does not list)."""
+        return BY_ID[self.param_id].name if self.param_id in BY_ID else f"param_{self.param_id}"
+
+
+def merge(current: Mapping[str, int], update: Mapping[int, int], streaming: bool) -> dict[str, int]:
+    """The whole configuration after ``update`` (wire id → value), or ConfigRejected for the first
+    failure in SPEC §4.3 order: unknown id, range/odd/step, non-live change while streaming, then
+    the cross-parameter rules of §5.2 on the merged result."""
+    new = dict(current)
+    for pid, value in update.items():
+        p = BY_ID.get(pid)
+        if p is None:
+            raise ConfigRejected(ErrorCode.UNKNOWN_PARAM, pid, f"unknown parameter id {pid}")
+        why = p.check(value)
+        if why:
+            raise ConfigRejected(ErrorCode.OUT_OF_RANGE, pid, why)
+        if streaming and not p.live and value != new[p.name]:
+            raise ConfigRejected(ErrorCode.BAD_STATE, pid, f"{p.name} cannot change while streaming; stop first")
+        new[p.name] = value
+    cross_check(new, update)
+    return new
+
+
+@dataclass(frozen=True)
+class CrossRule:
+    """One SPEC §5.2 constraint between parameters."""
+
+    name: str
+    names: tuple[str, ...]  # parameters the rule reads
+    blame: tuple[str, ...]  # NACK.param_id: the first of these the update touched, else the first
+    violated: Callable[[Mapping[str, int]], bool]
+    why: Callable[[Mapping[str, int]], str]
+
+
+CROSS_RULES: tuple[CrossRule, ...] = (
+    CrossRule("block_size_vs_image", ("block_size", "width", "height"), ("block_size", "width", "height"),
+              lambda c: c["block_size"] > min(c["width"], c["height"]),
+              lambda c: f"block_size={c['block_size']} larger than the image {c['width']}x{c['height']}"),
+    CrossRule("pre_filter_size_vs_image", ("pre_filter_size", "width", "height"),
+              ("pre_filter_size", "width", "height"),
+              lambda c: c["pre_filter_size"] > min(c["width"], c["height"]),
+              lambda c: f"pre_filter_size={c['pre_filter_size']} larger than the image {c['width']}x{c['height']}"),
+    CrossRule("disparity_range_vs_width", ("min_disparity", "num_disparities", "block_size", "width"),
+              ("num_disparities", "min_disparity", "width"),
+              lambda c: -c["min_disparity"] >= c["width"]
+              or c["min_disparity"] + c["num_disparities"] + c["block_size"] // 2 >= c["width"],
+              lambda c: f"disparity range {c['min_disparity']}..{c['min_disparity'] + c['num_disparities']}"
+                        f" does not fit in width {c['width']}"),
+    CrossRule("exposure_vs_frame_period", ("trigger_mode", "exposure_us", "fps"), ("exposure_us", "fps"),
+              lambda c: c["trigger_mode"] == TriggerMode.FREE_RUN and c["exposure_us"] > 1_000_000 // c["fps"],
+              lambda c: f"exposure_us={c['exposure_us']} longer than the frame period at fps={c['fps']}"),
+)
+"""SPEC §5.2, in the order a device checks them."""
+
+
+def cross_violation(config: Mapping[str, int], touched: set[str]) -> tuple[CrossRule, str] | None:
+    """The first rule ``config`` breaks and the parameter its NACK names, or None. Rules reading a
+    parameter the configuration does not have are not applied."""
+    for rule in CROSS_RULES:
+        if all(n in config for n in rule.names) and rule.violated(config):
+            return rule, next((n for n in rule.blame if n in touched), rule.blame[0])
+    return None
+
+
+def cross_check(c: Mapping[str, int], update: Mapping[int, int]) -> None:
+    """SPEC §5.2 on the merged configuration ``c``; blames the first listed parameter ``update`` touched."""
+    clash = cross_violation(c, {BY_ID[pid].name for pid in update if pid in BY_ID})
+    if clash is not None:
+        rule, blamed = clash
+        raise ConfigRejected(ErrorCode.OUT_OF_RANGE, BY_NAME[blamed].pid, rule.why(c))

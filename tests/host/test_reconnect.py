@@ -1,0 +1,75 @@
+"""Unplug, replug (same serial), reconnect: the configuration comes back and streaming resumes."""
+from __future__ import annotations
+
+import pytest
+
+import stereocam.device_sim.usb as simusb
+import stereocam
+from stereocam.device_sim import SimulatedCamera
+
+pytestmark = pytest.mark.sim_only("pulls the simulated unit's USB plug")
+
+
+def test_usb_unplug_replug_reconnect_reapplies_config_and_resumes():
+    sim = SimulatedCamera(serial="RECON-1", seed=51)
+    handle = simusb.plug(sim)
+    cam = stereocam.open("usb://?serial=RECON-1", timeout=1.0)
+    try:
+        cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=8, gain=35)
+        cam.start()
+        before = cam.get_frame(timeout=30)
+        handle.unplug()
+        with pytest.raises(stereocam.DisconnectedError):
+            for _ in range(50):
+                cam.get_frame(timeout=1.0)
+        sim.close()
+        rebooted = SimulatedCamera(serial="RECON-1", seed=51)  # the unit comes back after a power cycle
+        assert rebooted.config.snapshot()["fps"] == 30  # with its defaults
+        handle = simusb.plug(rebooted)
+        cam.reconnect(timeout=5.0)
+        cfg = cam.config()
+        assert (cfg["fps"], cfg["gain"], cfg["width"], cfg["num_disparities"]) == (8, 35, 320, 32)
+        after = cam.get_frame(timeout=30)  # streaming resumed without a start() from the user
+        assert after.left.shape == before.left.shape == (240, 320) and after.gain == 35
+    finally:
+        cam.close()
+        handle.unplug()
+
+
+def test_reconnect_gives_up_with_a_disconnect_error():
+    sim = SimulatedCamera(serial="RECON-2", seed=52)
+    handle = simusb.plug(sim)
+    cam = stereocam.open("usb://?serial=RECON-2", timeout=1.0)
+    handle.unplug()
+    sim.close()
+    with pytest.raises(stereocam.DisconnectedError, match="RECON-2"):
+        cam.reconnect(timeout=0.5)
+    cam.close()
+
+
+def test_auto_reconnect_rides_through_an_unplug():
+    import threading
+
+    sim = SimulatedCamera(serial="RECON-3", seed=53)
+    handles = [simusb.plug(sim)]
+    cam = stereocam.open("usb://?serial=RECON-3", timeout=1.0, auto_reconnect=True)
+    try:
+        cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=8, gain=20)
+        cam.start()
+        first = cam.get_frame(timeout=30)
+
+        def power_cycle():
+            handles[0].unplug()
+            sim.close()
+            threading.Event().wait(0.5)
+            handles.append(simusb.plug(SimulatedCamera(serial="RECON-3", seed=53)))
+
+        threading.Thread(target=power_cycle).start()
+        frames = [cam.get_frame(timeout=15) for _ in range(20)]  # no DisconnectedError reaches us
+        assert frames[-1].gain == 20 and frames[-1].left.shape == (240, 320)
+        seqs = [first.sequence] + [f.sequence for f in frames]
+        assert any(b <= a for a, b in zip(seqs, seqs[1:]))  # the rebooted unit's counter started over
+        assert cam.config()["fps"] == 8
+    finally:
+        cam.close()
+        handles[-1].unplug()

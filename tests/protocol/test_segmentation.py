@@ -1,0 +1,75 @@
+"""One capture as messages and back: the device's segmentation and the host's assembly share
+protocol/segmentation.py (SPEC §8.1–§8.2)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from stereocam.clock import ClockMap
+from stereocam.frames import FrameAssembler, FrameStatus
+from stereocam.protocol import messages as m
+from stereocam.protocol.framing import Decoder
+from stereocam.protocol.params import Output
+from stereocam.protocol.segmentation import PLANE_ORDER, capture_messages, plane_size
+
+W, H = 96, 40
+
+
+def begin(planes: Output, sequence: int = 5) -> m.FrameBegin:
+    return m.FrameBegin(sequence, 0, 1000, 4000, 0, W, H, int(planes), m.FRAME_RECTIFIED, m.DISPARITY_S16_Q4, 16, 0,
+                        32, -16, 0xABCD, 100.0, 48.0, 20.0, 0.1)
+
+
+def images(seed: int = 0) -> dict[Output, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return {Output.LEFT: rng.integers(0, 256, (H, W), np.uint8), Output.RIGHT: rng.integers(0, 256, (H, W), np.uint8),
+            Output.DISPARITY: rng.integers(-16, 512, (H, W)).astype(np.int16)}
+
+
+@pytest.mark.parametrize("chunk", [1000, plane_size(Output.LEFT, W, H), 7 * 1024, 1 << 17])
+@pytest.mark.parametrize("planes", [Output.LEFT | Output.RIGHT | Output.DISPARITY, Output.RIGHT, Output.DISPARITY,
+                                    Output(0)])
+def test_segmented_capture_reassembles_byte_for_byte(chunk: int, planes: Output) -> None:
+    imgs = images()
+    msgs = list(capture_messages(begin(planes), imgs, chunk))
+    assert isinstance(msgs[0], m.FrameBegin) and isinstance(msgs[-1], m.FrameEnd)
+    data = [x for x in msgs[1:-1] if isinstance(x, m.FrameData)]
+    assert len(data) == len(msgs) - 2 and all(len(d.data) <= chunk for d in data)
+    assert [d.plane for d in data] == sorted((d.plane for d in data), key=lambda p: PLANE_ORDER.index(p))
+    end = msgs[-1]
+    assert (end.left_bytes, end.right_bytes, end.disparity_bytes) == tuple(
+        plane_size(p, W, H) if p in planes else 0 for p in PLANE_ORDER)
+    asm = FrameAssembler(ClockMap())
+    for msg in Decoder().feed(b"".join(m.encode(x) for x in msgs)):  # through the real codec
+        asm.on_message(m.decode_packet(msg))
+    frame = asm.frames.get_nowait()
+    assert frame.status is FrameStatus.COMPLETE and asm.stats.frames == 1
+    for plane, got in ((Output.LEFT, frame.left), (Output.RIGHT, frame.right), (Output.DISPARITY, frame.disparity)):
+        if plane in planes:
+            assert np.array_equal(got, imgs[plane])
+        else:
+            assert got is None
+
+
+def test_a_chunk_lost_on_the_way_is_missing_data() -> None:
+    msgs = list(capture_messages(begin(Output.LEFT | Output.RIGHT), images(1), 1024))
+    asm = FrameAssembler(ClockMap(), deliver_incomplete=True)
+    for x in msgs[:3] + msgs[4:]:
+        asm.on_message(x)
+    assert asm.frames.get_nowait().status is FrameStatus.MISSING_DATA and asm.stats.incomplete == 1
+
+
+def test_images_that_do_not_fit_the_capture_are_refused() -> None:
+    imgs = images()
+    imgs[Output.RIGHT] = imgs[Output.RIGHT][:, :-16]
+    with pytest.raises(ValueError, match="RIGHT"):
+        list(capture_messages(begin(Output.LEFT | Output.RIGHT), imgs))
+    with pytest.raises(ValueError, match="DISPARITY"):
+        list(capture_messages(begin(Output.DISPARITY), {Output.LEFT: imgs[Output.LEFT]}))
+    with pytest.raises(ValueError, match="chunk"):
+        list(capture_messages(begin(Output.LEFT), imgs, 0))
+
+
+def test_plane_sizes() -> None:
+    assert plane_size(Output.LEFT, 640, 480) == plane_size(Output.RIGHT, 640, 480) == 640 * 480
+    assert plane_size(Output.DISPARITY, 640, 480) == 2 * 640 * 480

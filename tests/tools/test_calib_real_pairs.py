@@ -1,0 +1,40 @@
+"""The offline calibration tool on real camera images: OpenCV's 13 sample chessboard pairs."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from tests.support.paths import DATA
+
+PAIRS = DATA / "opencv_chessboard_pairs"
+
+
+def calibrate(out: Path, *extra: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "--images", str(PAIRS), "--board", "9x6",
+                           "--square-size", "0.025", "--out", str(out), "-q", *extra],
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_real_pairs_solve_and_the_default_gate_says_why_it_fails(tmp_path):
+    r = calibrate(tmp_path, "--min-views", "6")  # 13 pairs give only 7 distinct views
+    assert r.returncode == 4, r.stderr
+    assert "FAILED the gate" in r.stderr and "epipolar" in r.stderr
+    doc = json.loads((tmp_path / "calibration.json").read_text())
+    assert doc["passed"] is False and doc["written"] is False
+    assert doc["epipolar_rms_px"] > 0.3 and (tmp_path / "report.png").exists()
+    assert not (tmp_path / "calibration.yaml").exists()
+
+
+def test_real_pairs_pass_a_gate_that_fits_them(tmp_path):
+    r = calibrate(tmp_path, "--min-views", "6", "--max-epipolar", "0.6")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "calibration.json").read_text())
+    assert doc["passed"] is True and doc["image_size"] == [640, 480]
+    assert 0.05 < doc["rms_left"] < 0.5 and 0.05 < doc["rms_right"] < 0.5 and doc["rms_stereo"] < 0.5
+    baseline = sum(t * t for t in doc["T"]) ** 0.5
+    assert 0.075 < baseline < 0.09  # OpenCV's stereo_calib finds |T| ~ 3.3 squares on this set
+    assert doc["T"][0] < 0  # right camera to the right of the left one
+    for name in ("calibration.yaml", "left.yaml", "right.yaml", "report.png"):
+        assert (tmp_path / name).exists()

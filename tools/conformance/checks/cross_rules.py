@@ -1,0 +1,74 @@
+"""Cross-parameter rules (SPEC §5.2): each rule broken from either side, the NACK blaming the right
+parameter, the configuration unchanged; and values on the legal side accepted."""
+from __future__ import annotations
+
+from typing import Iterator
+
+from stereocam.protocol import messages as m
+from stereocam.protocol.errors import ErrorCode
+from stereocam.protocol.params import BY_NAME, TriggerMode
+
+from .. import spec_rules
+from ..context import Context
+from ..registry import CheckFn, family
+from ..results import expect
+from ..wire import describe_nack
+
+Case = tuple[dict[str, int], dict[str, int]]  # (setup applied first, the probe SET_CONFIG)
+
+# From the working configuration (320x240, num_disparities 32, block_size 11, pre_filter_size 9,
+# min_disparity 0, fps 15, exposure_us 4000, free-run). Whether each probe must be refused, and
+# which parameter the NACK names, is computed from the rules, not written here.
+CASES: dict[str, list[Case]] = {
+    "block_size_vs_image": [({}, {"block_size": 241}), ({"block_size": 101}, {"height": 96}),
+                            ({"block_size": 101}, {"width": 96, "height": 96}), ({}, {"block_size": 239})],
+    "pre_filter_size_vs_image": [({}, {"pre_filter_size": 241}), ({"pre_filter_size": 101}, {"height": 96}),
+                                 ({}, {"pre_filter_size": 239})],
+    "disparity_range_vs_width": [({}, {"min_disparity": 300}), ({}, {"min_disparity": -320}),
+                                 ({}, {"num_disparities": 256, "min_disparity": 64}),
+                                 ({"num_disparities": 128}, {"width": 128}), ({}, {"min_disparity": -100})],
+    "exposure_vs_frame_period": [({}, {"exposure_us": 70_000}), ({"exposure_us": 50_000}, {"fps": 30}),
+                                 ({"trigger_mode": TriggerMode.SOFTWARE}, {"exposure_us": 500_000}),
+                                 ({"trigger_mode": TriggerMode.SOFTWARE, "exposure_us": 500_000},
+                                  {"trigger_mode": TriggerMode.FREE_RUN})],
+}
+
+
+@family("config.cross")
+def cross_rules(ctx: Context) -> Iterator[tuple[str, CheckFn]]:
+    for rule in spec_rules.CROSS_RULES:
+        yield rule.name, _rule_check(rule.name)
+
+
+def _rule_check(rule: str) -> CheckFn:
+    def run(ctx: Context) -> str:
+        spec = next(r for r in spec_rules.CROSS_RULES if r.name == rule)
+        ctx.require_params(*spec.names)
+        refused = accepted = 0
+        for setup, probe in CASES[rule]:
+            ctx.reset()
+            if _case(ctx, setup, probe):
+                refused += 1
+            else:
+                accepted += 1
+        return f"{refused} violations refused naming the right parameter, {accepted} legal neighbours accepted"
+    return run
+
+
+def _case(ctx: Context, setup: dict[str, int], probe: dict[str, int]) -> bool:
+    """Apply ``setup``, send ``probe``; True if it was (rightly) refused."""
+    cfg = ctx.apply(**{k: int(v) for k, v in setup.items()})
+    clash = spec_rules.cross_violation({**cfg, **probe}, set(probe))
+    r = ctx.set(**probe)
+    shown = ", ".join(f"{k}={int(v)}" for k, v in probe.items()) + (f" after {setup}" if setup else "")
+    if clash is None:
+        expect(isinstance(r, m.ConfigApplied), f"{shown}: legal, but {describe_nack(r) if isinstance(r, m.Nack) else r!r}")
+        return False
+    rule, blamed = clash
+    pid = BY_NAME[blamed].pid
+    expect(isinstance(r, m.Nack), f"{shown} breaks {rule.name} but was accepted")
+    assert isinstance(r, m.Nack)
+    expect(r.code == ErrorCode.OUT_OF_RANGE and r.param_id == pid,
+           f"{shown} (breaks {rule.name}): {describe_nack(r)}, expected OUT_OF_RANGE naming {blamed} ({pid})")
+    expect(ctx.config() == cfg, f"{shown} refused but the configuration changed")
+    return True

@@ -1,0 +1,141 @@
+"""Hostile bytes between commands (SPEC §2, §3): garbage, corrupt frames, foreign versions, header
+extensions and headers announcing large payloads must not stop the device answering in time."""
+from __future__ import annotations
+
+import random
+import struct
+import time
+import zlib
+
+from stereocam.protocol import messages as m
+from stereocam.protocol.framing import FLAG_RESEND, MAGIC, header_crc
+from stereocam.protocol.params import BY_NAME
+
+from ..context import Context
+from ..registry import check
+from ..results import expect
+
+GARBAGE_BYTES = 4096
+QUIET_S = 0.3  # how long the suite waits to be sure a dropped frame got no answer
+LARGE_LENGTH_BUDGET_S = 2.0  # a stalled header may cost the device at most this before it answers again
+
+
+def header(msg_type: int, rid: int, payload_len: int, *, major: int = 1, minor: int = 1, header_len: int = 20,
+           flags: int = 0) -> bytes:
+    """A 20-byte header with a valid CRC, whatever its fields claim."""
+    head = struct.pack("<4sBBBBHHIH", MAGIC, major, minor, header_len, flags, msg_type, rid, payload_len, 0)
+    return head + struct.pack("<H", header_crc(head))
+
+
+def frame(msg_type: int, rid: int, payload: bytes = b"", *, major: int = 1, minor: int = 1, extension: bytes = b"") -> bytes:
+    """A complete frame, optionally of another version or with a header extension (SPEC §2)."""
+    body = extension + payload
+    return header(msg_type, rid, len(payload), major=major, minor=minor, header_len=20 + len(extension)) + body + \
+        struct.pack("<I", zlib.crc32(body))
+
+
+def _answers_info(ctx: Context, timeout: float | None = None) -> float:
+    """Seconds the device took to answer a GET_INFO (must be within the deadline)."""
+    t0 = time.monotonic()
+    r = ctx.s.exchange(m.GetInfo(), timeout)
+    expect(isinstance(r, m.Info), f"GET_INFO answered {r!r}")
+    return time.monotonic() - t0
+
+
+def _no_reply(ctx: Context, rid: int) -> bool:
+    try:
+        ctx.s.wait_reply(rid, QUIET_S)
+    except TimeoutError:
+        return True
+    return False
+
+
+@check("link.garbage")
+def garbage(ctx: Context) -> str:
+    """Random bytes and frames with a bad header or payload CRC are dropped and counted; the device
+    executes none of them and answers the next request in time."""
+    before_cfg, before = ctx.config(), ctx.status()
+    junk = random.Random(8).randbytes(GARBAGE_BYTES).replace(MAGIC, b"STOX")
+    ctx.s.send_bytes(junk)
+    took = _answers_info(ctx)
+    gain = BY_NAME["gain"]
+    bad_payload = bytearray(m.encode(m.SetConfig({gain.pid: gain.hi}), ctx.s.new_id()))
+    bad_payload[-1] ^= 0xFF  # payload CRC
+    bad_head = bytearray(m.encode(m.Start(), ctx.s.new_id()))
+    bad_head[10] ^= 0x01  # request id changed, header CRC not
+    ctx.s.send_bytes(bytes(bad_payload) + bytes(bad_head))
+    took = max(took, _answers_info(ctx))
+    expect(ctx.config() == before_cfg, "a frame with a bad payload CRC was executed")
+    after = ctx.status()
+    expect(not after.streaming, "a frame with a bad header CRC was executed (START)")
+    d = {k: after.counters[k] - before.counters[k]
+         for k in ("rx_garbage_bytes", "rx_header_crc_errors", "rx_payload_crc_errors")}
+    expect(d["rx_garbage_bytes"] >= GARBAGE_BYTES - 3, f"rx_garbage_bytes +{d['rx_garbage_bytes']} for "
+                                                       f"{GARBAGE_BYTES} garbage bytes")
+    expect(d["rx_header_crc_errors"] >= 1 and d["rx_payload_crc_errors"] >= 1, f"CRC errors not counted: {d}")
+    return f"answered within {took * 1e3:.0f} ms; counted {d}"
+
+
+@check("link.versions_and_extensions")
+def versions(ctx: Context) -> str:
+    """Any minor and a header extension (header_len 21..64) accepted; another major and
+    header_len outside 20..64 dropped without an answer, counted."""
+    s = ctx.s
+    before = s.call(m.Heartbeat())
+    rid = s.new_id()
+    s.expect_reply(rid, m.MsgType.GET_INFO)
+    s.send_bytes(frame(m.MsgType.GET_INFO, rid, minor=9, extension=bytes(range(8))))
+    expect(isinstance(s.wait_reply(rid).message, m.Info), "GET_INFO of minor 9 with an 8-byte header extension")
+    for what, data in (("major 2", frame(m.MsgType.GET_INFO, rid := s.new_id(), major=2)),
+                       ("header_len 19", header(m.MsgType.GET_INFO, rid := s.new_id(), 0, header_len=19) + bytes(4)),
+                       ("header_len 65", header(m.MsgType.GET_INFO, rid := s.new_id(), 0, header_len=65) + bytes(49))):
+        s.expect_reply(rid, m.MsgType.GET_INFO)
+        s.send_bytes(data)
+        expect(_no_reply(ctx, rid), f"a frame of {what} was answered")
+    after = s.call(m.Heartbeat())
+    assert isinstance(before, m.Status) and isinstance(after, m.Status)
+    dv = after.counters["rx_unsupported_version"] - before.counters["rx_unsupported_version"]
+    dh = after.counters["rx_header_crc_errors"] - before.counters["rx_header_crc_errors"]
+    expect(dv >= 1 and dh >= 2, f"rx_unsupported_version +{dv}, rx_header_crc_errors +{dh} (bad header_len)")
+    return "minor 9 + extension answered; major 2, header_len 19 and 65 dropped and counted"
+
+
+@check("link.oversize_header")
+def oversize(ctx: Context) -> str:
+    """A CRC-valid header announcing more than INFO.max_payload is rejected from the header alone
+    (never buffered): the next request is answered in time, rx_oversize counts it."""
+    before = ctx.status()
+    for n in (ctx.info.max_payload + 1, 0xFFFFFFFF):
+        ctx.s.send_bytes(header(m.MsgType.SET_CONFIG, ctx.s.new_id(), n))
+        took = _answers_info(ctx)
+    d = ctx.status().counters["rx_oversize"] - before.counters["rx_oversize"]
+    expect(d >= 2, f"rx_oversize +{d} for two oversize headers")
+    return f"answered within {took * 1e3:.0f} ms after headers of {ctx.info.max_payload + 1} and 2^32-1 bytes"
+
+
+@check("link.large_length_header")
+def large_length(ctx: Context) -> str:
+    """A CRC-valid header announcing the largest legal payload, then nothing: the device must not
+    wait for that payload forever (issue 9): it answers a following GET_INFO (resent every
+    deadline) within LARGE_LENGTH_BUDGET_S. The suite then completes the announced frame with
+    filler so the device recovers either way."""
+    s = ctx.s
+    n = ctx.info.max_payload
+    s.send_bytes(header(m.MsgType.SET_CONFIG, s.new_id(), n))
+    t0 = time.monotonic()
+    rid = s.send(m.GetInfo())
+    answered = None
+    try:
+        while answered is None and time.monotonic() - t0 < LARGE_LENGTH_BUDGET_S:
+            try:
+                answered = s.wait_reply(rid, min(s.timeout, LARGE_LENGTH_BUDGET_S - (time.monotonic() - t0)))
+            except TimeoutError:
+                s.send(m.GetInfo(), rid, FLAG_RESEND)
+    finally:
+        if answered is None:
+            s.send_bytes(bytes(n + 4))  # completes the announced frame (bad CRC): the decoder resynchronises
+    took = time.monotonic() - t0
+    expect(answered is not None,
+           f"DEAF: no answer within {LARGE_LENGTH_BUDGET_S} s after a CRC-valid header announcing {n} payload bytes "
+           f"(the device waits for the payload; it must bound that wait, issue 9)")
+    return f"answered within {took * 1e3:.0f} ms after a header announcing {n} bytes"

@@ -1,0 +1,138 @@
+"""Trigger modes: software triggers (ids, sequences, frames, refusals, a full queue), external
+trigger where advertised."""
+from __future__ import annotations
+
+import time
+
+from stereocam.protocol import messages as m
+from stereocam.protocol.errors import ErrorCode
+from stereocam.protocol.params import BY_NAME, TriggerMode
+
+from ..context import Context
+from ..registry import check
+from ..results import expect
+from ..wire import describe_nack
+
+FRAME_WAIT_S = 3.0
+BURST = 6
+
+
+def _software(ctx: Context) -> None:
+    ctx.require(m.Capability.SOFTWARE_TRIGGER)
+    ctx.require_params("trigger_mode")
+    ctx.apply(trigger_mode=int(TriggerMode.SOFTWARE))
+
+
+@check("trigger.software")
+def software(ctx: Context) -> str:
+    """Each TRIGGER: the next trigger id (+1), a new sequence, and one capture carrying both."""
+    _software(ctx)
+    before = ctx.status()
+    ctx.s.captures.clear()
+    ctx.s.call(m.Start())
+    got = []
+    try:
+        for _ in range(3):
+            r = ctx.s.call(m.Trigger())
+            assert isinstance(r, m.Triggered)
+            got.append(r)
+            deadline = time.monotonic() + FRAME_WAIT_S
+            while (c := ctx.s.captures.find(r.sequence)) is None or c.end is None:
+                expect(time.monotonic() < deadline, f"no whole capture of sequence {r.sequence} (trigger {r.trigger_id}) "
+                                                    f"within {FRAME_WAIT_S} s")
+                time.sleep(0.01)
+            expect(c.begin.trigger_id == r.trigger_id,
+                   f"capture {r.sequence} carries trigger id {c.begin.trigger_id}, TRIGGERED said {r.trigger_id}")
+    finally:
+        ctx.stop()
+    after = ctx.status()
+    ids, seqs = [r.trigger_id for r in got], [r.sequence for r in got]
+    expect(ids == list(range(ids[0], ids[0] + 3)) and ids[0] > 0, f"trigger ids {ids}, expected consecutive from >= 1")
+    expect(seqs == sorted(set(seqs)), f"sequences {seqs} not rising")
+    caps = ctx.s.captures.snapshot()
+    expect(len(caps) == 3, f"{len(caps)} captures for 3 triggers")
+    problems = ctx.note_captures(caps)
+    expect(not problems, "; ".join(problems))
+    d = after.counters["triggers"] - before.counters["triggers"]
+    expect(d == 3, f"STATUS triggers counter +{d} for 3 accepted triggers")
+    return f"trigger ids {ids}, sequences {seqs}, one capture each"
+
+
+@check("trigger.refusals")
+def refusals(ctx: Context) -> str:
+    """TRIGGER while stopped, or while streaming in free-run: NACK BAD_STATE naming trigger_mode."""
+    _software(ctx)
+    before = ctx.status()
+    pid = BY_NAME["trigger_mode"].pid
+    r = ctx.s.exchange(m.Trigger())
+    expect(isinstance(r, m.Nack) and r.code == ErrorCode.BAD_STATE and r.param_id == pid,
+           f"TRIGGER while stopped: {describe_nack(r) if isinstance(r, m.Nack) else r!r}, expected BAD_STATE naming "
+           f"trigger_mode ({pid})")
+    ctx.apply(trigger_mode=int(TriggerMode.FREE_RUN), fps=BY_NAME["fps"].lo)
+    ctx.s.call(m.Start())
+    try:
+        r = ctx.s.exchange(m.Trigger())
+    finally:
+        ctx.stop()
+    expect(isinstance(r, m.Nack) and r.code == ErrorCode.BAD_STATE and r.param_id == pid,
+           f"TRIGGER in free-run: {describe_nack(r) if isinstance(r, m.Nack) else r!r}, expected BAD_STATE naming "
+           f"trigger_mode ({pid})")
+    d = ctx.status().counters["triggers"] - before.counters["triggers"]
+    expect(d == 0, f"refused triggers counted: triggers +{d}")
+    return "stopped and free-run TRIGGERs NACKed BAD_STATE naming trigger_mode, not counted"
+
+
+@check("trigger.burst")
+def burst(ctx: Context) -> str:
+    """TRIGGERs sent back to back: each TRIGGERED or NACK BUSY; a refused one consumes no sequence
+    number, so accepted ones have consecutive sequences; one capture per accepted trigger."""
+    _software(ctx)
+    ctx.s.captures.clear()
+    ctx.s.call(m.Start())
+    try:
+        rids = [ctx.s.send(m.Trigger()) for _ in range(BURST)]
+        replies = [ctx.s.wait_reply(rid).message for rid in rids]
+        accepted = [r for r in replies if isinstance(r, m.Triggered)]
+        busy = [r for r in replies if isinstance(r, m.Nack)]
+        for n in busy:
+            expect(n.code == ErrorCode.BUSY and n.param_id == 0, f"burst TRIGGER: {describe_nack(n)}, expected BUSY")
+        expect(accepted, "every TRIGGER of the burst refused")
+        ctx.wait_captures(len(accepted), FRAME_WAIT_S)
+    finally:
+        ctx.stop()
+    seqs = [r.sequence for r in accepted]
+    expect(seqs == list(range(seqs[0], seqs[0] + len(seqs))),
+           f"accepted triggers got sequences {seqs}: a BUSY refusal consumed a number, or they are out of order")
+    tids = [r.trigger_id for r in accepted]
+    expect(tids == list(range(tids[0], tids[0] + len(tids))), f"accepted triggers got ids {tids}")
+    caps = ctx.s.captures.snapshot()
+    ctx.note_captures(caps)
+    got = {(c.sequence, c.begin.trigger_id) for c in caps if c.end is not None}
+    expect(got == set(zip(seqs, tids)), f"captures {sorted(got)} for accepted triggers {list(zip(seqs, tids))}")
+    return f"{len(accepted)} accepted, {len(busy)} BUSY; sequences {seqs[0]}..{seqs[-1]} consecutive"
+
+
+@check("trigger.external")
+def external(ctx: Context) -> str:
+    """External mode where advertised: accepted, STATUS reports it, TRIGGER refused; captures that
+    arrive (pulses on the line) carry rising non-zero trigger ids. Pulses cannot be made over the wire."""
+    ctx.require(m.Capability.EXTERNAL_TRIGGER)
+    ctx.require_params("trigger_mode")
+    ctx.apply(trigger_mode=int(TriggerMode.EXTERNAL))
+    ctx.s.captures.clear()
+    ctx.s.call(m.Start())
+    try:
+        st = ctx.status()
+        expect(st.streaming and st.trigger_mode == TriggerMode.EXTERNAL,
+               f"STATUS streaming {st.streaming} trigger_mode {st.trigger_mode} after START in external mode")
+        r = ctx.s.exchange(m.Trigger())
+        expect(isinstance(r, m.Nack) and r.code == ErrorCode.BAD_STATE,
+               f"TRIGGER in external mode: {describe_nack(r) if isinstance(r, m.Nack) else r!r}, expected BAD_STATE")
+        time.sleep(0.3)
+    finally:
+        ctx.stop()
+    caps = ctx.s.captures.snapshot()
+    ctx.note_captures(caps)
+    tids = [c.begin.trigger_id for c in caps]
+    expect(all(t > 0 for t in tids) and tids == sorted(set(tids)), f"external captures with trigger ids {tids}")
+    return f"external mode streams; {len(caps)} pulsed captures seen (pulses are not generated by the suite)"

@@ -1,0 +1,41 @@
+"""The check table: checks register themselves, in the order they run, by decorator."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable, Iterable
+
+if TYPE_CHECKING:
+    from .context import Context
+
+CheckFn = Callable[["Context"], "str | None"]
+FamilyFn = Callable[["Context"], Iterable[tuple[str, CheckFn]]]
+
+
+@dataclass(frozen=True)
+class Check:
+    name: str  # "area.what"
+    fn: Callable[["Context"], object]
+    family: bool  # fn returns (suffix, check) pairs, each run and reported as name.suffix
+
+    @property
+    def area(self) -> str:
+        return self.name.split(".", 1)[0]
+
+
+CHECKS: list[Check] = []
+
+
+def check(name: str) -> Callable[[CheckFn], CheckFn]:
+    """Register a check: it returns a detail line (or None) on pass, raises CheckFailed/CheckSkipped."""
+    def register(fn: CheckFn) -> CheckFn:
+        CHECKS.append(Check(name, fn, family=False))
+        return fn
+    return register
+
+
+def family(name: str) -> Callable[[FamilyFn], FamilyFn]:
+    """Register a family: called once, it lists (suffix, check) pairs, e.g. one per parameter."""
+    def register(fn: FamilyFn) -> FamilyFn:
+        CHECKS.append(Check(name, fn, family=True))
+        return fn
+    return register

@@ -1,0 +1,52 @@
+"""What the judge derives from protocol/SPEC.md: the values a limit probe sends and the roomy
+configuration probes start from. The §5.2 cross-parameter rules themselves are the protocol's own
+table (``stereocam.protocol.config_rules``, the SPEC's executable form), never the firmware's."""
+from __future__ import annotations
+
+from stereocam.protocol import config_rules
+from stereocam.protocol import messages as m
+from stereocam.protocol.params import BY_NAME, Param, TriggerMode
+
+INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
+RAW_OUTPUT = m.Capability.RAW_OUTPUT  # SPEC §4.1 bit 5: rectify=0 gives raw frames
+
+
+CROSS_RULES = config_rules.CROSS_RULES
+cross_violation = config_rules.cross_violation
+
+
+def effective_hi(p: Param, max_width: int, max_height: int) -> int:
+    """The largest value the device must accept: INFO.max_width / max_height cap the size table."""
+    cap = {"width": max_width, "height": max_height}.get(p.name)
+    if cap is None:
+        return p.hi
+    return min(p.hi, cap - (cap - p.lo) % p.step)
+
+
+def optional_values(capabilities: int) -> set[tuple[str, int]]:
+    """Values within the table that a device may refuse OUT_OF_RANGE because it does not advertise
+    the capability behind them (SPEC §5.1: rectify=0 needs RAW_OUTPUT)."""
+    return set() if capabilities & RAW_OUTPUT else {("rectify", 0)}
+
+
+def limit_probes(p: Param, hi: int) -> tuple[list[int], list[tuple[int, str]]]:
+    """Values at the limits (to be accepted) and beyond them (to be refused OUT_OF_RANGE, with why)."""
+    accept = [p.lo, hi] if hi != p.lo else [p.lo]
+    refuse = [(p.lo - 1, "below the range"), (hi + 1, "above the range"),
+              (INT32_MIN, "int32 minimum"), (INT32_MAX, "int32 maximum")]
+    if p.odd:
+        refuse.append((p.lo + 1, "even, must be odd"))
+    if p.step > 1:
+        refuse.append((p.lo + p.step // 2, f"not a multiple of {p.step}"))
+    return accept, refuse
+
+
+def roomy_base(max_width: int, max_height: int, advertised: set[str]) -> dict[str, int]:
+    """A configuration in which every parameter's own limits satisfy every cross rule: the largest
+    image, the smallest matcher windows and disparity range, triggered (no frame-period rule)."""
+    base = {"width": effective_hi(BY_NAME["width"], max_width, max_height),
+            "height": effective_hi(BY_NAME["height"], max_width, max_height),
+            "num_disparities": BY_NAME["num_disparities"].lo, "block_size": BY_NAME["block_size"].lo,
+            "pre_filter_size": BY_NAME["pre_filter_size"].lo, "min_disparity": 0,
+            "trigger_mode": int(TriggerMode.SOFTWARE)}
+    return {k: v for k, v in base.items() if k in advertised}
