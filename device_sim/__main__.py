@@ -1,5 +1,7 @@
 """``python -m stereocam.device_sim --serve pty|tcp:HOST:PORT [--scene board]``: run a simulated camera in its own process.
 
+With ``--replay FILE`` the unit plays a recording back (``--fast``, ``--loop``, ``--start N``; see replay.py).
+
 The first line on stdout is the URL a host opens. Runs until SIGINT or SIGTERM, then exits 0.
 """
 from __future__ import annotations
@@ -31,8 +33,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--serial", default=None, help="serial number (default derived from the seed)")
     ap.add_argument("--scene", choices=[s.value for s in Scene], default=Scene.LAB.value,
                     help="what the rig looks at (board: the calibration fixture's chessboard)")
+    ap.add_argument("--replay", default=None, metavar="FILE", help="play this recording back as the unit")
+    ap.add_argument("--fast", action="store_true", help="replay as fast as the host reads (default: recorded speed)")
+    ap.add_argument("--loop", action="store_true", help="replay in a loop (default: once)")
+    ap.add_argument("--start", type=int, default=0, help="replay from this frame index")
     args = ap.parse_args(argv)
-    sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene)
+    source = None
+    if args.replay:
+        from .replay import ReplaySource
+
+        source = ReplaySource(args.replay, realtime=not args.fast, loop=args.loop, start=args.start)
+    sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene, source=source)
     server = build_server(args.serve, sim)
 
     def stop(signum, frame):  # noqa: ARG001

@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import collections
 import tempfile
+from functools import partial
 from pathlib import Path
 
 from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.params import BY_NAME
 
 from . import registry
 from .calibration.truth import true_calibration
@@ -27,6 +29,7 @@ from .link_layer.device_link import DeviceLink, Sink
 from .link_layer.dispatcher import Dispatcher
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
 from .pipeline.capture_pipeline import CapturePipeline
+from .replay import ReplayEngine, ReplaySource
 from .rig.scene import Scene
 from .rig.sensor import SensorRig
 from .trigger import TriggerLine
@@ -37,18 +40,21 @@ class SimulatedCamera:
 
     def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: TriggerLine | None = None,
                  flash_path: str | Path | None = None, factory_calibrated: bool = True,
-                 scene: Scene | str = Scene.LAB):
+                 scene: Scene | str = Scene.LAB, source: ReplaySource | None = None):
         """``scene``: what the rig looks at ("lab", "wall", "board"; a simulator setting, changeable
         at run time through ``scene``, never a device parameter). ``flash_path``: the file behind
         this unit's flash (kept across runs); None: a private temporary file. ``factory_calibrated``:
         the unit left the factory with its true calibration stored (False: fresh from assembly,
-        streams raw images until calibrated)."""
+        streams raw images until calibrated). ``source``: a recording that stands in for the sensor
+        rig (replay.py); the unit is then the recorded one: identity, calibration, configuration."""
         self.seed = seed
-        self.serial = serial or f"SIM{seed:05d}"
-        self.model = MODEL
-        self.firmware_version = FIRMWARE_VERSION
-        self.clock = DeviceClock(seed)
+        self.serial = source.serial if source else serial or f"SIM{seed:05d}"
+        self.model = source.model if source else MODEL
+        self.firmware_version = source.firmware_version if source else FIRMWARE_VERSION
+        self.clock = source.clock if source else DeviceClock(seed)
         self.config = ConfigStore()
+        if source:
+            self.config.apply({BY_NAME[k].pid: v for k, v in source.config.items() if k in BY_NAME}, False)
         self.counters: collections.Counter[str] = collections.Counter()
         self._truth_cal = true_calibration(seed)
         self.rig = SensorRig(seed, self._truth_cal)
@@ -56,15 +62,17 @@ class SimulatedCamera:
         if flash_path is None:
             self._tmpdir = tempfile.TemporaryDirectory(prefix="stereocam-flash-")
             flash_path = Path(self._tmpdir.name) / f"{self.serial}.flash"
-        self.calibration = CalibrationService(flash_path, self._truth_cal, factory_calibrated)
+        stored = source.calibration if source else self._truth_cal
+        self.calibration = CalibrationService(flash_path, stored or self._truth_cal, factory_calibrated and stored is not None)
         self.truth = TruthLog(self.rig)
 
         # the engine's callbacks reach the pipeline and the watchdog, which themselves need the engine
         self.dispatcher = Dispatcher(self.counters)
-        self.engine = CaptureEngine(lambda req: self.pipeline.produce(req), lambda: self.heartbeat.watchdog())
+        self.engine = (partial(ReplayEngine, source) if source else CaptureEngine)(
+            lambda req: self.pipeline.produce(req), lambda: self.heartbeat.watchdog())
         self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop)
         self.pipeline = CapturePipeline(seed, self.rig, self.config, self.calibration, self.clock, self.truth,
-                                        self._send_capture_part, self.counters)
+                                        self._send_capture_part, self.counters, source)
         self.scene = scene
         self.heartbeat = HeartbeatHandlers(self.clock, self.config, self.engine, self.link, self.counters)
         self.streaming = StreamingHandlers(self.config, self.engine, self.counters)
@@ -130,6 +138,8 @@ class SimulatedCamera:
         self.link.close()
         if self._tmpdir is not None:
             self._tmpdir.cleanup()
+        if self.pipeline.source is not None:
+            self.pipeline.source.close()
 
     def __enter__(self) -> "SimulatedCamera":
         return self

@@ -18,6 +18,7 @@ from ..handlers.config_store import ConfigStore
 from ..matching import warm_up as matching_warm_up
 from ..rig.scene import Scene
 from ..rig.sensor import Geometry, SensorRig
+from ..replay import ReplaySource
 from .capture_engine import CaptureRequest
 from .stereo import StereoStage
 
@@ -27,7 +28,9 @@ Send = Callable[[CaptureRequest, bytes], bool]  # one message of a capture; Fals
 
 class CapturePipeline:
     def __init__(self, seed: int, rig: SensorRig, store: ConfigStore, calibration: CalibrationService,
-                 clock: DeviceClock, truth: TruthLog, send: Send, counters: collections.Counter[str]):
+                 clock: DeviceClock, truth: TruthLog, send: Send, counters: collections.Counter[str],
+                 source: ReplaySource | None = None):
+        """``source``: a recording whose captures replace the rig's (replay.py)."""
         self.scene = Scene.LAB  # what the rig looks at (a simulator setting)
         self._seed = seed
         self._rig = rig
@@ -37,6 +40,7 @@ class CapturePipeline:
         self._truth = truth
         self._send = send
         self._counters = counters
+        self.source = source
         self._stereo = StereoStage()
         self._view_rays: dict[Geometry, np.ndarray] = {}
 
@@ -52,6 +56,9 @@ class CapturePipeline:
 
     def produce(self, req: CaptureRequest) -> None:
         cfg = self._store.snapshot()
+        if self.source is not None:  # replay: the recorded capture, re-matched if the matching changed
+            replayed = self.source.capture(req, cfg, self._stereo.disparity)
+            return self._send_all(req, replayed.begin, replayed.planes)
         w, h = cfg["width"], cfg["height"]
         self._rig.set_format(w, h)
         t = req.time - self._clock.boot
@@ -81,7 +88,9 @@ class CapturePipeline:
             req.sequence & 0xFFFFFFFF, req.trigger_id & 0xFFFFFFFF, self._clock.at(req.time), cfg["exposure_us"],
             cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
             cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, calib_id, focal, cx, cy, baseline)
-        images = {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: disp}
+        self._send_all(req, begin, {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: disp})
+
+    def _send_all(self, req: CaptureRequest, begin: m.FrameBegin, images: dict[Output, np.ndarray | None]) -> None:
         for msg in capture_messages(begin, images, CHUNK):
             if not self._send(req, m.encode(msg)):
                 return  # the link went, or the stream was stopped: cut off at a message boundary
