@@ -10,6 +10,8 @@ import argparse
 import signal
 import sys
 
+from stereocam.transports.announced import announce
+
 from .firmware import SimulatedCamera
 from .links.servers import PtyServer, TcpServer
 from .rig.scene import Scene
@@ -27,7 +29,9 @@ def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m stereocam.device_sim", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="stereocam sim", description="Serve a simulated camera over a pty or TCP "
+                                 "until SIGINT or SIGTERM (also: python -m stereocam.device_sim). The first line "
+                                 "printed is the URL to open; stereocam list shows it while it runs.")
     ap.add_argument("--serve", required=True, metavar="pty|tcp:HOST:PORT")
     ap.add_argument("--seed", type=int, default=0, help="which simulated unit")
     ap.add_argument("--serial", default=None, help="serial number (default derived from the seed)")
@@ -53,7 +57,8 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop)
     print(server.url, flush=True)
     try:
-        server.serve_forever()
+        with announce(server.url, sim.serial, sim.model, sim.firmware_version, "pty" if args.serve == "pty" else "tcp"):
+            server.serve_forever()
     finally:
         server.close()
         sim.close()

@@ -8,9 +8,9 @@ from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as _version
 
 from stereocam.protocol.calibration import StereoCalibration
-from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DeviceError, DisconnectedError, ErrorCode,
-                             ProtocolError, StereoCamError, TransportError, VerificationError,
-                             VersionMismatchError)
+from stereocam.protocol.errors import (CallbackError, CameraTimeoutError, ConfigError, DeviceError, DisconnectedError, ErrorCode,
+                             ProtocolError, StereoCamError, StreamStalledError, TransportError,
+                             VerificationError, VersionMismatchError)
 from stereocam.protocol.params import Output, TriggerMode
 
 from .calibration_io import StoredCalibration
@@ -30,4 +30,5 @@ __all__ = [
     "DisparityFormat", "StereoGeometry", "StereoCalibration", "StoredCalibration", "TriggerMode", "Output",
     "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError",
     "ErrorCode", "TransportError", "DisconnectedError", "CameraTimeoutError", "VerificationError",
+    "StreamStalledError", "CallbackError",
 ]

@@ -1,7 +1,9 @@
 """The Camera API: what a user of the SDK holds."""
 from __future__ import annotations
 
+import logging
 import math
+import os
 import queue
 import threading
 import time
@@ -9,16 +11,17 @@ from dataclasses import dataclass
 from typing import Iterator
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError, TransportError,
-                             VersionMismatchError)
+from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError,
+                                      StreamStalledError, TransportError, VersionMismatchError)
 from stereocam.protocol.framing import VERSION_MAJOR
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.config_rules import merge
-from stereocam.protocol.params import BY_ID, BY_NAME, TriggerMode
+from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, Param, TriggerMode
 from stereocam.protocol.rectification import stereo_rectify
 
-from . import calibration_io
+from . import calibration_io, presets
 from .calibration_io import StoredCalibration
+from .callbacks import FrameCallback, FrameCallbacks
 from .clock import ClockMap, SyncSample
 from .frames import AssemblyStats, Frame, FrameAssembler, StereoGeometry
 from .link import Link, LinkStats
@@ -26,6 +29,7 @@ from .transports import Transport, open_transport, reopen_url
 
 SYNC_SAMPLES = 8
 SYNC_PERIOD = 5.0  # seconds between background time-sync samples
+_log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -70,6 +74,7 @@ class Camera:
         self.geometry_mismatches = 0  # frames whose carried geometry disagreed with the stored calibration
         self._streaming = False
         self.last_status: DeviceStatus | None = None
+        self._callbacks: FrameCallbacks | None = None
         self._connect(transport)
         self._heartbeat_interval = heartbeat_interval
         self._heartbeat = threading.Thread(target=self._heartbeat_loop, name="stereocam-heartbeat", daemon=True)
@@ -94,6 +99,7 @@ class Camera:
         serial = self._info.serial
         url = reopen_url(self.url, serial)
         deadline = time.monotonic() + timeout
+        _log.warning("%s: link lost (%s); reconnecting to serial %s via %s", self.url, self.link.error, serial, url)
         self.link.close()
         while True:
             try:
@@ -108,6 +114,8 @@ class Camera:
                         from exc
                 time.sleep(backoff)
                 backoff = min(backoff * 2, 1.0)
+        _log.warning("%s: reconnected to serial %s; re-applying %d parameters%s", self.url, serial,
+                     len(self._applied), ", resuming the stream" if self._streaming else "")
         if self._applied:
             self.request(m.SetConfig({BY_NAME[k].pid: v for k, v in self._applied.items()}))
         if self._streaming:
@@ -208,14 +216,34 @@ class Camera:
         self.request(m.Stop())
         self._streaming = False
 
+    @property
+    def streaming(self) -> bool:
+        """Whether this Camera started the stream (and has not stopped it)."""
+        return self._streaming
+
     def status(self) -> DeviceStatus:
         r = self.request(m.Heartbeat())
         assert isinstance(r, m.Status)
         return DeviceStatus(r.uptime_us, r.streaming, TriggerMode(r.trigger_mode), r.counters)
 
     def get_frame(self, timeout: float | None = None) -> Frame:
-        """The next complete frame; CameraTimeoutError (a TimeoutError) if none within ``timeout``."""
+        """The next complete frame; CameraTimeoutError (a TimeoutError) if none within ``timeout``.
+        ``timeout=0`` polls: a queued frame at once, or the error at once."""
+        if self._callbacks is not None and len(self._callbacks):
+            raise StereoCamError("frames go to the on_frame callbacks; remove them (cam.remove_callback) "
+                                 "before calling get_frame")
         timeout = self.timeout if timeout is None else timeout
+        frame = self._next_frame(timeout)
+        if frame is None:
+            raise CameraTimeoutError(f"no frame from {self.url} within {timeout:.3g} s")
+        return frame
+
+    def try_get_frame(self) -> Frame | None:
+        """A queued frame, or None at once if there is none (never waits)."""
+        return self._next_frame(0.0)
+
+    def _next_frame(self, timeout: float) -> Frame | None:
+        """The next frame within ``timeout`` (a queued one first, even at 0), else None."""
         deadline = time.monotonic() + timeout
         while True:
             try:
@@ -225,13 +253,38 @@ class Camera:
                     raise
                 self.reconnect(timeout=max(deadline - time.monotonic(), 0.0))
             left = deadline - time.monotonic()
-            if left <= 0:
-                raise CameraTimeoutError(f"no frame from {self.url} within {timeout:.3g} s")
             try:
-                frame = self.assembler.frames.get(timeout=min(left, 0.1))
+                frame = self.assembler.frames.get(timeout=min(left, 0.1)) if left > 0 else \
+                    self.assembler.frames.get_nowait()
             except queue.Empty:
+                if left <= 0:
+                    return None
                 continue
             return self._with_stored_calibration(frame)
+
+    def on_frame(self, fn: FrameCallback) -> FrameCallback:
+        """Call ``fn(frame)`` for every frame, on a thread of this Camera's (not the link's reader).
+        While any callback is registered frames go to the callbacks, not to ``get_frame``. A callback
+        that raises is logged and counted (``callback_errors``); ``check_callbacks()`` re-raises it.
+        Returns ``fn``, so it also works as a decorator."""
+        if self._callbacks is None:
+            self._callbacks = FrameCallbacks(self._next_frame)
+        self._callbacks.add(fn)
+        return fn
+
+    def remove_callback(self, fn: FrameCallback) -> None:
+        if self._callbacks is None or not self._callbacks.remove(fn):
+            raise ConfigError(f"{fn!r} is not a registered frame callback")
+
+    @property
+    def callback_errors(self) -> int:
+        """How many callback calls raised."""
+        return 0 if self._callbacks is None else self._callbacks.errors
+
+    def check_callbacks(self) -> None:
+        """Raise CallbackError (from the callback's exception) if a frame callback has raised."""
+        if self._callbacks is not None:
+            self._callbacks.check()
 
     def _with_stored_calibration(self, frame: Frame) -> Frame:
         """Give a rectified frame the geometry derived on this host from the calibration read
@@ -264,12 +317,37 @@ class Camera:
         return record(self, path, frames=frames, seconds=seconds, **options)
 
     def __iter__(self) -> Iterator[Frame]:
-        """Frames as they come, until the link fails or frames stop for ``timeout`` seconds."""
+        """Frames as they come while streaming. Ends when the stream is stopped (``stop()`` from any
+        thread, ``close()``) and the queued frames are taken; raises StreamStalledError (a
+        CameraTimeoutError) when streaming but no frame came for ``timeout`` seconds."""
+        if not self._streaming:
+            raise StereoCamError("not streaming: call start() before iterating over the camera")
         while True:
-            try:
-                yield self.get_frame()
-            except CameraTimeoutError:
-                return
+            deadline = time.monotonic() + self.timeout
+            while (frame := self._next_frame(min(0.1, max(deadline - time.monotonic(), 0.0)))) is None:
+                if not self._streaming or self._closed.is_set():
+                    return
+                if time.monotonic() >= deadline:
+                    raise StreamStalledError(f"{self.url} is streaming but sent no frame for {self.timeout:.3g} s "
+                                             "(software trigger mode waits for trigger())")
+            yield frame
+
+    # -- configuration ------------------------------------------------------------------------
+    @staticmethod
+    def options() -> list[Param]:
+        """Every parameter: name, range (lo..hi, step, odd), unit, default, description, live."""
+        return list(PARAMS)
+
+    def save_preset(self, path: str | os.PathLike) -> dict[str, int]:
+        """Write the whole current configuration to ``path`` as JSON; returns it."""
+        config = self.config()
+        presets.write_preset(path, config, self._info.model)
+        return config
+
+    def load_preset(self, path: str | os.PathLike) -> dict[str, int]:
+        """Apply a preset written by ``save_preset`` (all or nothing: a refusal changes nothing);
+        returns the new configuration. ConfigError for a file that is not a preset."""
+        return self.configure(**presets.read_preset(path))
 
     @property
     def stats(self) -> dict[str, int]:
@@ -284,6 +362,8 @@ class Camera:
         if self._closed.is_set():
             return
         self._closed.set()
+        if self._callbacks is not None:
+            self._callbacks.close()
         if self.link.alive:
             try:
                 self.request(m.Stop(), timeout=0.5)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import collections
 import enum
+import logging
 import queue
 from dataclasses import dataclass, field
 
@@ -74,6 +75,13 @@ class Frame:
     status: FrameStatus = FrameStatus.COMPLETE
     calibration: StereoCalibration | None = None  # that calibration, scaled to this frame's size
 
+    def __repr__(self) -> str:
+        planes = "+".join(n for n, a in (("left", self.left), ("right", self.right), ("disparity", self.disparity))
+                          if a is not None) or "no planes"
+        return (f"Frame(sequence={self.sequence}, {self.width}x{self.height}, {planes}, "
+                f"{'rectified' if self.rectified else 'raw'}, status={self.status.value}, "
+                f"device_time_us={self.device_time_us})")
+
     def disparity_px(self) -> np.ndarray:
         """Disparity in pixels, float32, NaN where invalid."""
         if self.disparity is None:
@@ -118,6 +126,9 @@ class AssemblyStats:
     def dropped(self) -> int:
         """Captures the user did not get whole (delivered flawed ones included)."""
         return self.incomplete + self.size_mismatch + self.device_errors + self.lost + self.queue_overflow
+
+
+_log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -167,6 +178,7 @@ class FrameAssembler:
             self._flawed(self._cur, FrameStatus.MISSING_DATA)
         if self._last_seq is not None and b.sequence > self._last_seq + 1:
             self.stats.lost += b.sequence - self._last_seq - 1
+            _log.info("frames %d..%d lost (never seen on the link)", self._last_seq + 1, b.sequence - 1)
         self._last_seq = b.sequence
         self._cur = _Building(b, {p: bytearray(plane_size(p, b.width, b.height)) for p in planes_of(b)})
 
@@ -202,6 +214,7 @@ class FrameAssembler:
         counter = {FrameStatus.MISSING_DATA: "incomplete", FrameStatus.SIZE_MISMATCH: "size_mismatch",
                    FrameStatus.DEVICE_ERROR: "device_errors"}[status]
         setattr(self.stats, counter, getattr(self.stats, counter) + 1)
+        _log.info("frame %d dropped: %s", cur.begin.sequence, status.value)
         if self.deliver_incomplete:
             self._deliver(self._frame(cur, status))
 
@@ -226,7 +239,8 @@ class FrameAssembler:
                 return
             except queue.Full:
                 try:
-                    self.frames.get_nowait()
+                    old = self.frames.get_nowait()
                     self.stats.queue_overflow += 1
+                    _log.debug("frame %d discarded: the user did not take it before the queue filled", old.sequence)
                 except queue.Empty:
                     pass

@@ -64,3 +64,11 @@ class VerificationError(StereoCamError):
 
 class CameraTimeoutError(StereoCamError, TimeoutError):
     """No answer or frame within the deadline; also a builtin TimeoutError."""
+
+
+class StreamStalledError(CameraTimeoutError):
+    """Streaming, but no frame came within the deadline (iteration raises this instead of ending)."""
+
+
+class CallbackError(StereoCamError):
+    """A frame callback raised; the callback's own exception is the ``__cause__``."""

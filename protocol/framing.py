@@ -12,6 +12,7 @@ is never trusted before the header CRC checks out.
 from __future__ import annotations
 
 import binascii
+import logging
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -29,6 +30,7 @@ FLAG_RESEND = 0x01  # request: this is a retry of the same request id
 _HEAD = struct.Struct("<4sBBBBHHIH")  # the 18 bytes the header CRC covers
 _CRC16 = struct.Struct("<H")
 _CRC32 = struct.Struct("<I")
+_log = logging.getLogger(__name__)
 
 
 def header_crc(first18: bytes | memoryview) -> int:
@@ -145,6 +147,8 @@ class Decoder:
             if crc != zlib.crc32(body):
                 body.release()
                 st.payload_crc_errors += 1
+                _log.info("payload CRC error in a type 0x%04x packet (request id %d, %d payload bytes); "
+                          "dropped, resyncing", mtype, rid, plen)
                 pos += 1
                 continue
             payload = bytes(body[hlen - HEADER_LEN:])

@@ -6,7 +6,7 @@ to map names to ids. One table, shared by both sides.
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 
 class TriggerMode(enum.IntEnum):
@@ -34,6 +34,7 @@ class Param:
     odd: bool = False
     unit: str = ""
     live: bool = True  # may change while streaming
+    description: str = ""  # one line for humans (Camera.options(), help texts, the viewer)
 
     def check(self, value: int) -> str | None:
         """None if ``value`` is acceptable on its own, else the reason."""
@@ -69,6 +70,31 @@ PARAMS: tuple[Param, ...] = (
     # id 20 is retired (a simulator control in drafts of 1.1); never reused
     Param(21, "rectify", 1, 0, 1),  # 1: rectified images + disparity; 0: raw images (INFO RAW_OUTPUT)
 )
+
+DESCRIPTIONS: dict[str, str] = {
+    "width": "image width after binning/cropping",
+    "height": "image height after binning/cropping",
+    "fps": "frame rate in free-run mode",
+    "exposure_us": "exposure time of both imagers",
+    "gain": "analogue gain of both imagers",
+    "trigger_mode": "0 free run, 1 software trigger (trigger()), 2 external trigger input",
+    "outputs": "planes each frame carries: 1 left + 2 right + 4 disparity",
+    "num_disparities": "disparity search range (max - min disparity)",
+    "block_size": "matching window side (odd)",
+    "min_disparity": "smallest disparity searched",
+    "pre_filter_type": "0 x-Sobel, 1 normalized response",
+    "pre_filter_size": "pre-filter window side (odd), normalized response only",
+    "pre_filter_cap": "clip of the pre-filtered image",
+    "texture_threshold": "minimum texture in the window for a match to count",
+    "uniqueness_ratio": "margin the best match must beat the second best by",
+    "speckle_window_size": "largest speckle region removed (0: off)",
+    "speckle_range": "disparity step that splits speckle regions",
+    "disp12_max_diff": "left-right consistency tolerance (-1: off)",
+    "heartbeat_timeout_ms": "the device stops streaming after this long without a host message (0: never)",
+    "scene": "simulator only: 0 animated lab, 1 textured wall at 1 m, 2 calibration board",
+    "rectify": "1 rectified images + disparity, 0 raw images without disparity",
+}
+PARAMS = tuple(replace(p, description=DESCRIPTIONS.get(p.name, p.description)) for p in PARAMS)
 
 BY_ID: dict[int, Param] = {p.pid: p for p in PARAMS}
 BY_NAME: dict[str, Param] = {p.name: p for p in PARAMS}

@@ -1,25 +1,14 @@
-"""``stereocam bench [protocol|transport|matching|all]``: figures, not pass/fail.
-
-protocol  — decoder throughput (MB/s) on a stream of 640x480 frame messages fed in 64 KiB chunks.
-transport — end-to-end frames/s and MB/s at 640x480 (left, right, disparity) per transport (sim,
-            pty, tcp, usb), the simulator rendering and matching every frame; side by side in one run.
-usb       — the USB path alone: bulk IN MB/s through pyusb and the transport (tools/bench_usb.py).
-matching  — the numba matching core against cv2.StereoBM (tools/bench_matching.py).
-calibration — calibration accuracy against the simulator's truth: the solver on rendered views
-            (tools/bench_calibration.py) and the factory tool through the protocol on uncalibrated
-            units, plus metric depth at 1 m through the stored result (tools/bench_device_calibration.py).
-record    — the recorder's ceiling in MB/s, a live recording at full rate, seek time (tools/bench_record.py).
-rematch   — stereocam rematch frames/s with 1 and 2 local Dask workers (tools/bench_rematch.py).
-"""
+"""stereocam bench: benchmark figures, not pass/fail (see the command's help for the modes)."""
 from __future__ import annotations
 
-import argparse
 import contextlib
 import importlib
 import time
 from typing import Iterator
 
+import click
 import numpy as np
+from tqdm import tqdm
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import Decoder
@@ -47,7 +36,7 @@ def bench_protocol(seconds: float = 2.0) -> dict[str, float]:
     return {"decode_MBps": mbps}
 
 
-def _stream_fps(url: str, seconds: float) -> tuple[float, float, int]:
+def _stream_fps(url: str, seconds: float, desc: str = "") -> tuple[float, float, int]:
     import stereocam
 
     with stereocam.open(url, timeout=3.0) as cam:
@@ -56,9 +45,11 @@ def _stream_fps(url: str, seconds: float) -> tuple[float, float, int]:
         cam.get_frame(timeout=60.0)  # warm-up (JIT cache load)
         n = 0
         t0 = time.monotonic()
-        while time.monotonic() - t0 < seconds:
-            cam.get_frame(timeout=5.0)
-            n += 1
+        with tqdm(total=round(seconds * 60), unit="frame", desc=desc, leave=False) as bar:
+            while time.monotonic() - t0 < seconds:
+                cam.get_frame(timeout=5.0)
+                n += 1
+                bar.update()
         dt = time.monotonic() - t0
         cam.stop()
         dropped = cam.stats["frames_dropped"]
@@ -97,31 +88,52 @@ def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty"
     print(f"  {'transport':<10} {'fps':>6} {'MB/s':>7} {'drops':>6}")
     for kind in kinds:
         with _device(kind) as url:
-            fps, mbps, dropped = _stream_fps(url, seconds)
+            fps, mbps, dropped = _stream_fps(url, seconds, kind)
         out[f"{kind}_fps"] = fps
         print(f"  {kind:<10} {fps:6.1f} {mbps:7.1f} {dropped:6d}")
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam bench", description=__doc__.splitlines()[0])
-    ap.add_argument("what", nargs="?", default="all",
-                    choices=["protocol", "transport", "usb", "matching", "calibration", "record", "rematch", "all"])
-    ap.add_argument("--seconds", type=float, default=5.0)
-    args, rest = ap.parse_known_args(argv)
-    if args.what in ("protocol", "all"):
+MODES = ("protocol", "transport", "usb", "matching", "calibration", "calib-real", "record", "rematch", "all")
+
+
+@click.command("bench", context_settings={"ignore_unknown_options": True},
+               epilog="Exit codes: 0 done (figures, never pass/fail); 1 a camera or simulator failed; 2 bad usage.")
+@click.argument("what", type=click.Choice(MODES), default="all")
+@click.option("--seconds", type=click.FloatRange(0, min_open=True), default=5.0, show_default=True,
+              help="Streaming time per transport (transport mode).")
+@click.argument("extra", nargs=-1, type=click.UNPROCESSED)
+def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
+    """Print benchmark figures. WHAT is one of:
+
+    \b
+    protocol     decoder throughput (MB/s): 640x480 frame messages fed in 64 KiB chunks
+    transport    end-to-end fps and MB/s at 640x480 over sim, pty, tcp and usb, side by side
+    usb          the USB path alone: bulk IN MB/s through pyusb
+    matching     the numba matching core against cv2.StereoBM
+    calibration  calibration accuracy against the simulator's truth, solver and device tool
+    calib-real   the offline tool on real calibration sets against OpenCV's all-pairs solution
+    record       the recorder's ceiling (MB/s), a live recording's drops, seek time by frame index
+    rematch      stereocam rematch frames/s with 1 and 2 local Dask workers
+    all          protocol, transport, matching and calibration (default)
+
+    Arguments after WHAT that this command does not know go to the usb or matching bench."""
+    rest = list(extra)
+    if what in ("protocol", "all"):
         bench_protocol()
-    if args.what in ("transport", "all"):
-        bench_transport(args.seconds)
-    if args.what == "record":
-        importlib.import_module("stereocam.tools.bench_record").main(rest + ["--seconds", str(args.seconds)])
-    if args.what == "rematch":
+    if what in ("transport", "all"):
+        bench_transport(seconds)
+    if what == "calib-real":
+        importlib.import_module("stereocam.tools.bench_calib_real").main(rest)
+    if what == "record":
+        importlib.import_module("stereocam.tools.bench_record").main(rest + ["--seconds", str(seconds)])
+    if what == "rematch":
         importlib.import_module("stereocam.tools.bench_rematch").main(rest)
-    if args.what == "usb":
+    if what == "usb":
         importlib.import_module("stereocam.tools.bench_usb").main(rest)
-    if args.what in ("matching", "all"):
+    if what in ("matching", "all"):
         importlib.import_module("stereocam.tools.bench_matching").main(rest)
-    if args.what in ("calibration", "all"):
+    if what in ("calibration", "all"):
         importlib.import_module("stereocam.tools.bench_calibration").main([])
         importlib.import_module("stereocam.tools.bench_device_calibration").main([])
     return 0

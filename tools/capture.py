@@ -1,28 +1,22 @@
-"""``stereocam capture URL --out DIR``: grab frames and write what a user looks at first."""
+"""stereocam capture URL --out DIR: grab frames and write what a user looks at first."""
 from __future__ import annotations
 
-import argparse
+import json
 from pathlib import Path
 
+import click
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 import stereocam
 
-
-def colorize(frame: stereocam.Frame) -> np.ndarray:
-    """Disparity as a TURBO colour map (near = warm), invalid pixels black."""
-    d = frame.disparity_px()
-    fmt = frame.disparity_format
-    lo, hi = fmt.min_disparity, fmt.min_disparity + fmt.num_disparities
-    norm = np.nan_to_num((d - lo) / max(hi - lo, 1), nan=0.0)
-    img = cv2.applyColorMap((np.clip(norm, 0, 1) * 255).astype(np.uint8), cv2.COLORMAP_TURBO)
-    img[np.isnan(d)] = 0
-    return img
+from .pictures import save_disparity_png
+from .session import output_dir, preserved_configuration
 
 
 def save_frame(frame: stereocam.Frame, out: Path, stem: str = "frame") -> dict[str, Path]:
-    """left/right PNG, disparity .npy (raw int16) and colour PNG, point cloud .ply."""
+    """left/right PNG, disparity .npy (raw int16) and colour PNG with a depth scale, point cloud .ply."""
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {}
     for name, img in (("left", frame.left), ("right", frame.right)):
@@ -32,27 +26,38 @@ def save_frame(frame: stereocam.Frame, out: Path, stem: str = "frame") -> dict[s
     if frame.disparity is not None:
         paths["disparity_npy"] = out / f"{stem}_disparity.npy"
         np.save(paths["disparity_npy"], frame.disparity)
-        paths["disparity_png"] = out / f"{stem}_disparity.png"
-        cv2.imwrite(str(paths["disparity_png"]), colorize(frame))
+        paths["disparity_png"] = save_disparity_png(frame, out / f"{stem}_disparity.png")
         paths["ply"] = out / f"{stem}_points.ply"
         stereocam.write_ply(paths["ply"], *frame.points())
     return paths
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam capture", description=__doc__.splitlines()[0])
-    ap.add_argument("url")
-    ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument("--count", type=int, default=1, help="frames to save")
-    ap.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for each frame (the first pays JIT warm-up)")
-    args = ap.parse_args(argv)
-    with stereocam.open(args.url, timeout=2.0) as cam:
+@click.command("capture", epilog="Exit codes: 0 saved; 1 camera unreachable, refused or timed out; 2 bad usage "
+               "(including an --out that cannot be created); 130 interrupted.")
+@click.argument("url")
+@click.option("--out", type=click.Path(path_type=Path), required=True,
+              help="Directory for the files; created if missing (checked before the camera is opened).")
+@click.option("--count", type=click.IntRange(min=1), default=1, show_default=True, help="Frames to save (at least 1).")
+@click.option("--timeout", type=click.FloatRange(0, min_open=True), default=30.0, show_default=True,
+              help="Seconds to wait for each frame (the first pays the matcher's warm-up).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON array (sequence and files per frame) at the end.")
+def command(url: str, out: Path, count: int, timeout: float, as_json: bool) -> int:
+    """Software-trigger COUNT frames and save each: left/right PNG, disparity .npy and PNG (colour bar
+    in metres), point cloud .ply. The camera's configuration (trigger mode included) is restored after."""
+    output_dir(out)
+    with stereocam.open(url, timeout=2.0) as cam, preserved_configuration(cam):
         cam.set_trigger_mode("software")
         cam.start()
-        for i in range(args.count):
-            cam.trigger()
-            frame = cam.get_frame(timeout=args.timeout)
-            paths = save_frame(frame, args.out, f"frame{frame.sequence:06d}")
-            print(f"sequence {frame.sequence}: " + ", ".join(str(p) for p in paths.values()))
-        cam.stop()
+        saved = []
+        with tqdm(total=count, unit="frame", desc="capture") as bar:
+            for _ in range(count):
+                cam.trigger()
+                frame = cam.get_frame(timeout=timeout)
+                paths = save_frame(frame, out, f"frame{frame.sequence:06d}")
+                saved.append({"sequence": frame.sequence, "files": {k: str(p) for k, p in paths.items()}})
+                if not as_json:
+                    bar.write(f"sequence {frame.sequence}: " + ", ".join(str(p) for p in paths.values()))
+                bar.update()
+    if as_json:
+        click.echo(json.dumps(saved, indent=2))
     return 0

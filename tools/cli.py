@@ -1,41 +1,131 @@
-"""The ``stereocam`` command: one subcommand per tool module."""
+"""The ``stereocam`` command: one click command tree built from the COMMANDS table.
+
+A module in COMMANDS either exposes ``command`` (a click command) or ``main(argv) -> int`` (an
+argparse tool, passed its arguments untouched, ``--help`` included). Adding a tool is one line.
+Errors are handled once, here, for every command: see EXIT_CODES.
+"""
 from __future__ import annotations
 
 import importlib
+import logging
+import os
 import sys
+from typing import Any, Callable, Sequence
+
+import click
 
 import stereocam
 
-COMMANDS = {
-    "sim": ("stereocam.device_sim.__main__", "serve a simulated camera (pty or tcp), like python -m device_sim"),
-    "list": ("stereocam.tools.list_devices", "list cameras: USB (real and simulated), camera serial ports, simulators"),
-    "info": ("stereocam.tools.info", "print a camera's info, configuration and counters"),
+COMMANDS: dict[str, tuple[str, str]] = {
+    "view": ("stereocam.tools.viewer.command", "live viewer in the browser: images, disparity, depth, settings"),
+    "list": ("stereocam.tools.list_devices", "list cameras: USB, serial ports, served and in-process simulators"),
+    "info": ("stereocam.tools.info", "print a camera's identity, calibration, configuration and counters"),
     "capture": ("stereocam.tools.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
     "calibrate": ("stereocam.tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
+    "calibration": ("stereocam.tools.calibration_export", "calibration export URL --size WxH: ROS camera_info from a unit"),
+    "factory": ("stereocam.tools.factory.cli", "factory record: yield and metric distributions per day and station"),
     "demo": ("stereocam.tools.demo", "simulator + streaming + outputs in ./out + summary"),
     "conformance": ("stereocam.tools.conformance.cli", "hold a camera to the protocol: one line per check, JUnit/JSON"),
     "record": ("stereocam.tools.record", "record a camera to an MCAP file (ROS 2 profile)"),
     "recording": ("stereocam.tools.recording", "recording files: info, repair, export"),
     "rematch": ("stereocam.tools.rematch", "re-run matching over recordings on a Dask cluster"),
-    "bench": ("stereocam.tools.bench", "benchmarks: protocol decode, transports (incl. USB), matching core"),
+    "sim": ("stereocam.device_sim.__main__", "serve a simulated camera over a pty or TCP"),
+    "bench": ("stereocam.tools.bench", "benchmarks: protocol, transports, USB, matching core, calibration"),
 }
+"""name -> (module, one-line help). The module provides ``command`` or ``main(argv)``."""
+
+EXIT_OK, EXIT_CAMERA, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 0, 1, 2, 130, 141
+EXIT_CODES = """Exit codes: 0 success; 1 camera error (unreachable, refused, timed out); 2 bad usage or
+input (unknown option, a path that cannot be written); 3-5 calibrate's own (see its --help);
+130 interrupted (Ctrl-C); 141 output closed early (for example piped into head)."""
+
+_log = logging.getLogger("stereocam.cli")
 
 
-def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
-        print("usage: stereocam COMMAND [args]   (stereocam COMMAND --help for more)\n")
-        for name, (_, text) in COMMANDS.items():
-            print(f"  {name:<10} {text}")
-        return 0 if argv and argv[0] in ("-h", "--help") else 2
-    module = importlib.import_module(COMMANDS[argv[0]][0])
+def _pass_through(name: str, main: Callable[[list[str]], int | None], text: str) -> click.Command:
+    """An argparse tool as a click command: every argument, --help included, goes to its main."""
+    def run(args: tuple[str, ...]) -> int:
+        try:
+            return main(list(args)) or 0
+        except SystemExit as exc:  # argparse's own exits (--help, usage errors)
+            return exc.code if isinstance(exc.code, int) else (EXIT_USAGE if exc.code else EXIT_OK)
+
+    return click.Command(name, callback=run, help=text, short_help=text, add_help_option=False,
+                         context_settings={"ignore_unknown_options": True, "allow_extra_args": True},
+                         params=[click.Argument(["args"], nargs=-1, type=click.UNPROCESSED)])
+
+
+class CommandTable(click.Group):
+    """Subcommands from COMMANDS, imported only when run; errors turned into clean exits."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return list(COMMANDS)
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name not in COMMANDS:
+            return None
+        module_name, text = COMMANDS[name]
+        module = importlib.import_module(module_name)
+        command = getattr(module, "command", None)
+        if isinstance(command, click.Command):
+            return command
+        return _pass_through(name, module.main, text)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        with formatter.section("Commands"):
+            formatter.write_dl([(name, text) for name, (_, text) in COMMANDS.items()])
+
+    def invoke(self, ctx: click.Context) -> Any:
+        name = ctx.protected_args[0] if ctx.protected_args else (ctx.args[0] if ctx.args else "")
+        try:
+            result = super().invoke(ctx)
+            sys.stdout.flush()  # a closed pipe shows here, not as a traceback at exit
+            return result
+        except BrokenPipeError:
+            devnull = os.open(os.devnull, os.O_WRONLY)  # nothing more to say to a closed pipe
+            os.dup2(devnull, sys.stdout.fileno())
+            raise click.exceptions.Exit(EXIT_BROKEN_PIPE) from None
+        except (KeyboardInterrupt, click.Abort):
+            click.echo(f"stereocam {name}: interrupted", err=True)
+            raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
+        except stereocam.StereoCamError as exc:
+            _log.debug("%s failed", name, exc_info=exc)
+            click.echo(f"stereocam {name}: error: {exc}", err=True)
+            raise click.exceptions.Exit(EXIT_CAMERA) from None
+        except OSError as exc:  # a path that cannot be read or written: the user's to fix
+            _log.debug("%s failed", name, exc_info=exc)
+            click.echo(f"stereocam {name}: error: {exc}", err=True)
+            raise click.exceptions.Exit(EXIT_USAGE) from None
+
+
+LOG_LEVELS = ("ERROR", "WARNING", "INFO", "DEBUG")
+
+
+@click.group("stereocam", cls=CommandTable, epilog=EXIT_CODES, no_args_is_help=True,
+             context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.version_option(stereocam.__version__, "--version", prog_name="stereocam", message="%(prog)s %(version)s")
+@click.option("-v", "--verbose", count=True,
+              help="Log more to stderr: -v info (reconnects, CRC errors, drops), -vv debug.  [default: warnings only]")
+@click.option("--log-level", type=click.Choice(LOG_LEVELS, case_sensitive=False), default=None,
+              help="Log level, overrides -v.")
+def cli(verbose: int, log_level: str | None) -> None:
+    """Tools for STOC-class stereo cameras and their simulator. Run a command with --help for more."""
+    level = log_level.upper() if log_level else LOG_LEVELS[min(1 + verbose, len(LOG_LEVELS) - 1)]
+    logging.basicConfig(level=level, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``stereocam`` with ``argv``; returns the exit code (see EXIT_CODES)."""
+    args = list(sys.argv[1:] if argv is None else argv)
     try:
-        return module.main(argv[1:]) or 0
-    except stereocam.StereoCamError as exc:
-        print(f"stereocam {argv[0]}: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        return 130
+        rc = cli.main(args=args, prog_name="stereocam", standalone_mode=False)
+    except click.ClickException as exc:  # usage errors, bad parameters: before any camera is touched
+        exc.show()
+        return exc.exit_code
+    except click.Abort:
+        click.echo("stereocam: interrupted", err=True)
+        return EXIT_INTERRUPTED
+    return rc if isinstance(rc, int) else EXIT_OK
 
 
 if __name__ == "__main__":

@@ -1,9 +1,10 @@
-"""``stereocam list``: print the cameras this host can open (USB, serial ports, simulators)."""
+"""stereocam list: print the cameras this host can open (USB, serial ports, served and in-process simulators)."""
 from __future__ import annotations
 
-import argparse
 import json
 from typing import Sequence
+
+import click
 
 from stereocam.discovery import DeviceEntry, list_devices
 
@@ -12,7 +13,7 @@ COLUMNS = (("URL", "url"), ("TRANSPORT", "transport"), ("SERIAL", "serial"), ("M
 
 
 def format_table(entries: Sequence[DeviceEntry]) -> str:
-    """A plain text table, one camera a line; simulated USB devices are marked with "(sim)"."""
+    """A plain text table, one camera a line; simulated devices are marked with "(sim)"."""
     rows = [[title for title, _ in COLUMNS]]
     for e in entries:
         row = ["" if getattr(e, key) is None else str(getattr(e, key)) for _, key in COLUMNS]
@@ -23,19 +24,22 @@ def format_table(entries: Sequence[DeviceEntry]) -> str:
     return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="stereocam list", description=__doc__)
-    parser.add_argument("--json", action="store_true", help="print a JSON array instead")
-    args = parser.parse_args(argv)
+@click.command("list", epilog="Exit codes: 0 listed (also when none were found); 2 bad usage.")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON array instead of a table.")
+def command(as_json: bool) -> int:
+    """Print the cameras this host can open: USB cameras (real and simulated), camera serial ports,
+    simulators served on this machine over TCP or a pty (stereocam sim), in-process simulators.
+    Each URL opens with stereocam info URL."""
     entries = list_devices()
-    if args.json:
-        print(json.dumps([e.as_dict() for e in entries], indent=2))
+    if as_json:
+        click.echo(json.dumps([e.as_dict() for e in entries], indent=2))
     elif entries:
-        print(format_table(entries))
+        click.echo(format_table(entries))
     else:
-        print("no cameras found (USB, serial ports, simulators)")
+        click.echo("no cameras found (USB, serial ports, simulators)")
     return 0
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run as ``stereocam list ARGV``; returns the exit code."""
+    return command.main(args=list(argv or []), prog_name="stereocam list", standalone_mode=False)

@@ -1,9 +1,11 @@
 """``sim://`` — a simulated camera in this process, joined by an in-memory byte pipe.
 
-``sim://?seed=N`` makes a fresh unit (closed with the transport). ``sim://?serial=S`` opens the
-live, unattached simulator with that serial if this process has one (``stereocam.list_devices``
-lists them), else makes a fresh unit with that serial. ``scene=lab|wall|board`` sets what the
-unit looks at (a simulator setting, not a device parameter; also applied to a live unit). Host writes go straight into the firmware's
+``sim://?seed=N`` makes a fresh unit (closed with the transport); ``sim://?seed=N&serial=S`` one
+with that serial; a bare ``sim://`` unit 0. ``sim://?serial=S`` (no seed) only opens the live,
+unattached simulator with that serial in this process (``stereocam.list_devices`` lists them) and
+raises TransportError when there is none: a serial that is not found never makes a new unit.
+``scene=lab|wall|board`` sets what the unit looks at (a simulator setting, not a device parameter;
+also applied to a live unit). Host writes go straight into the firmware's
 ``receive``; the firmware's output lands in a bounded FIFO the host reads (a full FIFO blocks
 the device, as a full USB or TCP buffer would).
 """
@@ -12,7 +14,7 @@ from __future__ import annotations
 import threading
 from urllib.parse import parse_qs, urlsplit
 
-from stereocam.protocol.errors import ConfigError, DisconnectedError
+from stereocam.protocol.errors import ConfigError, DisconnectedError, TransportError
 
 from .. import registry
 from ..rig.scene import Scene
@@ -99,10 +101,15 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
     serial = query.get("serial", [None])[0]
     if serial is not None and "seed" not in query:
         live = registry.find_free(serial)
-        if live is not None:
-            if scene is not None:
-                live.scene = scene
-            return InProcessTransport(live, url, owns=False)
+        if live is None:
+            held = [s.serial for s in registry.live_simulators()]
+            state = "held by another link" if serial in held else "not found"
+            raise TransportError(f"{url}: simulator {serial!r} {state} in this process (free ones: "
+                                 f"{[e.serial for e in discover()] or 'none'}); "
+                                 f"sim://?seed=N&serial={serial} makes a new one")
+        if scene is not None:
+            live.scene = scene
+        return InProcessTransport(live, url, owns=False)
     from ..firmware import SimulatedCamera
 
     return InProcessTransport(SimulatedCamera(serial=serial, seed=seed, scene=scene or Scene.LAB), url)

@@ -60,8 +60,11 @@ def open_transport(url: str, timeout: float) -> SerialTransport:
 
 
 def discover() -> list["DeviceEntry"]:
-    """Serial ports whose USB VID:PID is a camera's (pyserial's port list)."""
+    """Serial ports whose USB VID:PID is a camera's (pyserial's port list), and the simulators this
+    user serves on this machine over TCP or a pty (``announced``)."""
     from serial.tools import list_ports
+
+    from . import announced
 
     from ..discovery import DeviceEntry
 
@@ -71,4 +74,4 @@ def discover() -> list["DeviceEntry"]:
             continue
         entries.append(DeviceEntry(port.device, port.serial_number, port.product, "serial",
                                    location=port.location or port.hwid))
-    return entries
+    return entries + announced.discover()

@@ -17,13 +17,17 @@ def stereocam(*args: str, timeout: float = 180) -> subprocess.CompletedProcess:
 
 def test_usage_lists_commands():
     r = stereocam()
-    assert r.returncode == 2 and "demo" in r.stdout and "capture" in r.stdout
+    assert r.returncode == 2 and "demo" in r.stderr and "capture" in r.stderr and not r.stdout
+    r = stereocam("--help")
+    assert r.returncode == 0 and "demo" in r.stdout and "Exit codes" in r.stdout
 
 
 def test_info():
     r = stereocam("info", "sim://?seed=2")
     assert r.returncode == 0, r.stderr
     assert "serial SIM00002" in r.stdout and "protocol 1.1" in r.stdout and "config.num_disparities 64" in r.stdout
+    assert "config.trigger_mode free_run" in r.stdout and "config.outputs left+right+disparity" in r.stdout
+    assert "calibration id " in r.stdout and "source factory generation 1" in r.stdout
 
 
 def test_info_on_a_dead_url_is_a_clean_error():
@@ -50,6 +54,7 @@ def test_demo_prints_a_summary(tmp_path):
     assert int(fields["frames"]) >= 1 and float(fields["valid_disparity"].rstrip("%")) > 50
     assert float(fields["depth_error_median"].rstrip("%")) < 2.0
     assert (tmp_path / "demo_points.ply").exists()
+    assert "kept up: " in r.stdout or "could not keep up: " in r.stdout
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])

@@ -16,7 +16,7 @@ LATE_WINDOW_S = 0.15  # how long the suite listens after STOPPED for capture mes
 
 CAPABILITY_NAMES = {m.Capability.DISPARITY: "DISPARITY", m.Capability.SOFTWARE_TRIGGER: "SOFTWARE_TRIGGER",
                     m.Capability.EXTERNAL_TRIGGER: "EXTERNAL_TRIGGER", m.Capability.TIME_SYNC: "TIME_SYNC",
-                    m.Capability.CALIBRATION: "CALIBRATION"}
+                    m.Capability.CALIBRATION: "CALIBRATION", m.Capability.RAW_OUTPUT: "RAW_OUTPUT"}
 
 
 @dataclass

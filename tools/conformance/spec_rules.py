@@ -1,18 +1,28 @@
-"""What the judge derives from protocol/SPEC.md: the values a limit probe sends and the roomy
-configuration probes start from. The §5.2 cross-parameter rules themselves are the protocol's own
-table (``stereocam.protocol.config_rules``, the SPEC's executable form), never the firmware's."""
+"""What the judge expects of a configuration: SPEC §5.2 through the protocol's own rule set
+(protocol/config_rules.py, never the firmware's), the values a limit probe sends, the roomy
+configuration in which every parameter's limits are legal."""
 from __future__ import annotations
 
 from stereocam.protocol import config_rules
 from stereocam.protocol import messages as m
-from stereocam.protocol.params import BY_NAME, Param, TriggerMode
+from stereocam.protocol.config_rules import ConfigRejected, cross_check
+from stereocam.protocol.params import BY_NAME, Param, TriggerMode, defaults
 
 INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
-RAW_OUTPUT = m.Capability.RAW_OUTPUT  # SPEC §4.1 bit 5: rectify=0 gives raw frames
 
 
-CROSS_RULES = config_rules.CROSS_RULES
-cross_violation = config_rules.cross_violation
+CROSS_RULES: dict[str, tuple[str, ...]] = {r.name: r.names for r in config_rules.CROSS_RULES}
+"""SPEC §5.2, in order: each rule and the parameters it reads."""
+
+
+def cross_refusal(config: dict[str, int], touched: set[str]) -> ConfigRejected | None:
+    """The refusal SPEC §5.2 demands for ``config`` reached by changing ``touched`` (the NACK's
+    parameter and why), or None. Parameters the device lacks take the table's defaults."""
+    try:
+        cross_check({**defaults(), **config}, {BY_NAME[n].pid: config[n] for n in touched})
+    except ConfigRejected as refusal:
+        return refusal
+    return None
 
 
 def effective_hi(p: Param, max_width: int, max_height: int) -> int:
@@ -26,7 +36,7 @@ def effective_hi(p: Param, max_width: int, max_height: int) -> int:
 def optional_values(capabilities: int) -> set[tuple[str, int]]:
     """Values within the table that a device may refuse OUT_OF_RANGE because it does not advertise
     the capability behind them (SPEC §5.1: rectify=0 needs RAW_OUTPUT)."""
-    return set() if capabilities & RAW_OUTPUT else {("rectify", 0)}
+    return set() if capabilities & m.Capability.RAW_OUTPUT else {("rectify", 0)}
 
 
 def limit_probes(p: Param, hi: int) -> tuple[list[int], list[tuple[int, str]]]:

@@ -55,10 +55,9 @@ def _limit_check(p: Param) -> CheckFn:
 
 def _expect_outcome(ctx: Context, p: Param, value: int, base: dict[str, int]) -> None:
     """A value within the table: accepted, unless a §5.2 rule forbids it with this base."""
-    clash = spec_rules.cross_violation({**base, p.name: value}, {p.name})
-    if clash is not None:
-        rule, blamed = clash
-        _expect_refused(ctx, p, value, ErrorCode.OUT_OF_RANGE, f"cross rule {rule.name}", BY_NAME[blamed].pid)
+    refusal = spec_rules.cross_refusal({**base, p.name: value}, {p.name})
+    if refusal is not None:
+        _expect_refused(ctx, p, value, ErrorCode.OUT_OF_RANGE, str(refusal), refusal.param_id)
         return
     r = ctx.set(**{p.name: value})
     if isinstance(r, m.Nack):

@@ -6,7 +6,7 @@ from typing import Iterator
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode
-from stereocam.protocol.params import BY_NAME, TriggerMode
+from stereocam.protocol.params import TriggerMode
 
 from .. import spec_rules
 from ..context import Context
@@ -37,13 +37,12 @@ CASES: dict[str, list[Case]] = {
 @family("config.cross")
 def cross_rules(ctx: Context) -> Iterator[tuple[str, CheckFn]]:
     for rule in spec_rules.CROSS_RULES:
-        yield rule.name, _rule_check(rule.name)
+        yield rule, _rule_check(rule)
 
 
 def _rule_check(rule: str) -> CheckFn:
     def run(ctx: Context) -> str:
-        spec = next(r for r in spec_rules.CROSS_RULES if r.name == rule)
-        ctx.require_params(*spec.names)
+        ctx.require_params(*spec_rules.CROSS_RULES[rule])
         refused = accepted = 0
         for setup, probe in CASES[rule]:
             ctx.reset()
@@ -58,17 +57,16 @@ def _rule_check(rule: str) -> CheckFn:
 def _case(ctx: Context, setup: dict[str, int], probe: dict[str, int]) -> bool:
     """Apply ``setup``, send ``probe``; True if it was (rightly) refused."""
     cfg = ctx.apply(**{k: int(v) for k, v in setup.items()})
-    clash = spec_rules.cross_violation({**cfg, **probe}, set(probe))
+    refusal = spec_rules.cross_refusal({**cfg, **probe}, set(probe))
     r = ctx.set(**probe)
     shown = ", ".join(f"{k}={int(v)}" for k, v in probe.items()) + (f" after {setup}" if setup else "")
-    if clash is None:
+    if refusal is None:
         expect(isinstance(r, m.ConfigApplied), f"{shown}: legal, but {describe_nack(r) if isinstance(r, m.Nack) else r!r}")
         return False
-    rule, blamed = clash
-    pid = BY_NAME[blamed].pid
-    expect(isinstance(r, m.Nack), f"{shown} breaks {rule.name} but was accepted")
+    expect(isinstance(r, m.Nack), f"{shown} breaks SPEC §5.2 ({refusal}) but was accepted")
     assert isinstance(r, m.Nack)
-    expect(r.code == ErrorCode.OUT_OF_RANGE and r.param_id == pid,
-           f"{shown} (breaks {rule.name}): {describe_nack(r)}, expected OUT_OF_RANGE naming {blamed} ({pid})")
+    expect(r.code == ErrorCode.OUT_OF_RANGE and r.param_id == refusal.param_id,
+           f"{shown} ({refusal}): {describe_nack(r)}, expected OUT_OF_RANGE naming {refusal.param} "
+           f"({refusal.param_id})")
     expect(ctx.config() == cfg, f"{shown} refused but the configuration changed")
     return True

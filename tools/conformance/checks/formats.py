@@ -13,7 +13,7 @@ from .streaming import accounting, capture_problems
 
 STANDARD = ((64, 48), (160, 120), (320, 240), (640, 480), (1280, 960))
 SECONDS = 5.0  # at most, per format (returns once FRAMES whole captures are in)
-FRAMES = 3
+FRAMES = 2
 FPS = 5  # low enough that a device computing full-size disparity keeps up
 BLOCK = 9
 

@@ -122,6 +122,30 @@ def disparity_description(ctx: Context) -> str:
            f"{cfg['num_disparities']} subpixel 16 as configured"
 
 
+@check("stream.raw_output")
+def raw_output(ctx: Context) -> str:
+    """Where RAW_OUTPUT is advertised, rectify=0 gives raw frames: RECTIFIED clear, geometry 0, no
+    disparity plane whatever ``outputs`` asks, and the calibration in force still named."""
+    ctx.require(m.Capability.RAW_OUTPUT)
+    ctx.require_params("rectify", "trigger_mode")
+    cfg = ctx.apply(rectify=0, trigger_mode=int(TriggerMode.FREE_RUN))
+    info = ctx.s.call(m.GetInfo())
+    assert isinstance(info, m.Info)
+    run = ctx.stream(1.0, frames=2)
+    caps = [c for c in run.captures if c.end is not None]
+    expect(caps, "no whole capture in 1 s of free-run with rectify=0")
+    problems = capture_problems(run.captures, cfg)
+    for c in caps:
+        b = c.begin
+        if b.flags & m.FRAME_RECTIFIED or (b.focal_px, b.cx, b.cy, b.baseline_m) != (0, 0, 0, 0):
+            problems.append(f"sequence {b.sequence}: rectified or with geometry although rectify=0")
+        if b.calibration_id != info.calibration_id:
+            problems.append(f"sequence {b.sequence}: calibration id {b.calibration_id:08x}, in force "
+                            f"{info.calibration_id:08x}")
+    expect(not problems, "; ".join(problems[:3]))
+    return f"{len(caps)} raw captures, planes 0x{caps[0].begin.planes:x}, no geometry, calibration id named"
+
+
 def _check_values(c: Capture) -> None:
     raw = c.data.get(int(Output.DISPARITY))
     if raw is None:

@@ -1,0 +1,81 @@
+"""Frame callbacks (``Camera.on_frame``): run on a thread of their own, never on the link's reader.
+
+A callback that raises is logged, counted and kept: ``FrameCallbacks.check()`` re-raises the first
+such error as a CallbackError (its cause is the callback's exception). Nothing is swallowed.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Callable
+
+from stereocam.protocol.errors import CallbackError, StereoCamError
+
+from .frames import Frame
+
+FrameCallback = Callable[[Frame], object]
+_log = logging.getLogger(__name__)
+
+
+class FrameCallbacks:
+    """Takes frames from ``next_frame(timeout) -> Frame | None`` and hands each to every callback."""
+
+    def __init__(self, next_frame: Callable[[float], Frame | None], name: str = "stereocam-callbacks"):
+        self._next_frame = next_frame
+        self._callbacks: list[FrameCallback] = []
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self.errors = 0  # callback calls that raised
+        self.first_error: BaseException | None = None
+        self._thread.start()
+
+    def add(self, fn: FrameCallback) -> None:
+        with self._lock:
+            self._callbacks.append(fn)
+
+    def remove(self, fn: FrameCallback) -> bool:
+        """False if ``fn`` was not registered."""
+        with self._lock:
+            if fn not in self._callbacks:
+                return False
+            self._callbacks.remove(fn)
+            return True
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._callbacks)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            with self._lock:  # take a frame only while somebody wants it: none is lost to get_frame
+                callbacks = list(self._callbacks)
+                try:
+                    frame = self._next_frame(0.1) if callbacks else None
+                except StereoCamError as exc:  # the link died: nothing more will come
+                    _log.warning("frame callbacks stopped: %s", exc)
+                    return
+            if frame is None:
+                if not callbacks:
+                    self._stop.wait(0.05)
+                continue
+            for fn in callbacks:
+                try:
+                    fn(frame)
+                except Exception as exc:  # noqa: BLE001 - reported, counted and re-raisable via check()
+                    _log.error("frame callback %r raised on frame %d: %r", fn, frame.sequence, exc,
+                               exc_info=exc)
+                    if self.first_error is None:
+                        self.first_error = exc
+                    self.errors += 1
+
+    def check(self) -> None:
+        """Raise CallbackError from the first exception a callback raised, if any (and forget it)."""
+        exc, self.first_error = self.first_error, None
+        if exc is not None:
+            raise CallbackError(f"a frame callback raised {exc!r} ({self.errors} failed calls so far)") from exc
+
+    def close(self) -> None:
+        self._stop.set()
+        if threading.current_thread() is not self._thread:
+            self._thread.join(timeout=2)

@@ -1,0 +1,27 @@
+"""Presets: a camera's whole configuration as a JSON file (``Camera.save_preset`` / ``load_preset``)."""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from stereocam.protocol.errors import ConfigError
+
+PRESET_FORMAT = "stereocam-preset/1"
+
+
+def write_preset(path: str | os.PathLike, config: dict[str, int], model: str = "") -> None:
+    """``{"format": ..., "model": ..., "config": {name: value}}``, indented, one file."""
+    doc = {"format": PRESET_FORMAT, "model": model, "config": config}
+    Path(path).write_text(json.dumps(doc, indent=2) + "\n")
+
+
+def read_preset(path: str | os.PathLike) -> dict[str, int]:
+    """The configuration a preset file holds; ConfigError if it is unreadable or not a preset."""
+    try:
+        doc = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"cannot read preset {path}: {exc}") from exc
+    if not isinstance(doc, dict) or doc.get("format") != PRESET_FORMAT or not isinstance(doc.get("config"), dict):
+        raise ConfigError(f"{path} is not a stereocam preset (expected format {PRESET_FORMAT!r})")
+    return doc["config"]

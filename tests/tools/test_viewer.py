@@ -1,0 +1,119 @@
+"""stereocam view in a real headless browser (the distribution's Chromium, over DevTools)."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+import stereocam
+from stereocam.tools.viewer.server import ViewerServer
+from stereocam.tools.viewer.session import ViewerSession
+from tests.support.browser import Chromium, find_chromium
+from tests.support.device import SMALL
+
+CHROMIUM = find_chromium()
+needs_browser = pytest.mark.skipif(CHROMIUM is None, reason="no Chromium on this machine (apt-get install chromium; "
+                                                            ".ci/run installs it)")
+
+
+@pytest.fixture
+def viewer():
+    cam = stereocam.open("sim://?seed=6", timeout=2.0)
+    cam.configure(**SMALL, fps=10)
+    server = ViewerServer(ViewerSession(cam))
+    thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.1}, daemon=True)
+    thread.start()
+    cam.start()
+    yield server
+    server.shutdown()
+    server.server_close()
+    server.session.close()
+    cam.close()
+
+
+def _get(url: str) -> tuple[dict[str, str], bytes]:
+    with urllib.request.urlopen(url, timeout=30) as r:
+        return dict(r.headers), r.read()
+
+
+def test_images_are_always_the_newest_frame(viewer):
+    first = json.loads(_get(viewer.url + "api/frame")[1])
+    time.sleep(1.5)  # nobody looks: frames are replaced, not queued
+    headers, body = _get(viewer.url + "image/left.jpg")
+    assert int(headers["X-Sequence"]) > first["sequence"]
+    img = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert img.shape == (240, 320)
+    assert viewer.session.cam.stats["queue_overflow"] == 0
+
+
+@needs_browser
+def test_viewer_page_in_a_headless_browser(viewer, tmp_path):
+    browser = Chromium(CHROMIUM)
+    try:
+        page = browser.page(viewer.url)
+        browser.wait_for(page, "document.getElementById('disparity').naturalWidth > 0 && "
+                               "document.getElementById('left').naturalWidth > 0")
+        seq1 = int(browser.evaluate(page, "document.getElementById('sequence').textContent"))
+        shot1 = browser.screenshot(page)
+        browser.wait_for(page, f"Number(document.getElementById('sequence').textContent) > {seq1 + 2}")
+        shot2 = browser.screenshot(page)
+        a, b = (cv2.imdecode(np.frombuffer(s, np.uint8), cv2.IMREAD_COLOR) for s in (shot1, shot2))
+        assert a.shape == b.shape and np.abs(a.astype(int) - b.astype(int)).mean() > 0.05, "live image did not change"
+
+        ticks = browser.evaluate(page, "[...document.querySelectorAll('#ticks span')].map(s => s.textContent)")
+        assert ticks and all(t.endswith(" m") for t in ticks)
+        browser.wait_for(page, "document.getElementById('param-block_size') !== null")
+        browser.evaluate(page, "(() => { const i = document.getElementById('in-block_size'); i.value = 10; "
+                               "i.dispatchEvent(new Event('change')); })()")
+        reason = browser.wait_for(page, "document.querySelector('#param-block_size .reason').textContent")
+        assert "refused" in reason and "must be odd" in reason
+        assert viewer.session.cam.config()["block_size"] == SMALL["block_size"]
+
+        browser.evaluate(page, "(() => { const i = document.getElementById('in-exposure_us'); i.value = 2500; "
+                               "i.dispatchEvent(new Event('change')); })()")
+        browser.wait_for(page, "document.querySelector('#param-exposure_us .reason').textContent.includes('set to')")
+        assert viewer.session.cam.config()["exposure_us"] == 2500
+
+        box = browser.evaluate(page, "JSON.stringify(document.getElementById('disparity').getBoundingClientRect())")
+        box = json.loads(box)
+        browser.send("Input.dispatchMouseEvent", {"type": "mouseMoved", "x": box["x"] + box["width"] / 2,
+                                                  "y": box["y"] + box["height"] / 2}, page)
+        browser.wait_for(page, "document.getElementById('cursor').textContent.includes('(')")
+        cursor = browser.evaluate(page, "document.getElementById('cursor').textContent")
+        assert "depth" in cursor or "no depth" in cursor
+        time.sleep(1.0)
+        out = Path(os.environ.get("STEREOCAM_SCREENSHOT", tmp_path / "viewer.png"))
+        out.write_bytes(browser.screenshot(page))
+    finally:
+        browser.close()
+
+
+def test_view_command_prints_its_address_first_and_restores_the_camera(tmp_path):
+    from stereocam.device_sim.process import ServedSimulator
+
+    with ServedSimulator("tcp:127.0.0.1:0", seed=8) as sim:
+        proc = subprocess.Popen([sys.executable, "-m", "stereocam.tools.cli", "view", sim.url, "--no-browser"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            url = proc.stdout.readline().strip()
+            assert url.startswith("http://127.0.0.1:")
+            refused = urllib.request.Request(url + "api/config", data=json.dumps({"gain": 300}).encode(), method="POST")
+            with pytest.raises(urllib.error.HTTPError) as info:
+                urllib.request.urlopen(refused, timeout=30)
+            assert info.value.code == 409 and "gain=300" in json.loads(info.value.read())["reason"]
+            ok = urllib.request.Request(url + "api/config", data=json.dumps({"gain": 40}).encode(), method="POST")
+            assert json.loads(urllib.request.urlopen(ok, timeout=30).read())["config"]["gain"] == 40
+        finally:
+            proc.terminate()
+            assert proc.wait(timeout=30) == 0, proc.stderr.read()
+        with stereocam.open(sim.url, timeout=2.0) as cam:
+            assert cam.config()["gain"] == 0  # put back as found

@@ -1,0 +1,56 @@
+"""stereocam view URL: serve the live viewer on a local port and open it in the browser."""
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+import webbrowser
+
+import click
+
+import stereocam
+from stereocam.tools.session import preserved_configuration
+
+from .server import ViewerServer
+from .session import ViewerSession
+
+
+def _interrupt(signum: int, frame: object) -> None:  # noqa: ARG001
+    raise KeyboardInterrupt
+
+
+@click.command("view", epilog="Exit codes: 0 stopped with Ctrl-C (130 if interrupted before serving); "
+               "1 camera unreachable; 2 bad usage (including a port that is taken).")
+@click.argument("url")
+@click.option("--port", type=click.IntRange(0, 65535), default=0, show_default=True,
+              help="Local port to serve on (0: any free port).")
+@click.option("--host", default="127.0.0.1", show_default=True, help="Address to listen on.")
+@click.option("--no-browser", is_flag=True, help="Do not open the browser; just print the address.")
+@click.option("--keep-config", is_flag=True, help="Leave the configuration changed in the viewer on the camera.")
+def command(url: str, port: int, host: str, no_browser: bool, keep_config: bool) -> int:
+    """Live viewer: left, right and disparity (colour bar in metres), depth and 3-D point under the
+    cursor, frame rate, drops, link and device counters, the configuration with the device's ranges,
+    trigger, start/stop, snapshots (PNG, PLY). The first line printed is the viewer's address. Runs
+    until Ctrl-C; then the camera's configuration is put back as found unless --keep-config."""
+    with stereocam.open(url, timeout=2.0) as cam, \
+            (contextlib.nullcontext() if keep_config else preserved_configuration(cam)):
+        session = ViewerSession(cam)
+        try:
+            server = ViewerServer(session, host, port)
+        except OSError as exc:
+            session.close()
+            raise click.BadParameter(f"cannot listen on {host}:{port}: {exc.strerror or exc}",
+                                     param_hint="'--port'") from exc
+        click.echo(server.url)
+        if not no_browser:
+            threading.Thread(target=webbrowser.open, args=(server.url,), daemon=True).start()
+        signal.signal(signal.SIGTERM, _interrupt)  # a service manager's stop is a Ctrl-C too
+        try:
+            cam.start()
+            server.serve_forever(poll_interval=0.2)
+        except KeyboardInterrupt:
+            click.echo("viewer stopped", err=True)
+        finally:
+            server.server_close()
+            server.session.close()
+    return 0

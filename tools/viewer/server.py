@@ -1,0 +1,143 @@
+"""The viewer's HTTP server: the static page, the newest JPEG per plane, JSON for state and actions.
+
+GET  /                      the page (static/index.html, viewer.js, viewer.css)
+GET  /api/state             identity, rates, host and device counters, configuration with ranges
+GET  /api/frame?after=SEQ   the newest frame's metadata (waits up to 1 s for one newer than SEQ)
+GET  /image/PLANE.jpg       the newest frame's left, right or colour-mapped disparity as JPEG
+GET  /api/point?x=&y=       disparity, depth and 3-D point under the cursor
+POST /api/config            {"name": value, ...}; a refusal answers 409 with the device's reason
+POST /api/start|stop|trigger
+GET  /snapshot/NAME         the newest frame as left.png, right.png, disparity.png (depth colour bar)
+                            or points.ply, as a download
+"""
+from __future__ import annotations
+
+import json
+import logging
+import tempfile
+from http import HTTPStatus
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from importlib import resources
+from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qs, urlsplit
+
+import stereocam
+from stereocam.tools.capture import save_frame
+
+from .session import ViewerSession
+
+STATIC = {"/": ("index.html", "text/html; charset=utf-8"), "/viewer.js": ("viewer.js", "text/javascript"),
+          "/viewer.css": ("viewer.css", "text/css")}
+SNAPSHOTS = {"left.png": "left", "right.png": "right", "disparity.png": "disparity_png", "points.ply": "ply"}
+_log = logging.getLogger(__name__)
+
+
+class ViewerServer(ThreadingHTTPServer):
+    daemon_threads = True
+
+    def __init__(self, session: ViewerSession, host: str = "127.0.0.1", port: int = 0):
+        self.session = session
+        super().__init__((host, port), _Handler)
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        """A browser that closed a connection mid-answer is normal; anything else is logged."""
+        _log.debug("request from %s failed", client_address, exc_info=True)
+
+    @property
+    def url(self) -> str:
+        host, port = self.server_address[:2]
+        return f"http://{host}:{port}/"
+
+
+class _Handler(BaseHTTPRequestHandler):
+    server: ViewerServer
+    protocol_version = "HTTP/1.1"
+
+    def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 - the base class's name
+        _log.debug("%s %s", self.address_string(), format % args)
+
+    def _send(self, body: bytes, ctype: str, status: int = 200, headers: dict[str, str] | None = None) -> None:
+        self.send_response(status)
+        self.send_header("Content-Type", ctype)
+        self.send_header("Content-Length", str(len(body)))
+        self.send_header("Cache-Control", "no-store")
+        for k, v in (headers or {}).items():
+            self.send_header(k, v)
+        self.end_headers()
+        self.wfile.write(body)
+
+    def _json(self, doc: Any, status: int = 200) -> None:
+        self._send(json.dumps(doc).encode(), "application/json", status)
+
+    def do_GET(self) -> None:  # noqa: N802 - http.server's name
+        url = urlsplit(self.path)
+        query = {k: v[0] for k, v in parse_qs(url.query).items()}
+        session = self.server.session
+        try:
+            if url.path in STATIC:
+                name, ctype = STATIC[url.path]
+                self._send(resources.files(__package__).joinpath("static", name).read_bytes(), ctype)
+            elif url.path == "/api/state":
+                self._json(session.state())
+            elif url.path == "/api/frame":
+                frame = session.newest(int(query.get("after", -1)), wait=1.0)
+                self._json(None if frame is None else session.frame_meta(frame))
+            elif url.path.startswith("/image/") and url.path.endswith(".jpg"):
+                got = session.jpeg(url.path[len("/image/"):-4])
+                if got is None:
+                    self._json({"error": "no such image in the newest frame"}, HTTPStatus.NOT_FOUND)
+                else:
+                    self._send(got[1], "image/jpeg", headers={"X-Sequence": str(got[0])})
+            elif url.path == "/api/point":
+                self._json(session.point(int(query["x"]), int(query["y"])))
+            elif url.path.startswith("/snapshot/") and url.path[len("/snapshot/"):] in SNAPSHOTS:
+                self._snapshot(url.path[len("/snapshot/"):])
+            else:
+                self._json({"error": f"no such page {url.path}"}, HTTPStatus.NOT_FOUND)
+        except (KeyError, ValueError) as exc:
+            self._json({"error": f"bad request: {exc}"}, HTTPStatus.BAD_REQUEST)
+        except stereocam.StereoCamError as exc:
+            self._json({"error": str(exc)}, HTTPStatus.BAD_GATEWAY)
+
+    def _snapshot(self, name: str) -> None:
+        frame = self.server.session.newest(wait=0)
+        if frame is None:
+            self._json({"error": "no frame yet"}, HTTPStatus.NOT_FOUND)
+            return
+        with tempfile.TemporaryDirectory() as tmp:
+            paths = save_frame(frame, Path(tmp), "snapshot")
+            key = SNAPSHOTS[name]
+            if key not in paths:
+                self._json({"error": f"the newest frame has no {name}"}, HTTPStatus.NOT_FOUND)
+                return
+            body = paths[key].read_bytes()
+        ctype = "image/png" if name.endswith(".png") else "application/octet-stream"
+        self._send(body, ctype, headers={"Content-Disposition":
+                                         f'attachment; filename="frame{frame.sequence:06d}_{name}"'})
+
+    def do_POST(self) -> None:  # noqa: N802 - http.server's name
+        cam = self.server.session.cam
+        path = urlsplit(self.path).path
+        try:
+            length = int(self.headers.get("Content-Length", 0))
+            body = json.loads(self.rfile.read(length) or b"{}")
+            if path == "/api/config":
+                self._json({"config": cam.configure(**{k: int(v) for k, v in body.items()})})
+            elif path == "/api/start":
+                cam.start()
+                self._json({"streaming": True})
+            elif path == "/api/stop":
+                cam.stop()
+                self._json({"streaming": False})
+            elif path == "/api/trigger":
+                self._json({"trigger_id": cam.trigger()})
+            else:
+                self._json({"error": f"no such action {path}"}, HTTPStatus.NOT_FOUND)
+        except stereocam.DeviceError as exc:
+            self._json({"error": str(exc), "reason": exc.device_message, "param": exc.param,
+                        "code": getattr(exc.code, "name", exc.code)}, HTTPStatus.CONFLICT)
+        except (stereocam.ConfigError, ValueError, TypeError) as exc:
+            self._json({"error": str(exc), "reason": str(exc)}, HTTPStatus.BAD_REQUEST)
+        except stereocam.StereoCamError as exc:
+            self._json({"error": str(exc), "reason": str(exc)}, HTTPStatus.BAD_GATEWAY)

@@ -1,0 +1,142 @@
+"""The viewer's side of the camera: a grab thread that keeps only the newest frame, JPEGs made on
+demand (never queued), the point under the cursor, rates and counters."""
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from dataclasses import asdict
+from typing import Any
+
+import cv2
+import numpy as np
+
+import stereocam
+from stereocam.tools.info import value_name
+from stereocam.tools.pictures import colorize, depth_ticks, disparity_range
+
+PLANES = ("left", "right", "disparity")
+JPEG_QUALITY = 85
+
+
+def turbo_stops(n: int = 16) -> list[str]:
+    """The colour map the disparity image uses, as CSS colours from near (max disparity) to far."""
+    lut = cv2.applyColorMap(np.linspace(255, 0, n).astype(np.uint8).reshape(-1, 1), cv2.COLORMAP_TURBO)
+    return [f"rgb({r},{g},{b})" for b, g, r in lut[:, 0, :]]
+
+
+class ViewerSession:
+    """Owns the grab thread; every method is safe to call from any HTTP handler thread."""
+
+    def __init__(self, cam: stereocam.Camera):
+        self.cam = cam
+        self._cond = threading.Condition()
+        self._frame: stereocam.Frame | None = None
+        self._jpegs: dict[tuple[int, str], bytes] = {}
+        self._arrivals: collections.deque[float] = collections.deque(maxlen=60)
+        self.skipped = 0  # frames replaced by a newer one before anybody looked: never a backlog
+        self.error: str | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._grab, name="stereocam-viewer-grab", daemon=True)
+        self._thread.start()
+
+    # -- frames ---------------------------------------------------------------------------------
+    def _grab(self) -> None:
+        while not self._stop.is_set():
+            try:
+                frame = self.cam.get_frame(timeout=0.1)
+                while (newer := self.cam.try_get_frame()) is not None:  # only the newest counts
+                    frame, self.skipped = newer, self.skipped + 1
+            except stereocam.CameraTimeoutError:
+                continue
+            except stereocam.StereoCamError as exc:
+                self.error = str(exc)
+                self._stop.wait(0.5)
+                continue
+            self.error = None
+            with self._cond:
+                if self._frame is not None and (self._frame.sequence, "left") not in self._jpegs:
+                    self.skipped += 1
+                self._frame = frame
+                self._jpegs = {k: v for k, v in self._jpegs.items() if k[0] == frame.sequence}
+                self._arrivals.append(time.monotonic())
+                self._cond.notify_all()
+
+    def newest(self, after: int = -1, wait: float = 1.0) -> stereocam.Frame | None:
+        """The newest frame, waiting up to ``wait`` seconds for one newer than ``after``."""
+        deadline = time.monotonic() + wait
+        with self._cond:
+            while (self._frame is None or self._frame.sequence <= after) and time.monotonic() < deadline:
+                self._cond.wait(max(deadline - time.monotonic(), 0.0))
+            return self._frame
+
+    def jpeg(self, plane: str) -> tuple[int, bytes] | None:
+        """(sequence, JPEG) of the newest frame's ``plane``; None if there is no such image."""
+        frame = self.newest(wait=0)
+        if frame is None or plane not in PLANES:
+            return None
+        key = (frame.sequence, plane)
+        with self._cond:
+            cached = self._jpegs.get(key)
+        if cached is None:
+            img = self._image(frame, plane)
+            if img is None:
+                return None
+            cached = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])[1].tobytes()
+            with self._cond:
+                if self._frame is not None and self._frame.sequence == frame.sequence:
+                    self._jpegs[key] = cached
+        return frame.sequence, cached
+
+    @staticmethod
+    def _image(frame: stereocam.Frame, plane: str) -> np.ndarray | None:
+        if plane == "disparity":
+            return colorize(frame) if frame.disparity is not None else None
+        return getattr(frame, plane)
+
+    def fps(self) -> float:
+        with self._cond:
+            t = list(self._arrivals)
+        recent = [x for x in t if x > time.monotonic() - 2.0]
+        return (len(recent) - 1) / (recent[-1] - recent[0]) if len(recent) > 2 and recent[-1] > recent[0] else 0.0
+
+    # -- what the page shows --------------------------------------------------------------------
+    def frame_meta(self, frame: stereocam.Frame) -> dict[str, Any]:
+        meta: dict[str, Any] = {"sequence": frame.sequence, "width": frame.width, "height": frame.height,
+                                "rectified": frame.rectified, "status": frame.status.value,
+                                "planes": [p for p in PLANES if getattr(frame, p) is not None]}
+        if frame.disparity is not None:
+            lo, hi = disparity_range(frame)
+            meta["colorbar"] = {"near_to_far": turbo_stops(),
+                                "ticks": [{"at": (hi - d) / (hi - lo), "metres": z} for d, z in depth_ticks(frame)]}
+        return meta
+
+    def point(self, x: int, y: int) -> dict[str, Any]:
+        """Disparity, depth and the 3-D point (metres, left camera frame) at pixel (x, y) of the newest frame."""
+        frame = self.newest(wait=0)
+        if frame is None or frame.disparity is None or not (0 <= x < frame.width and 0 <= y < frame.height):
+            return {"x": x, "y": y, "valid": False}
+        d = float(frame.disparity_px()[y, x])
+        g = frame.geometry
+        if not d > 0:
+            return {"x": x, "y": y, "sequence": frame.sequence, "valid": False}
+        z = g.focal_px * g.baseline_m / d
+        return {"x": x, "y": y, "sequence": frame.sequence, "valid": True, "disparity_px": d, "depth_m": z,
+                "point_m": [(x - g.cx) * z / g.focal_px, (y - g.cy) * z / g.focal_px, z]}
+
+    def state(self) -> dict[str, Any]:
+        cam = self.cam
+        info = cam.info()
+        config = cam.config()
+        status = cam.last_status
+        return {
+            "url": cam.url, "model": info.model, "serial": info.serial, "firmware": info.firmware_version,
+            "streaming": cam.streaming, "fps": round(self.fps(), 1), "viewer_skipped": self.skipped,
+            "error": self.error, "host": cam.stats, "device": dict(status.counters) if status else {},
+            "config": config, "config_names": {k: value_name(k, v) for k, v in config.items()},
+            "options": [{**asdict(p), "value": config.get(p.name)} for p in cam.options() if p.name in config],
+        }
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2)
