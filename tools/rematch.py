@@ -12,6 +12,7 @@ uses a running Dask scheduler (its workers need stereocam installed and must see
 from __future__ import annotations
 
 import argparse
+import logging
 import time
 from pathlib import Path
 
@@ -31,6 +32,7 @@ def _client(scheduler: str | None, workers: int):
     if scheduler:
         return Client(scheduler, timeout="10s"), None
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.WARNING,  # the cluster's own INFO lines are not ours to print
                            env={"NUMBA_NUM_THREADS": "1"})  # one core per worker: scale by processes
     return Client(cluster), cluster
 
