@@ -1,5 +1,7 @@
 """``python -m stereocam.device_sim --serve pty|tcp:HOST:PORT [--scene board]``: run a simulated camera in its own process.
 
+With ``--replay FILE`` the unit plays a recording back (``--fast``, ``--loop``, ``--start N``; see replay.py).
+
 The first line on stdout is the URL a host opens. Runs until SIGINT or SIGTERM, then exits 0.
 ``--trigger-line NAME`` wires the unit's trigger input to a line shared by the simulators on this
 machine; ``--trigger-master FPS`` makes this unit drive that line at FPS (timed by its own
@@ -49,6 +51,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--trigger-line", metavar="NAME", help="join the machine-wide trigger line NAME")
     ap.add_argument("--trigger-master", type=float, metavar="FPS", help="drive the trigger line at FPS")
     ap.add_argument("--truth-log", metavar="PATH", help="append each exposure's true instant to PATH")
+    ap.add_argument("--replay", default=None, metavar="FILE", help="play this recording back as the unit")
+    ap.add_argument("--fast", action="store_true", help="replay as fast as the host reads (default: recorded speed)")
+    ap.add_argument("--loop", action="store_true", help="replay in a loop (default: once)")
+    ap.add_argument("--start", type=int, default=0, help="replay from this frame index")
     ap.add_argument("--vendor-key", type=Path, default=None,
                     help="PEM Ed25519 key the factory provisions and signs the shipped image with "
                          "(default: the simulator's development key)")
@@ -60,7 +66,13 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         raise SystemExit(f"--trigger-line: {exc}") from exc
     key = load_private_key(args.vendor_key.read_bytes()) if args.vendor_key else DEV_SIGNING_KEY
-    sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene, trigger_line=line, vendor_key=key)
+    source = None
+    if args.replay:
+        from .replay import ReplaySource
+
+        source = ReplaySource(args.replay, realtime=not args.fast, loop=args.loop, start=args.start)
+    sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene, trigger_line=line, vendor_key=key,
+                          source=source)
     truth_log = open(args.truth_log, "a", buffering=1) if args.truth_log else None  # noqa: SIM115
     if truth_log is not None:
         sim.truth.on_exposure = lambda seq, t: truth_log.write(f"{seq} {t!r}\n")

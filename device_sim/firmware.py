@@ -10,6 +10,7 @@ from __future__ import annotations
 import collections
 import tempfile
 import threading
+from functools import partial
 from pathlib import Path
 from typing import Callable
 
@@ -17,6 +18,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.params import BY_NAME
 
 from . import registry
 from .boot.boot_stage import Booted, BootStage
@@ -41,6 +43,7 @@ from .link_layer.device_link import DeviceLink, Sink
 from .link_layer.dispatcher import Dispatcher
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
 from .pipeline.capture_pipeline import CapturePipeline
+from .replay import ReplayEngine, ReplaySource
 from .rig.scene import Scene
 from .rig.sensor import SensorRig
 from .trigger import Line, TriggerInput
@@ -52,17 +55,20 @@ class SimulatedCamera:
     def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: Line | None = None,
                  flash_path: str | Path | None = None, factory_calibrated: bool = True,
                  scene: Scene | str = Scene.LAB, vendor_key: Ed25519PrivateKey = DEV_SIGNING_KEY,
-                 flash_size: int = FLASH_SIZE):
+                 flash_size: int = FLASH_SIZE, source: ReplaySource | None = None):
         """``scene``: what the rig looks at ("lab", "wall", "board"; a simulator setting, changeable
         at run time through ``scene``, never a device parameter). ``flash_path``: the file behind
         this unit's flash (kept across runs); None: a private temporary file. ``factory_calibrated``:
         the unit left the factory with its true calibration stored (False: fresh from assembly,
         streams raw images until calibrated). ``vendor_key``: the firmware-signing key whose public half
-        the factory line provisions into a blank unit (and signs its shipped image with)."""
+        the factory line provisions into a blank unit (and signs its shipped image with). ``source``: a
+        recording that stands in for the sensor rig (replay.py); the unit is then the recorded one:
+        identity, calibration, configuration."""
         self.seed = seed
-        self.serial = serial or f"SIM{seed:05d}"
-        self.model = MODEL
-        self.clock = DeviceClock(seed)
+        self._source = source
+        self.serial = source.serial if source else serial or f"SIM{seed:05d}"
+        self.model = source.model if source else MODEL
+        self.clock = source.clock if source else DeviceClock(seed)
         self.config = ConfigStore()
         self.counters: collections.Counter[str] = collections.Counter()
         self._truth_cal = true_calibration(seed)
@@ -72,7 +78,9 @@ class SimulatedCamera:
             self._tmpdir = tempfile.TemporaryDirectory(prefix="stereocam-flash-")
             flash_path = Path(self._tmpdir.name) / f"{self.serial}.flash"
         self.flash = NorFlash(flash_path, flash_size)
-        self.calibration = CalibrationService(self.flash, self._truth_cal, factory_calibrated)
+        stored = source.calibration if source else self._truth_cal
+        self.calibration = CalibrationService(self.flash, stored or self._truth_cal,
+                                              factory_calibrated and stored is not None)
         self.layout = FlashLayout(self.flash)
         provision(self.layout, vendor_key, FACTORY_BUILD, MODEL)
         self._power_lock = threading.RLock()
@@ -84,11 +92,12 @@ class SimulatedCamera:
 
         # the engine's callbacks reach the pipeline and the watchdog, which themselves need the engine
         self.dispatcher = Dispatcher(self.counters)
-        self.engine = CaptureEngine(lambda req: self.pipeline.produce(req), lambda: self.heartbeat.watchdog())
+        self.engine = (partial(ReplayEngine, source) if source else CaptureEngine)(
+            lambda req: self.pipeline.produce(req), lambda: self.heartbeat.watchdog())
         self.repair = FrameRepair(lambda wire: self.link.send(wire, lambda: True))
         self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset)
         self.pipeline = CapturePipeline(seed, self.rig, self.config, self.calibration, self.clock, self.truth,
-                                        self._send_capture_part, self.counters, self.repair)
+                                        self._send_capture_part, self.counters, self.repair, source)
         self.scene = scene
         self.heartbeat = HeartbeatHandlers(self.clock, self.config, self.engine, self.link, self.counters)
         self.streaming = StreamingHandlers(self.config, self.engine, self.counters)
@@ -111,10 +120,12 @@ class SimulatedCamera:
         slots, states = Slots(self.layout, key, MODEL), BootStateStore(self.layout)
         booted = BootStage(slots, states).boot(recovery)
         build = booted.image.build if booted.image else RECOVERY_BUILD
-        self.firmware_version = build.version
+        self.firmware_version = self._source.firmware_version if self._source else build.version
         self.config.reset(build.parameter_defaults)
+        if self._source:  # a replayed unit starts in the configuration it was recorded with
+            self.config.apply({BY_NAME[k].pid: v for k, v in self._source.config.items() if k in BY_NAME}, False)
         self.update = UpdateService(slots, states, booted)
-        identity = Identity(self.model, self.serial, build.version, build.protocol_minor, build.capabilities)
+        identity = Identity(self.model, self.serial, self.firmware_version, build.protocol_minor, build.capabilities)
         groups: list[dict] = [InfoHandler(identity, self.calibration).handlers(), self.heartbeat.handlers()]
         if booted.image is None:
             groups.append({m.MsgType.STOP: self.streaming.handlers()[m.MsgType.STOP]})
@@ -245,6 +256,8 @@ class SimulatedCamera:
         self.link.close()
         if self._tmpdir is not None:
             self._tmpdir.cleanup()
+        if self.pipeline.source is not None:
+            self.pipeline.source.close()
 
     def __enter__(self) -> "SimulatedCamera":
         return self

@@ -385,6 +385,12 @@ class Camera:
         frame.geometry, frame.calibration = geometry, cal
         return frame
 
+    def record(self, path: str, *, frames: int | None = None, seconds: float | None = None, **options):
+        """Record to an MCAP file (ROS 2 profile) until ``frames`` or ``seconds``; see stereocam.recording."""
+        from .recording import record
+
+        return record(self, path, frames=frames, seconds=seconds, **options)
+
     def __iter__(self) -> Iterator[Frame]:
         """Frames as they come while streaming. Ends when the stream is stopped (``stop()`` from any
         thread, ``close()``) and the queued frames are taken; raises StreamStalledError (a

@@ -100,6 +100,7 @@ def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty"
 
 
 MODES = ("protocol", "decoder", "transport", "usb", "matching", "calibration", "calib-real", "sync", "firmware",
+         "record", "rematch",
          "all")
 
 
@@ -122,6 +123,8 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
     calib-real   the offline tool on real calibration sets against OpenCV's all-pairs solution
     sync         three heads on one trigger line: skew within matched sets, clock-map error vs truth
     firmware     a 2 MiB signed image installed per transport, and one update's state trace
+    record       the recorder's ceiling (MB/s), a live recording's drops, seek time by frame index
+    rematch      stereocam rematch frames/s with 1 and 2 local Dask workers
     all          protocol, transport, matching and calibration (default)
 
     Arguments after WHAT that this command does not know go to the usb or matching bench."""
@@ -138,6 +141,10 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
         importlib.import_module("stereocam.tools.bench_firmware").main(rest)
     if what == "calib-real":
         importlib.import_module("stereocam.tools.bench_calib_real").main(rest)
+    if what == "record":
+        importlib.import_module("stereocam.tools.bench_record").main(rest + ["--seconds", str(seconds)])
+    if what == "rematch":
+        importlib.import_module("stereocam.tools.bench_rematch").main(rest)
     if what == "usb":
         importlib.import_module("stereocam.tools.bench_usb").main(rest)
     if what in ("matching", "all"):

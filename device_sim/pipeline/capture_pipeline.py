@@ -19,6 +19,7 @@ from ..handlers.frame_repair import FrameRepair
 from ..matching import warm_up as matching_warm_up
 from ..rig.scene import Scene
 from ..rig.sensor import Geometry, SensorRig
+from ..replay import ReplaySource
 from .capture_engine import CaptureRequest
 from .stereo import StereoStage
 
@@ -28,7 +29,8 @@ Send = Callable[[CaptureRequest, bytes], bool]  # one message of a capture; Fals
 class CapturePipeline:
     def __init__(self, seed: int, rig: SensorRig, store: ConfigStore, calibration: CalibrationService,
                  clock: DeviceClock, truth: TruthLog, send: Send, counters: collections.Counter[str],
-                 repair: FrameRepair):
+                 repair: FrameRepair, source: ReplaySource | None = None):
+        """``source``: a recording whose captures replace the rig's (replay.py)."""
         self.scene = Scene.LAB  # what the rig looks at (a simulator setting)
         self._seed = seed
         self._rig = rig
@@ -39,6 +41,7 @@ class CapturePipeline:
         self._send = send
         self._counters = counters
         self._repair = repair  # the link's chunk size, and recent captures kept for FRAME_RESEND
+        self.source = source
         self._stereo = StereoStage()
         self._view_rays: dict[Geometry, np.ndarray] = {}
 
@@ -54,6 +57,9 @@ class CapturePipeline:
 
     def produce(self, req: CaptureRequest) -> None:
         cfg = self._store.snapshot()
+        if self.source is not None:  # replay: the recorded capture, re-matched if the matching changed
+            replayed = self.source.capture(req, cfg, self._stereo.disparity)
+            return self._send_all(req, replayed.begin, replayed.planes)
         w, h = cfg["width"], cfg["height"]
         self._rig.set_format(w, h)
         t = req.time - self._clock.boot
@@ -83,7 +89,9 @@ class CapturePipeline:
             req.sequence & 0xFFFFFFFF, req.trigger_id & 0xFFFFFFFF, self._clock.at(req.time), cfg["exposure_us"],
             cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
             cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, calib_id, focal, cx, cy, baseline)
-        images = {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: disp}
+        self._send_all(req, begin, {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: disp})
+
+    def _send_all(self, req: CaptureRequest, begin: m.FrameBegin, images: dict[Output, np.ndarray | None]) -> None:
         raw = plane_bytes(begin, images, copy=True)  # kept unchanged for FRAME_RESEND
         self._repair.remember(req.sequence, {int(p): v for p, v in raw.items()})
         for msg in capture_messages(begin, raw, self._repair.chunk):
