@@ -26,11 +26,11 @@ import numpy as np
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.errors import ConfigError
-from stereocam.protocol.params import Output, TriggerMode
+from stereocam.protocol.params import Output, TriggerMode, defaults
 from stereocam.recording.reader import RecordedCapture, Recording
 
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
-from .pipeline.stereo import match_params
+from .pipeline.stereo import params_from_config
 
 Matcher = Callable[[dict, np.ndarray, np.ndarray], np.ndarray]
 
@@ -121,7 +121,7 @@ class ReplaySource:
         i = cap.info
         wanted = Output(cfg["outputs"]) & Output(i.planes | (Output.DISPARITY if i.rectified else 0))
         planes = {Output.LEFT: cap.left, Output.RIGHT: cap.right}
-        same = match_params(cfg) == match_params(self.config)  # the recorded matching
+        same = params_from_config(cfg) == params_from_config({**defaults(), **self.config})  # the recorded matching
         if Output.DISPARITY in wanted and same and cap.disparity is not None:
             planes[Output.DISPARITY] = cap.disparity
             fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)
@@ -163,7 +163,7 @@ class ReplayEngine(CaptureEngine):
                 return None
             epoch = self.epoch
         req = self.source.next_request(epoch)
-        if req is None:  # played once to the end: the stream ends, as a camera that stops
-            with self._cond:
-                self._streaming = False
+        if req is None:  # played once to the end: the stream stays started and sends nothing more
+            with self._cond:  # (were it stopped, a host would rightly restart it: SPEC §9)
+                self._cond.wait(0.05)
         return req

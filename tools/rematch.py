@@ -16,7 +16,7 @@ import logging
 import time
 from pathlib import Path
 
-from stereocam.device_sim.pipeline.stereo import match_params
+from stereocam.device_sim.pipeline.stereo import params_from_config
 from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.params import BY_NAME
 from stereocam.recording.reader import Recording
@@ -51,7 +51,7 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
     for path in recordings:
         with Recording(path) as rec:  # a bad file or a bad combination fails here, before any work
             try:
-                match_params(rec.config | overrides)
+                params_from_config(rec.config | overrides)
             except ValueError as exc:
                 raise ConfigError(f"{path}: {exc}") from exc
     out.mkdir(parents=True, exist_ok=True)

@@ -17,7 +17,7 @@ from mcap.records import Chunk, MessageIndex
 from mcap.stream_reader import StreamReader
 
 from stereocam.device_sim.matching import Matcher
-from stereocam.device_sim.pipeline.stereo import match_params
+from stereocam.device_sim.pipeline.stereo import params_from_config
 from stereocam.frames import DisparityFormat
 from stereocam.recording import LinkCounters, Recorder
 from stereocam.recording.mcapwriter import ChunkedWriter
@@ -47,7 +47,7 @@ def rematch_range(path: str, start: int, stop: int, overrides: dict[str, int], p
     tmp = _atomic(out)
     with Recording(path) as rec:
         cfg = rec.config | overrides
-        params = match_params(cfg)
+        params = params_from_config(cfg)
         fmt = DisparityFormat(16, params.min_disparity, params.num_disparities, params.invalid_value)
         matcher: Matcher | None = None
         unit = replace(rec.unit, config=cfg)

@@ -12,7 +12,7 @@ import pytest
 
 import stereocam
 from stereocam.device_sim.matching import Matcher
-from stereocam.device_sim.pipeline.stereo import match_params
+from stereocam.device_sim.pipeline.stereo import params_from_config
 from stereocam.recording.reader import Recording
 from stereocam.tools.bench_record import synthetic_recording
 
@@ -83,7 +83,7 @@ def test_other_matching_config_rematches_on_board(recording):
     assert not np.array_equal(f.disparity, c.disparity)
     with Recording(path) as rec:
         cfg = rec.config | {"block_size": 21}
-    params = match_params(cfg)
+    params = params_from_config(cfg)
     expected = Matcher(c.left.shape, params).match(c.left, c.right)
     assert np.array_equal(f.disparity, expected)
 

@@ -16,7 +16,7 @@ from rosbags.typesys import Stores, get_typestore
 
 import stereocam
 from stereocam.device_sim.matching import Matcher
-from stereocam.device_sim.pipeline.stereo import match_params
+from stereocam.device_sim.pipeline.stereo import params_from_config
 from stereocam.recording.reader import Recording
 from stereocam.tools import cli
 from stereocam.tools.rematch import rematch
@@ -38,7 +38,7 @@ def _check(source, out, block_size):
         assert len(b) == len(a) == N and np.array_equal(a.log_times, b.log_times)
         assert b.config["block_size"] == block_size and b.metadata["stereocam.rematch"]["algorithm"] == "bm"
         assert b.device == a.device and b.calibration.body == a.calibration.body
-        matcher = Matcher((240, 320), match_params(b.config))
+        matcher = Matcher((240, 320), params_from_config(b.config))
         for ca, cb in zip(a.captures(), b.captures(), strict=True):
             assert cb.info.sequence == ca.info.sequence and cb.info.device_time_us == ca.info.device_time_us
             assert cb.left.tobytes() == ca.left.tobytes() and cb.right.tobytes() == ca.right.tobytes()
