@@ -42,7 +42,9 @@ def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="stereocam sim", description="Serve a simulated camera over a pty or TCP "
                                  "until SIGINT or SIGTERM (also: python -m stereocam.device_sim). The first line "
-                                 "printed is the URL to open; stereocam list shows it while it runs.")
+                                 "printed is the URL to open; stereocam list shows it while it runs.",
+                                 epilog="Exit codes: 0 stopped by SIGINT/SIGTERM; 2 bad usage (a --serve, --scene, "
+                                        "--trigger-line or --vendor-key that cannot be used).")
     ap.add_argument("--serve", required=True, metavar="pty|tcp:HOST:PORT")
     ap.add_argument("--seed", type=int, default=0, help="which simulated unit")
     ap.add_argument("--serial", default=None, help="serial number (default derived from the seed)")

@@ -106,7 +106,9 @@ def _range(text: str) -> tuple[float, float]:
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="stereocam calibrate", description=__doc__.splitlines()[0],
+    doc = __doc__.replace("``", "")
+    ap = argparse.ArgumentParser(prog="stereocam calibrate", description=doc.splitlines()[0],
+                                 epilog="Exit codes: " + doc[doc.index("Exit status:") + len("Exit status:"):].strip(),
                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     ap.add_argument("url", nargs="?", help="camera to calibrate (device mode)")
     ap.add_argument("--images", type=Path, help="folder of left<N>/right<N> images (offline mode)")
@@ -116,7 +118,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--square-size", type=float, default=None,
                     help="chessboard square side in metres (required offline; device default 0.03)")
     ap.add_argument("--out", type=Path, required=True, help="output folder")
-    ap.add_argument("--target", choices=["user", "factory"], default="user", help="device record to write")
+    ap.add_argument("--target", choices=["user", "factory"], default="user",
+                    help="device record to write: user (any unit), or factory (only a unit fresh from assembly: "
+                         "once written the factory record is write-protected and the unit refuses, exit 5)")
     ap.add_argument("--pairs", type=int, default=200, help="device mode: most pairs to capture")
     ap.add_argument("--size", type=_size, default=None, metavar="WxH",
                     help="device mode: capture format (default the full sensor)")

@@ -6,6 +6,8 @@ calibration.json of the stored record. Without --size: every size the unit offer
 """
 from __future__ import annotations
 
+from stereocam.tools.exit_codes import EXIT_CODES
+
 import argparse
 import json
 import sys
@@ -24,7 +26,8 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam calibration", description=__doc__.splitlines()[0],
+    ap = argparse.ArgumentParser(prog="stereocam calibration", description=__doc__.splitlines()[0].replace("``", ""),
+                                 epilog=EXIT_CODES,
                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     sub = ap.add_subparsers(dest="command", required=True)
     ex = sub.add_parser("export", help="write ROS camera_info files from the calibration stored on a unit")

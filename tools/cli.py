@@ -16,6 +16,8 @@ import click
 
 import stereocam
 
+from .exit_codes import EXIT_BROKEN_PIPE, EXIT_CAMERA, EXIT_CODES, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE  # noqa: F401
+
 COMMANDS: dict[str, tuple[str, str]] = {
     "view": ("stereocam.tools.viewer.command", "live viewer in the browser: images, disparity, depth, settings"),
     "list": ("stereocam.tools.list_devices", "list cameras: USB, serial ports, served and in-process simulators"),
@@ -36,10 +38,6 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 """name -> (module, one-line help). The module provides ``command`` or ``main(argv)``."""
 
-EXIT_OK, EXIT_CAMERA, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 0, 1, 2, 130, 141
-EXIT_CODES = """Exit codes: 0 success; 1 camera error (unreachable, refused, timed out); 2 bad usage or
-input (unknown option, a path that cannot be written); 3-5 calibrate's own (see its --help);
-130 interrupted (Ctrl-C); 141 output closed early (for example piped into head)."""
 
 _log = logging.getLogger("stereocam.cli")
 

@@ -7,6 +7,8 @@
 """
 from __future__ import annotations
 
+from stereocam.tools.exit_codes import EXIT_CODES
+
 import argparse
 from pathlib import Path
 
@@ -89,7 +91,8 @@ def status(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam firmware", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="stereocam firmware", description=__doc__.splitlines()[0].replace("``", ""),
+                                 epilog=EXIT_CODES)
     sub = ap.add_subparsers(dest="command", required=True)
     p = sub.add_parser("keygen", help="make an Ed25519 signing key pair")
     p.add_argument("--out", type=Path, required=True)

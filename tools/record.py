@@ -6,6 +6,8 @@ Extra ``--set name=value`` options configure the camera first (``--set width=128
 """
 from __future__ import annotations
 
+from stereocam.tools.exit_codes import EXIT_CODES
+
 import argparse
 import sys
 
@@ -22,7 +24,8 @@ def _setting(text: str) -> tuple[str, int]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam record", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="stereocam record", description=__doc__.splitlines()[0].replace("``", ""),
+                                 epilog=EXIT_CODES)
     ap.add_argument("url")
     ap.add_argument("--out", required=True, help="the .mcap file to write")
     limit = ap.add_mutually_exclusive_group(required=True)

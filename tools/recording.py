@@ -6,6 +6,8 @@ export  per frame: left/right PNG, disparity .npy (int16, disparity*16) and colo
 """
 from __future__ import annotations
 
+from stereocam.tools.exit_codes import EXIT_CODES
+
 import argparse
 from pathlib import Path
 
@@ -51,7 +53,8 @@ def export(path: Path, out: Path, start: int, stop: int | None) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam recording", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="stereocam recording", description=__doc__.splitlines()[0].replace("``", ""),
+                                 epilog=EXIT_CODES)
     sub = ap.add_subparsers(dest="what", required=True)
     sub.add_parser("info", help="what a recording holds").add_argument("file", type=Path)
     p = sub.add_parser("repair", help="rewrite a recording cut short with its summary and indexes")

@@ -11,6 +11,8 @@ uses a running Dask scheduler (its workers need stereocam installed and must see
 """
 from __future__ import annotations
 
+from stereocam.tools.exit_codes import EXIT_CODES
+
 import argparse
 import logging
 import time
@@ -87,7 +89,8 @@ def _join_after(done: list[tuple[int, float]], source: str, parts: list[str], ou
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam rematch", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="stereocam rematch", description=__doc__.splitlines()[0].replace("``", ""),
+                                 epilog=EXIT_CODES)
     ap.add_argument("recordings", nargs="+", type=Path)
     ap.add_argument("--out", type=Path, required=True, help="folder for the re-matched recordings")
     ap.add_argument("--algorithm", default="bm", help=f"matcher: {', '.join(tasks.ALGORITHMS)} (default bm)")

@@ -9,6 +9,8 @@ Exit status 1 on any crash, hang, corrupted frame or counters that do not add up
 """
 from __future__ import annotations
 
+from stereocam.tools.exit_codes import EXIT_CODES
+
 import argparse
 
 from .soak_parts import Report, fuzz_decoder, fuzz_device, stream_with_faults
@@ -29,7 +31,8 @@ def _failed(rep: Report) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam soak", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="stereocam soak", description=__doc__.splitlines()[0].replace("``", ""),
+                                 epilog=EXIT_CODES)
     ap.add_argument("url", nargs="?", default="sim://?seed=1")
     ap.add_argument("--decoder-inputs", type=int, default=1_000_000)
     ap.add_argument("--device-inputs", type=int, default=5_000)

@@ -15,7 +15,9 @@ from .runner import run_suite
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam conformance", description=__doc__.split("\n\n")[1])
+    ap = argparse.ArgumentParser(prog="stereocam conformance", description=__doc__.split("\n\n")[1],
+                                 epilog="Exit codes: 0 every applicable check passed; 1 a check failed or the "
+                                        "camera could not be reached; 2 bad usage.")
     ap.add_argument("url", help="camera URL (usb://?serial=..., socket://host:port, /dev/ttyACM0, ...)")
     ap.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML")
     ap.add_argument("--json", action="store_true", help="print the results as JSON instead of text")

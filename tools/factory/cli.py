@@ -7,6 +7,8 @@ as its length in bytes).
 """
 from __future__ import annotations
 
+from stereocam.tools.exit_codes import EXIT_CODES
+
 import argparse
 import csv
 import json
@@ -63,7 +65,8 @@ def write_csv(attempts: list[Attempt], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam factory", description=__doc__.splitlines()[0],
+    ap = argparse.ArgumentParser(prog="stereocam factory", description=__doc__.splitlines()[0].replace("``", ""),
+                                 epilog=EXIT_CODES,
                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     sub = ap.add_subparsers(dest="command", required=True)
     rep = sub.add_parser("report", help="yield and metric distributions per day and station")
