@@ -6,11 +6,11 @@ import sys
 
 import pytest
 
-from stereocam.tools import bench_sync, demo
+from stereocam.tools import bench_sync, cli
 
 
 def test_demo_with_three_heads_prints_sets_and_saves_each_head(tmp_path, capsys):
-    assert demo.main(["--heads", "3", "--seconds", "2", "--fps", "8", "--out", str(tmp_path)]) == 0
+    assert cli.main(["demo", "--heads", "3", "--seconds", "2", "--fps", "8", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     line = [ln for ln in out.splitlines() if ln.startswith("summary:")][0]
     fields = dict(kv.split("=") for kv in line.split()[1:] if "=" in kv)
