@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from stereocam.tools.calib_report import write_report
 from stereocam.tools.calib_coverage import PARAM_NAMES
@@ -22,10 +24,31 @@ def _bar(value: float, width: int = 10) -> str:
     return "#" * n + "-" * (width - n)
 
 
-def print_progress(p: Progress) -> None:
-    """One line per pair: its fate, the kept/held-out counts and the coverage bars."""
+def progress_line(p: Progress) -> str:
+    """One pair: its fate, the kept/held-out counts and the coverage bars."""
     bars = " ".join(f"{name} [{_bar(c)}]" for name, c in zip(PARAM_NAMES, p.coverage))
-    print(f"{p.view.label:<24} {p.view.status:<9} kept {p.kept:>2} held-out {p.held_out:>2}  {bars}", flush=True)
+    return f"{p.view.label:<24} {p.view.status:<9} kept {p.kept:>2} held-out {p.held_out:>2}  {bars}"
+
+
+class PairProgress:
+    """A bar with pairs done / total and the rate (tqdm, on stderr), and a line per pair above it
+    unless ``quiet``. Use as a context manager; call it with each Progress."""
+
+    def __init__(self, total: int, quiet: bool = False):
+        self._bar = tqdm(total=total, unit="pair", desc="calibration", file=sys.stderr)
+        self._quiet = quiet
+
+    def __call__(self, p: Progress) -> None:
+        if not self._quiet:
+            self._bar.write(progress_line(p), file=sys.stdout)
+        self._bar.set_postfix(kept=p.kept, held_out=p.held_out, refresh=False)
+        self._bar.update()
+
+    def __enter__(self) -> "PairProgress":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._bar.close()
 
 
 def print_summary(result: CalibrationResult) -> None:

@@ -51,7 +51,7 @@ import cv2
 import numpy as np
 
 from stereocam.tools.calib_boards import describe, parse_board
-from stereocam.tools.calib_outputs import print_progress, print_summary, write_outputs
+from stereocam.tools.calib_outputs import PairProgress, print_summary, write_outputs
 from stereocam.tools.camera_info import stream_sizes
 from stereocam.tools.factory.db import FactoryDB, FactoryDBError, default_url
 from stereocam.tools.factory.record import make_attempt, now_utc
@@ -152,7 +152,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--station", default=socket.gethostname(), help="station name in the factory record")
     ap.add_argument("--serial", default=None,
                     help="unit serial in the factory record (default: the camera's; offline the folder name)")
-    ap.add_argument("-q", "--quiet", action="store_true", help="no per-pair progress lines")
+    ap.add_argument("-q", "--quiet", action="store_true",
+                    help="no per-pair lines; only the progress bar (pairs done / total, rate) on stderr")
     return ap
 
 
@@ -230,8 +231,8 @@ def _offline(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, start
     try:
         pairs = find_pairs(args.images)
         labels = [f"{l.name}|{r.name}" for _, l, r in pairs]
-        result = calibrate_pairs(_load(pairs), args.board, config, labels, None if args.quiet else print_progress,
-                                 select=False)
+        with PairProgress(len(pairs), args.quiet) as progress:
+            result = calibrate_pairs(_load(pairs), args.board, config, labels, progress, select=False)
     except CalibrationError as exc:
         _record(db, args, serial, started, None, EXIT_NO_SOLUTION, str(exc), None)
         return _fail(EXIT_NO_SOLUTION, f"{exc} (nothing written)")
@@ -271,10 +272,10 @@ def _device_mode(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, s
         with stereocam.open(args.url, timeout=2.0) as cam:
             serial = args.serial or cam.info().serial
             sizes = stream_sizes((cam.info().sensor_width, cam.info().sensor_height))
-            code, result, verdict = calibrate_device(
-                cam, args.board, config, args.out, target=args.target,
-                pairs=args.pairs, size=args.size, write_outputs=save,
-                progress=None if args.quiet else print_progress)
+            with PairProgress(args.pairs, args.quiet) as progress:
+                code, result, verdict = calibrate_device(
+                    cam, args.board, config, args.out, target=args.target,
+                    pairs=args.pairs, size=args.size, write_outputs=save, progress=progress)
     except stereocam.StereoCamError as exc:
         _record(db, args, serial, started, None, 1, f"camera {args.url}: {exc}", None)
         return _fail(1, f"camera {args.url}: {exc}")

@@ -75,8 +75,12 @@ class CommandTable(click.Group):
         with formatter.section("Commands"):
             formatter.write_dl([(name, text) for name, (_, text) in COMMANDS.items()])
 
+    def resolve_command(self, ctx: click.Context, args: list[str]):
+        name, command, rest = super().resolve_command(ctx, args)
+        ctx.meta["stereocam.command"] = name  # for the error messages below
+        return name, command, rest
+
     def invoke(self, ctx: click.Context) -> Any:
-        name = ctx.protected_args[0] if ctx.protected_args else (ctx.args[0] if ctx.args else "")
         try:
             result = super().invoke(ctx)
             sys.stdout.flush()  # a closed pipe shows here, not as a traceback at exit
@@ -86,16 +90,21 @@ class CommandTable(click.Group):
             os.dup2(devnull, sys.stdout.fileno())
             raise click.exceptions.Exit(EXIT_BROKEN_PIPE) from None
         except (KeyboardInterrupt, click.Abort):
-            click.echo(f"stereocam {name}: interrupted", err=True)
+            click.echo(f"stereocam {_command(ctx)}: interrupted", err=True)
             raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
         except stereocam.StereoCamError as exc:
-            _log.debug("%s failed", name, exc_info=exc)
-            click.echo(f"stereocam {name}: error: {exc}", err=True)
+            _log.debug("%s failed", _command(ctx), exc_info=exc)
+            click.echo(f"stereocam {_command(ctx)}: error: {exc}", err=True)
             raise click.exceptions.Exit(EXIT_CAMERA) from None
         except OSError as exc:  # a path that cannot be read or written: the user's to fix
-            _log.debug("%s failed", name, exc_info=exc)
-            click.echo(f"stereocam {name}: error: {exc}", err=True)
+            _log.debug("%s failed", _command(ctx), exc_info=exc)
+            click.echo(f"stereocam {_command(ctx)}: error: {exc}", err=True)
             raise click.exceptions.Exit(EXIT_USAGE) from None
+
+
+def _command(ctx: click.Context) -> str:
+    """The subcommand being run (set by CommandTable.resolve_command)."""
+    return ctx.meta.get("stereocam.command", "")
 
 
 LOG_LEVELS = ("ERROR", "WARNING", "INFO", "DEBUG")

@@ -208,3 +208,23 @@ def test_solver_failure_is_a_calibration_error(pairs, monkeypatch) -> None:
     monkeypatch.setattr(cv2, "calibrateCameraExtended", broken)
     with pytest.raises(CalibrationError, match="solver failed on .* pairs: .*simulated"):
         calibrate_pairs(iter(pairs), BOARD)
+
+
+def test_offline_run_shows_pairs_done_of_total_even_when_quiet(tmp_path):
+    """Issue 14: progress with N/total and rate on stderr; -q keeps only the bar, never silence."""
+    import subprocess
+    import sys
+
+    from tests.support.paths import DATA
+
+    def run(*extra):
+        return subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "--images",
+                               str(DATA / "opencv_chessboard_pairs"), "--board", "9x6", "--square-size", "0.025",
+                               "--out", str(tmp_path / f"out{len(extra)}"), "--db", str(tmp_path / "f.sqlite"),
+                               *extra], capture_output=True, text=True, timeout=600)
+
+    loud, quiet = run(), run("-q")
+    assert loud.returncode == quiet.returncode == 0, loud.stderr + quiet.stderr
+    assert "13/13" in loud.stderr and "13/13" in quiet.stderr  # pairs done of total
+    assert "pair/s" in quiet.stderr or "s/pair" in quiet.stderr
+    assert loud.stdout.count(" kept ") == 13 and " kept " not in quiet.stdout
