@@ -1,4 +1,4 @@
-"""``python -m stereocam.device_sim --serve pty|tcp:HOST:PORT [--scene board]``: run a simulated camera in its own process.
+"""``python -m stereocam.device_sim --serve pty|tcp:HOST:PORT [--scene board] [--flash PATH]``: run a simulated camera in its own process.
 
 The first line on stdout is the URL a host opens. Runs until SIGINT or SIGTERM, then exits 0.
 """
@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from pathlib import Path
 
 from stereocam.transports.announced import announce
 
@@ -33,10 +34,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--serve", required=True, metavar="pty|tcp:HOST:PORT")
     ap.add_argument("--seed", type=int, default=0, help="which simulated unit")
     ap.add_argument("--serial", default=None, help="serial number (default derived from the seed)")
+    ap.add_argument("--flash", type=Path, default=None, metavar="PATH",
+                    help="file behind the unit's flash, kept across restarts (created erased if missing); "
+                         "default: a private file removed at exit")
     ap.add_argument("--scene", choices=[s.value for s in Scene], default=Scene.LAB.value,
                     help="what the rig looks at (board: the calibration fixture's chessboard)")
     args = ap.parse_args(argv)
-    sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene)
+    sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene, flash_path=args.flash)
     server = build_server(args.serve, sim)
 
     def stop(signum, frame):  # noqa: ARG001

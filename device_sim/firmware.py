@@ -8,7 +8,6 @@ the simulator's own controls (scene, ground truth), which never travel on the wi
 from __future__ import annotations
 
 import collections
-import tempfile
 from pathlib import Path
 
 from stereocam.protocol.calibration import StereoCalibration
@@ -29,6 +28,7 @@ from .pipeline.capture_engine import CaptureEngine, CaptureRequest
 from .pipeline.capture_pipeline import CapturePipeline
 from .rig.scene import Scene
 from .rig.sensor import SensorRig
+from .scratch_flash import ScratchFlash
 from .trigger import TriggerLine
 
 
@@ -40,7 +40,8 @@ class SimulatedCamera:
                  scene: Scene | str = Scene.LAB):
         """``scene``: what the rig looks at ("lab", "wall", "board"; a simulator setting, changeable
         at run time through ``scene``, never a device parameter). ``flash_path``: the file behind
-        this unit's flash (kept across runs); None: a private temporary file. ``factory_calibrated``:
+        this unit's flash (kept across runs); None: a private file removed at close (scratch_flash.py:
+a killed process's file is swept by the next simulator). ``factory_calibrated``:
         the unit left the factory with its true calibration stored (False: fresh from assembly,
         streams raw images until calibrated)."""
         self.seed = seed
@@ -52,10 +53,10 @@ class SimulatedCamera:
         self.counters: collections.Counter[str] = collections.Counter()
         self._truth_cal = true_calibration(seed)
         self.rig = SensorRig(seed, self._truth_cal)
-        self._tmpdir = None
+        self._scratch = None
         if flash_path is None:
-            self._tmpdir = tempfile.TemporaryDirectory(prefix="stereocam-flash-")
-            flash_path = Path(self._tmpdir.name) / f"{self.serial}.flash"
+            self._scratch = ScratchFlash(self.serial)
+            flash_path = self._scratch.path
         self.calibration = CalibrationService(flash_path, self._truth_cal, factory_calibrated)
         self.truth = TruthLog(self.rig)
 
@@ -128,8 +129,8 @@ class SimulatedCamera:
         if self.trigger_line is not None:
             self.trigger_line.detach(self.streaming.on_pulse)
         self.link.close()
-        if self._tmpdir is not None:
-            self._tmpdir.cleanup()
+        if self._scratch is not None:
+            self._scratch.cleanup()
 
     def __enter__(self) -> "SimulatedCamera":
         return self
