@@ -57,20 +57,32 @@ class CrossRule:
     why: Callable[[Mapping[str, int]], str]
 
 
+def _largest_disparity(c: Mapping[str, int]) -> int:
+    return c["min_disparity"] + c["num_disparities"] - 1
+
+
+def _no_valid_column(c: Mapping[str, int]) -> bool:
+    """The block matcher's geometry (SPEC §5.2 rule 3): the columns it can compute, shifted by the
+    largest disparity on the left and by the most negative one on the right, must leave at least
+    one column whose whole window (block_size/2 either side) lies in the image."""
+    d_max, r = _largest_disparity(c), c["block_size"] // 2
+    return max(d_max, 0) + 2 * r >= c["width"] or max(-d_max, 0) + c["num_disparities"] - 1 >= c["width"]
+
+
+# The rules a block matcher (device_sim/matching, OpenCV StereoBM semantics) needs; a matcher with
+# other needs (SGM) adds its own rows here, so host check and device keep one table.
 CROSS_RULES: tuple[CrossRule, ...] = (
     CrossRule("block_size_vs_image", ("block_size", "width", "height"), ("block_size", "width", "height"),
-              lambda c: c["block_size"] > min(c["width"], c["height"]),
-              lambda c: f"block_size={c['block_size']} larger than the image {c['width']}x{c['height']}"),
+              lambda c: c["block_size"] >= min(c["width"], c["height"]),
+              lambda c: f"block_size={c['block_size']} larger than the image {c['width']}x{c['height']} allows"),
     CrossRule("pre_filter_size_vs_image", ("pre_filter_size", "width", "height"),
               ("pre_filter_size", "width", "height"),
               lambda c: c["pre_filter_size"] > min(c["width"], c["height"]),
               lambda c: f"pre_filter_size={c['pre_filter_size']} larger than the image {c['width']}x{c['height']}"),
     CrossRule("disparity_range_vs_width", ("min_disparity", "num_disparities", "block_size", "width"),
-              ("num_disparities", "min_disparity", "width"),
-              lambda c: -c["min_disparity"] >= c["width"]
-              or c["min_disparity"] + c["num_disparities"] + c["block_size"] // 2 >= c["width"],
-              lambda c: f"disparity range {c['min_disparity']}..{c['min_disparity'] + c['num_disparities']}"
-                        f" does not fit in width {c['width']}"),
+              ("num_disparities", "min_disparity", "width"), _no_valid_column,
+              lambda c: f"disparity range {c['min_disparity']}..{_largest_disparity(c)} with block_size="
+                        f"{c['block_size']} leaves no column of width {c['width']} where a disparity can be valid"),
     CrossRule("exposure_vs_frame_period", ("trigger_mode", "exposure_us", "fps"), ("exposure_us", "fps"),
               lambda c: c["trigger_mode"] == TriggerMode.FREE_RUN and c["exposure_us"] > 1_000_000 // c["fps"],
               lambda c: f"exposure_us={c['exposure_us']} longer than the frame period at fps={c['fps']}"),
