@@ -22,7 +22,7 @@ from .handlers.config_store import ConfigStore
 from .handlers.device_info import FIRMWARE_VERSION, MODEL, Identity, InfoHandler
 from .handlers.heartbeat import HeartbeatHandlers
 from .handlers.streaming import StreamingHandlers
-from .link_layer.device_link import DeviceLink, Sink
+from .link_layer.device_link import DeviceLink, HangUp, Sink
 from .link_layer.dispatcher import Dispatcher
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
 from .pipeline.capture_pipeline import CapturePipeline
@@ -30,6 +30,7 @@ from .rig.scene import Scene
 from .rig.sensor import SensorRig
 from .scratch_flash import ScratchFlash
 from .trigger import TriggerLine
+from .watchdog import WatchdogThread
 
 
 class SimulatedCamera:
@@ -60,9 +61,9 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         self.calibration = CalibrationService(flash_path, self._truth_cal, factory_calibrated)
         self.truth = TruthLog(self.rig)
 
-        # the engine's callbacks reach the pipeline and the watchdog, which themselves need the engine
+        # the engine's callback reaches the pipeline, which itself needs the engine
         self.dispatcher = Dispatcher(self.counters)
-        self.engine = CaptureEngine(lambda req: self.pipeline.produce(req), lambda: self.heartbeat.watchdog())
+        self.engine = CaptureEngine(lambda req: self.pipeline.produce(req))
         self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop)
         self.pipeline = CapturePipeline(seed, self.rig, self.config, self.calibration, self.clock, self.truth,
                                         self._send_capture_part, self.counters)
@@ -76,12 +77,14 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         if trigger_line is not None:
             trigger_line.attach(self.streaming.on_pulse)
         self.pipeline.warm_up()
+        self.watchdog = WatchdogThread(self.heartbeat.watchdog, name=f"watchdog-{self.serial}")
         registry.register(self)
 
     # -- the host link ------------------------------------------------------------------------
-    def attach(self, sink: Sink) -> None:
-        """Send all further output to ``sink`` (a new host link)."""
-        self.link.attach(sink)
+    def attach(self, sink: Sink, hang_up: HangUp | None = None) -> None:
+        """Send all further output to ``sink`` (a new host link); ``hang_up`` ends that link when the
+        watchdog drops it (SPEC §9)."""
+        self.link.attach(sink, hang_up)
 
     @property
     def attached(self) -> bool:
@@ -125,6 +128,7 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
     # -- lifetime -------------------------------------------------------------------------------
     def close(self) -> None:
         registry.unregister(self)
+        self.watchdog.close()
         self.engine.close()
         if self.trigger_line is not None:
             self.trigger_line.detach(self.streaming.on_pulse)

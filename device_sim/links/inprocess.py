@@ -66,7 +66,7 @@ class InProcessTransport(Transport):
         self.url = url
         self._owns = owns
         self._fifo = ByteFifo()
-        sim.attach(self._fifo.put)
+        sim.attach(self._fifo.put, hang_up=self._fifo.close)  # dropped by the device: the host reads EOF
 
     def write(self, data: bytes) -> None:
         if self._fifo.closed:
