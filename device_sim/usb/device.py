@@ -37,7 +37,10 @@ DEFAULT_OUT_CAPACITY = 64 * 1024
 class UsbFunction(Protocol):
     """What a firmware must offer to be plugged into the simulated bus."""
 
-    def attach(self, sink: Callable[[bytes], None]) -> None: ...
+    def attach(self, sink: Callable[[bytes], None], hang_up: Callable[[], None] | None = None) -> None: ...
+
+    @property
+    def attached(self) -> bool: ...
 
     def detach(self) -> None: ...
 
@@ -86,7 +89,7 @@ class SimUsbDevice:
         self._handles: set[SimHandle] = set()
         self._thread = threading.Thread(target=self._firmware_loop, daemon=True,
                                         name=f"usb-sim-{bus.number}-{address}")
-        sim.attach(self.in_pipe.push)
+        self._link_up()
         self._thread.start()
 
     def __repr__(self) -> str:
@@ -123,9 +126,18 @@ class SimUsbDevice:
         """Fault injection: STALL ``endpoint`` as firmware does on a protocol error."""
         self._pipe(endpoint).halt()
 
+    def _link_up(self) -> None:
+        """Link the firmware to the IN pipe. A firmware that drops a silent host (SPEC §9) hangs up
+        by flushing the pipe (which also frees a blocked push); the next OUT transfer links it up
+        again, with nothing of the old host's output left queued."""
+        self.in_pipe.flush()
+        self.sim.attach(self.in_pipe.push, self.in_pipe.flush)
+
     def _firmware_loop(self) -> None:
         while (chunk := self.out_pipe.take()) is not None:
             try:
+                if not self.sim.attached and self.plugged:
+                    self._link_up()
                 self.sim.receive(chunk)
             except OSError:  # the sink is gone (unplugged mid-reply)
                 break

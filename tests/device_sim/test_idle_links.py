@@ -14,6 +14,7 @@ import time
 import pytest
 import serial
 
+import stereocam.device_sim.usb as simusb
 from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.device_sim.links.servers import PtyServer, TcpServer
@@ -21,6 +22,7 @@ from stereocam.protocol import messages as m
 from stereocam.protocol.errors import DisconnectedError, ErrorCode
 from stereocam.protocol.framing import Decoder
 from stereocam.protocol.params import BY_NAME
+from stereocam.transports import open_transport
 
 SMALL = {"width": 320, "height": 240, "num_disparities": 32, "block_size": 11, "fps": 30}
 
@@ -179,3 +181,27 @@ def test_a_pty_host_that_dies_mid_stream_blocks_nothing_and_leaves_nothing(pty) 
             got += [m.decode_packet(p) for p in decoder.feed(host.read(65536))]
     stale = [type(x).__name__ for x in got if not isinstance(x, m.Info)]
     assert any(isinstance(x, m.Info) for x in got) and stale == []
+
+
+def test_a_usb_host_that_went_silent_is_dropped_and_the_next_one_served() -> None:
+    sim = SimulatedCamera(seed=94, serial="IDLE-USB")
+    device = simusb.plug(sim)
+    try:
+        with open_transport("usb://?serial=IDLE-USB", timeout=1.0) as t:
+            t.write(set_config(1, **SMALL, heartbeat_timeout_ms=200) + m.encode(m.Start(), 2))
+            deadline = time.monotonic() + 10
+            while sim.engine.captured < 1 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            deadline = time.monotonic() + 5  # silent and not reading: the stream stops, the link drops
+            while (sim.attached or sim.engine.streaming) and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert not sim.attached and not sim.engine.streaming
+            t.write(m.encode(m.GetInfo(), 3))  # the next host on the wire
+            decoder, got = Decoder(), []
+            deadline = time.monotonic() + 5
+            while not any(isinstance(x, m.Info) for x in got) and time.monotonic() < deadline:
+                got += [m.decode_packet(p) for p in decoder.feed(t.read(1 << 20, 0.2))]
+        assert [type(x).__name__ for x in got] == ["Info"], "nothing queued for the dropped host is delivered"
+    finally:
+        device.unplug()
+        sim.close()
