@@ -19,6 +19,7 @@ from .ground_truth import GroundTruth, TruthLog
 from .handlers.calibration import CalibrationService
 from .handlers.config import ConfigHandlers
 from .handlers.config_store import ConfigStore
+from .handlers.frame_repair import FrameRepair
 from .handlers.device_info import FIRMWARE_VERSION, MODEL, Identity, InfoHandler
 from .handlers.heartbeat import HeartbeatHandlers
 from .handlers.streaming import StreamingHandlers
@@ -64,14 +65,16 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         # the engine's callback reaches the pipeline, which itself needs the engine
         self.dispatcher = Dispatcher(self.counters)
         self.engine = CaptureEngine(lambda req: self.pipeline.produce(req))
-        self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop)
+        self.repair = FrameRepair(lambda wire: self.link.send(wire, lambda: True))
+        self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset)
         self.pipeline = CapturePipeline(seed, self.rig, self.config, self.calibration, self.clock, self.truth,
-                                        self._send_capture_part, self.counters)
+                                        self._send_capture_part, self.counters, self.repair)
         self.scene = scene
         self.heartbeat = HeartbeatHandlers(self.clock, self.config, self.engine, self.link, self.counters)
         self.streaming = StreamingHandlers(self.config, self.engine, self.counters)
         for group in (InfoHandler(Identity(self.model, self.serial, self.firmware_version), self.calibration),
-                      ConfigHandlers(self.config, self.engine), self.streaming, self.heartbeat, self.calibration):
+                      ConfigHandlers(self.config, self.engine), self.streaming, self.heartbeat, self.calibration,
+                      self.repair):
             self.dispatcher.register(group.handlers())
         self.trigger_line = trigger_line
         if trigger_line is not None:

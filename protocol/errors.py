@@ -58,6 +58,14 @@ class DisconnectedError(TransportError):
     """The device went away (cable pulled, process ended, socket closed)."""
 
 
+class LinkFailedError(DisconnectedError):
+    """The host's link ended because its reader or event path failed (the cause is chained)."""
+
+
+class StreamStoppedError(StereoCamError):
+    """The device stopped a stream the host had started (watchdog) and restarting it failed."""
+
+
 class VerificationError(StereoCamError):
     """Data read back from the device differs from what was written."""
 

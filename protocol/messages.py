@@ -17,6 +17,8 @@ from .errors import ProtocolError
 from .frame_messages import (DISPARITY_S16_Q4, FRAME_OK, FRAME_RECTIFIED, FRAME_SENSOR_OVERRUN, FrameBegin,
                              FrameData, FrameEnd)
 from .framing import Packet, encode_frame
+from .repair_messages import (MAX_FRAME_CHUNK, MAX_RESEND_RANGES, MIN_FRAME_CHUNK, RESEND_GONE, RESEND_SENT,
+                              FrameLink, FrameResend, FrameResent, SetFrameLink)
 from .message_base import EVENT_BIT, REPLY_BIT, Message, MsgType, _Empty, _read_str, _str, reply_type
 
 
@@ -74,6 +76,7 @@ class Capability:
     TIME_SYNC = 0x08
     CALIBRATION = 0x10  # since 1.1: CALIB_* messages (SPEC §12)
     RAW_OUTPUT = 0x20  # since 1.1: `rectify` = 0 gives raw (unrectified) frames (SPEC §5.1, §8.2)
+    FRAME_REPAIR = 0x40  # since 1.2: SET_FRAME_LINK and FRAME_RESEND (SPEC §13)
 
 
 @dataclass(frozen=True)
@@ -163,6 +166,7 @@ COUNTERS: tuple[str, ...] = (
     "frames_captured", "frames_sent", "frames_dropped", "triggers", "rx_bytes", "rx_packets",
     "rx_garbage_bytes", "rx_header_crc_errors", "rx_payload_crc_errors", "rx_oversize",
     "rx_unsupported_version", "nacks", "resends_replayed", "heartbeat_timeouts",
+    "rx_message_timeouts",  # since 1.2
 )
 
 
@@ -226,7 +230,8 @@ MESSAGES: dict[int, type[Message]] = {
     cls.TYPE: cls for cls in (
         GetInfo, GetConfig, SetConfig, Trigger, Start, Stop, Heartbeat, TimeSync, Info, Config,
         ConfigApplied, Triggered, Started, Stopped, Status, Time, Nack, FrameBegin, FrameData, FrameEnd,
-        CalibRead, CalibData, CalibWrite, CalibWritten, CalibCommit, CalibRestore, CalibCommitted, CalibRestored)
+        CalibRead, CalibData, CalibWrite, CalibWritten, CalibCommit, CalibRestore, CalibCommitted, CalibRestored,
+        SetFrameLink, FrameLink, FrameResend, FrameResent)
 }
 
 # request type -> reply class
@@ -235,6 +240,7 @@ REPLIES: dict[int, type[Message]] = {
     MsgType.TRIGGER: Triggered, MsgType.START: Started, MsgType.STOP: Stopped,
     MsgType.HEARTBEAT: Status, MsgType.TIME_SYNC: Time, MsgType.CALIB_READ: CalibData,
     MsgType.CALIB_WRITE: CalibWritten, MsgType.CALIB_COMMIT: CalibCommitted, MsgType.CALIB_RESTORE: CalibRestored,
+    MsgType.SET_FRAME_LINK: FrameLink, MsgType.FRAME_RESEND: FrameResent,
 }
 
 
@@ -269,4 +275,6 @@ __all__ = [  # the whole message catalogue, whichever module defines each part
     "FrameBegin", "FrameData", "FrameEnd", "DISPARITY_S16_Q4", "FRAME_RECTIFIED", "FRAME_OK", "FRAME_SENSOR_OVERRUN",
     "CalibSource", "CalibRead", "CalibData", "CalibWrite", "CalibWritten", "CalibCommit", "CalibRestore",
     "CalibState", "CalibCommitted", "CalibRestored", "MAX_CALIB_CHUNK", "calib_id",
+    "SetFrameLink", "FrameLink", "FrameResend", "FrameResent", "MIN_FRAME_CHUNK", "MAX_FRAME_CHUNK",
+    "MAX_RESEND_RANGES", "RESEND_SENT", "RESEND_GONE",
 ]

@@ -36,11 +36,12 @@ def bench_protocol(seconds: float = 2.0) -> dict[str, float]:
     return {"decode_MBps": mbps}
 
 
-def _stream_fps(url: str, seconds: float, desc: str = "") -> tuple[float, float, int]:
+def _stream_fps(url: str, seconds: float, algorithm: int = 0, desc: str = "") -> tuple[float, float, int]:
     import stereocam
 
     with stereocam.open(url, timeout=3.0) as cam:
-        cam.configure(width=640, height=480, fps=60, num_disparities=64, block_size=15)
+        cam.configure(width=640, height=480, fps=60, num_disparities=64, block_size=15,
+                      algorithm=algorithm)
         cam.start()
         cam.get_frame(timeout=60.0)  # warm-up (JIT cache load)
         n = 0
@@ -79,22 +80,26 @@ def _device(kind: str) -> Iterator[str]:
             yield server.url
 
 
+ALGORITHMS = {0: "bm", 1: "sgm"}  # values of the device's ``algorithm`` parameter
+
+
 def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty", "tcp", "usb")) -> dict[str, float]:
     out = {}
     print(f"end-to-end at 640x480, 64 disparities, all three planes ({seconds:.0f} s each; sim and usb "
           "run the device in this process, pty and tcp in a second one). The camera is asked for 60 fps: "
           "fps is what the whole pipeline (render, rectify, match, link, host) sustains; drops are the "
           "exposures the device skipped, counted and visible as sequence gaps:")
-    print(f"  {'transport':<10} {'fps':>6} {'MB/s':>7} {'drops':>6}")
+    print(f"  {'transport':<10} {'matcher':<8} {'fps':>6} {'MB/s':>7} {'drops':>6}")
     for kind in kinds:
-        with _device(kind) as url:
-            fps, mbps, dropped = _stream_fps(url, seconds, kind)
-        out[f"{kind}_fps"] = fps
-        print(f"  {kind:<10} {fps:6.1f} {mbps:7.1f} {dropped:6d}")
+        for algorithm, label in ALGORITHMS.items():
+            with _device(kind) as url:
+                fps, mbps, dropped = _stream_fps(url, seconds, algorithm, f"{kind} {label}")
+            out[f"{kind}_{label}_fps"] = fps
+            print(f"  {kind:<10} {label:<8} {fps:6.1f} {mbps:7.1f} {dropped:6d}")
     return out
 
 
-MODES = ("protocol", "transport", "usb", "matching", "calibration", "all")
+MODES = ("protocol", "decoder", "transport", "usb", "matching", "calibration", "calib-real", "all")
 
 
 @click.command("bench", context_settings={"ignore_unknown_options": True},
@@ -108,18 +113,24 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
 
     \b
     protocol     decoder throughput (MB/s): 640x480 frame messages fed in 64 KiB chunks
+    decoder      the decoder's cost per byte on adversarial streams against its clean cost
     transport    end-to-end fps and MB/s at 640x480 over sim, pty, tcp and usb, side by side
     usb          the USB path alone: bulk IN MB/s through pyusb
     matching     the numba matching core against cv2.StereoBM
     calibration  calibration accuracy against the simulator's truth, solver and device tool
+    calib-real   the offline tool on real calibration sets against OpenCV's all-pairs solution
     all          protocol, transport, matching and calibration (default)
 
     Arguments after WHAT that this command does not know go to the usb or matching bench."""
     rest = list(extra)
     if what in ("protocol", "all"):
         bench_protocol()
+    if what in ("decoder", "all"):
+        importlib.import_module("stereocam.tools.bench_decoder").main([])
     if what in ("transport", "all"):
         bench_transport(seconds)
+    if what == "calib-real":
+        importlib.import_module("stereocam.tools.bench_calib_real").main(rest)
     if what == "usb":
         importlib.import_module("stereocam.tools.bench_usb").main(rest)
     if what in ("matching", "all"):

@@ -14,7 +14,8 @@ from .calibration import CalibrationService
 MODEL = "STOC-SIM"
 FIRMWARE_VERSION = "1.1.0"
 CAPABILITIES = (m.Capability.DISPARITY | m.Capability.SOFTWARE_TRIGGER | m.Capability.EXTERNAL_TRIGGER
-                | m.Capability.TIME_SYNC | m.Capability.CALIBRATION | m.Capability.RAW_OUTPUT)
+                | m.Capability.TIME_SYNC | m.Capability.CALIBRATION | m.Capability.RAW_OUTPUT
+                | m.Capability.FRAME_REPAIR)
 
 
 @dataclass(frozen=True)

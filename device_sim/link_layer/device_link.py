@@ -7,7 +7,7 @@ import threading
 import time
 from typing import Callable
 
-from stereocam.protocol.framing import Decoder, DecoderStats
+from stereocam.protocol.framing import DEVICE_MESSAGE_TIMEOUT, Decoder, DecoderStats
 
 from .dispatcher import Dispatcher
 
@@ -30,10 +30,14 @@ def link_timeout(spoken: bool, heartbeat_timeout_ms: int) -> float | None:
 
 
 class DeviceLink:
-    """One host at a time. ``on_lost`` runs when the host goes (detach, drop, or a sink that fails)."""
+    """One host at a time. ``on_lost`` runs when the host goes (detach, drop, or a sink that fails);
+    ``on_attach`` when a new host comes (per-link state such as the frame-repair chunk size resets).
+    A request whose bytes stop arriving is abandoned after DEVICE_MESSAGE_TIMEOUT (SPEC §3)."""
 
-    def __init__(self, dispatcher: Dispatcher, on_lost: Callable[[], None]):
-        self.decoder = Decoder()
+    def __init__(self, dispatcher: Dispatcher, on_lost: Callable[[], None],
+                 on_attach: Callable[[], None] = lambda: None):
+        self.decoder = Decoder(message_timeout=DEVICE_MESSAGE_TIMEOUT)
+        self._on_attach = on_attach
         self.last_rx = time.monotonic()  # when the host last sent a whole frame (the watchdog's clock)
         self.spoken = False  # whether this link delivered a frame since it was attached
         self.drops = 0  # links dropped for silence
@@ -61,7 +65,8 @@ class DeviceLink:
             self._sink, self._hang_up = sink, hang_up
         with self._rx_lock:  # a new host: its request ids say nothing about the last one's
             self._dispatcher.cache.clear()
-            self.decoder = Decoder(stats=self.decoder.stats)
+            self._on_attach()
+            self.decoder = Decoder(stats=self.decoder.stats, message_timeout=DEVICE_MESSAGE_TIMEOUT)
             self.spoken = False
         self.last_rx = time.monotonic()
 

@@ -96,15 +96,20 @@ class InProcessTransport(Transport):
             self.sim.close()
 
 
+SEED_MAX = (1 << 32) - 1
+
+
 def open_transport(url: str, timeout: float) -> InProcessTransport:
-    query = parse_qs(urlsplit(url).query)
+    query = parse_qs(urlsplit(url).query, keep_blank_values=True)
     unknown = set(query) - {"seed", "serial", "scene"}
     if unknown:
         raise ConfigError(f"sim:// URL: unknown option(s) {sorted(unknown)}; known: seed, serial, scene")
-    try:
-        seed = int(query.get("seed", ["0"])[0])
-    except ValueError as exc:
-        raise ConfigError(f"sim:// URL: seed must be an integer, got {query['seed'][0]!r}") from exc
+    if any(len(v) > 1 for v in query.values()):
+        raise ConfigError(f"sim:// URL: an option given twice in {url!r}")
+    text = query.get("seed", ["0"])[0]
+    if not (text.isascii() and text.isdigit()) or int(text) > SEED_MAX:
+        raise ConfigError(f"sim:// URL: seed must be an integer 0..{SEED_MAX}, got {text!r}")
+    seed = int(text)
     scene = Scene.parse(query["scene"][0]) if "scene" in query else None
     serial = query.get("serial", [None])[0]
     if serial is not None and "seed" not in query:
@@ -130,4 +135,10 @@ def discover() -> list[DeviceEntry]:
 
 
 def reopen_url(url: str, serial: str) -> str:
+    """A unit this process opened by seed closes with its link, so it comes back as the same unit
+    freshly booted (same seed and serial); one opened by serial is looked up again."""
+    query = parse_qs(urlsplit(url).query)
+    if "seed" in query:
+        scene = f"&scene={query['scene'][0]}" if "scene" in query else ""
+        return f"sim://?seed={query['seed'][0]}&serial={serial}{scene}"
     return f"sim://?serial={serial}"

@@ -9,25 +9,26 @@ import numpy as np
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.params import Output
-from stereocam.protocol.segmentation import REFERENCE_CHUNK, capture_messages
+from stereocam.protocol.segmentation import capture_messages, plane_bytes
 
 from ..clock import DeviceClock
 from ..ground_truth import Exposure, TruthLog
 from ..handlers.calibration import CalibrationService
 from ..handlers.config_store import ConfigStore
+from ..handlers.frame_repair import FrameRepair
 from ..matching import warm_up as matching_warm_up
 from ..rig.scene import Scene
 from ..rig.sensor import Geometry, SensorRig
 from .capture_engine import CaptureRequest
 from .stereo import StereoStage
 
-CHUNK = REFERENCE_CHUNK  # FRAME_DATA data bytes per message
 Send = Callable[[CaptureRequest, bytes], bool]  # one message of a capture; False: stop sending it
 
 
 class CapturePipeline:
     def __init__(self, seed: int, rig: SensorRig, store: ConfigStore, calibration: CalibrationService,
-                 clock: DeviceClock, truth: TruthLog, send: Send, counters: collections.Counter[str]):
+                 clock: DeviceClock, truth: TruthLog, send: Send, counters: collections.Counter[str],
+                 repair: FrameRepair):
         self.scene = Scene.LAB  # what the rig looks at (a simulator setting)
         self._seed = seed
         self._rig = rig
@@ -37,6 +38,7 @@ class CapturePipeline:
         self._truth = truth
         self._send = send
         self._counters = counters
+        self._repair = repair  # the link's chunk size, and recent captures kept for FRAME_RESEND
         self._stereo = StereoStage()
         self._view_rays: dict[Geometry, np.ndarray] = {}
 
@@ -82,7 +84,9 @@ class CapturePipeline:
             cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
             cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, calib_id, focal, cx, cy, baseline)
         images = {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: disp}
-        for msg in capture_messages(begin, images, CHUNK):
+        raw = plane_bytes(begin, images, copy=True)  # kept unchanged for FRAME_RESEND
+        self._repair.remember(req.sequence, {int(p): v for p, v in raw.items()})
+        for msg in capture_messages(begin, raw, self._repair.chunk):
             if not self._send(req, m.encode(msg)):
                 return  # the link went, or the stream was stopped: cut off at a message boundary
         self._counters["frames_sent"] += 1

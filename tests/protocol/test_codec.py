@@ -35,7 +35,7 @@ LIGHT = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCh
 
 # -- helpers -----------------------------------------------------------------------------------
 def raw_frame(msg_type: int, request_id: int = 0, payload: bytes = b"", *, flags: int = 0, major: int = 1,
-              minor: int = 1, header_len: int = HEADER_LEN, payload_len: int | None = None,
+              minor: int = 2, header_len: int = HEADER_LEN, payload_len: int | None = None,
               ext: bytes | None = None) -> bytes:
     """A frame built by hand (not through encode_frame), with a correct header CRC for whatever it claims."""
     ext = bytes(header_len - HEADER_LEN) if ext is None else ext
@@ -86,7 +86,7 @@ def assert_every_byte_accounted(dec: Decoder, packets: list[Packet]) -> None:
 
 
 def packet_of(msg: m.Message, rid: int = 0, flags: int = 0) -> Packet:
-    return Packet(msg.TYPE, rid, flags, msg.pack(), (1, 1))  # what this code (v1.1) sends
+    return Packet(msg.TYPE, rid, flags, msg.pack(), (1, 2))  # what this code (v1.2) sends
 
 
 # -- strategies --------------------------------------------------------------------------------
@@ -146,6 +146,12 @@ MESSAGE_STRATEGIES: dict[type[m.Message], st.SearchStrategy[m.Message]] = {
     m.CalibRestore: st.just(m.CalibRestore()),
     m.CalibCommitted: st.builds(m.CalibCommitted, source=u8, generation=u32, calibration_id=u32),
     m.CalibRestored: st.builds(m.CalibRestored, source=u8, generation=u32, calibration_id=u32),
+    # v1.2 frame repair (SPEC §13)
+    m.SetFrameLink: st.builds(m.SetFrameLink, chunk_size=u32),
+    m.FrameLink: st.builds(m.FrameLink, chunk_size=u32, kept_captures=u16),
+    m.FrameResend: st.builds(m.FrameResend, sequence=u32,
+                             ranges=st.lists(st.tuples(u8, u32, u32), max_size=20).map(tuple)),
+    m.FrameResent: st.builds(m.FrameResent, sequence=u32, result=u8, frame_status=u8, chunks=u32),
 }
 any_message = st.one_of(*MESSAGE_STRATEGIES.values())
 framed = st.tuples(any_message, u16, u8)  # (message, request_id, flags)
@@ -294,7 +300,7 @@ def test_calibration_types_sources_and_codes() -> None:
     assert {t.name: int(t) for t in m.MsgType if t.name.startswith("CALIB")} == {
         "CALIB_READ": 0x0009, "CALIB_WRITE": 0x000A, "CALIB_COMMIT": 0x000B, "CALIB_RESTORE": 0x000C,
         "CALIB_DATA": 0x8009, "CALIB_WRITTEN": 0x800A, "CALIB_COMMITTED": 0x800B, "CALIB_RESTORED": 0x800C}
-    assert {int(k): v for k, v in m.REPLIES.items() if k >= 0x0009} == {
+    assert {int(k): v for k, v in m.REPLIES.items() if 0x0009 <= k <= 0x000C} == {
         0x0009: m.CalibData, 0x000A: m.CalibWritten, 0x000B: m.CalibCommitted, 0x000C: m.CalibRestored}
     for req, reply in m.REPLIES.items():
         assert reply.TYPE == m.reply_type(req) and m.MESSAGES[req].TYPE == req
@@ -790,9 +796,14 @@ SAMPLES: dict[type[m.Message], m.Message] = {
     m.CalibCommit: m.CalibCommit(m.CalibSource.USER, 248, 0x01234567),
     m.CalibCommitted: m.CalibCommitted(m.CalibSource.USER, 2, 0x76543210),
     m.CalibRestored: m.CalibRestored(m.CalibSource.FACTORY, 1, 0xFEDCBA98),
+    m.SetFrameLink: m.SetFrameLink(1024),
+    m.FrameLink: m.FrameLink(1024, 8),
+    m.FrameResend: m.FrameResend(7, ((4, 1024, 2048),)),
+    m.FrameResent: m.FrameResent(7, m.RESEND_SENT, 0, 2),
 }
 FIXED_SIZE = {m.Triggered: 8, m.Time: 8, m.FrameBegin: 56, m.FrameEnd: 17, m.CalibRead: 9, m.CalibWritten: 4,
-              m.CalibCommit: 9, m.CalibCommitted: 9, m.CalibRestored: 9}
+              m.CalibCommit: 9, m.CalibCommitted: 9, m.CalibRestored: 9, m.SetFrameLink: 4, m.FrameLink: 6,
+              m.FrameResend: 14, m.FrameResent: 10}
 # messages whose payload ends in data running to the end: the fixed head, then any number of bytes
 HEAD_THEN_DATA = {m.FrameData: 9, m.CalibData: 17, m.CalibWrite: 8}
 EMPTY = [cls for cls in m.MESSAGES.values() if cls not in SAMPLES]
@@ -856,7 +867,7 @@ def test_counts_that_do_not_match_the_payload() -> None:
             decode_packet(Packet(cls.TYPE, 0, 0, struct.pack("<HHiHi", 1, 1, 1, 2, 2)))
 
 
-@pytest.mark.parametrize("mtype", [0x0000, 0x000D, 0x8000, 0x800D, 0x4004, 0x1234, 0xFFFE, 0x0089, 0xC009])
+@pytest.mark.parametrize("mtype", [0x0000, 0x000F, 0x8000, 0x800F, 0x4004, 0x1234, 0xFFFE, 0x0089, 0xC009])
 def test_unknown_type(mtype: int) -> None:
     with pytest.raises(UnknownMessageError, match=f"unknown message type 0x{mtype:04x}"):
         decode_packet(Packet(mtype, 0, 0, b""))
@@ -885,17 +896,17 @@ def test_decoder_max_payload_in_range(ok: int) -> None:
 
 def test_stats_dropped_sums_every_loss_counter() -> None:
     s = DecoderStats(bytes_in=1, packets=2, garbage_bytes=3, header_crc_errors=4, bad_headers=5,
-                     payload_crc_errors=6, oversize=7, unsupported_version=8)
-    assert s.dropped == 30
-    assert s.as_dict()["unsupported_version"] == 8 and "dropped" not in s.as_dict() and len(s.as_dict()) == 8
+                     payload_crc_errors=6, oversize=7, unsupported_version=8, message_timeouts=9)
+    assert s.dropped == 39
+    assert s.as_dict()["unsupported_version"] == 8 and "dropped" not in s.as_dict() and len(s.as_dict()) == 9
 
 
 # -- the parameter table -----------------------------------------------------------------------
 def test_param_ids_and_names_are_unique_and_sane() -> None:
     ids = [p.pid for p in PARAMS]
     names = [p.name for p in PARAMS]
-    assert len(set(ids)) == len(ids) == 20
-    assert ids == [*range(1, 20), 21]  # v1.1 appended id 21 and retired 20; ids are never reused or renumbered
+    assert len(set(ids)) == len(ids) == 27
+    assert ids == [*range(1, 20), *range(21, 29)]  # 1.1 appended 21 and retired 20, 1.2 22..28; never reused
     assert len(set(names)) == len(names)
     assert all(1 <= i <= 0xFFFF for i in ids)  # 0 means "no parameter" in a NACK
     assert BY_ID[10].name == "min_disparity" and BY_NAME["width"].pid == 1
@@ -922,7 +933,7 @@ def test_check_rejects_out_of_range(p: Param) -> None:
 
 def test_check_rejects_even_values_for_odd_params() -> None:
     odd = [p for p in PARAMS if p.odd]
-    assert {p.name for p in odd} == {"block_size", "pre_filter_size"}
+    assert {p.name for p in odd} == {"block_size", "pre_filter_size", "census_width", "census_height"}
     for p in odd:
         for v in range(p.lo, p.hi + 1):
             assert (p.check(v) is None) == (v % 2 == 1), (p.name, v)
@@ -931,7 +942,8 @@ def test_check_rejects_even_values_for_odd_params() -> None:
 
 def test_check_rejects_non_multiples_of_step() -> None:
     stepped = {p.name: p for p in PARAMS if p.step > 1}
-    assert {n: p.step for n, p in stepped.items()} == {"width": 16, "height": 8, "num_disparities": 16}
+    assert {n: p.step for n, p in stepped.items()} == {"width": 16, "height": 8, "num_disparities": 16,
+                                                       "sgm_paths": 4}
     for p in stepped.values():
         for v in range(p.lo, p.hi + 1):
             assert (p.check(v) is None) == ((v - p.lo) % p.step == 0), (p.name, v)
@@ -944,11 +956,11 @@ def test_v1_1_parameters() -> None:
     """SPEC §5.1: v1.1 added `rectify` (21); id 20 is retired (no simulator control on the wire)."""
     r = BY_NAME["rectify"]
     assert (r.pid, r.default, r.lo, r.hi, r.step, r.odd) == (21, 1, 0, 1, 1, False)
-    assert BY_ID[21] is r and PARAMS[-1] is r
+    assert BY_ID[21] is r and PARAMS[19] is r
     assert 20 not in BY_ID and "scene" not in BY_NAME
     assert m.Capability.RAW_OUTPUT == 0x20  # SPEC §4.1 bit 5: the unit implements rectify=0
     assert r.check(0) is None and r.check(1) is None and "outside 0..1" in r.check(2)
-    assert defaults()["rectify"] == 1 and list(defaults())[-1] == "rectify"
+    assert defaults()["rectify"] == 1 and list(defaults())[19] == "rectify"
 
 
 @given(st.integers(-(1 << 31), (1 << 31) - 1))
