@@ -8,12 +8,11 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from stereocam.device_sim.matching import Matcher
-from stereocam.device_sim.pipeline.stereo import match_params
+from stereocam.device_sim.pipeline.stereo import matcher_for
 from stereocam.protocol.config_rules import ConfigRejected, merge
 from stereocam.protocol.params import BY_NAME, defaults
 
-GEOMETRY = ("width", "height", "num_disparities", "block_size", "min_disparity")
+GEOMETRY = ("algorithm", "width", "height", "num_disparities", "block_size", "min_disparity")
 
 
 def legal(name: str) -> st.SearchStrategy[int]:
@@ -34,9 +33,10 @@ def accepted(cfg: dict[str, int]) -> bool:
 
 
 def runnable(cfg: dict[str, int]) -> bool:
-    """The firmware's matcher can be built for this format (its own parameter validation)."""
+    """The firmware's matcher (the one ``algorithm`` selects) can be built for this format (its own
+    parameter validation)."""
     try:
-        Matcher((cfg["height"], cfg["width"]), match_params(cfg))
+        matcher_for(cfg, (cfg["height"], cfg["width"]))
         return True
     except ValueError:
         return False
@@ -44,8 +44,9 @@ def runnable(cfg: dict[str, int]) -> bool:
 
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.fixed_dictionaries({n: legal(n) for n in GEOMETRY}))
-@example({"width": 640, "height": 480, "num_disparities": 256, "block_size": 255, "min_disparity": 200})
-@example({"width": 64, "height": 48, "num_disparities": 16, "block_size": 47, "min_disparity": 0})
+@example({"algorithm": 0, "width": 640, "height": 480, "num_disparities": 256, "block_size": 255, "min_disparity": 200})
+@example({"algorithm": 0, "width": 64, "height": 48, "num_disparities": 16, "block_size": 47, "min_disparity": 0})
+@example({"algorithm": 1, "width": 64, "height": 48, "num_disparities": 16, "block_size": 255, "min_disparity": 48})
 def test_the_rules_accept_exactly_what_the_matcher_can_run(geometry) -> None:
     cfg = {**defaults(), **geometry}
     assert accepted(cfg) == runnable(cfg), f"rules and matcher disagree on {geometry}"
@@ -60,13 +61,13 @@ def test_every_accepted_geometry_matches_a_pair(geometry, seed) -> None:
     rng = np.random.default_rng(seed)
     left = rng.integers(0, 256, (cfg["height"], cfg["width"]), np.uint8)
     right = np.roll(left, -8, axis=1)
-    disp = Matcher(left.shape, match_params(cfg)).match(left, right)
+    disp = matcher_for(cfg, left.shape).match(left, right)
     assert disp.shape == left.shape and disp.dtype == np.int16
 
 
 @pytest.mark.parametrize("name", ["num_disparities", "min_disparity", "width"])
 def test_the_reported_case_is_refused_naming_the_parameter(name) -> None:
-    bad = {"width": 640, "height": 480, "num_disparities": 256, "block_size": 255, "min_disparity": 200}
+    bad = {"algorithm": 0, "width": 640, "height": 480, "num_disparities": 256, "block_size": 255, "min_disparity": 200}
     current = {**defaults(), **bad, name: defaults()[name] if name != "width" else 1280}
     with pytest.raises(ConfigRejected, match="disparity") as err:
         merge(current, {BY_NAME[name].pid: bad[name]}, streaming=False)
