@@ -13,6 +13,7 @@ import os
 import shutil
 import tempfile
 import time
+import weakref
 from pathlib import Path
 
 LOCK_NAME = "owner.lock"
@@ -65,16 +66,19 @@ class ScratchFlash:
         self.root.mkdir(mode=0o700, parents=True, exist_ok=True)
         sweep(self.root)
         setup = Path(tempfile.mkdtemp(prefix=SETUP_PREFIX, dir=self.root))
-        self._lock_fd: int | None = os.open(setup / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o600)
+        self._lock_fd = os.open(setup / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o600)
         fcntl.flock(self._lock_fd, fcntl.LOCK_EX)
         self.folder = self.root / f"{os.getpid()}-{setup.name[len(SETUP_PREFIX):]}"
         setup.rename(self.folder)
         self.path = self.folder / f"{name}.flash"
+        # also at garbage collection and interpreter exit, as tempfile.TemporaryDirectory does
+        self._remove = weakref.finalize(self, _remove, self.folder, self._lock_fd)
 
     def cleanup(self) -> None:
         """Remove the folder and release the lock (idempotent)."""
-        if self._lock_fd is None:
-            return
-        shutil.rmtree(self.folder, ignore_errors=True)
-        os.close(self._lock_fd)
-        self._lock_fd = None
+        self._remove()
+
+
+def _remove(folder: Path, lock_fd: int) -> None:
+    shutil.rmtree(folder, ignore_errors=True)
+    os.close(lock_fd)
