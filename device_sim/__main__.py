@@ -1,4 +1,4 @@
-"""``python -m stereocam.device_sim --serve pty|tcp:HOST:PORT [--scene board]``: run a simulated camera in its own process.
+"""``python -m stereocam.device_sim --serve pty|tcp:HOST:PORT [--scene board] [--flash PATH]``: run a simulated camera in its own process.
 
 With ``--replay FILE`` the unit plays a recording back (``--fast``, ``--loop``, ``--start N``; see replay.py).
 
@@ -48,6 +48,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--serve", required=True, metavar="pty|tcp:HOST:PORT")
     ap.add_argument("--seed", type=int, default=0, help="which simulated unit")
     ap.add_argument("--serial", default=None, help="serial number (default derived from the seed)")
+    ap.add_argument("--flash", type=Path, default=None, metavar="PATH",
+                    help="file behind the unit's flash, kept across restarts (created erased if missing); "
+                         "default: a private file removed at exit")
     ap.add_argument("--scene", choices=[s.value for s in Scene], default=Scene.LAB.value,
                     help="what the rig looks at (board: the calibration fixture's chessboard)")
     ap.add_argument("--trigger-line", metavar="NAME", help="join the machine-wide trigger line NAME")
@@ -74,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
 
         source = ReplaySource(args.replay, realtime=not args.fast, loop=args.loop, start=args.start)
     sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene, trigger_line=line, vendor_key=key,
-                          source=source)
+                          source=source, flash_path=args.flash)
     truth_log = open(args.truth_log, "a", buffering=1) if args.truth_log else None  # noqa: SIM115
     if truth_log is not None:
         sim.truth.on_exposure = lambda seq, t: truth_log.write(f"{seq} {t!r}\n")

@@ -8,7 +8,6 @@ the simulator's own controls (scene, ground truth), which never travel on the wi
 from __future__ import annotations
 
 import collections
-import tempfile
 import threading
 from functools import partial
 from pathlib import Path
@@ -39,14 +38,16 @@ from .handlers.frame_repair import FrameRepair
 from .handlers.heartbeat import HeartbeatHandlers
 from .handlers.streaming import StreamingHandlers
 from .handlers.update import UpdateHandlers
-from .link_layer.device_link import DeviceLink, Sink
+from .link_layer.device_link import DeviceLink, HangUp, Sink
 from .link_layer.dispatcher import Dispatcher
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
 from .pipeline.capture_pipeline import CapturePipeline
 from .replay import ReplayEngine, ReplaySource
 from .rig.scene import Scene
 from .rig.sensor import SensorRig
+from .scratch_flash import ScratchFlash
 from .trigger import Line, TriggerInput
+from .watchdog import WatchdogThread
 
 
 class SimulatedCamera:
@@ -58,7 +59,8 @@ class SimulatedCamera:
                  flash_size: int = FLASH_SIZE, source: ReplaySource | None = None):
         """``scene``: what the rig looks at ("lab", "wall", "board"; a simulator setting, changeable
         at run time through ``scene``, never a device parameter). ``flash_path``: the file behind
-        this unit's flash (kept across runs); None: a private temporary file. ``factory_calibrated``:
+        this unit's flash (kept across runs); None: a private file removed at close (scratch_flash.py:
+a killed process's file is swept by the next simulator). ``factory_calibrated``:
         the unit left the factory with its true calibration stored (False: fresh from assembly,
         streams raw images until calibrated). ``vendor_key``: the firmware-signing key whose public half
         the factory line provisions into a blank unit (and signs its shipped image with). ``source``: a
@@ -73,10 +75,10 @@ class SimulatedCamera:
         self.counters: collections.Counter[str] = collections.Counter()
         self._truth_cal = true_calibration(seed)
         self.rig = SensorRig(seed, self._truth_cal)
-        self._tmpdir = None
-        if flash_path is None:
-            self._tmpdir = tempfile.TemporaryDirectory(prefix="stereocam-flash-")
-            flash_path = Path(self._tmpdir.name) / f"{self.serial}.flash"
+        self._scratch = None
+        if flash_path is None:  # a private file removed at close; a killed process's is swept later
+            self._scratch = ScratchFlash(self.serial)
+            flash_path = self._scratch.path
         self.flash = NorFlash(flash_path, flash_size)
         stored = source.calibration if source else self._truth_cal
         self.calibration = CalibrationService(self.flash, stored or self._truth_cal,
@@ -90,10 +92,10 @@ class SimulatedCamera:
         self._epoch = 0
         self.truth = TruthLog(self.rig)
 
-        # the engine's callbacks reach the pipeline and the watchdog, which themselves need the engine
+        # the engine's callback reaches the pipeline, which itself needs the engine
         self.dispatcher = Dispatcher(self.counters)
         self.engine = (partial(ReplayEngine, source) if source else CaptureEngine)(
-            lambda req: self.pipeline.produce(req), lambda: self.heartbeat.watchdog())
+            lambda req: self.pipeline.produce(req))
         self.repair = FrameRepair(lambda wire: self.link.send(wire, lambda: True))
         self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset)
         self.pipeline = CapturePipeline(seed, self.rig, self.config, self.calibration, self.clock, self.truth,
@@ -107,6 +109,7 @@ class SimulatedCamera:
         if trigger_line is not None:
             trigger_line.attach(self.trigger_input.on_pulse)
         self.pipeline.warm_up()
+        self.watchdog = WatchdogThread(self.heartbeat.watchdog, name=f"watchdog-{self.serial}")
         registry.register(self)
 
     # -- boot, reboot, power --------------------------------------------------------------------
@@ -201,9 +204,10 @@ class SimulatedCamera:
             self._up(recovery)
 
     # -- the host link ------------------------------------------------------------------------
-    def attach(self, sink: Sink) -> None:
-        """Send all further output to ``sink`` (a new host link)."""
-        self.link.attach(sink)
+    def attach(self, sink: Sink, hang_up: HangUp | None = None) -> None:
+        """Send all further output to ``sink`` (a new host link); ``hang_up`` ends that link when the
+        watchdog drops it (SPEC §9)."""
+        self.link.attach(sink, hang_up)
 
     @property
     def attached(self) -> bool:
@@ -250,12 +254,13 @@ class SimulatedCamera:
         with self._power_lock:
             self._closed = True
         registry.unregister(self)
+        self.watchdog.close()
         self.engine.close()
         if self.trigger_line is not None:
             self.trigger_line.detach(self.trigger_input.on_pulse)
         self.link.close()
-        if self._tmpdir is not None:
-            self._tmpdir.cleanup()
+        if self._scratch is not None:
+            self._scratch.cleanup()
         if self.pipeline.source is not None:
             self.pipeline.source.close()
 

@@ -10,12 +10,15 @@ import sys
 class ServedSimulator:
     """Starts the child and reads the URL it prints first; ``stop`` sends SIGTERM and waits."""
 
-    def __init__(self, spec: str, seed: int = 7, scene: str = "lab", extra: list[str] | None = None):
-        """``extra``: more command-line options (``--trigger-line NAME``, ``--truth-log PATH``, ...)."""
+    def __init__(self, spec: str, seed: int = 7, scene: str = "lab", extra: list[str] | tuple[str, ...] | None = None,
+                 flash: str | os.PathLike[str] | None = None, env: dict[str, str] | None = None):
+        """``extra``: more command-line options (``--trigger-line NAME``, ``--truth-log PATH``, ...);
+        ``flash``: the unit's flash file (kept across restarts); ``env``: added to the environment."""
+        extra = [*(extra or []), *(["--flash", os.fspath(flash)] if flash is not None else [])]
         self.proc = subprocess.Popen([sys.executable, "-m", "stereocam.device_sim", "--serve", spec, "--seed", str(seed),
-                                      "--scene", scene, *(extra or [])],
+                                      "--scene", scene, *extra],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                     env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                                     env={**os.environ, **(env or {}), "PYTHONUNBUFFERED": "1"})
         self.url = self.proc.stdout.readline().strip()
         if not self.url:
             raise RuntimeError(f"simulator did not start: {self.proc.stderr.read()}")

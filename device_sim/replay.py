@@ -146,8 +146,8 @@ class ReplayEngine(CaptureEngine):
     """The capture engine of a replay: free-run exposures come from the recording (its sequence
     numbers, at its pace or as fast as the link takes them) instead of a frame-rate timer."""
 
-    def __init__(self, source: ReplaySource, produce, watchdog):
-        super().__init__(produce, watchdog)
+    def __init__(self, source: ReplaySource, produce):
+        super().__init__(produce)
         self.source = source
 
     def start(self, mode: TriggerMode, fps: int) -> None:

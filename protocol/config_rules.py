@@ -57,23 +57,58 @@ class CrossRule:
     why: Callable[[Mapping[str, int]], str]
 
 
+BLOCK_MATCHING, SEMI_GLOBAL = 0, 1  # values of the ``algorithm`` parameter (SPEC §5.1)
+
+
+def _algorithm(c: Mapping[str, int]) -> int:
+    """The matcher the configuration selects (a device without ``algorithm`` does block matching)."""
+    return c.get("algorithm", BLOCK_MATCHING)
+
+
+def _largest_disparity(c: Mapping[str, int]) -> int:
+    return c["min_disparity"] + c["num_disparities"] - 1
+
+
+def _bm_no_valid_column(c: Mapping[str, int]) -> bool:
+    """The block matcher's geometry (SPEC §5.2 rule 3): the columns it can compute, shifted by the
+    largest disparity on the left and by the most negative one on the right, must leave at least
+    one column whose whole window (block_size/2 either side) lies in the image."""
+    d_max, r = _largest_disparity(c), c["block_size"] // 2
+    return max(d_max, 0) + 2 * r >= c["width"] or max(-d_max, 0) + c["num_disparities"] - 1 >= c["width"]
+
+
+def _sgm_no_valid_column(c: Mapping[str, int]) -> bool:
+    """The semi-global matcher's geometry (SPEC §5.2 rule 5): it matches the columns where every
+    disparity of the range has its right pixel in the image, [max(d_max, 0), width + min(min_disparity, 0))."""
+    return min(c["width"], c["width"] + c["min_disparity"]) - max(_largest_disparity(c), 0) < 1
+
+
+def _range_why(c: Mapping[str, int], window: str) -> str:
+    return (f"disparity range {c['min_disparity']}..{_largest_disparity(c)}{window} leaves no column of width "
+            f"{c['width']} where a disparity can be valid")
+
+
+# What each matching engine needs of the frame (device_sim/matching: block matching with OpenCV
+# StereoBM semantics, SGM): a rule for one engine applies only while ``algorithm`` selects it, and
+# an engine with new needs adds its rows here, so host check and device keep one table.
 CROSS_RULES: tuple[CrossRule, ...] = (
-    CrossRule("block_size_vs_image", ("block_size", "width", "height"), ("block_size", "width", "height"),
-              lambda c: c["block_size"] > min(c["width"], c["height"]),
-              lambda c: f"block_size={c['block_size']} larger than the image {c['width']}x{c['height']}"),
+    CrossRule("block_size_vs_image", ("block_size", "width", "height"), ("block_size", "width", "height", "algorithm"),
+              lambda c: _algorithm(c) == BLOCK_MATCHING and c["block_size"] >= min(c["width"], c["height"]),
+              lambda c: f"block_size={c['block_size']} larger than the image {c['width']}x{c['height']} allows"),
     CrossRule("pre_filter_size_vs_image", ("pre_filter_size", "width", "height"),
               ("pre_filter_size", "width", "height"),
               lambda c: c["pre_filter_size"] > min(c["width"], c["height"]),
               lambda c: f"pre_filter_size={c['pre_filter_size']} larger than the image {c['width']}x{c['height']}"),
     CrossRule("disparity_range_vs_width", ("min_disparity", "num_disparities", "block_size", "width"),
-              ("num_disparities", "min_disparity", "width"),
-              lambda c: -c["min_disparity"] >= c["width"]
-              or c["min_disparity"] + c["num_disparities"] + c["block_size"] // 2 >= c["width"],
-              lambda c: f"disparity range {c['min_disparity']}..{c['min_disparity'] + c['num_disparities']}"
-                        f" does not fit in width {c['width']}"),
+              ("num_disparities", "min_disparity", "width", "block_size", "algorithm"),
+              lambda c: _algorithm(c) == BLOCK_MATCHING and _bm_no_valid_column(c),
+              lambda c: _range_why(c, f" with block_size={c['block_size']}")),
     CrossRule("exposure_vs_frame_period", ("trigger_mode", "exposure_us", "fps"), ("exposure_us", "fps"),
               lambda c: c["trigger_mode"] == TriggerMode.FREE_RUN and c["exposure_us"] > 1_000_000 // c["fps"],
               lambda c: f"exposure_us={c['exposure_us']} longer than the frame period at fps={c['fps']}"),
+    CrossRule("sgm_disparity_range_vs_width", ("algorithm", "min_disparity", "num_disparities", "width"),
+              ("num_disparities", "min_disparity", "width", "algorithm"),
+              lambda c: _algorithm(c) == SEMI_GLOBAL and _sgm_no_valid_column(c), lambda c: _range_why(c, "")),
 )
 """SPEC §5.2, in the order a device checks them."""
 

@@ -13,8 +13,10 @@ from pathlib import Path
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import CalibrationFormatError, StereoCalibration
+from stereocam.protocol.calibration_limits import PlausibilityLimits
 from stereocam.protocol.errors import ErrorCode
 
+from ..calibration.acceptance import usable_calibration
 from ..calibration.flash import FlashError, NorFlash
 from ..calibration.rectify import RectificationMaps, rectification_maps
 from ..calibration.store import CalibrationStore, StoreError, StoredRecord
@@ -25,7 +27,11 @@ MAX_BODY = 4096
 
 
 class CalibrationService:
-    def __init__(self, flash: str | Path | NorFlash, truth: StereoCalibration, factory_calibrated: bool):
+    def __init__(self, flash: str | Path | NorFlash, truth: StereoCalibration, factory_calibrated: bool,
+                 limits: PlausibilityLimits | None = None):
+        """``limits``: what this rig can physically have (default: the protocol's wide limits for a
+        sensor of the true calibration's size)."""
+        self.limits = limits or PlausibilityLimits(sensor_size=truth.image_size)
         self.flash = flash if isinstance(flash, NorFlash) else NorFlash(flash)
         self.store = CalibrationStore(self.flash)
         if factory_calibrated and self.store.read_factory() is None and not self.store.factory_locked:
@@ -38,7 +44,7 @@ class CalibrationService:
         self._lock = threading.Lock()  # the capture thread reads what requests change
         self.record: StoredRecord | None = None
         self.calibration: StereoCalibration | None = None
-        self.rejected_records = 0  # valid CRC but a body this firmware cannot use
+        self.rejected_records = 0  # valid CRC but a body this firmware cannot use (malformed or implausible)
         self._load()
 
     def reload(self) -> None:
@@ -55,7 +61,7 @@ class CalibrationService:
                 continue
             seen.add((rec.region, rec.slot))
             try:
-                calibration = StereoCalibration.from_bytes(rec.body)
+                calibration = usable_calibration(rec.body, self.limits)
                 record = rec
                 break
             except CalibrationFormatError:
@@ -130,9 +136,10 @@ class CalibrationService:
             raise Refusal(ErrorCode.BAD_PAYLOAD, f"staged {len(body)} bytes with CRC {zlib.crc32(body):08x}, "
                               f"commit announced {msg.total} bytes with CRC {msg.crc:08x}; nothing written")
         try:
-            StereoCalibration.from_bytes(body)
+            usable_calibration(body, self.limits)
         except CalibrationFormatError as exc:
-            raise Refusal(ErrorCode.BAD_PAYLOAD, f"not a calibration this firmware can use: {exc}") from exc
+            raise Refusal(ErrorCode.BAD_PAYLOAD, f"not a calibration this firmware can use: {exc}; "
+                          "nothing written") from exc
         try:
             if msg.target == m.CalibSource.FACTORY:
                 written = self.store.write_factory(body)

@@ -1,5 +1,5 @@
 """HEARTBEAT → STATUS and TIME_SYNC → TIME (SPEC §4.7, §4.8), and the watchdog that stops a
-stream when the host goes silent (§9)."""
+stream and then drops the link when the host goes silent (§9)."""
 from __future__ import annotations
 
 import collections
@@ -44,8 +44,11 @@ class HeartbeatHandlers:
         return c
 
     def watchdog(self) -> None:
-        """Called by the capture thread: stop streaming once the host has been silent too long."""
+        """Called by the watchdog thread (SPEC §9): stop streaming once the host has been silent for
+        the heartbeat timeout; drop the link once it has been silent for the link timeout."""
         timeout_ms = self._store.snapshot()["heartbeat_timeout_ms"]
         if self._engine.streaming and timeout_ms and time.monotonic() - self._link.last_rx > timeout_ms / 1000:
             self._counters["heartbeat_timeouts"] += 1
             self._engine.stop()
+        if self._link.drop_if_silent(timeout_ms):
+            self._counters["links_dropped"] += 1

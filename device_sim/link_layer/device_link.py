@@ -12,10 +12,25 @@ from stereocam.protocol.framing import DEVICE_MESSAGE_TIMEOUT, Decoder, DecoderS
 from .dispatcher import Dispatcher
 
 Sink = Callable[[bytes], None]
+HangUp = Callable[[], None]
+
+FIRST_MESSAGE_TIMEOUT_S = 3.0
+"""A new link must deliver its first frame within this (the default heartbeat timeout, SPEC §9),
+whatever heartbeat_timeout_ms an earlier host left configured."""
+LINK_TIMEOUT_FACTOR = 2
+"""A link that has spoken is dropped after this many heartbeat timeouts of silence (SPEC §9): the
+watchdog stops the stream at one, so a host whose traffic comes back in time can restart it."""
+
+
+def link_timeout(spoken: bool, heartbeat_timeout_ms: int) -> float | None:
+    """Seconds of silence after which a link is dropped; None: never (heartbeat_timeout_ms = 0)."""
+    if not spoken:
+        return FIRST_MESSAGE_TIMEOUT_S
+    return LINK_TIMEOUT_FACTOR * heartbeat_timeout_ms / 1000 if heartbeat_timeout_ms else None
 
 
 class DeviceLink:
-    """One host at a time. ``on_lost`` runs when the host goes (detach, or a sink that fails);
+    """One host at a time. ``on_lost`` runs when the host goes (detach, drop, or a sink that fails);
     ``on_attach`` when a new host comes (per-link state such as the frame-repair chunk size resets).
     A request whose bytes stop arriving is abandoned after DEVICE_MESSAGE_TIMEOUT (SPEC §3)."""
 
@@ -24,9 +39,12 @@ class DeviceLink:
         self.decoder = Decoder(message_timeout=DEVICE_MESSAGE_TIMEOUT)
         self._on_attach = on_attach
         self.last_rx = time.monotonic()  # when the host last sent a whole frame (the watchdog's clock)
+        self.spoken = False  # whether this link delivered a frame since it was attached
+        self.drops = 0  # links dropped for silence
         self._dispatcher = dispatcher
         self._on_lost = on_lost
         self._sink: Sink | None = None
+        self._hang_up: HangUp | None = None
         self._sink_lock = threading.Lock()
         self._rx_lock = threading.Lock()
 
@@ -39,14 +57,17 @@ class DeviceLink:
         """Whether a host link (in-process pipe, pty, socket, USB) currently holds this unit."""
         return self._sink is not None
 
-    def attach(self, sink: Sink) -> None:
-        """Send all further output to ``sink`` (called from device threads; may block)."""
+    def attach(self, sink: Sink, hang_up: HangUp | None = None) -> None:
+        """Send all further output to ``sink`` (called from device threads; may block).
+        ``hang_up``: how the transport ends this link when it is dropped (close the socket...); it
+        must also make a blocked ``sink`` call fail, and must not block."""
         with self._sink_lock:
-            self._sink = sink
+            self._sink, self._hang_up = sink, hang_up
         with self._rx_lock:  # a new host: its request ids say nothing about the last one's
             self._dispatcher.cache.clear()
             self._on_attach()
             self.decoder = Decoder(stats=self.decoder.stats, message_timeout=DEVICE_MESSAGE_TIMEOUT)
+            self.spoken = False
         self.last_rx = time.monotonic()
 
     def detach(self) -> None:
@@ -55,11 +76,26 @@ class DeviceLink:
             self._sink = None
         self._on_lost()
 
+    def drop_if_silent(self, heartbeat_timeout_ms: int) -> bool:
+        """SPEC §9: end a link silent for longer than its link timeout (from the watchdog thread,
+        never blocked by a sender stuck in the sink). True if it was dropped."""
+        limit = link_timeout(self.spoken, heartbeat_timeout_ms)
+        if self._sink is None or limit is None or time.monotonic() - self.last_rx <= limit:
+            return False
+        hang_up = self._hang_up
+        self._sink, self._hang_up = None, None  # no lock: a sender may hold it, blocked in the sink
+        self.drops += 1
+        self._on_lost()
+        if hang_up is not None:
+            hang_up()
+        return True
+
     def receive(self, data: bytes) -> None:
         """Bytes from the host; replies go to the sink before this returns."""
         with self._rx_lock:
             for packet in self.decoder.feed(data):
                 self.last_rx = time.monotonic()
+                self.spoken = True
                 wire = self._dispatcher.answer(packet)
                 with self._sink_lock:
                     self._emit(wire)
@@ -72,16 +108,18 @@ class DeviceLink:
 
     def close(self) -> None:
         with self._sink_lock:
-            self._sink = None
+            self._sink, self._hang_up = None, None
 
     def _emit(self, wire: bytes) -> bool:
         """Write under ``_sink_lock``; a failing sink means the link is gone."""
         if self._sink is None:
             return False
+        sink = self._sink
         try:
-            self._sink(wire)
+            sink(wire)
             return True
         except OSError:
-            self._sink = None
+            if self._sink is sink:
+                self._sink, self._hang_up = None, None
             self._on_lost()
             return False

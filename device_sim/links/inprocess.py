@@ -67,8 +67,13 @@ class InProcessTransport(Transport):
         self.url = url
         self._owns = owns
         self._fifo = ByteFifo()
+        self._closed = False
         self._unsubscribe = sim.on_power(self._on_power)
-        sim.attach(self._fifo.put)
+        sim.attach(self._fifo.put, hang_up=self._fifo.close)  # dropped by the device: the host reads EOF
+
+    def _gone(self) -> DisconnectedError:
+        why = "is closed" if self._closed else "was dropped by the device (no request for the link timeout, SPEC §9)"
+        return DisconnectedError(f"{self.url} {why}")
 
     def _on_power(self, event: str) -> None:
         """The unit went down (reboot, power cut): this link is gone; the host reconnects by serial."""
@@ -78,22 +83,25 @@ class InProcessTransport(Transport):
 
     def write(self, data: bytes) -> None:
         if self._fifo.closed:
-            raise DisconnectedError(f"{self.url} is closed")
+            raise self._gone()
         self.sim.receive(data)
 
     def read(self, max_bytes: int, timeout: float) -> bytes:
         data = self._fifo.get(max_bytes, timeout)
         if not data and self._fifo.closed:
-            raise DisconnectedError(f"{self.url} is closed")
+            raise self._gone()
         return data
 
     def close(self) -> None:
-        if self._fifo.closed:
+        if self._closed:
             return
+        self._closed = True
+        dropped = self._fifo.closed  # the device dropped this link (SPEC §9): it may serve another by now
         self._fifo.close()
         self._unsubscribe()
-        self.sim.detach()
-        if self._owns:
+        if not dropped:
+            self.sim.detach()
+        if self._owns and not (dropped and self.sim.attached):
             self.sim.close()
 
 

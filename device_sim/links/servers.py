@@ -1,45 +1,86 @@
-"""Serve a SimulatedCamera over a pseudo-terminal or a TCP socket until told to stop."""
+"""Serve a SimulatedCamera over a pseudo-terminal or a TCP socket until told to stop.
+
+Both follow SPEC §9: a host silent for the link timeout is dropped by the device's watchdog (the
+transport's ``hang_up``), a host that stops reading is dropped after ``send_timeout`` seconds of a
+send making no progress, and a new host never receives output meant for an earlier one.
+"""
 from __future__ import annotations
 
 import os
 import select
 import socket
+import termios
 import threading
+import time
 import tty
+
+from stereocam.protocol import messages as m
+from stereocam.protocol.errors import ErrorCode
 
 from ..firmware import SimulatedCamera
 
 READ_CHUNK = 65536
+SEND_TIMEOUT_S = 5.0
+REFUSE_LINGER_S = 0.5  # a refused client's bytes are read and discarded this long, so the NACK is not reset away
 
 
 class PtyServer:
-    """The firmware behind the master side of a pty; hosts open ``path`` (the slave) with pyserial."""
+    """The firmware behind the master side of a pty; hosts open ``path`` (the slave) with pyserial.
 
-    def __init__(self, sim: SimulatedCamera):
+    A pty has no connections: after the device dropped a host (silence or a send timeout) the next
+    bytes that arrive start a new link, and the output still queued for the old host is discarded.
+    """
+
+    def __init__(self, sim: SimulatedCamera, send_timeout: float = SEND_TIMEOUT_S):
         self.sim = sim
+        self.send_timeout = send_timeout
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)  # no echo, no line discipline: an 8-bit clean wire
         self.path = os.ttyname(self._slave)
         self._stop = threading.Event()
         self._wlock = threading.Lock()
+        self._session = 0  # bumped by every hang-up: a write of an older session gives up
 
     @property
     def url(self) -> str:
         return self.path
 
     def _write(self, data: bytes) -> None:
+        """Bounded send: TimeoutError (an OSError: the link detaches and the stream stops) when the
+        host reads nothing for ``send_timeout``; BrokenPipeError once the link was hung up."""
         view = memoryview(data)
+        session = self._session
         with self._wlock:
+            stalled_since = time.monotonic()
             while view and not self._stop.is_set():
+                if self._session != session:
+                    raise BrokenPipeError("the device dropped this host")
                 try:
                     n = os.write(self._master, view)
                     view = view[n:]
+                    stalled_since = time.monotonic()
                 except BlockingIOError:
-                    select.select([], [self._master], [], 0.1)
+                    if time.monotonic() - stalled_since > self.send_timeout:
+                        self.sim.counters["link_send_timeouts"] += 1
+                        raise TimeoutError(f"the host read nothing for {self.send_timeout} s") from None
+                    select.select([], [self._master], [], 0.05)
+
+    def _hang_up(self) -> None:
+        self._session += 1
+
+    def _attach(self) -> None:
+        """A new host: discard what the pty still holds for the last one, then link up."""
+        self._session += 1
+        for fd, queue in ((self._master, termios.TCOFLUSH), (self._slave, termios.TCIFLUSH)):
+            try:
+                termios.tcflush(fd, queue)
+            except termios.error:
+                pass
+        self.sim.attach(self._write, self._hang_up)
 
     def serve_forever(self) -> None:
         os.set_blocking(self._master, False)
-        self.sim.attach(self._write)
+        self._attach()
         while not self._stop.is_set():
             ready, _, _ = select.select([self._master], [], [], 0.1)
             if not ready:
@@ -52,6 +93,8 @@ class PtyServer:
                 self._stop.wait(0.05)
                 continue
             if data:
+                if not self.sim.attached:
+                    self._attach()
                 self.sim.receive(data)
 
     def shutdown(self) -> None:
@@ -67,14 +110,23 @@ class PtyServer:
                 pass
 
 
+def busy_nack(holder: str) -> bytes:
+    """What a second TCP client hears before the device hangs up on it."""
+    return m.encode(m.Nack(0, ErrorCode.BAD_STATE, 0, f"busy: another host ({holder}) holds this device; "
+                           "nothing you sent was executed, connect again when it has left"))
+
+
 class TcpServer:
     """The firmware behind a listening TCP socket, one host connection at a time.
 
-    A host that stops reading for ``send_timeout`` seconds is dropped (the send fails, the device
-    detaches and stops streaming), so a wedged client cannot hold the camera forever.
+    A second client is accepted, told why with a NACK, and closed at once: nothing it sent is ever
+    executed, and nothing waits in the listen queue for the first host to leave. A host that stops
+    reading for ``send_timeout`` seconds is dropped (the send fails, the device detaches and stops
+    streaming); one silent for the link timeout is dropped by the device's watchdog (SPEC §9).
     """
 
-    def __init__(self, sim: SimulatedCamera, host: str = "127.0.0.1", port: int = 0, send_timeout: float = 5.0):
+    def __init__(self, sim: SimulatedCamera, host: str = "127.0.0.1", port: int = 0,
+                 send_timeout: float = SEND_TIMEOUT_S):
         self.sim = sim
         self.send_timeout = send_timeout
         self._sock = socket.create_server((host, port))
@@ -89,20 +141,53 @@ class TcpServer:
     def serve_forever(self) -> None:
         while not self._stop.is_set():
             try:
-                conn, _ = self._sock.accept()
+                conn, peer = self._sock.accept()
             except (socket.timeout, OSError):
                 continue
             with conn:
-                self._serve(conn)
+                self._serve(conn, f"{peer[0]}:{peer[1]}")
 
-    def _serve(self, conn: socket.socket) -> None:
+    def _refuse(self, holder: str) -> None:
+        """Accept the waiting client and hang up on it (in its own thread: the host is not kept waiting)."""
+        try:
+            conn, _ = self._sock.accept()
+        except OSError:
+            return
+        self.sim.counters["hosts_refused"] += 1
+        threading.Thread(target=self._tell_busy, args=(conn, holder), name="tcp-refuse", daemon=True).start()
+
+    @staticmethod
+    def _tell_busy(conn: socket.socket, holder: str) -> None:
+        with conn:
+            conn.settimeout(REFUSE_LINGER_S)
+            try:
+                conn.sendall(busy_nack(holder))
+                conn.shutdown(socket.SHUT_WR)
+                deadline = time.monotonic() + REFUSE_LINGER_S
+                while time.monotonic() < deadline and conn.recv(READ_CHUNK):  # discarded, never executed
+                    pass
+            except OSError:
+                pass
+
+    def _serve(self, conn: socket.socket, peer: str) -> None:
         conn.settimeout(self.send_timeout)  # bounds sendall; recv only runs when select says ready
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.sim.attach(conn.sendall)
+
+        def hang_up() -> None:
+            try:
+                conn.shutdown(socket.SHUT_RDWR)  # wakes a sender blocked in sendall and this loop
+            except OSError:
+                pass
+
+        self.sim.attach(conn.sendall, hang_up)
         try:
-            while not self._stop.is_set() and self.sim.attached:  # a failed send detaches the sim
-                ready, _, _ = select.select([conn], [], [], 0.1)
-                if not ready:
+            while not self._stop.is_set() and self.sim.attached:  # a failed send or a drop detaches
+                ready, _, _ = select.select([conn, self._sock], [], [], 0.1)
+                if not self.sim.attached:  # dropped meanwhile: the waiting client is the next host
+                    break
+                if self._sock in ready:
+                    self._refuse(peer)
+                if conn not in ready:
                     continue
                 data = conn.recv(READ_CHUNK)
                 if not data:

@@ -29,9 +29,8 @@ class CaptureRequest:
 class CaptureEngine:
     """Decides when exposures happen and hands each to ``produce`` on the worker thread."""
 
-    def __init__(self, produce: Callable[[CaptureRequest], None], watchdog: Callable[[], None]):
+    def __init__(self, produce: Callable[[CaptureRequest], None]):
         self._produce = produce
-        self._watchdog = watchdog
         self._cond = threading.Condition()
         self._queue: collections.deque[CaptureRequest] = collections.deque()
         self._streaming = False
@@ -131,7 +130,6 @@ class CaptureEngine:
 
     def _run(self) -> None:
         while not self._closed:
-            self._watchdog()
             req = self._next_request()
             if req is None:
                 continue

@@ -13,11 +13,12 @@ import logging
 import struct
 import threading
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable, Protocol
+from typing import TYPE_CHECKING, Callable
 
 from .descriptors import (CONFIGURATION_VALUE, DT_CONFIG, DT_DEVICE, DT_STRING, EP_IN, EP_OUT,
                           INTERFACE_NUMBER, MAX_PACKET_SIZE, DescriptorSet)
 from .errors import LibusbError, usb_error
+from .function import UsbFunction
 from .pipes import InPipe, OutPipe
 
 if TYPE_CHECKING:
@@ -32,16 +33,6 @@ GET_INTERFACE, SET_INTERFACE = 0x0A, 0x0B
 FEATURE_ENDPOINT_HALT = 0
 DEFAULT_IN_CAPACITY = 4 * 1024 * 1024
 DEFAULT_OUT_CAPACITY = 64 * 1024
-
-
-class UsbFunction(Protocol):
-    """What a firmware must offer to be plugged into the simulated bus."""
-
-    def attach(self, sink: Callable[[bytes], None]) -> None: ...
-
-    def detach(self) -> None: ...
-
-    def receive(self, data: bytes) -> None: ...
 
 
 _handle_ids = itertools.count(1)
@@ -90,7 +81,7 @@ class SimUsbDevice:
         self.successor: SimUsbDevice | None = None  # this unit's next enumeration, after a reboot
         on_power = getattr(sim, "on_power", None)
         self._unsubscribe = on_power(self._on_power) if on_power is not None else (lambda: None)
-        sim.attach(self.in_pipe.push)
+        self._link_up()
         self._thread.start()
 
     def __repr__(self) -> str:
@@ -142,9 +133,18 @@ class SimUsbDevice:
         """Fault injection: STALL ``endpoint`` as firmware does on a protocol error."""
         self._pipe(endpoint).halt()
 
+    def _link_up(self) -> None:
+        """Link the firmware to the IN pipe. A firmware that drops a silent host (SPEC §9) hangs up
+        by flushing the pipe (which also frees a blocked push); the next OUT transfer links it up
+        again, with nothing of the old host's output left queued."""
+        self.in_pipe.flush()
+        self.sim.attach(self.in_pipe.push, self.in_pipe.flush)
+
     def _firmware_loop(self) -> None:
         while (chunk := self.out_pipe.take()) is not None:
             try:
+                if not self.sim.attached and self.plugged:
+                    self._link_up()
                 self.sim.receive(chunk)
             except OSError:  # the sink is gone (unplugged mid-reply)
                 break

@@ -22,8 +22,12 @@ class EchoDevice:
         self.received: list[bytes] = []
         self._sink: Sink | None = None
 
-    def attach(self, sink: Sink) -> None:
+    def attach(self, sink: Sink, hang_up: Callable[[], None] | None = None) -> None:  # noqa: ARG002 (never drops)
         self._sink = sink
+
+    @property
+    def attached(self) -> bool:
+        return self._sink is not None
 
     def detach(self) -> None:
         self._sink = None
@@ -56,8 +60,12 @@ class SourceDevice:
         self._threads: list[threading.Thread] = []
         self._block = bytes(range(256)) * (chunk // 256 + 1)
 
-    def attach(self, sink: Sink) -> None:
+    def attach(self, sink: Sink, hang_up: Callable[[], None] | None = None) -> None:  # noqa: ARG002 (never drops)
         self._sink = sink
+
+    @property
+    def attached(self) -> bool:
+        return self._sink is not None
 
     def detach(self) -> None:
         self._sink = None

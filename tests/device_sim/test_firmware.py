@@ -22,13 +22,16 @@ def open_sim(sim: SimulatedCamera, **kw) -> Camera:
 
 
 def test_device_stops_streaming_when_host_goes_silent():
-    with open_sim(SimulatedCamera(seed=21), heartbeat_interval=3600) as cam:
+    sim = SimulatedCamera(seed=21)
+    with open_sim(sim, heartbeat_interval=3600) as cam:
         cam.configure(heartbeat_timeout_ms=300, fps=5)
         cam.start()
-        time.sleep(1.0)  # no heartbeat, no command: the watchdog fires
-        st = cam.status()
-        assert st.streaming is False
-        assert st.counters["heartbeat_timeouts"] == 1
+        time.sleep(0.45)  # no heartbeat, no command: the watchdog stops the stream at 300 ms ...
+        assert not sim.engine.streaming and sim.counters["heartbeat_timeouts"] == 1
+        time.sleep(0.6)  # ... and drops the link at twice that (SPEC §9)
+        assert not sim.attached and sim.counters["links_dropped"] == 1
+        with pytest.raises(stereocam.DisconnectedError):
+            cam.status()
 
 
 def test_heartbeats_keep_the_stream_alive():

@@ -5,7 +5,7 @@ import struct
 
 from stereocam.camera import Camera
 from stereocam.device_sim import SimulatedCamera
-from stereocam.device_sim.handlers import calibration as calib_service
+from stereocam.device_sim.calibration import acceptance as calib_service  # where the firmware parses a body
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.device_sim.rig.sensor import BOARD
 from stereocam.protocol.calibration import CalibrationFormatError, StereoCalibration
