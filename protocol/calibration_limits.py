@@ -39,8 +39,10 @@ class PlausibilityLimits:
     """|T| in metres: from a 5 mm board camera to a 2 m rail."""
     max_rotation_deg: float = 30.0
     """Angle of R: how far the two optical axes may be turned against each other."""
-    max_distortion: float = 50.0
-    """|coefficient| of every distortion term (OpenCV fits of wide lenses stay far below)."""
+    max_distortion: float = 1000.0
+    """|coefficient| of every distortion term. Wide: a rational_polynomial fit's numerator and
+    denominator terms are often tens to hundreds each (their ratio is what matters); what a lens
+    model really does to the image is judged by the rectification check (calibration/acceptance.py)."""
     sensor_size: tuple[int, int] | None = None
     """The rig's sensor (width, height): image_size must not exceed it and must keep its aspect
     ratio within ``aspect_tolerance`` (a device scales the calibration to every output format)."""

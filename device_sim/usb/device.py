@@ -13,7 +13,7 @@ import logging
 import struct
 import threading
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 from .descriptors import (CONFIGURATION_VALUE, DT_CONFIG, DT_DEVICE, DT_STRING, EP_IN, EP_OUT,
                           INTERFACE_NUMBER, MAX_PACKET_SIZE, DescriptorSet)
