@@ -64,7 +64,7 @@ class SimulatedCamera:
         self.engine = CaptureEngine(lambda req: self.pipeline.produce(req), lambda: self.heartbeat.watchdog())
         self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop)
         self.pipeline = CapturePipeline(seed, self.rig, self.config, self.calibration, self.clock, self.truth,
-                                        self._send_capture_part, self.counters)
+                                        self._send_capture_part, self.counters, self.engine.count_drop)
         self.scene = scene
         self.heartbeat = HeartbeatHandlers(self.clock, self.config, self.engine, self.link, self.counters)
         self.streaming = StreamingHandlers(self.config, self.engine, self.counters)
@@ -125,6 +125,7 @@ class SimulatedCamera:
     def close(self) -> None:
         registry.unregister(self)
         self.engine.close()
+        self.pipeline.close()
         if self.trigger_line is not None:
             self.trigger_line.detach(self.streaming.on_pulse)
         self.link.close()

@@ -206,10 +206,11 @@ def render_layer(rays, origin, rot, prims, subset, tex, tex_off, tex_side, light
 TILE = 16  # pixels per side of the tiles render_over culls moving primitives on
 
 
-def ray_cones(rays: np.ndarray, tile: int = TILE) -> np.ndarray:
-    """Per ``tile`` x ``tile`` block of a ray table: the cone holding all its rays, as
+def ray_cones(rays: np.ndarray) -> np.ndarray:
+    """Per ``TILE`` x ``TILE`` block of a ray table: the cone holding all its rays, as
     (unit axis x, y, z, half-angle in radians), shape (ceil(H/tile), ceil(W/tile), 4)."""
     h, w = rays.shape[:2]
+    tile = TILE
     nty, ntx = -(-h // tile), -(-w // tile)
     padded = np.full((nty * tile, ntx * tile, 3), np.nan)
     padded[:h, :w] = rays / np.linalg.norm(rays.astype(np.float64), axis=2, keepdims=True)
@@ -245,7 +246,7 @@ def render_over(rays, cones, origin, rot, prims, subset, base_rad, base_t, base_
     Tiles whose ray cone (``ray_cones``) misses a primitive's bounding sphere skip its test."""
     h, w = out_rad.shape
     nty, ntx = cones.shape[0], cones.shape[1]
-    tile = -(-h // nty)
+    tile = TILE
     for ty in nb.prange(nty):
         active = np.empty(subset.shape[0], np.int64)
         for tx in range(ntx):

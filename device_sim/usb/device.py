@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable, Protocol
 
 from .descriptors import (CONFIGURATION_VALUE, DT_CONFIG, DT_DEVICE, DT_STRING, EP_IN, EP_OUT,
-                          INTERFACE_NUMBER, MAX_PACKET_SIZE, DescriptorSet)
+                          INTERFACE_NUMBER, BusSpeed, DescriptorSet)
 from .errors import LibusbError, usb_error
 from .pipes import InPipe, OutPipe
 
@@ -30,7 +30,8 @@ GET_STATUS, CLEAR_FEATURE, SET_FEATURE = 0x00, 0x01, 0x03
 GET_DESCRIPTOR, GET_CONFIGURATION, SET_CONFIGURATION = 0x06, 0x08, 0x09
 GET_INTERFACE, SET_INTERFACE = 0x0A, 0x0B
 FEATURE_ENDPOINT_HALT = 0
-DEFAULT_IN_CAPACITY = 4 * 1024 * 1024
+IN_FIFO_SECONDS = 0.025  # the device's IN FIFO holds about this much of its bus's time
+MIN_IN_CAPACITY = 1024 * 1024
 DEFAULT_OUT_CAPACITY = 64 * 1024
 
 
@@ -69,18 +70,21 @@ class SimUsbDevice:
     firmware writers get ``BrokenPipeError``."""
 
     def __init__(self, bus: "SimUsbBus", sim: UsbFunction, descriptors: DescriptorSet,
-                 port: int, address: int, zlp: bool = True,
-                 in_capacity: int = DEFAULT_IN_CAPACITY,
+                 port: int, address: int, speed: BusSpeed, zlp: bool = True,
+                 in_capacity: int | None = None,
                  out_capacity: int = DEFAULT_OUT_CAPACITY) -> None:
         self.bus = bus
         self.sim = sim
         self.descriptors = descriptors
         self.port = port
         self.address = address
+        self.speed = speed
         self.plugged = True
         self.configuration = CONFIGURATION_VALUE  # the OS configures a device on enumeration
         self.claims: dict[int, SimHandle] = {}
-        self.in_pipe = InPipe(EP_IN, MAX_PACKET_SIZE, in_capacity, zlp=zlp)
+        if in_capacity is None:
+            in_capacity = max(MIN_IN_CAPACITY, int(speed.bulk_bytes_per_s * IN_FIFO_SECONDS))
+        self.in_pipe = InPipe(EP_IN, speed.max_packet, in_capacity, zlp=zlp, bytes_per_s=speed.bulk_bytes_per_s)
         self.out_pipe = OutPipe(EP_OUT, out_capacity)
         self._lock = threading.RLock()
         self._handles: set[SimHandle] = set()
