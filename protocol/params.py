@@ -69,6 +69,14 @@ PARAMS: tuple[Param, ...] = (
     Param(19, "heartbeat_timeout_ms", 3000, 0, 600_000, unit="ms"),  # 0: never time out
     # id 20 is retired (a simulator control in drafts of 1.1); never reused
     Param(21, "rectify", 1, 0, 1),  # 1: rectified images + disparity; 0: raw images (INFO RAW_OUTPUT)
+    # matching algorithm and the semi-global matcher's own parameters (SGM also uses 8, 10, 15..18)
+    Param(22, "algorithm", 0, 0, 1),  # 0 block matching (StereoBM), 1 semi-global matching
+    Param(23, "sgm_p1", 15, 0, 255),  # SGM penalty for a 1 px disparity step along a path
+    Param(24, "sgm_p2", 128, 0, 193),  # SGM penalty for larger steps (census bits + p2 <= 255)
+    Param(25, "sgm_p2_adapt", 32, 0, 255),  # > 0: p2 / (1 + |dI| / this), not below p1; 0 off
+    Param(26, "sgm_paths", 8, 4, 8, step=4),  # 4 (horizontal + vertical) or 8 (+ diagonals)
+    Param(27, "census_width", 9, 3, 9, odd=True, unit="px"),  # SGM census window
+    Param(28, "census_height", 7, 1, 7, odd=True, unit="px"),
 )
 
 DESCRIPTIONS: dict[str, str] = {
@@ -91,8 +99,14 @@ DESCRIPTIONS: dict[str, str] = {
     "speckle_range": "disparity step that splits speckle regions",
     "disp12_max_diff": "left-right consistency tolerance (-1: off)",
     "heartbeat_timeout_ms": "the device stops streaming after this long without a host message (0: never)",
-    "scene": "simulator only: 0 animated lab, 1 textured wall at 1 m, 2 calibration board",
-    "rectify": "1 rectified images + disparity, 0 raw images without disparity",
+    "rectify": "1 rectified images + disparity, 0 raw images without disparity (INFO RAW_OUTPUT)",
+    "algorithm": "0 block matching, 1 semi-global matching (census + SGM)",
+    "sgm_p1": "SGM penalty for a 1 px disparity step along a path",
+    "sgm_p2": "SGM penalty for larger disparity steps",
+    "sgm_p2_adapt": "SGM: p2 / (1 + |intensity step| / this), not below p1 (0: off)",
+    "sgm_paths": "SGM aggregation paths: 4 or 8",
+    "census_width": "SGM census window width (odd)",
+    "census_height": "SGM census window height (odd)",
 }
 PARAMS = tuple(replace(p, description=DESCRIPTIONS.get(p.name, p.description)) for p in PARAMS)
 

@@ -11,6 +11,8 @@ Every test gets its own simulated USB bus, so tests can run in any order.
 """
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from stereocam.device_sim.process import ServedSimulator
@@ -62,6 +64,16 @@ def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Co
                                     f"{_DEVICE_OUTCOMES.get('passed', 0)} passed, "
                                     f"{_DEVICE_OUTCOMES.get('failed', 0)} failed, "
                                     f"{_DEVICE_OUTCOMES.get('skipped', 0)} skipped")
+@pytest.fixture(scope="session", autouse=True)
+def factory_db_in_tmp(tmp_path_factory: pytest.TempPathFactory):
+    """Calibration runs record their attempts in a session-scoped SQLite file, not in the home folder."""
+    old = os.environ.get("STEREOCAM_FACTORY_DB")
+    os.environ["STEREOCAM_FACTORY_DB"] = str(tmp_path_factory.mktemp("factory") / "factory.sqlite")
+    yield
+    if old is None:
+        os.environ.pop("STEREOCAM_FACTORY_DB")
+    else:
+        os.environ["STEREOCAM_FACTORY_DB"] = old
 
 
 @pytest.fixture(scope="session")

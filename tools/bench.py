@@ -33,7 +33,7 @@ def bench_protocol(seconds: float = 2.0) -> dict[str, float]:
     return {"decode_MBps": mbps}
 
 
-MODES = ("protocol", "transport", "usb", "matching", "calibration", "all")
+MODES = ("protocol", "transport", "usb", "matching", "calibration", "calib-real", "all")
 
 
 @click.command("bench", context_settings={"ignore_unknown_options": True},
@@ -52,6 +52,7 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
     usb          the USB path alone: bulk IN MB/s through pyusb
     matching     the numba matching core against cv2.StereoBM
     calibration  calibration accuracy against the simulator's truth, solver and device tool
+    calib-real   the offline tool on real calibration sets against OpenCV's all-pairs solution
     all          protocol, transport, matching and calibration (default)
 
     Arguments after WHAT that this command does not know go to the transport, usb or matching bench."""
@@ -60,6 +61,8 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
         bench_protocol()
     if what in ("transport", "all"):
         importlib.import_module("stereocam.tools.bench_transport").main(rest if what == "transport" else [], seconds)
+    if what == "calib-real":
+        importlib.import_module("stereocam.tools.bench_calib_real").main(rest)
     if what == "usb":
         importlib.import_module("stereocam.tools.bench_usb").main(rest)
     if what in ("matching", "all"):

@@ -1,7 +1,7 @@
 """Benchmark the device matching core against cv2.StereoBM in one process.
 
     python -m tools.bench_matching [--threads 2] [--repeat 15] [--quick] [--profile]
-                                   [--cold-jit]
+                                   [--cold-jit] [--algorithm bm|sgm]
 
 Prints per case: median ms of each (runs interleaved), ratio core/cv2, G disparity
 evaluations/s (W*H*D/time), bad-2.0 against ground truth (Middlebury Motorcycle from
@@ -124,7 +124,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--profile", action="store_true", help="per-stage timings of the core")
     ap.add_argument("--cold-jit", action="store_true",
                     help="also time a from-scratch compile (subprocess, empty numba cache)")
+    ap.add_argument("--algorithm", choices=["bm", "sgm"], default="bm",
+                    help="bm: the block matcher vs cv2.StereoBM; sgm: our SGM vs every "
+                         "cv2.StereoSGBM mode and StereoBM (tools/bench_sgm.py)")
     args = ap.parse_args(argv)
+    if args.algorithm == "sgm":
+        from .bench_sgm import main as sgm_main
+        return sgm_main(args)
 
     import cv2
     import numba

@@ -6,7 +6,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from stereocam.tools.calib_solve import PARAM_NAMES, CalibrationResult
+from stereocam.device_sim.calibration.rectify import undistort_rectify_map
+from stereocam.tools.calib_coverage import PARAM_NAMES
+from stereocam.tools.calib_solve import CalibrationResult
 
 WIDTH = 1280
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
@@ -24,16 +26,18 @@ def _header(result: CalibrationResult) -> np.ndarray:
     verdict = "PASSED" if result.passed else "FAILED: " + "; ".join(result.failures)
     _text(img, verdict, (10, 25), 0.7, (0, 140, 0) if result.passed else (0, 0, 200))
     _text(img, f"rms left {q.rms_left:.3f} px   right {q.rms_right:.3f} px   stereo {q.rms_stereo:.3f} px   "
-               f"held-out epipolar {q.epipolar_rms_px:.3f} px   views {q.views_used}   "
-               f"baseline {c.baseline_m * 1000:.2f} mm   {c.image_size[0]}x{c.image_size[1]}", (10, 55))
+               f"held-out epipolar {q.epipolar_rms_px:.3f} px   pairs {q.views_used} (+{q.views_dropped} dropped)   "
+               f"{c.lens_model}   baseline {c.baseline_m * 1000:.2f} mm   {c.image_size[0]}x{c.image_size[1]}",
+          (10, 55))
     return img
 
 
 def _view_errors(result: CalibrationResult, height: int = 240) -> np.ndarray:
-    """Bars per view: used views show left/right RMS, held-out views their epipolar RMS."""
+    """Bars per used pair: left/right reprojection RMS, and for held-out pairs their epipolar RMS."""
     img = np.full((height, WIDTH, 3), 255, np.uint8)
-    views = [v for v in result.views if v.status in ("used", "held_out")]
-    values = [x for v in views for x in (v.rms_left, v.rms_right, v.epipolar_rms_px) if x is not None]
+    views = [v for v in result.views if v.status == "used"]
+    values = [x for v in views for x in (v.rms_left, v.rms_right, v.epipolar_rms_px if v.held_out else None)
+              if x is not None]
     top = max(0.2, 1.1 * max(values, default=0.0))
     x0, y0, y1 = 60, 30, height - 30
     plot_w = WIDTH - x0 - 20
@@ -42,18 +46,17 @@ def _view_errors(result: CalibrationResult, height: int = 240) -> np.ndarray:
         cv2.line(img, (x0, y), (WIDTH - 20, y), (225, 225, 225), 1)
         _text(img, f"{top * k / 4:.2f}", (5, y + 4), 0.4)
     slot = plot_w / max(len(views), 1)
-    bar = max(1, int(slot / 3) - 1)
+    bar = max(1, int(slot / 4) - 1)
 
     def draw(i: int, k: int, value: float, color: tuple[int, int, int]) -> None:
         x = int(x0 + i * slot + k * (bar + 1))
         cv2.rectangle(img, (x, int(y1 - (y1 - y0) * value / top)), (x + bar - 1, y1), color, -1)
 
     for i, v in enumerate(views):
-        if v.status == "used":
-            draw(i, 0, v.rms_left, _LEFT)
-            draw(i, 1, v.rms_right, _RIGHT)
-        else:
-            draw(i, 0, v.epipolar_rms_px, _EPI)
+        draw(i, 0, v.rms_left, _LEFT)
+        draw(i, 1, v.rms_right, _RIGHT)
+        if v.held_out:
+            draw(i, 2, v.epipolar_rms_px, _EPI)
     _text(img, "per-view RMS error (px):", (10, 18))
     for k, (name, color) in enumerate((("left reprojection", _LEFT), ("right reprojection", _RIGHT),
                                        ("held-out epipolar", _EPI))):
@@ -64,7 +67,7 @@ def _view_errors(result: CalibrationResult, height: int = 240) -> np.ndarray:
 
 def _coverage(result: CalibrationResult) -> np.ndarray:
     img = np.full((30 * len(PARAM_NAMES) + 30, WIDTH, 3), 255, np.uint8)
-    _text(img, "coverage of kept views (ROS-style X, Y, size, skew):", (10, 18))
+    _text(img, "coverage of the pairs used (ROS-style X, Y, size, skew):", (10, 18))
     for k, (name, value) in enumerate(zip(PARAM_NAMES, result.coverage)):
         y = 30 + 30 * k
         _text(img, name, (10, y + 16))
@@ -81,7 +84,7 @@ def _rectified_pair(result: CalibrationResult) -> np.ndarray | None:
     halves = []
     for img, K, D, R, P in ((result.sample_pair[0], c.K_left, c.D_left, r.R1, r.P1),
                             (result.sample_pair[1], c.K_right, c.D_right, r.R2, r.P2)):
-        mx, my = cv2.initUndistortRectifyMap(K, D, R, P, c.image_size, cv2.CV_32FC1)
+        mx, my = undistort_rectify_map(K, D, R, P, c.image_size, c.lens_model)
         halves.append(cv2.remap(img, mx, my, cv2.INTER_LINEAR))
     pair = cv2.cvtColor(np.hstack(halves), cv2.COLOR_GRAY2BGR)
     scale = WIDTH / pair.shape[1]
@@ -89,7 +92,7 @@ def _rectified_pair(result: CalibrationResult) -> np.ndarray | None:
     for y in range(20, pair.shape[0], 30):
         cv2.line(pair, (0, y), (WIDTH - 1, y), (0, 200, 255), 1)
     cv2.line(pair, (WIDTH // 2, 0), (WIDTH // 2, pair.shape[0] - 1), _WHITE, 2)
-    _text(pair, "rectified held-out pair with epipolar lines", (10, 18), 0.5, _WHITE)
+    _text(pair, "rectified pair with epipolar lines", (10, 18), 0.5, _WHITE)
     return pair
 
 

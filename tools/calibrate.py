@@ -2,6 +2,7 @@
 
     stereocam calibrate URL --out OUTDIR [--target user|factory]          (device mode)
     stereocam calibrate --images DIR --board 9x6 --square-size 0.025 --out OUTDIR   (offline)
+    stereocam calibrate --images DIR --board charuco:19x26:0.005:0.004:DICT_4X4_250 --out OUTDIR
 
 Device mode (tools/calibrate_device.py) captures raw pairs of the calibration board, solves, gates,
 writes the result to the camera, reads it back and compares it byte for byte before it reports
@@ -11,26 +12,37 @@ board (``python -m stereocam.device_sim --scene board`` or ``sim://?scene=board`
 inner corners of 30 mm, the device-mode default.
 
 DIR holds pairs named left<N>.<ext> / right<N>.<ext> (any text between the side and the number,
-e.g. left_003.png ↔ right3.png); they are paired by the integer N. The engine and the metric
-definitions are in tools/calib_solve.py.
+e.g. left_003.png ↔ right3.png); they are paired by the integer N. Offline, every pair with the
+board in both images is used except the outliers by their own residuals, which are listed with the
+reason; the lens model is chosen on held-out pairs unless --lens-model names one. The engine and
+the metric definitions are in tools/calib_solve.py and tools/calib_fit.py; boards in
+tools/calib_boards.py.
 
 Outputs in OUTDIR:
-  calibration.json   geometry + rms_left, rms_right, rms_stereo, epipolar_rms_px, views_used,
-                     passed, written, verified (written/verified are false in offline mode)
-  calibration.yaml   OpenCV FileStorage: K1 D1 K2 D2 R T R1 R2 P1 P2 Q + metrics   (only if passed)
-  left.yaml, right.yaml   ROS camera_info (plumb_bob)                              (only if passed)
+  calibration.json   geometry + lens_model + rms_left, rms_right, rms_stereo, epipolar_rms_px,
+                     epipolar_all_rms_px, views_used, views_dropped, passed, written, verified
+                     (written/verified are false in offline mode), dropped (file and reason),
+                     lens_model_scores (held-out score per model tried)
+  calibration.yaml   OpenCV FileStorage: lens_model K1 D1 K2 D2 R T R1 R2 P1 P2 Q + metrics  (if passed)
+  left.yaml, right.yaml   ROS camera_info (plumb_bob, rational_polynomial or equidistant) (if passed)
+  camera_info/left_WxH.yaml, right_WxH.yaml   device mode: camera_info for every stream size the
+                     unit offers (tools/camera_info.py)                              (if passed)
   report.png         per-view errors, coverage, rectified pair with epipolar lines
 Exit status: 0 passed; 1 the camera could not be reached; 2 bad arguments or unreadable images;
 3 no solution (board never found, too few views); 4 the solution failed the gate (calibration.json
 says passed: false, the YAML files are not written and stale ones from an earlier run are removed);
 5 the write to the camera failed or read back different (the camera keeps its previous calibration);
-6 the camera does not advertise raw output (INFO capability RAW_OUTPUT).
+6 the outputs could not be saved (in device mode after a successful write: the camera holds the new
+calibration and the factory record says so). --out and --db are checked before anything is
+captured or written; every attempt is recorded in the factory database (tools/factory/).
+7 the camera does not advertise raw output (INFO capability RAW_OUTPUT): nothing was written.
 """
 from __future__ import annotations
 
 import argparse
-import json
+import os
 import re
+import socket
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -38,13 +50,17 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from stereocam.device_sim.calibration.board import BoardSpec
-from stereocam.tools.calib_report import write_report
-from stereocam.tools.calib_solve import PARAM_NAMES, CalibrationError, CalibrationResult, Progress, SolveConfig, calibrate_pairs
+from stereocam.tools.calib_boards import describe, parse_board
+from stereocam.tools.calib_outputs import print_progress, print_summary, write_outputs
+from stereocam.tools.camera_info import stream_sizes
+from stereocam.tools.factory.db import FactoryDB, FactoryDBError, default_url
+from stereocam.tools.factory.record import make_attempt, now_utc
+from stereocam.tools.calib_fit import OutlierRules
+from stereocam.tools.calib_lens import ALIASES
+from stereocam.tools.calib_solve import CalibrationError, CalibrationResult, SolveConfig, calibrate_pairs
 
-EXIT_OK, EXIT_USAGE, EXIT_NO_SOLUTION, EXIT_GATE = 0, 2, 3, 4
+EXIT_OK, EXIT_USAGE, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_SAVE = 0, 2, 3, 4, 6
 _NAME = re.compile(r"^(left|right)\D*?(\d+)\.(png|jpe?g|bmp|pgm|ppm|tiff?)$", re.IGNORECASE)
-_PASS_ONLY = ("calibration.yaml", "left.yaml", "right.yaml")
 
 
 def find_pairs(directory: Path) -> list[tuple[int, Path, Path]]:
@@ -74,91 +90,76 @@ def _load(pairs: list[tuple[int, Path, Path]]) -> Iterator[tuple[np.ndarray, np.
         yield images[0], images[1]
 
 
-def _bar(value: float, width: int = 10) -> str:
-    n = int(round(value * width))
-    return "#" * n + "-" * (width - n)
-
-
-def print_progress(p: Progress) -> None:
-    """One line per pair: its fate, the kept/held-out counts and the coverage bars."""
-    bars = " ".join(f"{name} [{_bar(c)}]" for name, c in zip(PARAM_NAMES, p.coverage))
-    print(f"{p.view.label:<24} {p.view.status:<9} kept {p.kept:>2} held-out {p.held_out:>2}  {bars}", flush=True)
-
-
-def _mat(a: np.ndarray) -> dict[str, object]:
-    a = np.atleast_2d(a)
-    return {"rows": a.shape[0], "cols": a.shape[1], "data": [float(v) for v in a.ravel()]}
-
-
-def ros_camera_info(name: str, size: tuple[int, int], K: np.ndarray, D: np.ndarray,
-                    R: np.ndarray, P: np.ndarray) -> str:
-    """A ROS camera_info YAML document (camera_calibration_parsers layout)."""
-    lines = [f"image_width: {size[0]}", f"image_height: {size[1]}", f"camera_name: {name}"]
-    for key, value in (("camera_matrix", K), ("distortion_model", None), ("distortion_coefficients", D),
-                       ("rectification_matrix", R), ("projection_matrix", P)):
-        if value is None:
-            lines.append("distortion_model: plumb_bob")
-            continue
-        m = _mat(value)
-        lines += [f"{key}:", f"  rows: {m['rows']}", f"  cols: {m['cols']}",
-                  "  data: [" + ", ".join(repr(v) for v in m["data"]) + "]"]
-    return "\n".join(lines) + "\n"
-
-
-def write_outputs(result: CalibrationResult, outdir: Path) -> list[Path]:
-    """Write the files listed in the module docstring; returns the paths written."""
-    outdir.mkdir(parents=True, exist_ok=True)
-    c, q, r = result.calibration, result.quality, result.rectification
-    written = [outdir / "calibration.json", outdir / "report.png"]
-    written[0].write_text(json.dumps(c.to_json_dict(q), indent=2) + "\n")
-    write_report(result, written[1])
-    if not result.passed:
-        for name in _PASS_ONLY:
-            (outdir / name).unlink(missing_ok=True)
-        return written
-    fs = cv2.FileStorage(str(outdir / "calibration.yaml"), cv2.FILE_STORAGE_WRITE)
-    fs.write("image_width", c.image_size[0])
-    fs.write("image_height", c.image_size[1])
-    for key, value in (("K1", c.K_left), ("D1", c.D_left.reshape(1, 5)), ("K2", c.K_right),
-                       ("D2", c.D_right.reshape(1, 5)), ("R", c.R), ("T", c.T.reshape(3, 1)), ("R1", r.R1),
-                       ("R2", r.R2), ("P1", r.P1), ("P2", r.P2), ("Q", r.Q)):
-        fs.write(key, np.asarray(value, dtype=np.float64))
-    for key in ("rms_left", "rms_right", "rms_stereo", "epipolar_rms_px"):
-        fs.write(key, float(getattr(q, key)))
-    fs.release()
-    (outdir / "left.yaml").write_text(ros_camera_info("left", c.image_size, c.K_left, c.D_left, r.R1, r.P1))
-    (outdir / "right.yaml").write_text(ros_camera_info("right", c.image_size, c.K_right, c.D_right, r.R2, r.P2))
-    return written + [outdir / n for n in _PASS_ONLY]
-
-
-def _board(text: str) -> tuple[int, int]:
+def _size(text: str) -> tuple[int, int]:
     m = re.fullmatch(r"(\d+)[xX](\d+)", text)
     if not m:
-        raise argparse.ArgumentTypeError(f"board must be COLSxROWS inner corners, e.g. 9x6, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 640x480, got {text!r}")
     return int(m.group(1)), int(m.group(2))
 
 
+def _range(text: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected MIN:MAX, got {text!r}") from None
+    return lo, hi
+
+
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="stereocam calibrate", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="stereocam calibrate", description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     ap.add_argument("url", nargs="?", help="camera to calibrate (device mode)")
     ap.add_argument("--images", type=Path, help="folder of left<N>/right<N> images (offline mode)")
-    ap.add_argument("--board", type=_board, default=(9, 6), help="inner corners COLSxROWS (default 9x6)")
+    ap.add_argument("--board", default="9x6",
+                    help="COLSxROWS inner corners of a chessboard, or charuco:COLSxROWS:SQUARE:MARKER:DICT "
+                         "(squares; lengths in metres)")
     ap.add_argument("--square-size", type=float, default=None,
-                    help="square side in metres (required offline; device default 0.03)")
+                    help="chessboard square side in metres (required offline; device default 0.03)")
     ap.add_argument("--out", type=Path, required=True, help="output folder")
     ap.add_argument("--target", choices=["user", "factory"], default="user", help="device record to write")
     ap.add_argument("--pairs", type=int, default=200, help="device mode: most pairs to capture")
-    ap.add_argument("--size", type=_board, default=None, metavar="WxH",
+    ap.add_argument("--size", type=_size, default=None, metavar="WxH",
                     help="device mode: capture format (default the full sensor)")
-    d = SolveConfig()
-    ap.add_argument("--max-stereo-rms", type=float, default=d.max_stereo_rms_px, help="gate, px")
-    ap.add_argument("--max-epipolar", type=float, default=d.max_epipolar_rms_px, help="gate, px (held-out)")
-    ap.add_argument("--min-views", type=int, default=d.min_views, help="distinct views needed to solve")
-    ap.add_argument("--max-views", type=int, default=d.max_views, help="stop after this many kept views")
+    ap.add_argument("--lens-model", default="auto", choices=["auto", *ALIASES],
+                    help="lens model; auto: chosen by held-out error, the simpler wins ties")
+    d, o = SolveConfig(), OutlierRules()
+    ap.add_argument("--max-stereo-rms", type=float, default=d.max_stereo_rms_px, help="gate: stereo RMS, px")
+    ap.add_argument("--max-epipolar", type=float, default=d.max_epipolar_rms_px,
+                    help="gate: held-out epipolar RMS, px")
+    ap.add_argument("--max-pixel-aspect", type=float, default=d.max_pixel_aspect,
+                    help="gate: fy/fx must lie within [1/A, A]")
+    ap.add_argument("--baseline-range", type=_range, default=(d.min_baseline_m, d.max_baseline_m),
+                    metavar="MIN:MAX", help="gate: plausible baseline, metres")
+    ap.add_argument("--min-views", type=int, default=d.min_views, help="device mode: distinct views needed")
+    ap.add_argument("--max-views", type=int, default=d.max_views, help="device mode: stop after this many views")
+    ap.add_argument("--min-pairs", type=int, default=d.min_pairs,
+                    help="offline: pairs with the board (outliers removed) needed")
     ap.add_argument("--holdout-every", type=int, default=d.holdout_every,
-                    help="hold out every N-th pair with a board for the epipolar check")
+                    help="hold out every N-th pair for the lens-model choice and the epipolar check")
+    ap.add_argument("--model-tie", type=float, default=d.model_tie,
+                    help="relative held-out score difference within which the simpler lens model wins")
+    ap.add_argument("--outlier-k", type=float, default=o.k, help="outlier: > median + k x 1.4826 MAD ...")
+    ap.add_argument("--outlier-ratio", type=float, default=o.ratio, help="... and > ratio x median")
+    ap.add_argument("--outlier-rounds", type=int, default=o.rounds, help="outlier removal rounds")
+    ap.add_argument("--max-drop-fraction", type=float, default=o.max_drop_fraction,
+                    help="most pairs removed as outliers, fraction")
+    ap.add_argument("--db", default=default_url(),
+                    help="factory database for the record of this attempt: SQLite path or postgresql://...")
+    ap.add_argument("--station", default=socket.gethostname(), help="station name in the factory record")
+    ap.add_argument("--serial", default=None,
+                    help="unit serial in the factory record (default: the camera's; offline the folder name)")
     ap.add_argument("-q", "--quiet", action="store_true", help="no per-pair progress lines")
     return ap
+
+
+def _config(args: argparse.Namespace) -> SolveConfig:
+    return SolveConfig(
+        max_stereo_rms_px=args.max_stereo_rms, max_epipolar_rms_px=args.max_epipolar, min_views=args.min_views,
+        max_views=args.max_views, min_pairs=args.min_pairs, holdout_every=args.holdout_every,
+        lens_model=ALIASES.get(args.lens_model, "auto"), model_tie=args.model_tie,
+        outliers=OutlierRules(args.outlier_k, args.outlier_ratio, args.outlier_rounds, args.max_drop_fraction),
+        max_pixel_aspect=args.max_pixel_aspect, min_baseline_m=args.baseline_range[0],
+        max_baseline_m=args.baseline_range[1])
 
 
 def _fail(code: int, text: str) -> int:
@@ -166,58 +167,120 @@ def _fail(code: int, text: str) -> int:
     return code
 
 
+def _writable(path: Path) -> bool:
+    """True when `path` is a writable folder or could be created as one (nothing is created)."""
+    probe = path.resolve()
+    while not probe.exists():
+        probe = probe.parent
+    return probe.is_dir() and os.access(probe, os.W_OK | os.X_OK)
+
+
+def _record(db: FactoryDB, args: argparse.Namespace, serial: str, started: str, result: CalibrationResult | None,
+            code: int, reason: str, blob: bytes | None) -> None:
+    attempt = make_attempt(serial=serial, started_at=started, station=args.station,
+                           mode="device" if args.url else "offline", board=describe(args.board), result=result,
+                           passed=code == EXIT_OK or (code == EXIT_SAVE and result is not None and result.passed),
+                           reason=reason, output_dir=args.out, blob=blob)
+    try:
+        row = db.record(attempt)
+        print(f"factory record: attempt {row} in {db.url}")
+    except FactoryDBError as exc:
+        print(f"stereocam calibrate: warning: {exc}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    started = now_utc()
     if (args.url is None) == (args.images is None):
         return _fail(EXIT_USAGE, "give a camera URL (device mode) or --images DIR (offline), not both")
-    if args.square_size is None:
+    charuco = args.board.lower().startswith("charuco:")
+    if args.square_size is None and not charuco:
         if args.images is not None:
-            return _fail(EXIT_USAGE, "--square-size is required with --images")
+            return _fail(EXIT_USAGE, "--square-size is required with --images and a chessboard")
         args.square_size = 0.03
-    if not 0 < args.square_size <= 1.0:
+    if args.square_size is not None and not 0 < args.square_size <= 1.0:
         return _fail(EXIT_USAGE, f"--square-size is in metres (0 < s <= 1), got {args.square_size}")
-    if args.holdout_every < 2 or args.min_views < 3:
-        return _fail(EXIT_USAGE, "--holdout-every must be >= 2 and --min-views >= 3")
-    config = SolveConfig(args.max_stereo_rms, args.max_epipolar, args.min_views, args.max_views, args.holdout_every)
-    if args.url is not None:
-        return _device_mode(args, config)
+    if args.holdout_every < 2 or args.min_views < 3 or args.min_pairs < 4:
+        return _fail(EXIT_USAGE, "--holdout-every must be >= 2, --min-views >= 3 and --min-pairs >= 4")
+    if args.max_pixel_aspect < 1 or not 0 < args.baseline_range[0] < args.baseline_range[1]:
+        return _fail(EXIT_USAGE, "--max-pixel-aspect must be >= 1 and --baseline-range 0 < MIN < MAX")
     try:
-        board = BoardSpec(*args.board, args.square_size)
+        args.board = parse_board(args.board, args.square_size)
+    except ValueError as exc:
+        return _fail(EXIT_USAGE, str(exc))
+    config = _config(args)
+    if not _writable(args.out):  # checked before anything is captured or written to a camera
+        return _fail(EXIT_USAGE, f"--out {args.out} is not a writable folder; nothing was done")
+    try:
+        db = FactoryDB(args.db)
+    except FactoryDBError as exc:
+        return _fail(EXIT_USAGE, f"{exc}; nothing was done")
+    with db:
+        if args.url is not None:
+            return _device_mode(args, config, db, started)
+        return _offline(args, config, db, started)
+
+
+def _offline(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, started: str) -> int:
+    serial = args.serial or args.images.resolve().name
+    try:
         pairs = find_pairs(args.images)
         labels = [f"{l.name}|{r.name}" for _, l, r in pairs]
-        result = calibrate_pairs(_load(pairs), board, config, labels, None if args.quiet else print_progress)
+        result = calibrate_pairs(_load(pairs), args.board, config, labels, None if args.quiet else print_progress,
+                                 select=False)
     except CalibrationError as exc:
+        _record(db, args, serial, started, None, EXIT_NO_SOLUTION, str(exc), None)
         return _fail(EXIT_NO_SOLUTION, f"{exc} (nothing written)")
     except ValueError as exc:
         return _fail(EXIT_USAGE, str(exc))
-    paths = write_outputs(result, args.out)
-    q = result.quality
-    print(f"rms left {q.rms_left:.3f} px  right {q.rms_right:.3f} px  stereo {q.rms_stereo:.3f} px  "
-          f"held-out epipolar {q.epipolar_rms_px:.3f} px  views {q.views_used}  baseline "
-          f"{result.calibration.baseline_m * 1000:.2f} mm")
-    print("wrote " + ", ".join(str(p) for p in paths))
-    if not result.passed:
-        return _fail(EXIT_GATE, "calibration FAILED the gate: " + "; ".join(result.failures))
+    code = EXIT_OK if result.passed else EXIT_GATE
+    reason = "passed" if result.passed else "calibration FAILED the gate: " + "; ".join(result.failures)
+    try:
+        paths = write_outputs(result, args.out)
+    except OSError as exc:
+        code, reason = EXIT_SAVE, f"saving the outputs failed: {exc}"
+        paths = []
+    print_summary(result)
+    _record(db, args, serial, started, result, code, reason, None)
+    if paths:
+        print("wrote " + ", ".join(str(p) for p in paths))
+    if code:
+        return _fail(code, reason)
     print("calibration PASSED")
     return EXIT_OK
 
 
-def _device_mode(args: argparse.Namespace, config: SolveConfig) -> int:
+def _device_mode(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, started: str) -> int:
     import stereocam
     from stereocam.tools.calibrate_device import calibrate_device
 
+    save_errors: list[OSError] = []
+
+    def save(result: CalibrationResult, outdir: Path) -> None:
+        try:
+            write_outputs(result, outdir, sizes)
+        except OSError as exc:  # the camera may already hold the new calibration: say so, keep the record
+            save_errors.append(exc)
+
+    serial = args.serial or args.url
     try:
         with stereocam.open(args.url, timeout=2.0) as cam:
+            serial = args.serial or cam.info().serial
+            sizes = stream_sizes((cam.info().sensor_width, cam.info().sensor_height))
             code, result, verdict = calibrate_device(
-                cam, BoardSpec(*args.board, args.square_size), config, args.out, target=args.target,
-                pairs=args.pairs, size=args.size, write_outputs=write_outputs,
+                cam, args.board, config, args.out, target=args.target,
+                pairs=args.pairs, size=args.size, write_outputs=save,
                 progress=None if args.quiet else print_progress)
     except stereocam.StereoCamError as exc:
+        _record(db, args, serial, started, None, 1, f"camera {args.url}: {exc}", None)
         return _fail(1, f"camera {args.url}: {exc}")
+    if save_errors:
+        verdict = f"{verdict}; but saving the outputs to {args.out} failed: {save_errors[0]}"
+        code = code or EXIT_SAVE
     if result is not None:
-        q = result.quality
-        print(f"rms left {q.rms_left:.3f} px  right {q.rms_right:.3f} px  stereo {q.rms_stereo:.3f} px  "
-              f"held-out epipolar {q.epipolar_rms_px:.3f} px  views {q.views_used}")
+        print_summary(result)
+    blob = result.calibration.to_bytes() if result is not None and result.quality.written else None
+    _record(db, args, serial, started, result, code, verdict, blob)
     if code:
         return _fail(code, verdict)
     print(verdict)

@@ -20,7 +20,7 @@ import stereocam
 from stereocam.protocol import messages as m
 from stereocam.tools.calib_solve import CalibrationError, CalibrationResult, SolveConfig, calibrate_pairs
 
-EXIT_OK, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_WRITE, EXIT_UNSUPPORTED = 0, 3, 4, 5, 6
+EXIT_OK, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_WRITE, EXIT_UNSUPPORTED = 0, 3, 4, 5, 7
 
 
 def raw_pairs(cam: stereocam.Camera, count: int, timeout: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:

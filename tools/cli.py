@@ -22,6 +22,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "info": ("stereocam.tools.info", "print a camera's identity, calibration, configuration and counters"),
     "capture": ("stereocam.tools.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
     "calibrate": ("stereocam.tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
+    "calibration": ("stereocam.tools.calibration_export", "calibration export URL --size WxH: ROS camera_info from a unit"),
+    "factory": ("stereocam.tools.factory.cli", "factory record: yield and metric distributions per day and station"),
     "demo": ("stereocam.tools.demo", "simulator + streaming + outputs in ./out + summary"),
     "conformance": ("stereocam.tools.conformance.cli", "hold a camera to the protocol: one line per check, JUnit/JSON"),
     "sim": ("stereocam.device_sim.__main__", "serve a simulated camera over a pty or TCP"),

@@ -1,7 +1,8 @@
 """On-board rectification, computed by the device from its stored calibration (no OpenCV here).
 
 stereo_rectify (protocol/rectification.py, shared with the host) gives the geometry;
-undistort_rectify_map() is cv2.initUndistortRectifyMap (float32 maps), remap_bilinear() is
+undistort_rectify_map() is cv2.initUndistortRectifyMap (float32 maps) for plumb_bob and
+rational_polynomial lenses and cv2.fisheye.initUndistortRectifyMap for equidistant ones; remap_bilinear() is
 cv2.remap(INTER_LINEAR, BORDER_CONSTANT 0) in double precision with rounding to nearest, as
 OpenCV 5 computes it for float maps (OpenCV 4 quantised to 1/32 px; both agree to ±1 DN on
 smooth images). What depends only on the maps (source pixel, weights, which pixels touch the
@@ -70,9 +71,8 @@ class RectificationMaps:
 
 
 @numba.njit(parallel=True, nogil=True, cache=True)
-def _map(ir: np.ndarray, fx: float, fy: float, u0: float, v0: float, d: np.ndarray,
+def _map(ir: np.ndarray, fx: float, fy: float, u0: float, v0: float, d: np.ndarray, fisheye: bool,
          width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    k1, k2, p1, p2, k3 = d[0], d[1], d[2], d[3], d[4]
     mx = np.empty((height, width), dtype=np.float32)
     my = np.empty((height, width), dtype=np.float32)
     for i in numba.prange(height):
@@ -80,28 +80,40 @@ def _map(ir: np.ndarray, fx: float, fy: float, u0: float, v0: float, d: np.ndarr
             _x = i * ir[0, 1] + ir[0, 2] + j * ir[0, 0]
             _y = i * ir[1, 1] + ir[1, 2] + j * ir[1, 0]
             _w = i * ir[2, 1] + ir[2, 2] + j * ir[2, 0]
+            if fisheye:  # equidistant: θ_d = θ(1 + k1θ² + k2θ⁴ + k3θ⁶ + k4θ⁸), as cv2.fisheye
+                r = np.sqrt(_x * _x + _y * _y)
+                theta = np.arctan2(r, _w)
+                t2 = theta * theta
+                theta_d = theta * (1.0 + t2 * (d[0] + t2 * (d[1] + t2 * (d[2] + t2 * d[3]))))
+                scale = theta_d / r if r > 0.0 else 1.0 / _w
+                mx[i, j] = fx * _x * scale + u0
+                my[i, j] = fy * _y * scale + v0
+                continue
             w = 1.0 / _w if _w != 0.0 else np.inf
             x, y = _x * w, _y * w
             x2, y2 = x * x, y * y
             r2, _2xy = x2 + y2, 2.0 * x * y
-            kr = 1.0 + ((k3 * r2 + k2) * r2 + k1) * r2
-            mx[i, j] = fx * (x * kr + p1 * _2xy + p2 * (r2 + 2.0 * x2)) + u0
-            my[i, j] = fy * (y * kr + p1 * (r2 + 2.0 * y2) + p2 * _2xy) + v0
+            kr = (1.0 + ((d[4] * r2 + d[1]) * r2 + d[0]) * r2) / (1.0 + ((d[7] * r2 + d[6]) * r2 + d[5]) * r2)
+            mx[i, j] = fx * (x * kr + d[2] * _2xy + d[3] * (r2 + 2.0 * x2)) + u0
+            my[i, j] = fy * (y * kr + d[2] * (r2 + 2.0 * y2) + d[3] * _2xy) + v0
     return mx, my
 
 
 def undistort_rectify_map(K: np.ndarray, D: np.ndarray, R: np.ndarray, P: np.ndarray,
-                          size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+                          size: tuple[int, int], lens_model: str = "plumb_bob") -> tuple[np.ndarray, np.ndarray]:
     """Float32 maps (H, W): for each rectified pixel, where to sample the raw image."""
     ir = np.linalg.inv(np.asarray(P, np.float64)[:3, :3] @ np.asarray(R, np.float64))
-    return _map(ir, K[0, 0], K[1, 1], K[0, 2], K[1, 2], np.asarray(D, np.float64).reshape(5), size[0], size[1])
+    d = np.zeros(8)
+    coeffs = np.asarray(D, np.float64).ravel()
+    d[:len(coeffs)] = coeffs
+    return _map(ir, K[0, 0], K[1, 1], K[0, 2], K[1, 2], d, lens_model == "equidistant", size[0], size[1])
 
 
 def rectification_maps(calib: StereoCalibration) -> RectificationMaps:
     """Geometry and remap tables for both cameras."""
     g = stereo_rectify(calib)
-    lx, ly = undistort_rectify_map(calib.K_left, calib.D_left, g.R1, g.P1, g.image_size)
-    rx, ry = undistort_rectify_map(calib.K_right, calib.D_right, g.R2, g.P2, g.image_size)
+    lx, ly = undistort_rectify_map(calib.K_left, calib.D_left, g.R1, g.P1, g.image_size, calib.lens_model)
+    rx, ry = undistort_rectify_map(calib.K_right, calib.D_right, g.R2, g.P2, g.image_size, calib.lens_model)
     return RectificationMaps(g, lx, ly, rx, ry)
 
 

@@ -1,8 +1,14 @@
-"""Device matching core: StereoBM block matching, bit-exact with cv2.StereoBM (OpenCV 4.x/5.x).
+"""Device matching core: StereoBM block matching, bit-exact with cv2.StereoBM (OpenCV 4.x/5.x),
+and semi-global matching (census, 4 or 8 paths), bit-exact with tests/sgm_reference.py.
 
-    from stereocam.device_sim.matching import MatchParams, match, Matcher
+    from stereocam.device_sim.matching import MatchParams, SGMParams, match, Matcher, SGMMatcher
     disp = match(left, right, MatchParams(num_disparities=64, block_size=9))  # int16, d * 16
+    disp = match(left, right, SGMParams(num_disparities=128))  # semi-global matching
     m = Matcher(left.shape, params); disp = m.match(left, right)  # keeps scratch per frame
+    m = SGMMatcher(left.shape, SGMParams())  # the same for SGM
+
+SGM pipeline (modules): sgm_params.py -> census.py -> sgm.py + sgm_simd.py (costs, paths,
+selection) -> postfilter.py (speckle filter).
 
 Pipeline (modules): prefilter.py (XSOBEL / NORMALIZED_RESPONSE) -> sad.py + simd.py (running
 SAD sums, texture, winner-take-all, uniqueness, subpixel, left-right check, valid region) ->
@@ -20,5 +26,8 @@ Where OpenCV's own output is not well defined we do the following instead:
 """
 from .matcher import Matcher, check_pair, match, warm_up
 from .params import MatchParams, geometry
+from .sgm_matcher import SGMMatcher, sgm_warm_up
+from .sgm_params import SGMParams, sgm_geometry
 
-__all__ = ["MatchParams", "Matcher", "match", "warm_up", "check_pair", "geometry"]
+__all__ = ["MatchParams", "Matcher", "match", "warm_up", "check_pair", "geometry", "SGMParams",
+           "SGMMatcher", "sgm_warm_up", "sgm_geometry"]

@@ -1,20 +1,25 @@
-"""The matching stage: the disparity engine configured from the device parameters (SPEC §5.1).
-
-The engine is built from the configuration by ``_engine_for``; block matching is the only one
-today. The SGM engine (device_sim/matching, selected by an ``algorithm`` parameter) plugs in
-there: its settings from the configuration, and how to build it for a format.
-"""
+"""The matching stage: block matching or SGM, configured from the device parameters (SPEC §5.1)."""
 from __future__ import annotations
 
-from typing import Hashable
+from typing import Mapping
 
 import numpy as np
 
-from ..matching import Matcher, MatchParams
+from ..matching import Matcher, MatchParams, SGMMatcher, SGMParams
+
+BLOCK_MATCHING, SEMI_GLOBAL = 0, 1  # values of the ``algorithm`` parameter
 
 
-def match_params(cfg: dict[str, int]) -> MatchParams:
-    """The block matcher settings a configuration asks for."""
+def params_from_config(cfg: Mapping[str, int]) -> MatchParams | SGMParams:
+    """Block-matching or SGM parameters per ``cfg["algorithm"]``."""
+    if cfg["algorithm"] == SEMI_GLOBAL:
+        return SGMParams(
+            num_disparities=cfg["num_disparities"], min_disparity=cfg["min_disparity"],
+            census_width=cfg["census_width"], census_height=cfg["census_height"],
+            paths=cfg["sgm_paths"], p1=cfg["sgm_p1"], p2=cfg["sgm_p2"],
+            p2_adapt=cfg["sgm_p2_adapt"], uniqueness_ratio=cfg["uniqueness_ratio"],
+            lr_max_diff=cfg["disp12_max_diff"], speckle_window_size=cfg["speckle_window_size"],
+            speckle_range=cfg["speckle_range"])
     return MatchParams(
         num_disparities=cfg["num_disparities"], block_size=cfg["block_size"], min_disparity=cfg["min_disparity"],
         pre_filter_type="normalized" if cfg["pre_filter_type"] else "xsobel",
@@ -24,22 +29,21 @@ def match_params(cfg: dict[str, int]) -> MatchParams:
         disp12_max_diff=cfg["disp12_max_diff"])
 
 
-def _engine_for(cfg: dict[str, int]) -> tuple[Hashable, type]:
-    """(the engine's settings, its class: ``cls(shape, settings).match(left, right)``) that a
-    configuration asks for. The SGM engine adds its branch here."""
-    return match_params(cfg), Matcher
+def matcher_for(cfg: Mapping[str, int], shape: tuple[int, int],
+                current: Matcher | SGMMatcher | None = None) -> Matcher | SGMMatcher:
+    """``current`` when it already matches (cfg, shape), else a new matcher for them."""
+    params = params_from_config(cfg)
+    if current is not None and current.params == params and current.shape == tuple(shape):
+        return current
+    return (SGMMatcher if isinstance(params, SGMParams) else Matcher)(tuple(shape), params)
 
 
 class StereoStage:
-    """Disparity of a rectified pair; the engine is rebuilt only when its settings or the format change."""
+    """Disparity of a rectified pair; the matcher is rebuilt only when its settings or the format change."""
 
     def __init__(self) -> None:
-        self._key: tuple[Hashable, tuple[int, ...]] | None = None
-        self._engine: Matcher | None = None
+        self._matcher: Matcher | SGMMatcher | None = None
 
     def disparity(self, cfg: dict[str, int], left: np.ndarray, right: np.ndarray) -> np.ndarray:
-        settings, engine = _engine_for(cfg)
-        if self._engine is None or self._key != (settings, left.shape):
-            self._engine = engine(left.shape, settings)
-            self._key = (settings, left.shape)
-        return self._engine.match(left, right)
+        self._matcher = matcher_for(cfg, left.shape, self._matcher)
+        return self._matcher.match(left, right)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from stereocam.protocol.calibration import (
-    BODY_SIZE, CalibrationFormatError, CalibrationQuality, StereoCalibration,
+    CalibrationFormatError, CalibrationQuality, StereoCalibration, body_size,
 )
 from stereocam.device_sim.calibration.truth import true_calibration
 
@@ -39,19 +39,46 @@ def test_json_missing_key_names_it(calib: StereoCalibration) -> None:
 
 def test_bytes_round_trip_and_layout(calib: StereoCalibration) -> None:
     body = calib.to_bytes()
-    assert len(body) == BODY_SIZE == 248
-    assert struct.unpack_from("<4H", body) == (1, 5, 1280, 960)
-    assert struct.unpack_from("<d", body, 8)[0] == calib.K_left[0, 0]
-    assert struct.unpack_from("<3d", body, 224) == tuple(calib.T)
+    assert len(body) == body_size() == 250
+    assert struct.unpack_from("<5H", body) == (2, 5, 1280, 960, 0)
+    assert struct.unpack_from("<d", body, 10)[0] == calib.K_left[0, 0]
+    assert struct.unpack_from("<3d", body, 226) == tuple(calib.T)
     back = StereoCalibration.from_bytes(body)
-    assert back.to_bytes() == body
+    assert back.to_bytes() == body and back.lens_model == "plumb_bob"
     np.testing.assert_array_equal(back.R, calib.R)
 
 
+def _other_model(calib: StereoCalibration, model: str, n: int) -> StereoCalibration:
+    rng = np.random.default_rng(n)
+    return StereoCalibration(calib.image_size, calib.K_left, rng.normal(0, 0.01, n), calib.K_right,
+                             rng.normal(0, 0.01, n), calib.R, calib.T, model)
+
+
+@pytest.mark.parametrize("model, n", [("rational_polynomial", 8), ("equidistant", 4)])
+def test_every_lens_model_round_trips(calib: StereoCalibration, model: str, n: int) -> None:
+    other = _other_model(calib, model, n)
+    body = other.to_bytes()
+    assert len(body) == body_size(model) == 170 + 16 * n
+    back = StereoCalibration.from_bytes(body)
+    assert back.lens_model == model and back.to_bytes() == body
+    np.testing.assert_array_equal(back.D_right, other.D_right)
+    d = json.loads(json.dumps(other.to_json_dict()))
+    assert d["lens_model"] == model and StereoCalibration.from_json_dict(d).to_bytes() == body
+    assert other.scaled(640, 480).lens_model == model
+
+
+def test_version_1_bodies_are_still_read(calib: StereoCalibration) -> None:
+    values = [*calib.K_left[[0, 1, 0, 1], [0, 1, 2, 2]], *calib.D_left, *calib.K_right[[0, 1, 0, 1], [0, 1, 2, 2]],
+              *calib.D_right, *calib.R.ravel(), *calib.T]
+    v1 = struct.pack("<4H30d", 1, 5, 1280, 960, *values)
+    assert StereoCalibration.from_bytes(v1).to_bytes() == calib.to_bytes()
+
+
 @pytest.mark.parametrize("mutate, match", [
-    (lambda b: b[:-1], "248 bytes"),
-    (lambda b: struct.pack("<H", 2) + b[2:], "version 2"),
+    (lambda b: b[:-1], "250 bytes"),
+    (lambda b: struct.pack("<H", 3) + b[2:], "version 3"),
     (lambda b: b[:2] + struct.pack("<H", 8) + b[4:], "count 8"),
+    (lambda b: b[:8] + struct.pack("<H", 7) + b[10:], "lens model code 7"),
     (lambda b: b[:3], "too short"),
 ])
 def test_bytes_rejects_bad_bodies(calib: StereoCalibration, mutate, match: str) -> None:
@@ -66,6 +93,9 @@ def test_validation_names_the_problem(calib: StereoCalibration) -> None:
         StereoCalibration(calib.image_size, K, calib.D_left, calib.K_right, calib.D_right, calib.R, calib.T)
     with pytest.raises(CalibrationFormatError, match="D_right"):
         StereoCalibration(calib.image_size, calib.K_left, calib.D_left, calib.K_right, [0.1], calib.R, calib.T)
+    with pytest.raises(CalibrationFormatError, match="unknown lens model"):
+        StereoCalibration(calib.image_size, calib.K_left, calib.D_left, calib.K_right, calib.D_right, calib.R,
+                          calib.T, "kannala")
     with pytest.raises(CalibrationFormatError, match="rotation"):
         StereoCalibration(calib.image_size, calib.K_left, calib.D_left, calib.K_right, calib.D_right,
                           2 * calib.R, calib.T)

@@ -894,8 +894,8 @@ def test_stats_dropped_sums_every_loss_counter() -> None:
 def test_param_ids_and_names_are_unique_and_sane() -> None:
     ids = [p.pid for p in PARAMS]
     names = [p.name for p in PARAMS]
-    assert len(set(ids)) == len(ids) == 20
-    assert ids == [*range(1, 20), 21]  # v1.1 appended id 21 and retired 20; ids are never reused or renumbered
+    assert len(set(ids)) == len(ids) == 27
+    assert ids == [*range(1, 20), *range(21, 29)]  # 1.1 appended 21 and retired 20, 1.2 22..28; never reused
     assert len(set(names)) == len(names)
     assert all(1 <= i <= 0xFFFF for i in ids)  # 0 means "no parameter" in a NACK
     assert BY_ID[10].name == "min_disparity" and BY_NAME["width"].pid == 1
@@ -922,7 +922,7 @@ def test_check_rejects_out_of_range(p: Param) -> None:
 
 def test_check_rejects_even_values_for_odd_params() -> None:
     odd = [p for p in PARAMS if p.odd]
-    assert {p.name for p in odd} == {"block_size", "pre_filter_size"}
+    assert {p.name for p in odd} == {"block_size", "pre_filter_size", "census_width", "census_height"}
     for p in odd:
         for v in range(p.lo, p.hi + 1):
             assert (p.check(v) is None) == (v % 2 == 1), (p.name, v)
@@ -931,7 +931,8 @@ def test_check_rejects_even_values_for_odd_params() -> None:
 
 def test_check_rejects_non_multiples_of_step() -> None:
     stepped = {p.name: p for p in PARAMS if p.step > 1}
-    assert {n: p.step for n, p in stepped.items()} == {"width": 16, "height": 8, "num_disparities": 16}
+    assert {n: p.step for n, p in stepped.items()} == {"width": 16, "height": 8, "num_disparities": 16,
+                                                       "sgm_paths": 4}
     for p in stepped.values():
         for v in range(p.lo, p.hi + 1):
             assert (p.check(v) is None) == ((v - p.lo) % p.step == 0), (p.name, v)
@@ -944,11 +945,11 @@ def test_v1_1_parameters() -> None:
     """SPEC §5.1: v1.1 added `rectify` (21); id 20 is retired (no simulator control on the wire)."""
     r = BY_NAME["rectify"]
     assert (r.pid, r.default, r.lo, r.hi, r.step, r.odd) == (21, 1, 0, 1, 1, False)
-    assert BY_ID[21] is r and PARAMS[-1] is r
+    assert BY_ID[21] is r and PARAMS[19] is r
     assert 20 not in BY_ID and "scene" not in BY_NAME
     assert m.Capability.RAW_OUTPUT == 0x20  # SPEC §4.1 bit 5: the unit implements rectify=0
     assert r.check(0) is None and r.check(1) is None and "outside 0..1" in r.check(2)
-    assert defaults()["rectify"] == 1 and list(defaults())[-1] == "rectify"
+    assert defaults()["rectify"] == 1 and list(defaults())[19] == "rectify"
 
 
 @given(st.integers(-(1 << 31), (1 << 31) - 1))

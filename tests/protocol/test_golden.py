@@ -56,7 +56,7 @@ CASES: list[tuple[m.Message, int, int]] = [
     (m.Info(model="STOC-Σ1 stereo", serial="SN-00042-ß", firmware_version="1.2.3+çà", protocol_version=(1, 1),
             capabilities=0xA5A50F0F, sensor_width=1280, sensor_height=960, max_payload=1 << 20,
             max_width=1280, max_height=960, calibration_id=0x8BADF00D), 1, 0),
-    (m.Config({p.pid: int(p.default) for p in PARAMS}), 2, 0),
+    (m.Config({p.pid: int(p.default) for p in PARAMS if p.pid <= 21}), 2, 0),  # the 1.1 table
     (m.ConfigApplied({1: 640, 10: -256, 14: 1 << 20, 0xFFFF: -(1 << 31), 0x1234: (1 << 31) - 1}), 0x1234, 0),
     (m.Triggered(trigger_id=0xDEADBEEF, sequence=42), 0xFFFF, 0),
     (m.Started(), 0x0100, 0),

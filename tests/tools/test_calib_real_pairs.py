@@ -17,18 +17,24 @@ def calibrate(out: Path, *extra: str) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=300)
 
 
-def test_real_pairs_solve_and_the_default_gate_says_why_it_fails(tmp_path):
-    r = calibrate(tmp_path, "--min-views", "6")  # 13 pairs give only 7 distinct views
+def test_a_strict_gate_says_why_it_fails(tmp_path):
+    r = calibrate(tmp_path, "--max-epipolar", "0.05")
     assert r.returncode == 4, r.stderr
     assert "FAILED the gate" in r.stderr and "epipolar" in r.stderr
     doc = json.loads((tmp_path / "calibration.json").read_text())
     assert doc["passed"] is False and doc["written"] is False
-    assert doc["epipolar_rms_px"] > 0.3 and (tmp_path / "report.png").exists()
+    assert doc["epipolar_rms_px"] > 0.05 and (tmp_path / "report.png").exists()
     assert not (tmp_path / "calibration.yaml").exists()
 
 
-def test_real_pairs_pass_a_gate_that_fits_them(tmp_path):
-    r = calibrate(tmp_path, "--min-views", "6", "--max-epipolar", "0.6")
+def test_readme_offline_example_passes(tmp_path):
+    """The README's offline example, as written there (its --min-views only matters in device mode)."""
+    r = calibrate(tmp_path, "--min-views", "6")
+    assert r.returncode == 0, r.stderr
+
+
+def test_real_pairs_pass_the_default_gate(tmp_path):
+    r = calibrate(tmp_path)
     assert r.returncode == 0, r.stderr
     doc = json.loads((tmp_path / "calibration.json").read_text())
     assert doc["passed"] is True and doc["image_size"] == [640, 480]

@@ -14,9 +14,10 @@ from stereocam.protocol.calibration import StereoCalibration
 from stereocam.device_sim.calibration.truth import true_calibration
 from stereocam.tools import calibrate
 from stereocam.tools.calib_solve import (
-    BoardNotFoundError, CalibrationError, CoverageSelector, SolveConfig, TooFewViewsError, calibrate_pairs,
-    detect_corners, view_params,
+    BoardNotFoundError, CalibrationError, SolveConfig, TooFewViewsError, calibrate_pairs,
 )
+from stereocam.tools.calib_coverage import CoverageSelector, view_params
+from stereocam.tools.calib_boards import detect_all
 
 TRUTH = true_calibration(11, (640, 480))
 BOARD = BoardSpec(9, 6, 0.03)
@@ -63,18 +64,18 @@ def test_offline_calibration_recovers_truth(image_dir: Path, tmp_path: Path) -> 
 
 
 def test_metric_definitions(pairs) -> None:
-    res = calibrate_pairs(iter(pairs), BOARD)
+    res = calibrate_pairs(iter(pairs), BOARD, select=False)
     used = [v for v in res.views if v.status == "used"]
-    held = [v for v in res.views if v.status == "held_out"]
-    assert len(used) == res.quality.views_used and len(held) == N_PAIRS // 5
-    assert [v.index for v in held] == [4, 9, 14, 19]          # every 5th pair with a board
+    held = [v for v in res.views if v.held_out]
+    assert len(used) == res.quality.views_used == N_PAIRS - res.quality.views_dropped
+    assert [v.index for v in held] == [v.index for v in used][4::5]      # every 5th pair kept
     # per-camera RMS = sqrt(mean over all corners of squared 2-D distance) = pooled per-view RMS
     assert res.quality.rms_left == pytest.approx(np.sqrt(np.mean([v.rms_left ** 2 for v in used])), rel=1e-9)
-    # held-out epipolar RMS: recompute from scratch with the stored geometry
+    # all-pairs epipolar RMS: recompute from scratch with the stored geometry, converged undistortion
     c, r = res.calibration, res.rectification
     dy = []
-    for v in held:
-        cl, cr = (detect_corners(img, BOARD) for img in pairs[v.index])
+    for v in used:
+        cl, cr = (detect_all(img, BOARD)["classic"].image_points for img in pairs[v.index])
         if np.dot(cl[-1] - cl[0], cr[-1] - cr[0]) < 0:
             cr = cr[::-1]
         crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
@@ -83,7 +84,25 @@ def test_metric_definitions(pairs) -> None:
         yr = cv2.undistortPoints(cr.reshape(-1, 1, 2).astype(float), c.K_right, c.D_right,
                                  R=r.R2, P=r.P2, criteria=crit)[:, 0, 1]
         dy.append(yl - yr)
-    assert res.quality.epipolar_rms_px == pytest.approx(np.sqrt(np.mean(np.concatenate(dy) ** 2)), rel=1e-6)
+    assert res.quality.epipolar_all_rms_px == pytest.approx(np.sqrt(np.mean(np.concatenate(dy) ** 2)), rel=1e-6)
+    assert res.calibration.lens_model == "plumb_bob"  # the simulated lenses are plumb_bob: simpler wins
+
+
+def test_non_simultaneous_pairs_are_found_and_named(pairs) -> None:
+    """Two right images from the neighbouring pair: the stereo/epipolar residuals single them out."""
+    bad = list(pairs)
+    bad[3] = (pairs[3][0], pairs[4][1])
+    bad[11] = (pairs[11][0], pairs[12][1])
+    res = calibrate_pairs(iter(bad), BOARD, select=False)
+    assert sorted(v.index for v in res.dropped) == [3, 11]
+    assert all(("stereo" in v.reason or "epipolar" in v.reason) for v in res.dropped)
+    assert res.passed
+
+
+def test_forced_lens_model(pairs) -> None:
+    res = calibrate_pairs(iter(pairs), BOARD, SolveConfig(lens_model="rational_polynomial"), select=False)
+    assert res.calibration.lens_model == "rational_polynomial" and len(res.calibration.D_left) == 8
+    assert list(res.model_scores) == ["rational_polynomial"]
 
 
 def test_gate_failure_writes_nothing_as_passed(image_dir: Path, tmp_path: Path, capsys) -> None:
@@ -98,7 +117,7 @@ def test_gate_failure_writes_nothing_as_passed(image_dir: Path, tmp_path: Path, 
 def test_mismatched_pairs_fail_the_gate(pairs, tmp_path: Path) -> None:
     """Right images shifted by one pair: the solve 'converges' but held-out epipolar error exposes it."""
     shifted = [(pairs[i][0], pairs[(i + 1) % len(pairs)][1]) for i in range(len(pairs))]
-    res = calibrate_pairs(iter(shifted), BOARD)
+    res = calibrate_pairs(iter(shifted), BOARD, select=False)
     assert not res.passed and any("stereo RMS" in f for f in res.failures)
 
 
@@ -109,7 +128,7 @@ def test_board_never_found(tmp_path: Path, capsys) -> None:
         cv2.imwrite(str(tmp_path / f"right{i}.png"), blank)
     out = tmp_path / "out"
     assert run(tmp_path, out) == calibrate.EXIT_NO_SOLUTION
-    assert "not found in both images of any of the 3 pairs" in capsys.readouterr().err
+    assert "board was not found in both images of any of the 3 pairs" in capsys.readouterr().err
     assert not out.exists()
     with pytest.raises(BoardNotFoundError):
         calibrate_pairs(iter([(blank, blank)]), BOARD)
@@ -117,10 +136,12 @@ def test_board_never_found(tmp_path: Path, capsys) -> None:
 
 def test_too_few_views(pairs, image_dir: Path, tmp_path: Path) -> None:
     with pytest.raises(TooFewViewsError, match="need 8"):
-        calibrate_pairs(iter(pairs[:6]), BOARD)
+        calibrate_pairs(iter(pairs[:6]), BOARD)                      # live capture: distinct views
+    with pytest.raises(TooFewViewsError, match="need 5"):
+        calibrate_pairs(iter(pairs[:4]), BOARD, select=False)        # offline: pairs, alike or not
     small = tmp_path / "small"
     small.mkdir()
-    for p in sorted(image_dir.glob("*_00[0-5].png")) + [image_dir / f"right{i}.png" for i in range(6)]:
+    for p in sorted(image_dir.glob("*_00[0-3].png")) + [image_dir / f"right{i}.png" for i in range(4)]:
         shutil.copy(p, small)
     assert run(small, tmp_path / "out") == calibrate.EXIT_NO_SOLUTION
     assert not (tmp_path / "out").exists()
@@ -135,7 +156,8 @@ def test_engine_stops_reading_when_enough(pairs) -> None:
             yield p
 
     res = calibrate_pairs(stream(), BOARD, SolveConfig(max_views=8))
-    assert res.quality.views_used == 8 and len(consumed) < 3 * len(pairs)
+    held = sum(v.held_out for v in res.views)
+    assert res.quality.views_used - held == 8 and len(consumed) < 3 * len(pairs)
 
 
 def test_bad_arguments(image_dir: Path, tmp_path: Path, capsys) -> None:
@@ -143,10 +165,11 @@ def test_bad_arguments(image_dir: Path, tmp_path: Path, capsys) -> None:
     assert calibrate.main(["--images", str(image_dir), "--board", "9x6", "--square-size", "25",
                            "--out", str(tmp_path)]) == calibrate.EXIT_USAGE
     assert "metres" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        calibrate.main(["--images", str(image_dir), "--board", "9by6", "--square-size", "0.03", "--out", "x"])
-    with pytest.raises(ValueError, match="cols != rows"):
-        calibrate_pairs(iter([]), BoardSpec(6, 6, 0.03))
+    assert calibrate.main(["--images", str(image_dir), "--board", "9by6", "--square-size", "0.03",
+                           "--out", "x"]) == calibrate.EXIT_USAGE
+    assert calibrate.main(["--images", str(image_dir), "--board", "6x6", "--square-size", "0.03",
+                           "--out", str(tmp_path)]) == calibrate.EXIT_USAGE
+    assert "cols != rows" in capsys.readouterr().err
 
 
 def test_find_pairs_rules(tmp_path: Path) -> None:
@@ -183,5 +206,5 @@ def test_solver_failure_is_a_calibration_error(pairs, monkeypatch) -> None:
         raise cv2.error("simulated solver breakdown")
 
     monkeypatch.setattr(cv2, "calibrateCameraExtended", broken)
-    with pytest.raises(CalibrationError, match="solver failed on .* views: simulated"):
+    with pytest.raises(CalibrationError, match="solver failed on .* pairs: .*simulated"):
         calibrate_pairs(iter(pairs), BOARD)

@@ -9,8 +9,8 @@ from stereocam.device_sim.calibration.board import BoardSpec, StereoBoardRendere
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.device_sim.calibration.rectify import rectification_maps, remap_bilinear, undistort_rectify_map
 from stereocam.device_sim.calibration.truth import true_calibration
-from stereocam.protocol.rectification import _log_rotation, rodrigues, stereo_rectify
-from stereocam.tools.calib_solve import detect_corners
+from stereocam.protocol.rectification import _log_rotation, rodrigues, stereo_rectify, undistort_points
+from stereocam.tools.calib_boards import detect_all
 
 
 def cv_rectify(c: StereoCalibration):
@@ -86,7 +86,7 @@ def test_rectified_board_rows_align() -> None:
     dy, disparity_depth = [], []
     for pose in board_poses(6, 3, board, c, distance_m=(0.4, 0.8)):
         left, right = m.rectify(*renderer.render(pose, rng))
-        cl, cr = detect_corners(left, board), detect_corners(right, board)
+        cl, cr = (detect_all(img, board)["classic"].image_points for img in (left, right))
         if np.dot(cl[-1] - cl[0], cr[-1] - cr[0]) < 0:
             cr = cr[::-1]
         dy.append(cl[:, 1] - cr[:, 1])
@@ -117,3 +117,30 @@ def test_undistort_rectify_map_identity() -> None:
     v, u = np.mgrid[0:16, 0:20]
     np.testing.assert_allclose(mx, u, atol=1e-4)
     np.testing.assert_allclose(my, v, atol=1e-4)
+
+
+@pytest.mark.parametrize("model, D", [
+    ("rational_polynomial", [-0.2, 0.05, 1e-4, -2e-4, 0.01, 0.1, 0.02, 0.005]),
+    ("equidistant", [0.05, -0.01, 0.002, -0.0005]),
+])
+def test_maps_of_every_lens_model_match_opencv(model: str, D: list[float]) -> None:
+    """On-board maps for the rational and fisheye models equal OpenCV's own map builders."""
+    c = true_calibration(4, (320, 240))
+    c = StereoCalibration(c.image_size, c.K_left, D, c.K_right, D, c.R, c.T, model)
+    m = rectification_maps(c)
+    g = m.geometry
+    if model == "equidistant":
+        mx, my = cv2.fisheye.initUndistortRectifyMap(c.K_left, np.array(D), g.R1, g.P1, c.image_size, cv2.CV_32FC1)
+    else:
+        mx, my = cv2.initUndistortRectifyMap(c.K_left, np.array(D), g.R1, g.P1, c.image_size, cv2.CV_32FC1)
+    np.testing.assert_allclose(m.left_x, mx, atol=2e-3)
+    np.testing.assert_allclose(m.left_y, my, atol=2e-3)
+    # the geometry's undistortion inverts the lens: rectified corners of a pixel grid are consistent
+    pts = np.array([[10.0, 12.0], [160.0, 120.0], [300.0, 220.0]])
+    norm = undistort_points(c.K_left, np.array(D), pts, 100, model)
+    if model == "equidistant":
+        back = cv2.fisheye.distortPoints(norm.reshape(-1, 1, 2), c.K_left, np.array(D)).reshape(-1, 2)
+    else:
+        back = cv2.projectPoints(np.column_stack([norm, np.ones(3)]), np.zeros(3), np.zeros(3), c.K_left,
+                                 np.array(D))[0].reshape(-1, 2)
+    np.testing.assert_allclose(back, pts, atol=1e-6)

@@ -1,0 +1,167 @@
+"""SGM kernel: Hamming costs, path aggregation, winner-take-all, uniqueness, subpixel and
+left-right check, bit-exact with tests/sgm_reference.py.
+
+Work split: two groups run in parallel (``prange(2)``). Group 0 walks the rows top to bottom
+and owns the paths arriving from the left, from above and from the two upper diagonals; group
+1 walks bottom to top with the mirrored paths. Per row a group computes its cost row from the
+census codes, steps all its paths in one pass per pixel (sgm_simd.pixel_paths: uint8 path
+costs, the previous row's kept per path, the disparity axis contiguous) and sums them in
+int16. The first group to finish a row parks its sum in ``parked``; the second adds it and
+finishes that row (winner-take-all ... left-right) into ``disp``. A per-row spin lock decides
+who is first; nobody ever waits for the other group's progress, so one thread runs the same
+code (group 0, then group 1) with the same result.
+
+numba caches this module's kernels on disk keyed on *this* file only: after editing
+sgm_simd.py, touch this file and census.py (or delete __pycache__) so the cache is rebuilt.
+"""
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from .lanes import uidx
+from .sgm_simd import add_min, cost_run, diag_update, pixel_paths, try_lock, unlock
+from .simd import wta_all
+
+_JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
+
+# layout of the int64 configuration vector passed to sgm_rows
+(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_LEN) = range(9)
+
+
+@nb.njit(**_JIT)
+def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int, cols: int,
+              out: np.ndarray) -> None:
+    """out[x * nd + k] = popcount(cl[y, x0 + x] ^ census_R[y, x0 + x - md - k])."""
+    w = cl.shape[1]
+    for x in range(cols):
+        cost_run(cl[y, uidx(x0 + x)], crr[y], w - 1 - x0 - x + md, out, x * nd, nd)
+
+
+@nb.njit(**_JIT)
+def _aggregate_row(g: int, y: int, step: int, img: np.ndarray, cfg: np.ndarray,
+                   p2tab: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+                   meta: np.ndarray, pm: np.ndarray, acc: np.ndarray) -> None:
+    """acc = sum over group g's paths of L at row y, the group's step-th row.
+
+    lbuf runs of nd + 2 (a padding element each side): two for the horizontal path (this
+    pixel's and its predecessor's), one zero run (predecessor of a path's first pixel), then
+    per row parity and vertical/diagonal path one run per column. mv[parity, v, x]: minima.
+    p2tab[|I(p) - I(q)|]: the effective P2 between neighbours of those intensities."""
+    nd, p1 = cfg[C_ND], cfg[C_P1]
+    x0, cols = cfg[C_X0], cfg[C_COLS]
+    npaths = 2 if cfg[C_PATHS] == 4 else 4
+    dy = 1 if g == 0 else -1
+    stride = nd + 2
+    zero = 2 * stride + 1
+    cur, prv = step & 1, 1 - (step & 1)
+    for i in range(cols):
+        x = i if g == 0 else cols - 1 - i
+        X = x0 + x
+        # horizontal path (0, dy): predecessor x - dy on this row
+        meta[1] = (i & 1) * stride + 1
+        if i == 0:
+            meta[0], meta[2], meta[3] = zero, 255, 0
+        else:
+            hm = np.int64(pm[0])
+            meta[0] = (1 - (i & 1)) * stride + 1
+            meta[2] = min(hm + p2tab[abs(np.int64(img[y, X]) - img[y, X - dy])], 255)
+            meta[3] = hm
+        for v in range(1, npaths):  # (dy, 0), (dy, 1), (dy, -1): predecessor (y-dy, x-dx)
+            dx = v - 1 if v < 3 else -1
+            xq = x - dx
+            o = 4 * v
+            meta[o + 1] = 3 * stride + ((cur * 3 + v - 1) * cols + x) * stride + 1
+            if step == 0 or xq < 0 or xq >= cols:
+                meta[o], meta[o + 2], meta[o + 3] = zero, 255, 0
+            else:
+                mp = np.int64(mv[prv, v - 1, xq])
+                meta[o] = 3 * stride + ((prv * 3 + v - 1) * cols + xq) * stride + 1
+                meta[o + 2] = min(mp + p2tab[abs(np.int64(img[y, X]) - img[y - dy, X - dx])],
+                                  255)
+                meta[o + 3] = mp
+        pixel_paths(cost, x * nd, lbuf, meta, npaths, p1, acc, x * nd, nd, pm)
+        for v in range(1, npaths):
+            mv[cur, v - 1, x] = pm[v]
+
+
+@nb.njit(**_JIT)
+def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray,
+                rmin: np.ndarray, rarg: np.ndarray, mins: np.ndarray,
+                out: np.ndarray) -> None:
+    """acc += parked (the other group's sum), then winner-take-all, uniqueness, left-right
+    check and subpixel into the output row."""
+    nd, md, uratio, lrdiff = cfg[C_ND], cfg[C_MIND], cfg[C_URATIO], cfg[C_LRDIFF]
+    x0, cols = cfg[C_X0], cfg[C_COLS]
+    inv = np.int16((md - 1) * 16)
+    for i in range(rmin.shape[0]):
+        rmin[i] = 32767
+    for x in range(cols):
+        mins[x] = add_min(acc, x * nd, parked, x * nd, nd)
+        if lrdiff >= 0:
+            diag_update(acc, x * nd, rmin, rarg, cols - 1 - x, nd)
+    for x in range(x0):
+        out[x] = inv
+    for x in range(x0 + cols, out.shape[0]):
+        out[x] = inv
+    for x in range(cols):
+        s = acc[x * nd:(x + 1) * nd]
+        m = mins[x]
+        thr = np.int16(-1)
+        if uratio > 0:
+            thr = np.int16(min(m + np.int64(m) * uratio // 100, 32767))
+        k, cnt = wta_all(s, nd, m, thr)
+        a = np.int64(s[uidx(k - 1)]) if k > 0 else np.int64(0)
+        b = np.int64(s[uidx(k + 1)]) if k < nd - 1 else np.int64(0)
+        near = np.int64((k > 0) & (a <= thr)) + np.int64((k < nd - 1) & (b <= thr))
+        if uratio > 0 and cnt - 1 - near > 0:
+            out[x0 + x] = inv
+            continue
+        if lrdiff >= 0 and abs(np.int64(rarg[uidx(cols - 1 - x + k)]) - k) > lrdiff:
+            out[x0 + x] = inv
+            continue
+        d16 = 16 * (md + k)
+        if 0 < k < nd - 1:
+            den = max(a + b - 2 * np.int64(m), 1)
+            d16 += ((a - b) * 16 + den) // (2 * den)
+        out[x0 + x] = d16
+
+
+@nb.njit(**_JIT)
+def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
+           p2tab: np.ndarray, parked: np.ndarray, locks: np.ndarray, done: np.ndarray,
+           disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+           meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
+           rarg: np.ndarray, mins: np.ndarray) -> None:
+    """Every row of group g (see the module docstring)."""
+    h = img.shape[0]
+    nd, md, x0, cols = cfg[C_ND], cfg[C_MIND], cfg[C_X0], cfg[C_COLS]
+    for step in range(h):
+        y = step if g == 0 else h - 1 - step
+        _cost_row(cl, crr, y, x0, md, nd, cols, cost)
+        _aggregate_row(g, y, step, img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc)
+        while not try_lock(locks, y):
+            pass
+        first = done[y] == 0
+        if first:
+            row = parked[y]
+            for i in range(acc.shape[0]):
+                row[i] = acc[i]
+            done[y] = 1
+        unlock(locks, y)
+        if not first:
+            _finish_row(y, cfg, acc, parked[y], rmin, rarg, mins, disp[y])
+
+
+@nb.njit(parallel=True, **_JIT)
+def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
+             p2tab: np.ndarray, parked: np.ndarray, locks: np.ndarray, done: np.ndarray,
+             disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
+             pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
+             mins: np.ndarray) -> None:
+    """Disparity rows (before the speckle filter) of the census pair (cl, crr mirrored).
+
+    Scratch has one slice per group (leading axis 2); locks and done must be zero."""
+    for g in nb.prange(2):
+        _group(g, img, cl, crr, cfg, p2tab, parked, locks, done, disp, cost[g], lbuf[g], mv[g],
+               meta[g], pm[g], acc[g], rmin[g], rarg[g], mins[g])

@@ -1,0 +1,124 @@
+"""Reusable semi-global matcher: validates inputs, owns scratch buffers, runs the pipeline
+census (census.py) -> aggregation and selection (sgm.py) -> speckle filter (postfilter.py)."""
+from __future__ import annotations
+
+import threading
+
+import numba as nb
+import numpy as np
+
+from . import sgm as _sgm
+from .census import census_pair
+from .matcher import STRIPES_PER_THREAD, _aligned, _contiguous, _stripes, check_pair
+from .postfilter import filter_speckles
+from .sgm_params import SGMGeometry, SGMParams, sgm_geometry
+
+
+class SGMMatcher:
+    """Semi-global matcher for one (shape, params); scratch buffers live between frames.
+
+    Runs on two threads (one per group of path directions) when numba has them; the output
+    does not depend on the thread count. Calls are serialised by a lock."""
+
+    def __init__(self, shape: tuple[int, int], params: SGMParams = SGMParams()) -> None:
+        if not isinstance(params, SGMParams):
+            raise ValueError(f"params must be SGMParams, got {type(params).__name__}")
+        params.validate()
+        h, w = int(shape[0]), int(shape[1])
+        self.params = params
+        self.shape = (h, w)
+        self.geom: SGMGeometry = sgm_geometry(h, w, params)
+        self._lock = threading.Lock()
+        self._alloc()
+
+    def _alloc(self) -> None:
+        p, g = self.params, self.geom
+        h, w = self.shape
+        nd, cols = p.num_disparities, g.cols
+        n = max(1, nb.config.NUMBA_NUM_THREADS)  # numba.get_thread_id() < this
+        padded = (h + p.census_height - 1, w + p.census_width - 1 + 64)  # + vector slack
+        self.padl = np.zeros(padded, np.uint8)
+        self.padr = np.zeros(padded, np.uint8)
+        self.census_byte = np.zeros((n, w + 64), np.uint8)
+        self.census_code = np.empty((n, w), np.uint64)
+        self.cl = np.empty((h, w), np.uint64)
+        self.crr = np.empty((h, w), np.uint64)
+        cfg = np.zeros(_sgm.C_LEN, np.int64)
+        cfg[[_sgm.C_ND, _sgm.C_MIND, _sgm.C_P1, _sgm.C_URATIO, _sgm.C_LRDIFF, _sgm.C_X0,
+             _sgm.C_COLS, _sgm.C_PATHS]] = [
+            nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths]
+        self.cfg = cfg
+        self.p2tab = np.full(256, p.p2, np.int64)  # effective P2 per intensity step |dI|
+        if p.p2_adapt > 0:
+            a = p.p2_adapt
+            self.p2tab[:] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + np.arange(256))))
+        self.parked = _aligned((h, cols * nd), np.int16)
+        self.locks = np.zeros(h, np.int32)
+        self.done = np.zeros(h, np.int32)
+        # per group of paths: cost row, uint8 path buffers (sgm._aggregate_row; the padding
+        # elements hold 255) and their minima
+        stride = nd + 2
+        self.cost = _aligned((2, cols * nd), np.uint8)
+        self.lbuf = np.full((2, 3 * stride + 6 * cols * stride), 255, np.uint8)
+        self.lbuf[:, 2 * stride + 1:3 * stride - 1] = 0
+        self.mv = np.empty((2, 2, 3, cols), np.int16)
+        self.meta = np.zeros((2, 16), np.int64)
+        self.pm = np.zeros((2, 4), np.int16)
+        self.acc = _aligned((2, cols * nd), np.int16)
+        self.rmin = np.empty((2, cols + nd - 1), np.int16)
+        self.rarg = np.zeros((2, cols + nd - 1), np.int16)
+        self.mins = np.empty((2, cols), np.int16)
+        if p.use_speckle:
+            self.labels = np.empty((h, w), np.int32)
+            self.stack = np.empty((h * w, 2), np.int32)
+            self.rtype = np.zeros(h * w + 1, np.uint8)
+
+    def scratch_bytes(self) -> int:
+        """Bytes of scratch this matcher keeps between frames."""
+        return sum(v.nbytes for v in vars(self).values() if isinstance(v, np.ndarray))
+
+    def match(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """Disparity map (int16, disparity * 16; invalid = (min_disparity - 1) * 16)."""
+        check_pair(left, right)
+        if left.shape != self.shape:
+            raise ValueError(f"image shape {left.shape} differs from the matcher's {self.shape}")
+        left, right = _contiguous(left), _contiguous(right)
+        p = self.params
+        disp = np.empty(self.shape, np.int16)
+        with self._lock:
+            self.run_census(left, right)
+            self.run_sgm(left, disp)
+            if p.use_speckle:
+                filter_speckles(disp, p.invalid_value, p.speckle_window_size, p.speckle_range,
+                                self.labels, self.stack, self.rtype)
+        return disp
+
+    def run_census(self, left: np.ndarray, right: np.ndarray) -> None:
+        """Census codes of the pair into self.cl and self.crr (mirrored rows)."""
+        p = self.params
+        bounds = _stripes(0, self.padl.shape[0], STRIPES_PER_THREAD * nb.get_num_threads())
+        chunk = nb.set_parallel_chunksize(1)
+        try:
+            census_pair(left, right, p.census_width, p.census_height, bounds, self.padl,
+                        self.padr, self.census_byte, self.census_code, self.cl, self.crr)
+        finally:
+            nb.set_parallel_chunksize(chunk)
+
+    def run_sgm(self, left: np.ndarray, disp: np.ndarray) -> None:
+        """Aggregation and selection on the census codes (disp before the speckle filter)."""
+        self.locks[:] = 0
+        self.done[:] = 0
+        chunk = nb.set_parallel_chunksize(1)
+        try:
+            _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.p2tab, self.parked, self.locks,
+                          self.done, disp, self.cost, self.lbuf, self.mv, self.meta, self.pm,
+                          self.acc, self.rmin, self.rarg, self.mins)
+        finally:
+            nb.set_parallel_chunksize(chunk)
+
+
+def sgm_warm_up() -> None:
+    """Compile (or load from numba's disk cache) the SGM kernels."""
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 256, (24, 64), dtype=np.uint8)
+    SGMMatcher(img.shape, SGMParams(num_disparities=16)).match(img, np.roll(img, -3, axis=1))

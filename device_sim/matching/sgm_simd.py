@@ -1,0 +1,273 @@
+"""Vector operations over the disparity axis for the SGM kernels, plus a per-row spin lock.
+
+Arrays are 1-D (uint8 path costs, int16 sums) with the disparity axis contiguous; ``nd`` is a
+multiple of 16 and each loop walks it in 64/32/16-lane chunks (simd._chunked). Callers guarantee
+indices are in range, including the padding element before and after each predecessor run that
+pixel_paths reads.
+"""
+from __future__ import annotations
+
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba.extending import intrinsic
+
+from .simd import _TAIL, _call, _chunked, _fold16, _ptr, _reduce_min, _smin, _splat, _vload, \
+    _vstore
+
+_I16 = ir.IntType(16)
+_I32 = ir.IntType(32)
+
+
+def _i16_arrays(*tys) -> bool:
+    return all(isinstance(t, types.Array) and t.ndim == 1 and t.dtype == types.int16
+               for t in tys)
+
+
+def _intp(context, builder, sig, args, i):
+    return context.cast(builder, args[i], sig.args[i], types.intp)
+
+
+def _i16(context, builder, sig, args, i):
+    return context.cast(builder, args[i], sig.args[i], types.int16)
+
+
+@intrinsic
+def add_min(typingctx, dst, di, src, si, nd):
+    """dst[di+k] += src[si+k] for k < nd; returns min_k of the new dst values."""
+    if not _i16_arrays(dst, src):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        div, siv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 3, 4))
+        best = cgutils.alloca_once_value(builder, _splat(builder, ir.Constant(_I16, 32767),
+                                              ir.VectorType(_I16, _TAIL)))
+
+        def body(j0, n):
+            vty = ir.VectorType(_I16, n)
+            pd = _ptr(context, builder, st[0], args[0], [builder.add(div, j0)])
+            s = _vload(builder, _ptr(context, builder, st[2], args[2], [builder.add(siv, j0)]),
+                       vty)
+            t = builder.add(_vload(builder, pd, vty), s)
+            _vstore(builder, t, pd)
+            builder.store(_smin(builder, builder.load(best), _fold16(builder, t)), best)
+
+        _chunked(builder, ndv, body)
+        return _reduce_min(builder, builder.load(best))
+
+    return types.int16(dst, di, src, si, nd), codegen
+
+
+@intrinsic
+def diag_update(typingctx, s, si, rmin, rarg, ri, nd):
+    """Right-image winner bookkeeping: where s[si+k] < rmin[ri+k], rmin[ri+k] = s[si+k] and
+    rarg[ri+k] = k (strictly smaller only: the first minimum in scan order is kept)."""
+    if not _i16_arrays(s, rmin, rarg):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        siv, riv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 4, 5))
+
+        def body(j0, n):
+            vty = ir.VectorType(_I16, n)
+            x = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(siv, j0)]),
+                       vty)
+            pr = _ptr(context, builder, st[2], args[2], [builder.add(riv, j0)])
+            pa = _ptr(context, builder, st[3], args[3], [builder.add(riv, j0)])
+            r = _vload(builder, pr, vty)
+            lt = builder.icmp_signed("<", x, r)
+            _vstore(builder, builder.select(lt, x, r), pr)
+            ks = builder.add(_splat(builder, builder.trunc(j0, _I16), vty),
+                             ir.Constant(vty, list(range(n))))
+            _vstore(builder, builder.select(lt, ks, _vload(builder, pa, vty)), pa)
+
+        _chunked(builder, ndv, body)
+        return context.get_dummy_value()
+
+    return types.none(s, si, rmin, rarg, ri, nd), codegen
+
+
+def _lock_ptr(context, builder, sig, args):
+    return _ptr(context, builder, sig.args[0], args[0], [_intp(context, builder, sig, args, 1)])
+
+
+@intrinsic
+def try_lock(typingctx, locks, i):
+    """Atomically set locks[i] from 0 to 1 (acquire); True when this call took the lock."""
+    if not (isinstance(locks, types.Array) and locks.dtype == types.int32):
+        return None
+
+    def codegen(context, builder, sig, args):
+        res = builder.cmpxchg(_lock_ptr(context, builder, sig, args), ir.Constant(_I32, 0),
+                              ir.Constant(_I32, 1), "acq_rel", "monotonic")
+        return builder.extract_value(res, 1)
+
+    return types.boolean(locks, i), codegen
+
+
+@intrinsic
+def unlock(typingctx, locks, i):
+    """Release locks[i] (store 0 with release ordering)."""
+    if not (isinstance(locks, types.Array) and locks.dtype == types.int32):
+        return None
+
+    def codegen(context, builder, sig, args):
+        builder.store_atomic(ir.Constant(_I32, 0), _lock_ptr(context, builder, sig, args),
+                             "release", 4)
+        return context.get_dummy_value()
+
+    return types.none(locks, i), codegen
+
+
+def _u8_arrays(*tys) -> bool:
+    return all(isinstance(t, types.Array) and t.ndim == 1 and t.dtype == types.uint8
+               for t in tys)
+
+
+def _umin(builder, a, b):
+    return builder.select(builder.icmp_unsigned("<", a, b), a, b)
+
+
+@intrinsic
+def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
+    """All path steps of one pixel (2 or 4 paths) in one pass over the disparities:
+
+        for path v < npaths, with (po, oo, p2m, mprev) = meta[4v : 4v+4]:
+          L_v[k] = cost[ci+k] + min(P, min(P[-1], P[+1]) +sat p1, p2m) - mprev,  P = lbuf[po+k]
+          lbuf[oo+k] = L_v[k];  mins[v] = min_k L_v[k]
+        acc[ai+k] = sum_v L_v[k]   (int16)
+
+    Path costs are uint8 (the caller keeps every L <= 255 and passes p2m <= 255; the padding
+    elements hold 255, and +p1 saturates), so one 512-bit register holds 64 disparities. The
+    cost and the sum stay in registers across the paths."""
+    if not (_u8_arrays(cost, lbuf) and _i16_arrays(acc, mins) and isinstance(meta, types.Array)
+            and meta.dtype == types.int64):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        u8 = ir.IntType(8)
+        civ, aiv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 7, 8))
+        nmore = builder.icmp_signed(">", _intp(context, builder, sig, args, 4),
+                                    ir.Constant(ir.IntType(64), 2))
+        p1v = context.cast(builder, args[5], st[5], types.uint8)
+        one = ir.Constant(civ.type, 1)
+        meta_v = [builder.load(_ptr(context, builder, st[3], args[3], [ir.Constant(civ.type, i)]))
+                  for i in range(16)]
+        wide = ir.VectorType(u8, 64)
+        best = [cgutils.alloca_once_value(builder, ir.Constant(wide, [255] * 64))
+                for _ in range(4)]
+
+        def lb(off, vty):
+            return _vload(builder, _ptr(context, builder, st[2], args[2], [off]), vty)
+
+        def body(j0, n):
+            vty, wty = ir.VectorType(u8, n), ir.VectorType(_I16, n)
+            c = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(civ, j0)]),
+                       vty)
+            total = cgutils.alloca_once(builder, wty)
+            p1s = _splat(builder, p1v, vty)
+
+            def step(v):
+                po, oo, p2m, mp = meta_v[4 * v:4 * v + 4]
+                pj = builder.add(po, j0)
+                # P[k-1] and P[k+1] by shifting the chunk (loaded where it was stored, so a
+                # just-written predecessor forwards) with the neighbouring element (padding 255
+                # at either end of the run)
+                pv = lb(pj, vty)
+                before = builder.load(_ptr(context, builder, st[2], args[2],
+                                           [builder.sub(pj, one)]))
+                after = builder.load(_ptr(context, builder, st[2], args[2],
+                                          [builder.add(pj, ir.Constant(pj.type, n))]))
+                lo = builder.shuffle_vector(pv, _splat(builder, before, vty), ir.Constant(
+                    ir.VectorType(_I32, n), [n] + list(range(n - 1))))
+                hi = builder.shuffle_vector(pv, _splat(builder, after, vty), ir.Constant(
+                    ir.VectorType(_I32, n), list(range(1, n)) + [n]))
+                t = _call(builder, f"llvm.uadd.sat.v{n}i8", vty, [_umin(builder, lo, hi), p1s])
+                m = _umin(builder, _umin(builder, pv, t),
+                          _splat(builder, builder.trunc(p2m, u8), vty))
+                L = builder.sub(builder.add(c, m), _splat(builder, builder.trunc(mp, u8), vty))
+                _vstore(builder, L, _ptr(context, builder, st[2], args[2], [builder.add(oo, j0)]))
+                lw = L if n == 64 else builder.shuffle_vector(  # pad with 255 to 64 lanes
+                    L, ir.Constant(vty, [255] * n),
+                    ir.Constant(ir.VectorType(_I32, 64), list(range(n)) + [n] * (64 - n)))
+                builder.store(_umin(builder, builder.load(best[v]), lw), best[v])
+                return builder.zext(L, wty)
+
+            builder.store(builder.add(step(0), step(1)), total)
+            with builder.if_then(nmore, likely=True):
+                builder.store(builder.add(builder.load(total),
+                                          builder.add(step(2), step(3))), total)
+            _vstore(builder, builder.load(total),
+                    _ptr(context, builder, st[6], args[6], [builder.add(aiv, j0)]))
+
+        _chunked(builder, ndv, body)
+        for v in range(4):
+            def put(v=v):
+                low = _call(builder, "llvm.vector.reduce.umin.v64i8", u8,
+                            [builder.load(best[v])])
+                builder.store(builder.zext(low, _I16), _ptr(context, builder, st[9], args[9],
+                                                            [ir.Constant(civ.type, v)]))
+            if v >= 2:
+                with builder.if_then(nmore, likely=True):
+                    put()
+            else:
+                put()
+        return context.get_dummy_value()
+
+    return types.none(cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins), codegen
+
+
+@intrinsic
+def cost_run(typingctx, a, crow, base, out, oi, nd):
+    """out[oi+k] = popcount(a ^ crow[base+k]) for k < nd (census codes uint64, out uint8)."""
+    if not (a == types.uint64 and isinstance(crow, types.Array) and crow.ndim == 1
+            and crow.dtype == types.uint64 and _u8_arrays(out)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        bv, oiv, ndv = (_intp(context, builder, sig, args, i) for i in (2, 4, 5))
+
+        def body(j0, n):
+            qty = ir.VectorType(ir.IntType(64), n)
+            x = _vload(builder, _ptr(context, builder, st[1], args[1], [builder.add(bv, j0)]),
+                       qty)
+            pc = _call(builder, f"llvm.ctpop.v{n}i64", qty,
+                       [builder.xor(x, _splat(builder, args[0], qty))])
+            _vstore(builder, builder.trunc(pc, ir.VectorType(ir.IntType(8), n)),
+                    _ptr(context, builder, st[3], args[3], [builder.add(oiv, j0)]))
+
+        _chunked(builder, ndv, body)
+        return context.get_dummy_value()
+
+    return types.none(a, crow, base, out, oi, nd), codegen
+
+
+@intrinsic
+def census_bits(typingctx, byte, row, ro, centre, co, bit, n):
+    """byte[x] |= bit where row[ro+x] < centre[co+x], for x < n rounded up to 64 (uint8
+    arrays; the caller pads them so that the rounded range is readable and writable)."""
+    if not (_u8_arrays(byte, row, centre) and isinstance(bit, types.Integer)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        u8 = ir.IntType(8)
+        rov, cov, nv = (_intp(context, builder, sig, args, i) for i in (2, 4, 6))
+        bitv = context.cast(builder, args[5], st[5], types.uint8)
+        vty = ir.VectorType(u8, 64)
+        bits, zero = _splat(builder, bitv, vty), ir.Constant(vty, None)
+        with cgutils.for_range_slice(builder, ir.Constant(nv.type, 0), nv,
+                                     ir.Constant(nv.type, 64)) as (x, _):
+            r = _vload(builder, _ptr(context, builder, st[1], args[1], [builder.add(rov, x)]),
+                       vty)
+            c = _vload(builder, _ptr(context, builder, st[3], args[3], [builder.add(cov, x)]),
+                       vty)
+            pb = _ptr(context, builder, st[0], args[0], [x])
+            hit = builder.select(builder.icmp_unsigned("<", r, c), bits, zero)
+            _vstore(builder, builder.or_(_vload(builder, pb, vty), hit), pb)
+        return context.get_dummy_value()
+
+    return types.none(byte, row, ro, centre, co, bit, n), codegen

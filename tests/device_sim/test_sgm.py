@@ -1,0 +1,186 @@
+"""Semi-global matching: the numba engine is bit-exact with the numpy reference
+(tests/support/sgm_reference.py) on random images, simulator scenes and Middlebury Motorcycle."""
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+
+cv2 = pytest.importorskip("cv2")
+
+from stereocam.device_sim.matching import (  # noqa: E402
+    MatchParams, SGMMatcher, SGMParams, match, sgm_geometry)
+
+from tests.support import sgm_reference as ref  # noqa: E402
+
+
+def pair(h: int, w: int, shift: int, seed: int, blur: bool = True):
+    """Random texture seen with a shift, a nearer box, a flat patch and some noise."""
+    rng = np.random.default_rng(seed)
+    pad = 2 * shift + 8
+    base = rng.integers(0, 256, (h, w + 2 * pad), dtype=np.uint8)
+    if blur:
+        base = cv2.GaussianBlur(base, (3, 3), 0)
+    right = base[:, pad:pad + w].copy()
+    left = base[:, pad - shift:pad - shift + w].copy()
+    y0, y1, x0, x1 = h // 4, h // 2, w // 2, 3 * w // 4
+    left[y0:y1, x0:x1] = base[y0:y1, pad - 2 * shift + x0:pad - 2 * shift + x1]
+    left[h - h // 5:, w // 2:] = 90
+    right[h - h // 5:, w // 2:] = 90
+    noise = rng.integers(-2, 3, left.shape)
+    left = np.clip(left.astype(int) + noise, 0, 255).astype(np.uint8)
+    return left, right
+
+
+def assert_same(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray:
+    ours = SGMMatcher(left.shape, p).match(left, right)
+    want = ref.sgm(left, right, p)
+    assert ours.dtype == np.int16 and ours.shape == left.shape
+    diff = np.argwhere(ours != want)
+    assert diff.size == 0, (f"{len(diff)} pixels differ for {p}; first (y, x, ours, ref): "
+                            + str([(y, x, ours[y, x], want[y, x]) for y, x in diff[:5]]))
+    valid = ours != p.invalid_value
+    assert valid.any()
+    return ours
+
+
+EDGES = [
+    dict(),
+    dict(uniqueness_ratio=10, lr_max_diff=1),
+    dict(uniqueness_ratio=1, lr_max_diff=0, p2_adapt=0),
+    dict(uniqueness_ratio=99, lr_max_diff=3, speckle_window_size=0),
+    dict(p1=0, p2=0, p2_adapt=0),  # no smoothness: winner-take-all on census costs
+    dict(p1=40, p2=40, p2_adapt=1),  # p1 == p2; P2 adapts down to p1
+    dict(p1=255, p2=20, uniqueness_ratio=100),  # p1 > p2 (saturating); largest p1
+    dict(p1=5, p2=255 - 62),  # largest P2 for a 9x7 census (path costs reach 255)
+    dict(census_width=3, census_height=1, p2=253),
+    dict(census_width=1, census_height=3, lr_max_diff=2),
+    dict(census_width=13, census_height=5),  # 64 comparison bits
+    dict(census_width=5, census_height=5, p2_adapt=1000, uniqueness_ratio=15),
+    dict(min_disparity=-9, num_disparities=32, lr_max_diff=1),
+    dict(min_disparity=5, num_disparities=16, uniqueness_ratio=5),
+    dict(min_disparity=-20, num_disparities=16),  # the whole range negative
+    dict(num_disparities=48, speckle_window_size=20, speckle_range=16),
+    dict(num_disparities=80, lr_max_diff=1),  # 64 + 16 lanes
+]
+SHAPES = [(23, 97), (37, 121), (50, 131), (31, 160)]
+
+
+@pytest.mark.parametrize("paths", [4, 8])
+@pytest.mark.parametrize("i", range(len(EDGES)))
+def test_random_pairs_bit_exact(i: int, paths: int) -> None:
+    p = SGMParams(**{"num_disparities": 32, **EDGES[i], "paths": paths})
+    h, w = SHAPES[i % len(SHAPES)]
+    while sgm_geometry(h, w + 20, p).cols < 40:
+        w += 32
+    left, right = pair(h, w, 4 + i % 7 + max(p.min_disparity, 0), seed=i, blur=i % 2 == 0)
+    assert_same(left, right, p)
+
+
+def test_raw_noise_and_flat_images() -> None:
+    rng = np.random.default_rng(7)
+    a = rng.integers(0, 256, (29, 77), dtype=np.uint8)
+    b = rng.integers(0, 256, (29, 77), dtype=np.uint8)
+    assert_same(a, b, SGMParams(num_disparities=16, uniqueness_ratio=5, lr_max_diff=1,
+                                speckle_window_size=0))
+    flat = np.full((17, 50), 77, np.uint8)
+    p = SGMParams(num_disparities=16, speckle_window_size=0)
+    out = SGMMatcher(flat.shape, p).match(flat, flat)
+    np.testing.assert_array_equal(out, ref.sgm(flat, flat, p))
+
+
+@pytest.fixture(scope="module")
+def motorcycle_small():
+    skimage_data = pytest.importorskip("skimage.data")
+    left, right, _ = skimage_data.stereo_motorcycle()
+    grey = [cv2.cvtColor(im, cv2.COLOR_RGB2GRAY) for im in (left, right)]
+    return [cv2.resize(g, (183, 123), interpolation=cv2.INTER_AREA) for g in grey]
+
+
+@pytest.mark.parametrize("kw", [dict(paths=8), dict(paths=4, uniqueness_ratio=5, lr_max_diff=1),
+                                dict(min_disparity=-3, census_width=7, census_height=5)])
+def test_motorcycle_bit_exact(motorcycle_small, kw) -> None:
+    left, right = motorcycle_small
+    assert_same(left, right, SGMParams(num_disparities=32, **kw))
+
+
+@pytest.fixture(scope="module")
+def sim_pair():
+    from stereocam.tools.bench_sgm import sim_scene
+    left, right, truth = sim_scene(320, 240, scene="lab", seed=5)
+    return left[5:152, 3:290], right[5:152, 3:290], truth[5:152, 3:290]
+
+
+@pytest.mark.parametrize("paths", [4, 8])
+def test_simulator_scene_bit_exact_and_accurate(sim_pair, paths: int) -> None:
+    left, right, truth = sim_pair
+    p = SGMParams(num_disparities=48, paths=paths, lr_max_diff=1)
+    ours = assert_same(left, right, p)
+    g = sgm_geometry(*left.shape, p)
+    valid = ours[:, g.x0:] != p.invalid_value
+    err = np.abs(ours[:, g.x0:] / 16.0 - truth[:, g.x0:])
+    assert valid.mean() > 0.8
+    assert np.mean(err[valid] <= 1.0) > 0.9  # the simulator's truth, not the reference
+
+
+def test_output_contract_and_match_api() -> None:
+    left, right = pair(40, 200, 6, seed=3)
+    p = SGMParams(num_disparities=16, min_disparity=2)
+    out = match(left, right, p)
+    assert out.dtype == np.int16 and out.shape == left.shape
+    assert p.invalid_value == 16
+    assert np.all(out[:, :sgm_geometry(40, 200, p).x0] == p.invalid_value)
+    inner = out[2:-2, 40:]
+    assert np.median(inner[inner != p.invalid_value]) == pytest.approx(6 * 16, abs=8)
+    assert np.array_equal(match(left, right, SGMParams(num_disparities=128)),
+                          SGMMatcher(left.shape, SGMParams()).match(left, right))
+    bm = match(left, right, MatchParams(num_disparities=16, block_size=9))
+    assert not np.array_equal(bm, out)  # the block matcher still answers MatchParams
+
+
+def test_thread_count_and_reuse_do_not_change_output() -> None:
+    a = pair(45, 150, 5, seed=11)
+    b = pair(45, 150, 9, seed=12)
+    p = SGMParams(num_disparities=32, uniqueness_ratio=5, lr_max_diff=1)
+    m = SGMMatcher(a[0].shape, p)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = [m.match(*a), m.match(*b)]
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        two = [m.match(*b), m.match(*a)]
+    finally:
+        numba.set_num_threads(before)
+    assert np.array_equal(one[0], two[1]) and np.array_equal(one[1], two[0])
+    assert np.array_equal(one[0], ref.sgm(*a, p))
+
+
+@pytest.mark.parametrize("kw, msg", [
+    (dict(num_disparities=24), "divisible by 16"),
+    (dict(census_width=8), "census window"),
+    (dict(census_width=11, census_height=7), "census window"),
+    (dict(paths=6), "paths"),
+    (dict(p1=256), "p1 <= 255"),
+    (dict(p2=-1), "p2 >= 0"),
+    (dict(p2=194), "too large"),
+    (dict(uniqueness_ratio=-1), "uniqueness_ratio"),
+    (dict(speckle_range=-1), "speckle_range"),
+    (dict(p1=1.5), "must be an int"),
+    (dict(min_disparity=-2100), "int16"),
+])
+def test_bad_params(kw, msg) -> None:
+    with pytest.raises(ValueError, match=msg):
+        SGMParams(**kw)
+
+
+def test_bad_inputs() -> None:
+    img = np.zeros((20, 40), np.uint8)
+    with pytest.raises(ValueError, match="too small"):
+        SGMMatcher(img.shape, SGMParams(num_disparities=48))
+    m = SGMMatcher(img.shape, SGMParams(num_disparities=16))
+    with pytest.raises(ValueError, match="differs"):
+        m.match(np.zeros((21, 40), np.uint8), np.zeros((21, 40), np.uint8))
+    with pytest.raises(ValueError, match="uint8"):
+        m.match(img.astype(np.float32), img)
+    with pytest.raises(ValueError, match="SGMParams"):
+        SGMMatcher(img.shape, MatchParams())

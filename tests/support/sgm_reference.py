@@ -1,0 +1,143 @@
+"""Plain numpy semi-global matching: the specification the numba engine is bit-exact with.
+
+Every step is written for reading, not speed. Notation: the matched columns are X = x0 + x for
+x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k in [0, N).
+
+1. census: per pixel one bit per window neighbour (width x height, centre excluded), set when
+   the neighbour is darker than the centre; the image is extended by edge replication.
+2. cost C[y, x, k] = popcount(census_L[y, X] ^ census_R[y, X - d]) (Hamming distance).
+3. for each path direction r = (dy, dx): L_r(p) = C(p) where p - r leaves the matched
+   rectangle, else L_r(p, k) = C(p, k) + min(L_r(q, k), L_r(q, k-1) + P1, L_r(q, k+1) + P1,
+   m_q + P2') - m_q with q = p - r, m_q = min_k L_r(q, k) and P2' = P2, or with p2_adapt = a > 0
+   P2' = min(P2, max(P1, P2 * a // (a + |I_L(p) - I_L(q)|))). S = sum of the 4 (horizontal,
+   vertical) or 8 (plus diagonal) paths. (L <= census bits + P2 <= 255, as SGMParams demands.)
+4. winner-take-all: k* = first argmin_k S; m = S[k*].
+5. uniqueness (ratio u > 0): invalid when some k with |k - k*| > 1 has S[k] <= m + m * u // 100.
+6. subpixel (0 < k* < N-1, a = S[k*-1], b = S[k*+1]): den = max(a + b - 2m, 1),
+   out = 16 * (min_disparity + k*) + floor(((a - b) * 16 + den) / (2 * den)); else 16 * d.
+7. left-right (lr_max_diff >= 0): the right image's winner for right column j is the first
+   argmin over k of S at the left pixel x = j + k (same row); invalid when it differs from k*
+   by more than lr_max_diff.
+8. speckle filter: cv2.filterSpeckles(out, invalid, speckle_window_size, speckle_range).
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from stereocam.device_sim.matching.sgm_params import SGMParams, sgm_geometry
+
+PATHS4 = [(0, 1), (0, -1), (1, 0), (-1, 0)]
+PATHS8 = PATHS4 + [(1, 1), (1, -1), (-1, 1), (-1, -1)]
+
+
+def census(img: np.ndarray, width: int, height: int) -> np.ndarray:
+    rx, ry = width // 2, height // 2
+    h, w = img.shape
+    padded = np.pad(img, ((ry, ry), (rx, rx)), mode="edge")
+    code = np.zeros((h, w), np.uint64)
+    bit = 0
+    for dy in range(-ry, ry + 1):
+        for dx in range(-rx, rx + 1):
+            if dy == 0 and dx == 0:
+                continue
+            neighbour = padded[ry + dy:ry + dy + h, rx + dx:rx + dx + w]
+            code |= (neighbour < img).astype(np.uint64) << np.uint64(bit)
+            bit += 1
+    return code
+
+
+def cost_volume(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray:
+    g = sgm_geometry(*left.shape, p)
+    cl = census(left, p.census_width, p.census_height)
+    cr = census(right, p.census_width, p.census_height)
+    cost = np.empty((g.height, g.cols, p.num_disparities), np.int32)
+    xs = np.arange(g.x0, g.x1)
+    for k in range(p.num_disparities):
+        d = p.min_disparity + k
+        cost[:, :, k] = np.bitwise_count(cl[:, xs] ^ cr[:, xs - d])
+    return cost
+
+
+def _step(cost: np.ndarray, prev: np.ndarray, grad: np.ndarray, p: SGMParams) -> np.ndarray:
+    """One path step for a batch of pixels: cost, prev (n, N); grad (n,) = |I(p) - I(q)|."""
+    big = np.iinfo(np.int32).max // 2
+    m = prev.min(axis=1, keepdims=True)
+    p2 = np.full(grad.shape, p.p2, np.int64)
+    if p.p2_adapt > 0:
+        p2 = np.minimum(p.p2, np.maximum(p.p1, p.p2 * p.p2_adapt // (p.p2_adapt + grad)))
+    lower = np.pad(prev, ((0, 0), (1, 0)), constant_values=big)[:, :-1]  # L(q, k-1)
+    upper = np.pad(prev, ((0, 0), (0, 1)), constant_values=big)[:, 1:]  # L(q, k+1)
+    best = np.minimum(np.minimum(prev, np.minimum(lower, upper) + p.p1), m + p2[:, None])
+    return cost + best - m
+
+
+def aggregate_path(cost: np.ndarray, img: np.ndarray, dy: int, dx: int, p: SGMParams) -> np.ndarray:
+    """L_r over the matched rectangle for r = (dy, dx); img is the left image's matched columns."""
+    h, w, _ = cost.shape
+    img = img.astype(np.int64)
+    out = cost.copy()  # pixels whose predecessor is outside keep L = C
+    if dy == 0:  # horizontal: columns in path order, all rows at once
+        order = range(1, w) if dx > 0 else range(w - 2, -1, -1)
+        for x in order:
+            q = x - dx
+            out[:, x] = _step(cost[:, x], out[:, q], np.abs(img[:, x] - img[:, q]), p)
+        return out
+    order = range(1, h) if dy > 0 else range(h - 2, -1, -1)
+    for y in order:
+        xs = np.arange(w)
+        inside = (xs - dx >= 0) & (xs - dx < w)
+        x, q = xs[inside], xs[inside] - dx
+        grad = np.abs(img[y, x] - img[y - dy, q])
+        out[y, x] = _step(cost[y, x], out[y - dy, q], grad, p)
+    return out
+
+
+def aggregate(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray:
+    """S = sum over the paths of L_r, shape (height, cols, N), int32."""
+    g = sgm_geometry(*left.shape, p)
+    cost = cost_volume(left, right, p)
+    img = left[:, g.x0:g.x1]
+    paths = PATHS4 if p.paths == 4 else PATHS8
+    path_costs = [aggregate_path(cost, img, dy, dx, p) for dy, dx in paths]
+    assert max(L.max() for L in path_costs) <= 255  # the engine holds L in uint8
+    return sum(path_costs)
+
+
+def select(total: np.ndarray, p: SGMParams) -> np.ndarray:
+    """Steps 4-7 on S (height, cols, N): disparity * 16 of the matched columns, or invalid."""
+    h, w, nd = total.shape
+    out = np.full((h, w), p.invalid_value, np.int64)
+    xs, ks = np.arange(w), np.arange(nd)
+    for y in range(h):
+        s = total[y].astype(np.int64)
+        k = s.argmin(axis=1)  # first minimum
+        m = s[xs, k]
+        ok = np.ones(w, bool)
+        if p.uniqueness_ratio > 0:
+            thr = m + m * p.uniqueness_ratio // 100
+            others = np.abs(ks[None, :] - k[:, None]) > 1
+            ok &= ~np.any((s <= thr[:, None]) & others, axis=1)
+        if p.lr_max_diff >= 0:
+            diag = np.full((w + nd - 1, nd), np.iinfo(np.int64).max)
+            for kk in range(nd):  # right column j = x + N-1 - k (shifted to start at 0)
+                diag[xs + nd - 1 - kk, kk] = s[:, kk]
+            right_best = diag.argmin(axis=1)
+            ok &= np.abs(right_best[xs + nd - 1 - k] - k) <= p.lr_max_diff
+        inner = (k > 0) & (k < nd - 1)
+        a = s[xs, np.clip(k - 1, 0, nd - 1)]
+        b = s[xs, np.clip(k + 1, 0, nd - 1)]
+        den = np.maximum(a + b - 2 * m, 1)
+        frac = np.where(inner, ((a - b) * 16 + den) // (2 * den), 0)
+        out[y] = np.where(ok, 16 * (p.min_disparity + k) + frac, p.invalid_value)
+    return out
+
+
+def sgm(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray:
+    """Disparity * 16 (int16), invalid = (min_disparity - 1) * 16."""
+    g = sgm_geometry(*left.shape, p)
+    disp = np.full(left.shape, p.invalid_value, np.int16)
+    disp[:, g.x0:g.x1] = select(aggregate(left, right, p), p)
+    if p.use_speckle:
+        cv2.filterSpeckles(disp, p.invalid_value, p.speckle_window_size, p.speckle_range)
+    return disp

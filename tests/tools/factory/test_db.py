@@ -1,0 +1,116 @@
+"""The factory record against SQLite and a real PostgreSQL server (pgserver's packaged binaries)."""
+from __future__ import annotations
+
+import csv
+import json
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+from tests.support.paths import DATA
+
+from stereocam.tools import calibrate
+from stereocam.tools.factory import cli as factory_cli
+from stereocam.tools.factory.db import MIGRATIONS, SCHEMA_VERSION, Attempt, FactoryDB, FactoryDBError
+
+PAIRS = DATA / "opencv_chessboard_pairs"
+
+
+@pytest.fixture(scope="module")
+def postgres_url(tmp_path_factory: pytest.TempPathFactory):
+    pgserver = pytest.importorskip("pgserver", reason="pgserver (packaged PostgreSQL) is not installed")
+    try:
+        server = pgserver.get_server(tmp_path_factory.mktemp("pg"), cleanup_mode="stop")
+    except Exception as exc:  # no server can be started here (e.g. no shared memory)
+        pytest.skip(f"cannot start a PostgreSQL server: {exc}")
+    yield server.get_uri()
+    server.cleanup()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request, tmp_path: Path) -> str:
+    if request.param == "sqlite":
+        return str(tmp_path / "factory.sqlite")
+    url = request.getfixturevalue("postgres_url")
+    with FactoryDB(url) as db:  # a clean table per test
+        cur = db._conn.cursor()
+        cur.execute("DELETE FROM attempts")
+        db._conn.commit()
+    return url
+
+
+def _run(db_url: str, out: Path, *extra: str) -> int:
+    return calibrate.main(["-q", "--images", str(PAIRS), "--board", "9x6", "--square-size", "0.025",
+                           "--out", str(out), "--db", db_url, "--station", "line-1", *extra])
+
+
+def test_every_attempt_is_recorded_and_reported(db_url: str, tmp_path: Path, capsys) -> None:
+    assert _run(db_url, tmp_path / "a") == 0
+    assert _run(db_url, tmp_path / "b", "--max-epipolar", "0.01", "--station", "line-2",
+                "--serial", "SN-7") == calibrate.EXIT_GATE
+    with FactoryDB(db_url) as db:
+        rows = db.attempts()
+        assert db.version() == SCHEMA_VERSION
+    assert [(r.passed, r.station) for r in rows] == [(True, "line-1"), (False, "line-2")]
+    ok, bad = rows
+    assert ok.unit_serial == "opencv_chessboard_pairs" and bad.unit_serial == "SN-7"
+    assert ok.mode == "offline" and ok.board == "9x6:0.025" and ok.lens_model == "plumb_bob"
+    assert ok.rms_stereo > 0 and ok.epipolar_rms_px > 0 and ok.views_used >= 12 and ok.baseline_m > 0.05
+    assert ok.metrics["lens_model_scores"] and ok.output_dir == str((tmp_path / "a").resolve())
+    assert ok.calibration is None and ok.written is False        # offline: nothing written to a device
+    assert "epipolar" in bad.reason and bad.metrics["failures"]
+    capsys.readouterr()
+    day = ok.started_at[:10]
+    assert factory_cli.main(["report", "--db", db_url, "--since", day, "--csv", str(tmp_path / "r.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "2 attempts" in out and "line-1" in out and "line-2" in out and "50.0%" in out
+    assert "calibration FAILED the gate" in out
+    with (tmp_path / "r.csv").open() as f:
+        table = list(csv.DictReader(f))
+    assert [t["station"] for t in table] == ["line-1", "line-2"] and float(table[0]["rms_stereo"]) > 0
+    assert json.loads(table[0]["metrics"])["lens_model_scores"] == ok.metrics["lens_model_scores"]
+    assert factory_cli.main(["report", "--db", db_url, "--since", "2999-01-01"]) == 0
+    assert "0 attempts" in capsys.readouterr().out
+
+
+def test_device_blob_round_trips(db_url: str) -> None:
+    blob = bytes(range(256)) * 2
+    with FactoryDB(db_url) as db:
+        db.record(Attempt("SN-1", "2026-01-02T03:04:05Z", "s", "0.2", "device", "9x6:0.03", True, "ok",
+                          calibration=blob, written=True, verified=True, metrics={"a": 1.5}))
+        (row,) = db.attempts()
+    assert row.calibration == blob and row.written is True and row.metrics == {"a": 1.5}
+
+
+def test_sqlite_migrates_a_version_1_database(tmp_path: Path) -> None:
+    path = tmp_path / "old.sqlite"
+    con = sqlite3.connect(path)
+    con.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
+    con.execute("INSERT INTO schema_version VALUES (1)")
+    for statement in MIGRATIONS[1]:
+        con.execute(statement.format(id="INTEGER PRIMARY KEY AUTOINCREMENT", blob="BLOB", bool="INTEGER"))
+    con.execute("INSERT INTO attempts (unit_serial, started_at, station, tool_version, mode, board, passed, reason) "
+                "VALUES ('SN-0', '2025-12-31T23:00:00Z', 'old', '0.1', 'device', '9x6', 1, 'passed')")
+    con.commit()
+    con.close()
+    with FactoryDB(str(path)) as db:
+        assert db.version() == SCHEMA_VERSION
+        (row,) = db.attempts()
+    assert row.unit_serial == "SN-0" and row.passed is True and row.metrics == {} and row.baseline_m is None
+
+
+def test_newer_schema_and_unusable_db_are_refused_before_anything(tmp_path: Path, capsys) -> None:
+    path = tmp_path / "new.sqlite"
+    with FactoryDB(str(path)) as db:
+        db._conn.execute("UPDATE schema_version SET version = 99")
+        db._conn.commit()
+    with pytest.raises(FactoryDBError, match="newer than this tool"):
+        FactoryDB(str(path))
+    out = tmp_path / "out"
+    assert _run(str(path), out) == calibrate.EXIT_USAGE
+    assert "nothing was done" in capsys.readouterr().err and not out.exists()
+    assert _run("postgresql://nobody@127.0.0.1:1/none", out) == calibrate.EXIT_USAGE
+    (tmp_path / "file").write_text("x")
+    assert _run(str(tmp_path / "db.sqlite"), tmp_path / "file" / "sub") == calibrate.EXIT_USAGE
+    assert "not a writable folder" in capsys.readouterr().err
