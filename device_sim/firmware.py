@@ -11,6 +11,7 @@ import collections
 import tempfile
 from pathlib import Path
 
+from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
 
 from . import registry
@@ -50,6 +51,7 @@ class SimulatedCamera:
         self.clock = DeviceClock(seed)
         self.config = ConfigStore()
         self.counters: collections.Counter[str] = collections.Counter()
+        self.usb_speed = m.UsbSpeed.NOT_USB  # set by the simulated USB bus while plugged (INFO reports it)
         self._truth_cal = true_calibration(seed)
         self.rig = SensorRig(seed, self._truth_cal)
         self._tmpdir = None
@@ -68,7 +70,8 @@ class SimulatedCamera:
         self.scene = scene
         self.heartbeat = HeartbeatHandlers(self.clock, self.config, self.engine, self.link, self.counters)
         self.streaming = StreamingHandlers(self.config, self.engine, self.counters)
-        for group in (InfoHandler(Identity(self.model, self.serial, self.firmware_version), self.calibration),
+        for group in (InfoHandler(Identity(self.model, self.serial, self.firmware_version), self.calibration,
+                                  lambda: self.usb_speed),
                       ConfigHandlers(self.config, self.engine), self.streaming, self.heartbeat, self.calibration):
             self.dispatcher.register(group.handlers())
         self.trigger_line = trigger_line

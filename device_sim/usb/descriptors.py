@@ -9,6 +9,7 @@ import re
 import struct
 from dataclasses import dataclass, field
 
+from stereocam.protocol.messages import UsbSpeed
 from stereocam.protocol.usb_identity import (EP_IN, EP_OUT, INTERFACE_NUMBER, PRODUCT_ID,  # noqa: F401
                                              VENDOR_ID)
 from stereocam.protocol.usb_identity import INTERFACE_CLASS as CLASS_VENDOR_SPECIFIC
@@ -22,9 +23,9 @@ INTERFACE_NAME = "StereoCam bulk stream"
 
 DT_DEVICE, DT_CONFIG, DT_STRING, DT_INTERFACE, DT_ENDPOINT = 1, 2, 3, 4, 5
 ATTR_BULK = 0x02
-SPEED_HIGH = 3
-"""libusb_speed value for USB 2.0 high speed (480 Mbit/s)."""
-SPEED_SUPER = 4
+SPEED_HIGH = UsbSpeed.HIGH
+"""libusb_speed value for USB 2.0 high speed (480 Mbit/s); INFO reports the same numbers."""
+SPEED_SUPER = UsbSpeed.SUPER
 """libusb_speed value for USB 3.x super speed (5 Gbit/s)."""
 
 

@@ -90,6 +90,8 @@ class SimUsbDevice:
         self._handles: set[SimHandle] = set()
         self._thread = threading.Thread(target=self._firmware_loop, daemon=True,
                                         name=f"usb-sim-{bus.number}-{address}")
+        if hasattr(sim, "usb_speed"):  # firmware that reports its link speed (INFO) reads it from here
+            sim.usb_speed = speed.libusb_speed
         sim.attach(self.in_pipe.push)
         self._thread.start()
 
@@ -114,6 +116,8 @@ class SimUsbDevice:
         self.bus._remove(self)
         self.in_pipe.close()
         self.out_pipe.close()
+        if hasattr(self.sim, "usb_speed"):
+            self.sim.usb_speed = 0
         try:
             self.sim.detach()
         except Exception:  # a firmware bug must not stop the unplug

@@ -375,3 +375,21 @@ def test_high_speed_bus_caps_bulk_throughput(bus):
         got += len(dev.read(EP_IN, 256 * 1024, 2000))
     rate = total / (time.monotonic() - start)
     assert rate < 48e6  # 40 MB/s plus slack for the first transfer's start
+
+
+@pytest.mark.parametrize("speed,reported", [("high", 3), ("super", 4)])
+def test_info_says_which_speed_the_unit_is_plugged_at(speed, reported):
+    import stereocam
+    import stereocam.device_sim.usb as simusb
+    from stereocam.device_sim import SimulatedCamera
+    from stereocam.protocol import messages as m
+
+    sim = SimulatedCamera(serial=f"INFO-{speed}", seed=43)
+    handle = simusb.plug(sim, speed=speed)
+    try:
+        with stereocam.open(f"usb://?serial=INFO-{speed}", timeout=3.0) as cam:
+            assert cam.request(m.GetInfo()).usb_speed == reported
+    finally:
+        handle.unplug()
+    assert sim.usb_speed == m.UsbSpeed.NOT_USB  # unplugged: on no USB link
+    sim.close()
