@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench soak clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -20,6 +20,9 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(VENV)/bin/stereocam bench
+
+soak: $(STAMP)
+	$(VENV)/bin/stereocam soak 'sim://?seed=1'
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

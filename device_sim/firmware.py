@@ -9,46 +9,66 @@ from __future__ import annotations
 
 import collections
 import tempfile
+import threading
+from functools import partial
 from pathlib import Path
+from typing import Callable
+
+from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.params import BY_NAME
 
 from . import registry
+from .boot.boot_stage import Booted, BootStage
+from .boot.boot_state import BootStateStore
+from .boot.factory import DEV_SIGNING_KEY, provision, trusted_key
+from .boot.layout import FLASH_SIZE, FlashLayout
+from .boot.slots import Slots
+from .boot.update_service import UpdateService
+from .calibration.flash import NorFlash, PowerLossError
 from .calibration.truth import true_calibration
 from .clock import DeviceClock
 from .ground_truth import GroundTruth, TruthLog
 from .handlers.calibration import CalibrationService
 from .handlers.config import ConfigHandlers
 from .handlers.config_store import ConfigStore
-from .handlers.device_info import FIRMWARE_VERSION, MODEL, Identity, InfoHandler
+from .handlers.device_info import FACTORY_BUILD, MODEL, RECOVERY_BUILD, Identity, InfoHandler
+from .handlers.frame_repair import FrameRepair
 from .handlers.heartbeat import HeartbeatHandlers
 from .handlers.streaming import StreamingHandlers
+from .handlers.update import UpdateHandlers
 from .link_layer.device_link import DeviceLink, Sink
 from .link_layer.dispatcher import Dispatcher
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
 from .pipeline.capture_pipeline import CapturePipeline
+from .replay import ReplayEngine, ReplaySource
 from .rig.scene import Scene
 from .rig.sensor import SensorRig
-from .trigger import TriggerLine
+from .trigger import Line, TriggerInput
 
 
 class SimulatedCamera:
     """One simulated STOC-class unit (firmware + sensor rig)."""
 
-    def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: TriggerLine | None = None,
+    def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: Line | None = None,
                  flash_path: str | Path | None = None, factory_calibrated: bool = True,
-                 scene: Scene | str = Scene.LAB):
+                 scene: Scene | str = Scene.LAB, vendor_key: Ed25519PrivateKey = DEV_SIGNING_KEY,
+                 flash_size: int = FLASH_SIZE, source: ReplaySource | None = None):
         """``scene``: what the rig looks at ("lab", "wall", "board"; a simulator setting, changeable
         at run time through ``scene``, never a device parameter). ``flash_path``: the file behind
         this unit's flash (kept across runs); None: a private temporary file. ``factory_calibrated``:
         the unit left the factory with its true calibration stored (False: fresh from assembly,
-        streams raw images until calibrated)."""
+        streams raw images until calibrated). ``vendor_key``: the firmware-signing key whose public half
+        the factory line provisions into a blank unit (and signs its shipped image with). ``source``: a
+        recording that stands in for the sensor rig (replay.py); the unit is then the recorded one:
+        identity, calibration, configuration."""
         self.seed = seed
-        self.serial = serial or f"SIM{seed:05d}"
-        self.model = MODEL
-        self.firmware_version = FIRMWARE_VERSION
-        self.clock = DeviceClock(seed)
+        self._source = source
+        self.serial = source.serial if source else serial or f"SIM{seed:05d}"
+        self.model = source.model if source else MODEL
+        self.clock = source.clock if source else DeviceClock(seed)
         self.config = ConfigStore()
         self.counters: collections.Counter[str] = collections.Counter()
         self.usb_speed = m.UsbSpeed.NOT_USB  # set by the simulated USB bus while plugged (INFO reports it)
@@ -58,27 +78,130 @@ class SimulatedCamera:
         if flash_path is None:
             self._tmpdir = tempfile.TemporaryDirectory(prefix="stereocam-flash-")
             flash_path = Path(self._tmpdir.name) / f"{self.serial}.flash"
-        self.calibration = CalibrationService(flash_path, self._truth_cal, factory_calibrated)
+        self.flash = NorFlash(flash_path, flash_size)
+        stored = source.calibration if source else self._truth_cal
+        self.calibration = CalibrationService(self.flash, stored or self._truth_cal,
+                                              factory_calibrated and stored is not None)
+        self.layout = FlashLayout(self.flash)
+        provision(self.layout, vendor_key, FACTORY_BUILD, MODEL)
+        self._power_lock = threading.RLock()
+        self._power_listeners: list[Callable[[str], None]] = []
+        self.powered = True
+        self._closed = False
+        self._epoch = 0
         self.truth = TruthLog(self.rig)
 
         # the engine's callbacks reach the pipeline and the watchdog, which themselves need the engine
         self.dispatcher = Dispatcher(self.counters)
-        self.engine = CaptureEngine(lambda req: self.pipeline.produce(req), lambda: self.heartbeat.watchdog())
-        self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop)
+        self.engine = (partial(ReplayEngine, source) if source else CaptureEngine)(
+            lambda req: self.pipeline.produce(req), lambda: self.heartbeat.watchdog())
+        self.repair = FrameRepair(lambda wire: self.link.send(wire, lambda: True))
+        self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset)
         self.pipeline = CapturePipeline(seed, self.rig, self.config, self.calibration, self.clock, self.truth,
-                                        self._send_capture_part, self.counters, self.engine.count_drop)
+                                        self._send_capture_part, self.counters, self.repair,
+                                        self.engine.count_drop, source)
         self.scene = scene
         self.heartbeat = HeartbeatHandlers(self.clock, self.config, self.engine, self.link, self.counters)
         self.streaming = StreamingHandlers(self.config, self.engine, self.counters)
-        for group in (InfoHandler(Identity(self.model, self.serial, self.firmware_version), self.calibration,
-                                  lambda: self.usb_speed),
-                      ConfigHandlers(self.config, self.engine), self.streaming, self.heartbeat, self.calibration):
-            self.dispatcher.register(group.handlers())
+        self._boot(recovery=False)
+        self.trigger_input = TriggerInput(seed, self.streaming.on_pulse)  # its own latency after an edge
         self.trigger_line = trigger_line
         if trigger_line is not None:
-            trigger_line.attach(self.streaming.on_pulse)
+            trigger_line.attach(self.trigger_input.on_pulse)
         self.pipeline.warm_up()
         registry.register(self)
+
+    # -- boot, reboot, power --------------------------------------------------------------------
+    def _boot(self, recovery: bool) -> None:
+        """Run the boot stage and become what it booted: its build's version, protocol minor,
+        capabilities, parameter defaults and request handlers (recovery: INFO, HEARTBEAT, TIME_SYNC, STOP,
+        UPDATE_*)."""
+        key = trusted_key(self.flash)
+        if key is None:
+            raise RuntimeError(f"unit {self.serial} has no trusted key provisioned")
+        slots, states = Slots(self.layout, key, MODEL), BootStateStore(self.layout)
+        booted = BootStage(slots, states).boot(recovery)
+        build = booted.image.build if booted.image else RECOVERY_BUILD
+        self.firmware_version = self._source.firmware_version if self._source else build.version
+        self.config.reset(build.parameter_defaults)
+        if self._source:  # a replayed unit starts in the configuration it was recorded with
+            self.config.apply({BY_NAME[k].pid: v for k, v in self._source.config.items() if k in BY_NAME}, False)
+        self.update = UpdateService(slots, states, booted)
+        identity = Identity(self.model, self.serial, self.firmware_version, build.protocol_minor, build.capabilities)
+        groups: list[dict] = [InfoHandler(identity, self.calibration, lambda: self.usb_speed).handlers(),
+                              self.heartbeat.handlers()]
+        if booted.image is None:
+            groups.append({m.MsgType.STOP: self.streaming.handlers()[m.MsgType.STOP]})
+        else:
+            groups += [ConfigHandlers(self.config, self.engine).handlers(), self.streaming.handlers()]
+            if build.capabilities & m.Capability.CALIBRATION:
+                groups.append(self.calibration.handlers())
+            if build.capabilities & m.Capability.FRAME_REPAIR:
+                groups.append(self.repair.handlers())
+        if build.capabilities & m.Capability.FIRMWARE_UPDATE:
+            groups.append(UpdateHandlers(self.update, self._reset_from(self._epoch), self.power_cut).handlers())
+        self.dispatcher.handlers.clear()
+        for handlers in groups:
+            self.dispatcher.register(handlers)
+
+    @property
+    def booted(self) -> Booted:
+        """What the boot stage started (its mode turns NORMAL once the host confirms a trial)."""
+        return self.update.booted
+
+    def on_power(self, listener: Callable[[str], None]) -> Callable[[], None]:
+        """Call ``listener("down")`` when the unit goes down (reset, power cut) and ``("up")`` when it
+        has booted again (a USB device re-enumerates); returns the function that unsubscribes."""
+        self._power_listeners.append(listener)
+        return lambda: self._power_listeners.remove(listener) if listener in self._power_listeners else None
+
+    def _notify(self, event: str) -> None:
+        for listener in list(self._power_listeners):
+            listener(event)
+
+    def _reset_from(self, epoch: int) -> Callable[[], None]:
+        """The reset the running firmware requests (ACTIVATE): void if the unit went down meanwhile."""
+        def reset() -> None:
+            with self._power_lock:
+                if self._epoch == epoch:
+                    self.reboot()
+        return reset
+
+    def _down(self) -> None:
+        self._epoch += 1  # whatever the firmware that ran scheduled dies with it
+        self.powered = False
+        self._notify("down")
+        self.link.detach()
+
+    def _up(self, recovery: bool) -> None:
+        self.calibration.reload()
+        self._boot(recovery)
+        self.powered = True
+        self._notify("up")
+
+    def reboot(self, recovery: bool = False) -> None:
+        """Reset: the link drops, the boot stage runs again from flash (``recovery``: the recovery
+        strap is held), the unit comes back as what it booted."""
+        with self._power_lock:
+            if self._closed:  # a reboot scheduled by ACTIVATE may fire after close()
+                return
+            self._down()
+            try:
+                self._up(recovery)
+            except PowerLossError:  # the supply failed during the boot: the unit stays off until power_on()
+                pass
+
+    def power_cut(self) -> None:
+        """Simulator control: the supply fails now; a flash step in progress or started later fails."""
+        self.flash.power_loss_after(0)
+        with self._power_lock:
+            self._down()
+
+    def power_on(self, recovery: bool = False) -> None:
+        """Simulator control: power returns after ``power_cut`` (or a PowerLossError): boot from flash."""
+        with self._power_lock:
+            self.flash.power_loss_after(None)
+            self._up(recovery)
 
     # -- the host link ------------------------------------------------------------------------
     def attach(self, sink: Sink) -> None:
@@ -95,8 +218,9 @@ class SimulatedCamera:
         self.link.detach()
 
     def receive(self, data: bytes) -> None:
-        """Bytes from the host; replies go to the sink before this returns."""
-        self.link.receive(data)
+        """Bytes from the host; replies go to the sink before this returns (nothing while unpowered)."""
+        if self.powered:
+            self.link.receive(data)
 
     def _send_capture_part(self, req: CaptureRequest, wire: bytes) -> bool:
         """A capture whose stream was stopped meanwhile is cut off (the host counts it incomplete)."""
@@ -126,14 +250,18 @@ class SimulatedCamera:
 
     # -- lifetime -------------------------------------------------------------------------------
     def close(self) -> None:
+        with self._power_lock:
+            self._closed = True
         registry.unregister(self)
         self.engine.close()
         self.pipeline.close()
         if self.trigger_line is not None:
-            self.trigger_line.detach(self.streaming.on_pulse)
+            self.trigger_line.detach(self.trigger_input.on_pulse)
         self.link.close()
         if self._tmpdir is not None:
             self._tmpdir.cleanup()
+        if self.pipeline.source is not None:
+            self.pipeline.source.close()
 
     def __enter__(self) -> "SimulatedCamera":
         return self

@@ -7,6 +7,7 @@ from __future__ import annotations
 import collections
 import threading
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -14,6 +15,7 @@ from .rig.scene import Scene
 from .rig.sensor import SensorRig
 
 GROUND_TRUTH_KEEP = 64  # captures remembered
+INSTANTS_KEEP = 1 << 16  # exposure instants remembered (cheap: for timing benchmarks)
 
 
 @dataclass(frozen=True)
@@ -46,13 +48,25 @@ class TruthLog:
     def __init__(self, rig: SensorRig):
         self._rig = rig
         self._exposures: collections.OrderedDict[int, Exposure] = collections.OrderedDict()
+        self._instants: collections.OrderedDict[int, float] = collections.OrderedDict()
         self._lock = threading.Lock()
+        self.on_exposure: Callable[[int, float], None] | None = None  # (sequence, host monotonic) per capture
 
     def remember(self, exposure: Exposure) -> None:
         with self._lock:
             self._exposures[exposure.sequence] = exposure
             while len(self._exposures) > GROUND_TRUTH_KEEP:
                 self._exposures.popitem(last=False)
+            self._instants[exposure.sequence] = exposure.host_monotonic
+            while len(self._instants) > INSTANTS_KEEP:
+                self._instants.popitem(last=False)
+        if self.on_exposure is not None:
+            self.on_exposure(exposure.sequence, exposure.host_monotonic)
+
+    def exposure_instant(self, sequence: int) -> float | None:
+        """The true exposure instant (host monotonic) of one of the last ``INSTANTS_KEEP`` captures."""
+        with self._lock:
+            return self._instants.get(sequence)
 
     def ground_truth(self, sequence: int) -> GroundTruth | None:
         """Truth for one of the last few captures (None once it has aged out, or for the board),

@@ -10,9 +10,10 @@ import sys
 class ServedSimulator:
     """Starts the child and reads the URL it prints first; ``stop`` sends SIGTERM and waits."""
 
-    def __init__(self, spec: str, seed: int = 7, scene: str = "lab"):
+    def __init__(self, spec: str, seed: int = 7, scene: str = "lab", extra: list[str] | None = None):
+        """``extra``: more command-line options (``--trigger-line NAME``, ``--truth-log PATH``, ...)."""
         self.proc = subprocess.Popen([sys.executable, "-m", "stereocam.device_sim", "--serve", spec, "--seed", str(seed),
-                                      "--scene", scene],
+                                      "--scene", scene, *(extra or [])],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                      env={**os.environ, "PYTHONUNBUFFERED": "1"})
         self.url = self.proc.stdout.readline().strip()

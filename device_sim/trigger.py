@@ -1,33 +1,127 @@
-"""The external trigger line: one wire shared by several heads, pulsed by a master."""
+"""The external trigger line: one wire shared by several heads, pulsed by a master.
+
+A pulse carries its trigger id (the line's pulse number) and the host-monotonic instant of its
+edge: on a real wire every head sees the edge at once, so however late a simulated head learns of
+it (another thread, another process), it exposes relative to that instant. Each head's trigger
+input adds its own latency (``TriggerInput``). ``TriggerMaster`` drives a line at a frame rate,
+timed by one unit's crystal. ``SharedTriggerLine`` (shared_line.py) is the same line across
+processes.
+"""
 from __future__ import annotations
 
+import collections
+import random
 import threading
-from typing import Callable
+import time
+from typing import Callable, Protocol
+
+from .clock import DeviceClock
+
+OnPulse = Callable[[int, float], None]  # (trigger id, host monotonic instant of the edge)
+LATENCY_RANGE_S = (2e-6, 8e-6)  # exposure start after the edge, fixed per unit
+LATENCY_JITTER_S = 0.3e-6
+
+
+class Line(Protocol):
+    def attach(self, on_pulse: OnPulse) -> None: ...
+    def detach(self, on_pulse: OnPulse) -> None: ...
+    def pulse(self, instant: float | None = None) -> int: ...
 
 
 class TriggerLine:
-    """Every pulse reaches every head attached to the line with the same trigger id."""
+    """In-process: every pulse reaches every head attached to the line with the same trigger id."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._heads: list[Callable[[int], None]] = []
+        self._heads: list[OnPulse] = []
         self.pulses = 0
 
-    def attach(self, on_pulse: Callable[[int], None]) -> None:
+    def attach(self, on_pulse: OnPulse) -> None:
         with self._lock:
             self._heads.append(on_pulse)
 
-    def detach(self, on_pulse: Callable[[int], None]) -> None:
+    def detach(self, on_pulse: OnPulse) -> None:
         with self._lock:
             if on_pulse in self._heads:
                 self._heads.remove(on_pulse)
 
-    def pulse(self) -> int:
-        """Raise the line once; returns the trigger id the heads received."""
+    def pulse(self, instant: float | None = None) -> int:
+        """Raise the line once (at ``instant``, host monotonic; default now); returns the trigger id."""
+        instant = time.monotonic() if instant is None else instant
         with self._lock:
             self.pulses += 1
             tid = self.pulses
             heads = list(self._heads)
         for head in heads:
-            head(tid)
+            head(tid, instant)
         return tid
+
+    def close(self) -> None:
+        with self._lock:
+            self._heads.clear()
+
+
+class TriggerInput:
+    """One unit's trigger input: the exposure starts a few µs (per unit, from its seed) after the edge.
+
+    Two simulator faults: ``miss_next`` — the unit misses that many coming edges (no exposure; their
+    ids are appended to ``missed``); ``delay_frames`` — it latches each pulse's id but exposes on
+    a later pulse, so its frames carry the right id and the wrong instant (a head a frame behind).
+    """
+
+    def __init__(self, seed: int, expose: OnPulse):
+        rnd = random.Random(seed ^ 0x7A1C)
+        self.latency_s = rnd.uniform(*LATENCY_RANGE_S)
+        self.delay_frames = 0
+        self.miss_next = 0
+        self.missed: list[int] = []
+        self._expose = expose
+        self._noise = random.Random(seed ^ 0x7A1D)
+        self._held: collections.deque[int] = collections.deque()
+
+    def on_pulse(self, trigger_id: int, instant: float) -> None:
+        if self.miss_next > 0:
+            self.miss_next -= 1
+            self.missed.append(trigger_id)
+            return
+        at = instant + self.latency_s + self._noise.gauss(0.0, LATENCY_JITTER_S)
+        if self.delay_frames:
+            self._held.append(trigger_id)
+            if len(self._held) <= self.delay_frames:
+                return
+            trigger_id = self._held.popleft()
+        else:
+            self._held.clear()
+        self._expose(trigger_id, at)
+
+
+class TriggerMaster:
+    """Pulses ``line`` at ``fps`` until closed, the period counted on ``clock`` (the master unit's
+    crystal; None: the host's). Each pulse carries its scheduled instant, not the (later) moment
+    this thread got to send it."""
+
+    def __init__(self, line: Line, fps: float, clock: DeviceClock | None = None):
+        if not fps > 0:
+            raise ValueError(f"trigger master fps must be > 0, got {fps}")
+        self.line = line
+        self.period = clock.host_period(1.0 / fps) if clock is not None else 1.0 / fps
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="trigger-master", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        t = time.monotonic() + self.period
+        while not self._stop.wait(max(t - time.monotonic(), 0.0)):
+            self.line.pulse(t)
+            t += self.period  # a starved thread catches up: every edge happened, each at its instant
+
+    def close(self) -> None:
+        self._stop.set()
+        if threading.current_thread() is not self._thread:
+            self._thread.join(timeout=2)
+
+    def __enter__(self) -> "TriggerMaster":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

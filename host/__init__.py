@@ -8,15 +8,17 @@ from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as _version
 
 from stereocam.protocol.calibration import StereoCalibration
-from stereocam.protocol.errors import (CallbackError, CameraTimeoutError, ConfigError, DeviceError, DisconnectedError, ErrorCode,
-                             ProtocolError, StereoCamError, StreamStalledError, TransportError,
-                             VerificationError, VersionMismatchError)
+from stereocam.protocol.errors import (CallbackError, CameraTimeoutError, ConfigError, DeviceError,
+                                      DisconnectedError, ErrorCode, LinkFailedError, ProtocolError,
+                                      StereoCamError, StreamStalledError, StreamStoppedError, TransportError,
+                                      VerificationError, VersionMismatchError)
 from stereocam.protocol.params import Output, TriggerMode
 
 from .calibration_io import StoredCalibration
 from .camera import Camera, DeviceInfo, DeviceStatus, open
 from .discovery import DeviceEntry, list_devices
 from .frames import DisparityFormat, Frame, FrameStatus, StereoGeometry
+from .group import CameraGroup  # noqa: F401  (several cameras on one trigger line)
 from .pointcloud import write_ply
 
 try:
@@ -29,6 +31,6 @@ __all__ = [
     "open", "list_devices", "DeviceEntry", "Camera", "DeviceInfo", "DeviceStatus", "Frame", "FrameStatus",
     "DisparityFormat", "StereoGeometry", "StereoCalibration", "StoredCalibration", "TriggerMode", "Output",
     "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError",
-    "ErrorCode", "TransportError", "DisconnectedError", "CameraTimeoutError", "VerificationError",
-    "StreamStalledError", "CallbackError",
+    "ErrorCode", "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError", "CameraTimeoutError",
+    "VerificationError", "StreamStalledError", "CallbackError",
 ]

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
-from stereocam.protocol.errors import ProtocolError, VerificationError
+from stereocam.protocol.errors import ConfigError, ProtocolError, VerificationError
 
 SOURCES = {"active": m.CalibSource.ACTIVE, "factory": m.CalibSource.FACTORY, "user": m.CalibSource.USER}
 
@@ -28,8 +28,8 @@ class StoredCalibration:
 
 def read_calibration(request, source: str = "active") -> StoredCalibration | None:
     """The stored record (``active``: the one in force), or None if there is none."""
-    if source not in SOURCES:
-        raise ValueError(f"source must be one of {sorted(SOURCES)}, got {source!r}")
+    if not isinstance(source, str) or source not in SOURCES:
+        raise ConfigError(f"source must be one of {sorted(SOURCES)}, got {source!r}")
     body = b""
     while True:
         r = request(m.CalibRead(SOURCES[source], len(body), m.MAX_CALIB_CHUNK))
@@ -50,8 +50,10 @@ def read_calibration(request, source: str = "active") -> StoredCalibration | Non
 
 def write_calibration(request, calib: StereoCalibration, target: str = "user") -> StoredCalibration:
     """Store ``calib`` as the ``target`` record, read it back, compare; VerificationError if it differs."""
-    if target not in ("factory", "user"):
-        raise ValueError(f"target must be 'factory' or 'user', got {target!r}")
+    if not isinstance(calib, StereoCalibration):
+        raise ConfigError(f"calibration must be a StereoCalibration, got {type(calib).__name__}")
+    if not isinstance(target, str) or target not in ("factory", "user"):
+        raise ConfigError(f"target must be 'factory' or 'user', got {target!r}")
     body = calib.to_bytes()
     for off in range(0, len(body), m.MAX_CALIB_CHUNK):
         r = request(m.CalibWrite(off, len(body), body[off:off + m.MAX_CALIB_CHUNK]))

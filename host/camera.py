@@ -12,23 +12,27 @@ from typing import Iterator
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError,
-                                      StreamStalledError, TransportError, VersionMismatchError)
+                                      StreamStalledError, StreamStoppedError, TransportError,
+                                      VersionMismatchError)
 from stereocam.protocol.framing import VERSION_MAJOR
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.config_rules import merge
 from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, Param, TriggerMode
 from stereocam.protocol.rectification import stereo_rectify
 
-from . import calibration_io, presets
+from . import calibration_io, firmware_update, presets
+from .arguments import int32_arg, timeout_arg
 from .calibration_io import StoredCalibration
 from .callbacks import FrameCallback, FrameCallbacks
-from .clock import ClockMap, SyncSample
+from .clock import ArrivalStamp, ClockMap, SyncSample
+from .frame_repair import RepairWorker
 from .frames import AssemblyStats, Frame, FrameAssembler, StereoGeometry
 from .link import Link, LinkStats
 from .transports import Transport, open_transport, reopen_url
 
 SYNC_SAMPLES = 8
-SYNC_PERIOD = 5.0  # seconds between background time-sync samples
+SYNC_PERIOD = 1.0  # seconds between background time-sync bursts (the map needs them to follow drift)
+SYNC_BURST = 3  # round trips per burst: one of them usually finds the link free of frame data
 _log = logging.getLogger(__name__)
 
 
@@ -43,6 +47,8 @@ class DeviceInfo:
     sensor_height: int
     max_payload: int
     calibration_id: int  # the calibration in force when this was read; 0 = uncalibrated
+    max_width: int = 0  # largest frame width the device may send (INFO)
+    max_height: int = 0
 
 
 @dataclass(frozen=True)
@@ -63,7 +69,8 @@ class Camera:
         within their own timeout instead of raising DisconnectedError at once."""
         self.url = transport.url
         self.auto_reconnect = auto_reconnect
-        self.timeout = timeout
+        self.timeout = timeout_arg(timeout)
+        heartbeat_interval = timeout_arg(heartbeat_interval, "heartbeat_interval")
         self._retries = retries
         self.clock = ClockMap()
         self.assembler = FrameAssembler(self.clock, queue_depth, deliver_incomplete)
@@ -72,19 +79,33 @@ class Camera:
         self._applied: dict[str, int] = {}  # every parameter this Camera set, for reconnect
         self._geometries: dict[tuple[int, int, int], tuple[StereoCalibration, StereoGeometry]] = {}
         self.geometry_mismatches = 0  # frames whose carried geometry disagreed with the stored calibration
-        self._streaming = False
+        self._streaming = False  # what the user asked for
+        self._stream_lock = threading.Lock()  # orders user start/stop against a watchdog restart
+        self._stream_epoch = 0  # bumped by every user start/stop: an older STATUS is not acted on
+        self._stream_error: StreamStoppedError | None = None
+        self.stream_restarts = 0  # streams the device stopped (watchdog) that the host restarted
         self.last_status: DeviceStatus | None = None
         self._callbacks: FrameCallbacks | None = None
-        self._connect(transport)
+        self._repairer = RepairWorker(lambda msg: self.link.request(msg, min(self.timeout, 0.5), 2),
+                                      self.assembler.on_resent,
+                                      lambda exc: self.link.fail(exc))
+        try:
+            self._connect(transport)
+        except BaseException:
+            self._repairer.close()
+            raise
         self._heartbeat_interval = heartbeat_interval
         self._heartbeat = threading.Thread(target=self._heartbeat_loop, name="stereocam-heartbeat", daemon=True)
         self._heartbeat.start()
 
     def _connect(self, transport: Transport) -> None:
         """Bring up a link on ``transport``: identify, stop any stale stream, map the clock."""
-        self.link = Link(transport, timeout=self.timeout, retries=self._retries, on_event=self.assembler.on_message)
+        self._arrivals = ArrivalStamp(transport)
+        self.link = Link(self._arrivals, timeout=self.timeout, retries=self._retries, on_event=self.assembler.on_message)
         try:
             self._info = self._fetch_info()
+            self.assembler.set_limits(self._info.max_width, self._info.max_height)
+            self._set_up_repair(transport)
             self.request(m.Stop())  # a known state: no stale stream from a previous session
             self.clock.reset()  # the unit may have rebooted: its clock starts over
             self.sync_clock(SYNC_SAMPLES)
@@ -92,10 +113,19 @@ class Camera:
             self.link.close()
             raise
 
+    def _set_up_repair(self, transport: Transport) -> None:
+        """Protocol 1.2 (SPEC §13): ask for this transport's chunk size and let the assembler request
+        resends of damaged parts; with an older device frames travel and drop as in 1.1."""
+        self.assembler.repair = None
+        if self._info.capabilities & m.Capability.FRAME_REPAIR:
+            self.request(m.SetFrameLink(transport.frame_chunk or 0))
+            self.assembler.repair = self._repairer.submit
+
     def reconnect(self, timeout: float = 10.0, backoff: float = 0.1) -> None:
         """After a disconnect: find the same unit again (by serial), re-apply every parameter this
         Camera set, and resume streaming if it was streaming. Retries with exponential backoff
         until ``timeout``; DisconnectedError if the unit does not come back in time."""
+        timeout, backoff = timeout_arg(timeout), timeout_arg(backoff, "backoff")
         serial = self._info.serial
         url = reopen_url(self.url, serial)
         deadline = time.monotonic() + timeout
@@ -132,7 +162,8 @@ class Camera:
             raise VersionMismatchError(f"device speaks protocol {r.protocol_version[0]}.{r.protocol_version[1]}, "
                                        f"this host speaks {VERSION_MAJOR}.x")
         return DeviceInfo(r.model, r.serial, r.firmware_version, r.protocol_version, r.capabilities,
-                          r.sensor_width, r.sensor_height, r.max_payload, r.calibration_id)
+                          r.sensor_width, r.sensor_height, r.max_payload, r.calibration_id, r.max_width,
+                          r.max_height)
 
     def sync_clock(self, samples: int = 1) -> None:
         """Take ``samples`` time-sync round trips into the device→host clock map."""
@@ -140,6 +171,7 @@ class Camera:
             t0 = time.monotonic()
             r = self.request(m.TimeSync())
             t1 = time.monotonic()
+            t1 = self._arrivals.last if t0 < self._arrivals.last < t1 else t1  # when the reply came in
             assert isinstance(r, m.Time)
             self.clock.add(SyncSample(t0, r.device_time_us, t1))
         self._last_sync = time.monotonic()
@@ -147,11 +179,35 @@ class Camera:
     def _heartbeat_loop(self) -> None:
         while not self._closed.wait(self._heartbeat_interval):
             try:
+                epoch = self._stream_epoch
                 self.last_status = self.status()
+                if not self.last_status.streaming:
+                    self._restart_stopped_stream(epoch)
                 if time.monotonic() - self._last_sync > SYNC_PERIOD:
-                    self.sync_clock(1)
+                    self.sync_clock(SYNC_BURST)
             except StereoCamError:
                 pass  # a dead link shows in the user's next call; reconnect() brings a new one
+            except Exception as exc:  # noqa: BLE001 - a bug here ends the link visibly, not silently
+                self.link.fail(exc)
+
+    def _restart_stopped_stream(self, epoch: int) -> None:
+        """The rule for a stream the device stopped on its own (SPEC §9): the host sends START once
+        for each STATUS that shows it stopped while the user wants it streaming, and counts it in
+        ``stream_restarts``. If that START is refused or unanswered on a live link, ``get_frame``
+        raises StreamStoppedError until the user calls ``start`` (or ``stop``) again."""
+        with self._stream_lock:
+            if (not self._streaming or self._stream_error is not None or epoch != self._stream_epoch
+                    or self._closed.is_set()):
+                return
+            try:
+                self.request(m.Start())
+            except StereoCamError as exc:
+                if self.link.alive:  # a dead link is reconnect()'s business, which restarts the stream
+                    err = StreamStoppedError(f"{self.url} stopped streaming on its own and did not restart: {exc}")
+                    err.__cause__ = exc
+                    self._stream_error = err
+                return
+            self.stream_restarts += 1
 
     # -- API --------------------------------------------------------------------------------
     def info(self) -> DeviceInfo:
@@ -170,6 +226,15 @@ class Camera:
 
     def restore_factory_calibration(self) -> StoredCalibration | None:
         return calibration_io.restore_factory(self.request)
+
+    def firmware_status(self) -> firmware_update.FirmwareStatus:
+        """Both image slots (version, state, hash read back by the unit) and what runs."""
+        return firmware_update.status(self.request)
+
+    def update_firmware(self, image: bytes, progress: firmware_update.Progress | None = None,
+                        replace: bool = False) -> firmware_update.UpdateResult:
+        """Install a signed image; returns once the unit runs it and it is confirmed (host/firmware_update.py)."""
+        return firmware_update.update(self, image, progress=progress, replace=replace)
 
     def config(self) -> dict[str, int]:
         r = self.request(m.GetConfig())
@@ -208,13 +273,19 @@ class Camera:
 
     def start(self) -> None:
         """Start streaming; frames still queued from an earlier stream are discarded."""
-        self.assembler.reset()
-        self.request(m.Start())
-        self._streaming = True
+        with self._stream_lock:
+            self._stream_epoch += 1
+            self.assembler.reset()
+            self.request(m.Start())
+            self._streaming = True
+            self._stream_error = None
 
     def stop(self) -> None:
-        self.request(m.Stop())
-        self._streaming = False
+        with self._stream_lock:
+            self._stream_epoch += 1
+            self.request(m.Stop())
+            self._streaming = False
+            self._stream_error = None
 
     @property
     def streaming(self) -> bool:
@@ -227,12 +298,14 @@ class Camera:
         return DeviceStatus(r.uptime_us, r.streaming, TriggerMode(r.trigger_mode), r.counters)
 
     def get_frame(self, timeout: float | None = None) -> Frame:
-        """The next complete frame; CameraTimeoutError (a TimeoutError) if none within ``timeout``.
-        ``timeout=0`` polls: a queued frame at once, or the error at once."""
+        """The next complete frame; CameraTimeoutError (a TimeoutError) if none within ``timeout``
+        (finite seconds >= 0; ConfigError otherwise). ``timeout=0`` polls: a queued frame at once, or
+        the error at once. StreamStoppedError if the device stopped the stream and would not restart
+        (see ``_restart_stopped_stream``)."""
         if self._callbacks is not None and len(self._callbacks):
             raise StereoCamError("frames go to the on_frame callbacks; remove them (cam.remove_callback) "
                                  "before calling get_frame")
-        timeout = self.timeout if timeout is None else timeout
+        timeout = self.timeout if timeout is None else timeout_arg(timeout)
         frame = self._next_frame(timeout)
         if frame is None:
             raise CameraTimeoutError(f"no frame from {self.url} within {timeout:.3g} s")
@@ -246,6 +319,8 @@ class Camera:
         """The next frame within ``timeout`` (a queued one first, even at 0), else None."""
         deadline = time.monotonic() + timeout
         while True:
+            if self._stream_error is not None:
+                raise self._stream_error
             try:
                 self.link.check_alive()
             except DisconnectedError:
@@ -310,6 +385,12 @@ class Camera:
         frame.geometry, frame.calibration = geometry, cal
         return frame
 
+    def record(self, path: str, *, frames: int | None = None, seconds: float | None = None, **options):
+        """Record to an MCAP file (ROS 2 profile) until ``frames`` or ``seconds``; see stereocam.recording."""
+        from .recording import record
+
+        return record(self, path, frames=frames, seconds=seconds, **options)
+
     def __iter__(self) -> Iterator[Frame]:
         """Frames as they come while streaming. Ends when the stream is stopped (``stop()`` from any
         thread, ``close()``) and the queued frames are taken; raises StreamStalledError (a
@@ -364,7 +445,8 @@ class Camera:
             except StereoCamError:
                 pass
         self._heartbeat.join(timeout=2)
-        self.link.close()
+        self.link.close()  # first: a resend request in flight then fails at once
+        self._repairer.close()
 
     def __enter__(self) -> "Camera":
         return self
@@ -373,20 +455,15 @@ class Camera:
         self.close()
 
 
-def _wire_update(params: dict[str, int]) -> dict[int, int]:
-    """Parameters by name as a SET_CONFIG update (wire id → int); ConfigError for an unknown name
-    or a value that is not an integer."""
+def _wire_update(params: dict[str, object]) -> dict[int, int]:
+    """Parameters by name as a SET_CONFIG update (wire id → int32); ConfigError for an unknown name
+    or a value that is not an integer fitting the wire."""
     update = {}
     for name, value in params.items():
         p = BY_NAME.get(name)
         if p is None:
             raise ConfigError(f"unknown parameter {name!r}; known: {', '.join(BY_NAME)}")
-        if isinstance(value, bool) or not isinstance(value, int):
-            if isinstance(value, TriggerMode) or (isinstance(value, float) and value.is_integer()):
-                value = int(value)
-            else:
-                raise ConfigError(f"{name} must be an integer, got {value!r}")
-        update[p.pid] = int(value)
+        update[p.pid] = int32_arg(value, name)
     return update
 
 
@@ -400,4 +477,5 @@ def _fields(obj: LinkStats | AssemblyStats) -> dict[str, int]:
 
 def open(url: str, timeout: float = 1.0, **kwargs) -> Camera:  # noqa: A001 - mirrors serial_for_url
     """Open the camera at ``url`` (sim://, usb://, socket://host:port, a device path, ...)."""
+    timeout = timeout_arg(timeout)
     return Camera(open_transport(url, timeout), timeout=timeout, **kwargs)

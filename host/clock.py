@@ -1,15 +1,25 @@
-"""Device clock → host clock, from time-sync round trips (as librealsense does it).
+"""Device clock → host clock, from time-sync round trips (as librealsense does it, with drift).
 
-Each round trip gives (host send, device time, host receive). The best estimate of when the
-device read its clock is the midpoint, and the shorter the round trip, the tighter the bound, so
-the map keeps the lowest-RTT samples and fits host = a + b·device through them (offset + drift).
+Each round trip gives (host send, device time, host receive). The device read its clock somewhere
+in between; the midpoint is the estimate and half the round trip bounds its error, so short round
+trips are worth far more than long ones (a reply queued behind a frame can take milliseconds). The
+map keeps samples spread over the last two minutes, the shorter round trip winning wherever two
+crowd together, and fits host = a + b·device through them weighted by 1/rtt² (offset and drift).
 """
 from __future__ import annotations
 
+import math
+import threading
+import time
 from dataclasses import dataclass
 
+from .transports.base import Transport
+
 KEEP = 32
+WINDOW_US = 120_000_000  # older samples are forgotten: a crystal's drift wanders with temperature
+MIN_SPAN_US = 200_000  # below this span of device time only the offset is fitted
 MAX_DRIFT = 1e-3  # a crystal is within 1000 ppm
+RTT_FLOOR = 20e-6  # no sample is trusted as more exact than this (s)
 
 
 @dataclass(frozen=True)
@@ -27,49 +37,118 @@ class SyncSample:
         return 0.5 * (self.host_send + self.host_recv)
 
 
+@dataclass(frozen=True)
+class MapError:
+    """How far the map is to be trusted, in seconds.
+
+    ``residual`` is the scatter of the trusted samples about the fitted line (weighted RMS);
+    ``bias_bound`` is half the best round trip, the most an asymmetric link (slower one way than
+    the other) can shift the whole line without any sample showing it. ``sigma`` combines both
+    (the bias taken as uniform within its bound)."""
+
+    residual: float
+    bias_bound: float
+    samples: int
+    span_s: float
+
+    @property
+    def sigma(self) -> float:
+        return math.hypot(self.residual, self.bias_bound / math.sqrt(3))
+
+
 class ClockMap:
     """Maps device microseconds to host ``time.monotonic()`` seconds.
 
-    Written by the thread taking sync samples, read by the thread stamping frames: the fit is
-    published as one tuple, so a reader never sees half of an update.
+    Written by the threads taking sync samples (one at a time), read by the threads stamping
+    frames: the fit is published as one tuple, so a reader never sees half of an update.
     """
 
     def __init__(self) -> None:
+        self._lock = threading.Lock()
         self.samples: list[SyncSample] = []
-        self._fit: tuple[float, float, int] | None = None  # (host s at ref, host s per device µs, ref µs)
+        self._fit: tuple[float, float, int, MapError] | None = None  # (host s at ref, s per µs, ref µs, error)
 
     def reset(self) -> None:
         """Forget everything (the device may have rebooted: its clock starts over)."""
-        self.samples = []
-        self._fit = None
+        with self._lock:
+            self.samples = []
+            self._fit = None
 
     def add(self, sample: SyncSample) -> None:
-        samples = sorted(self.samples + [sample], key=lambda s: s.device_us)
-        if len(samples) > KEEP:  # drop the worst round trip, keep the time span
-            del samples[max(range(1, len(samples) - 1), key=lambda i: samples[i].rtt)]
-        self.samples = samples
-        self._fit = _fit(samples)
+        with self._lock:
+            samples = sorted(self.samples + [sample], key=lambda s: s.device_us)
+            newest = samples[-1].device_us
+            samples = [s for s in samples[:-2] if newest - s.device_us <= WINDOW_US] + samples[-2:]
+            while len(samples) > KEEP:  # thin where samples crowd: of the closest two, keep the shorter trip
+                i = min(range(len(samples) - 1), key=lambda j: samples[j + 1].device_us - samples[j].device_us)
+                del samples[i if samples[i].rtt > samples[i + 1].rtt else i + 1]
+            self.samples = samples
+            self._fit = _fit(samples)
 
     def to_host(self, device_us: int) -> float:
         fit = self._fit
         if fit is None:
             return float("nan")
-        a, b, ref = fit
+        a, b, ref, _ = fit
         return a + b * (device_us - ref)
 
+    def error(self) -> MapError:
+        """The current error estimate (NaN until the first sample)."""
+        fit = self._fit
+        return fit[3] if fit is not None else MapError(math.nan, math.nan, 0, 0.0)
 
-def _fit(samples: list[SyncSample]) -> tuple[float, float, int]:
-    """Line through the better half of the samples (lowest round trips); drift only when the
-    samples span enough device time to show it, and never beyond what a crystal can do."""
-    good = sorted(samples, key=lambda s: s.rtt)[: max(2, len(samples) // 2)]
-    ref = good[0].device_us
-    if len(good) < 2 or max(s.device_us for s in good) - min(s.device_us for s in good) < 200_000:
-        return good[0].host_mid, 1e-6, ref
-    xs = [s.device_us - ref for s in good]
-    ys = [s.host_mid for s in good]
-    n = len(xs)
-    mx, my = sum(xs) / n, sum(ys) / n
-    sxx = sum((x - mx) ** 2 for x in xs)
-    b = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx
-    b = min(max(b, 1e-6 * (1 - MAX_DRIFT)), 1e-6 * (1 + MAX_DRIFT))
-    return my - b * mx, b, ref
+    @property
+    def drift(self) -> float:
+        """The fitted device-clock rate error (device µs per host µs − 1; 0 until fitted)."""
+        fit = self._fit
+        return 1e-6 / fit[1] - 1.0 if fit is not None else 0.0
+
+
+def _fit(samples: list[SyncSample]) -> tuple[float, float, int, MapError]:
+    """Weighted least squares of host midpoint over device time, weights 1/rtt²; the slope only when
+    the samples span enough device time to show it, and never beyond what a crystal can do."""
+    best = min(samples, key=lambda s: s.rtt)
+    ref = best.device_us
+    xs = [s.device_us - ref for s in samples]
+    ys = [s.host_mid for s in samples]
+    ws = [1.0 / max(s.rtt, RTT_FLOOR) ** 2 for s in samples]
+    sw = sum(ws)
+    mx = sum(w * x for w, x in zip(ws, xs)) / sw
+    span = max(xs) - min(xs)
+    b = 1e-6
+    if span >= MIN_SPAN_US:
+        sxx = sum(w * (x - mx) ** 2 for w, x in zip(ws, xs))
+        my = sum(w * y for w, y in zip(ws, ys)) / sw
+        b = sum(w * (x - mx) * (y - my) for w, x, y in zip(ws, xs, ys)) / sxx
+        b = min(max(b, 1e-6 * (1 - MAX_DRIFT)), 1e-6 * (1 + MAX_DRIFT))
+    a = sum(w * (y - b * x) for w, x, y in zip(ws, xs, ys)) / sw
+    resid = math.sqrt(sum(w * (y - a - b * x) ** 2 for w, x, y in zip(ws, xs, ys)) / sw)
+    return a, b, ref, MapError(resid, best.rtt / 2, len(samples), span / 1e6)
+
+
+class ArrivalStamp(Transport):
+    """A transport that notes when each read brought bytes (``last``, host monotonic).
+
+    A time-sync reply arrived no later than the read that carried it, however long the requesting
+    thread then takes to be woken: the receive side of a round trip is timed there, at the lowest
+    layer the host has, so thread hand-offs do not lengthen the trip or skew its midpoint."""
+
+    def __init__(self, inner: Transport):
+        self.inner = inner
+        self.url = inner.url
+        self.last = -math.inf
+
+    def write(self, data: bytes) -> None:
+        self.inner.write(data)
+
+    def read(self, max_bytes: int, timeout: float) -> bytes:
+        data = self.inner.read(max_bytes, timeout)
+        if data:
+            self.last = time.monotonic()
+        return data
+
+    def close(self) -> None:
+        self.inner.close()
+
+    def __getattr__(self, name: str):  # the wrapped transport's own attributes (sim, port, ...)
+        return getattr(self.inner, name)

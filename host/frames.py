@@ -1,115 +1,30 @@
-"""Frames: the typed capture a user gets, and the assembler that builds them from the stream.
+"""The frame assembler: builds the captures a user gets (frame_types.py) from the message stream.
 
 FRAME_BEGIN opens a capture, FRAME_DATA chunks fill its planes, FRAME_END closes it. A capture
 with a missing chunk, a chunk outside its plane or a byte count that disagrees with the trailer is
-dropped and counted by reason; a gap in sequence numbers is counted as lost. Nothing is hidden.
+repaired by resends where the device can (frame_repair.py), else dropped and counted by reason; a
+gap in sequence numbers is counted as lost. Nothing is hidden.
 """
 from __future__ import annotations
 
-import collections
-import enum
+import bisect
 import logging
 import queue
-from dataclasses import dataclass, field
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.params import Output
-from stereocam.protocol.segmentation import PLANE_DTYPE, plane_size, planes_of
+from stereocam.protocol.segmentation import PLANE_DTYPE, PLANE_ORDER, plane_size, planes_of
 
+from .frame_repair import MAX_REPAIRING, MAX_ROUNDS, REPAIR_WINDOW, Coverage, Ranges
+from .frame_types import DisparityFormat, Frame, FrameStatus, StereoGeometry
 
-class FrameStatus(enum.Enum):
-    COMPLETE = "complete"
-    MISSING_DATA = "missing data"  # a chunk or the trailer never arrived; missing bytes read as 0
-    SIZE_MISMATCH = "size mismatch"  # a chunk outside its plane, or the trailer disagrees
-    DEVICE_ERROR = "device error"  # the device flagged the capture in its trailer
-
-
-@dataclass(frozen=True)
-class DisparityFormat:
-    """How to read ``Frame.disparity``: value = disparity * subpixel; ``invalid`` marks no match."""
-
-    subpixel: int
-    min_disparity: int
-    num_disparities: int
-    invalid: int
-
-
-@dataclass(frozen=True)
-class StereoGeometry:
-    """Rectified geometry that turns disparity (px) into depth (m): Z = f * B / d."""
-
-    focal_px: float
-    cx: float
-    cy: float
-    baseline_m: float
-    calibration_id: int = 0
-
-    @property
-    def Q(self) -> np.ndarray:
-        """OpenCV's 4x4 reprojection matrix (cv2.reprojectImageTo3D), both principal points equal."""
-        return np.array([[1, 0, 0, -self.cx], [0, 1, 0, -self.cy], [0, 0, 0, self.focal_px],
-                         [0, 0, 1.0 / self.baseline_m, 0]], dtype=np.float64)
-
-
-@dataclass
-class Frame:
-    """One capture: both images and the disparity share one sequence number."""
-
-    sequence: int
-    trigger_id: int
-    device_time_us: int
-    host_time: float  # device time mapped to the host's time.monotonic() clock
-    left: np.ndarray | None
-    right: np.ndarray | None
-    disparity: np.ndarray | None  # int16, disparity * 16, invalid = (min_disparity - 1) * 16
-    exposure_us: int
-    gain: int
-    width: int
-    height: int
-    rectified: bool
-    disparity_format: DisparityFormat
-    geometry: StereoGeometry  # from the calibration the host read from the device (see Camera)
-    status: FrameStatus = FrameStatus.COMPLETE
-    calibration: StereoCalibration | None = None  # that calibration, scaled to this frame's size
-
-    def __repr__(self) -> str:
-        planes = "+".join(n for n, a in (("left", self.left), ("right", self.right), ("disparity", self.disparity))
-                          if a is not None) or "no planes"
-        return (f"Frame(sequence={self.sequence}, {self.width}x{self.height}, {planes}, "
-                f"{'rectified' if self.rectified else 'raw'}, status={self.status.value}, "
-                f"device_time_us={self.device_time_us})")
-
-    def disparity_px(self) -> np.ndarray:
-        """Disparity in pixels, float32, NaN where invalid."""
-        if self.disparity is None:
-            raise ValueError("this frame carries no disparity (raw frame of an uncalibrated unit or "
-                             "rectify=0, or the outputs config excludes it)")
-        d = self.disparity.astype(np.float32) / self.disparity_format.subpixel
-        d[self.disparity == self.disparity_format.invalid] = np.nan
-        return d
-
-    def depth(self) -> np.ndarray:
-        """Depth along the optical axis in metres, float32, NaN where unknown."""
-        d = self.disparity_px()
-        g = self.geometry
-        with np.errstate(divide="ignore", invalid="ignore"):
-            z = (g.focal_px * g.baseline_m) / d
-        z[~(d > 0)] = np.nan
-        return z
-
-    def points(self) -> tuple[np.ndarray, np.ndarray]:
-        """Valid 3-D points (N x 3, metres, left camera frame) and their grey levels (N,)."""
-        z = self.depth()
-        h, w = z.shape
-        g = self.geometry
-        ys, xs = np.nonzero(np.isfinite(z))
-        zz = z[ys, xs]
-        pts = np.stack([(xs - g.cx) * zz / g.focal_px, (ys - g.cy) * zz / g.focal_px, zz], axis=1)
-        grey = self.left[ys, xs] if self.left is not None else np.full(len(zz), 255, np.uint8)
-        return pts.astype(np.float32), grey
+__all__ = ["AssemblyStats", "DisparityFormat", "Frame", "FrameAssembler", "FrameStatus", "StereoGeometry"]
 
 
 @dataclass
@@ -119,15 +34,20 @@ class AssemblyStats:
     size_mismatch: int = 0  # chunk outside its plane or trailer disagrees
     device_errors: int = 0  # the device's trailer status was not OK
     orphan_chunks: int = 0  # chunks of a capture whose leader was lost
+    bad_leaders: int = 0  # FRAME_BEGINs claiming sizes beyond the INFO limits: dropped, nothing allocated
     lost: int = 0  # sequence numbers never seen (dropped on the device or on the link)
     queue_overflow: int = 0  # delivered frames discarded because the user did not keep up
+    repair_requests: int = 0  # FRAME_RESEND requests sent (protocol 1.2)
+    repaired: int = 0  # captures delivered complete thanks to resent parts
 
     @property
     def dropped(self) -> int:
         """Captures the user did not get whole (delivered flawed ones included)."""
-        return self.incomplete + self.size_mismatch + self.device_errors + self.lost + self.queue_overflow
+        return (self.incomplete + self.size_mismatch + self.device_errors + self.lost + self.queue_overflow
+                + self.bad_leaders)
 
 
+_ALL_PLANES = sum(int(p) for p in PLANE_ORDER)
 _log = logging.getLogger(__name__)
 
 
@@ -135,8 +55,10 @@ _log = logging.getLogger(__name__)
 class _Building:
     begin: m.FrameBegin
     buffers: dict[int, bytearray]
-    received: dict[int, int] = field(default_factory=lambda: collections.defaultdict(int))
+    coverage: Coverage
     bad: bool = False
+    deadline: float = 0.0  # while under repair
+    rounds: int = 0
 
 
 class FrameAssembler:
@@ -153,12 +75,25 @@ class FrameAssembler:
         self._clock_map = clock_map
         self._cur: _Building | None = None
         self._last_seq: int | None = None
+        self._limits: tuple[int, int] | None = None  # (max_width, max_height) from INFO
+        self._lock = threading.RLock()  # messages come from the reader, repair outcomes from the worker
+        self.repair: Callable[[int, Ranges], None] | None = None  # set when the device can resend (1.2)
+        self.repair_window = REPAIR_WINDOW
+        self._repairing: dict[int, _Building] = {}
+        self._held: list[tuple[int, Frame]] = []  # complete frames waiting behind an older one under repair
+
+    def set_limits(self, max_width: int, max_height: int) -> None:
+        """What the device said in INFO; a FRAME_BEGIN beyond it (or before it is known) is dropped."""
+        self._limits = (max_width, max_height)
 
     def reset(self) -> None:
         """Before a new stream: forget the last sequence (a gap across start is no loss), a capture
         cut off by the stop, and the frames still queued."""
-        self._last_seq = None
-        self._cur = None
+        with self._lock:
+            self._last_seq = None
+            self._cur = None
+            self._repairing.clear()
+            self._held.clear()
         while True:
             try:
                 self.frames.get_nowait()
@@ -166,25 +101,39 @@ class FrameAssembler:
                 return
 
     def on_message(self, msg: m.Message) -> None:
-        if isinstance(msg, m.FrameBegin):
-            self._begin(msg)
-        elif isinstance(msg, m.FrameData):
-            self._data(msg)
-        elif isinstance(msg, m.FrameEnd):
-            self._end(msg)
+        with self._lock:
+            if isinstance(msg, m.FrameBegin):
+                self._begin(msg)
+            elif isinstance(msg, m.FrameData):
+                self._data(msg)
+            elif isinstance(msg, m.FrameEnd):
+                self._end(msg)
 
     def _begin(self, b: m.FrameBegin) -> None:
         if self._cur is not None:  # its FRAME_END never came
-            self._flawed(self._cur, FrameStatus.MISSING_DATA)
+            self._incomplete(self._cur)
+            self._cur = None
+        if not self._plausible(b):  # checked before a byte is allocated
+            self.stats.bad_leaders += 1
+            return
         if self._last_seq is not None and b.sequence > self._last_seq + 1:
             self.stats.lost += b.sequence - self._last_seq - 1
             _log.info("frames %d..%d lost (never seen on the link)", self._last_seq + 1, b.sequence - 1)
         self._last_seq = b.sequence
-        self._cur = _Building(b, {p: bytearray(plane_size(p, b.width, b.height)) for p in planes_of(b)})
+        sizes = {p: plane_size(p, b.width, b.height) for p in planes_of(b)}
+        self._cur = _Building(b, {p: bytearray(k) for p, k in sizes.items()}, Coverage(sizes))
+
+    def _plausible(self, b: m.FrameBegin) -> bool:
+        if self._limits is None:
+            return False
+        max_w, max_h = self._limits
+        return 0 < b.width <= max_w and 0 < b.height <= max_h and not b.planes & ~_ALL_PLANES
 
     def _data(self, d: m.FrameData) -> None:
         cur = self._cur
         if cur is None or cur.begin.sequence != d.sequence:
+            cur = self._repairing.get(d.sequence)
+        if cur is None:
             self.stats.orphan_chunks += 1
             return
         buf = cur.buffers.get(d.plane)
@@ -192,23 +141,64 @@ class FrameAssembler:
             cur.bad = True
             return
         buf[d.offset:d.offset + len(d.data)] = d.data
-        cur.received[d.plane] += len(d.data)
+        cur.coverage.add(d.plane, d.offset, len(d.data))
 
     def _end(self, e: m.FrameEnd) -> None:
         cur, self._cur = self._cur, None
         if cur is None or cur.begin.sequence != e.sequence:
             if cur is not None:
-                self._flawed(cur, FrameStatus.MISSING_DATA)
+                self._incomplete(cur)
             return
         sent = {Output.LEFT: e.left_bytes, Output.RIGHT: e.right_bytes, Output.DISPARITY: e.disparity_bytes}
         if e.status != m.FRAME_OK:
             self._flawed(cur, FrameStatus.DEVICE_ERROR)
         elif cur.bad or any(sent[p] != len(buf) for p, buf in cur.buffers.items()):
             self._flawed(cur, FrameStatus.SIZE_MISMATCH)
-        elif any(cur.received[p] != len(buf) for p, buf in cur.buffers.items()):
-            self._flawed(cur, FrameStatus.MISSING_DATA)
+        elif not cur.coverage.complete():
+            self._incomplete(cur)
         else:
             self._deliver(self._frame(cur, FrameStatus.COMPLETE))
+
+    # -- repair (SPEC §13) --------------------------------------------------------------------
+    def _incomplete(self, cur: _Building) -> None:
+        """A capture with bytes (or its trailer) missing: repaired if the device can resend, else dropped."""
+        if self.repair is None or cur.bad:
+            self._flawed(cur, FrameStatus.MISSING_DATA)
+            return
+        cur.deadline = time.monotonic() + self.repair_window
+        self._repairing[cur.begin.sequence] = cur
+        while len(self._repairing) > MAX_REPAIRING:
+            self._give_up(min(self._repairing))
+        self._ask(cur)
+
+    def _ask(self, cur: _Building) -> None:
+        assert self.repair is not None
+        cur.rounds += 1
+        self.stats.repair_requests += 1
+        self.repair(cur.begin.sequence, cur.coverage.missing())
+
+    def on_resent(self, sequence: int, reply: m.FrameResent | None) -> None:
+        """The outcome of one FRAME_RESEND (None: no usable reply). The resent chunks came before it."""
+        with self._lock:
+            cur = self._repairing.get(sequence)
+            if cur is None:
+                return
+            if reply is not None and reply.result == m.RESEND_SENT and reply.frame_status != m.FRAME_OK:
+                self._give_up(sequence, FrameStatus.DEVICE_ERROR)
+            elif reply is not None and reply.result == m.RESEND_SENT and cur.coverage.complete() and not cur.bad:
+                del self._repairing[sequence]
+                self.stats.repaired += 1
+                self._deliver(self._frame(cur, FrameStatus.COMPLETE))
+            elif ((reply is not None and reply.result == m.RESEND_GONE) or cur.bad or cur.rounds >= MAX_ROUNDS
+                  or time.monotonic() > cur.deadline):
+                self._give_up(sequence)
+            else:
+                self._ask(cur)
+            self._release_held()
+
+    def _give_up(self, sequence: int, status: FrameStatus = FrameStatus.MISSING_DATA) -> None:
+        self._flawed(self._repairing.pop(sequence), status)
+        self._release_held()
 
     def _flawed(self, cur: _Building, status: FrameStatus) -> None:
         counter = {FrameStatus.MISSING_DATA: "incomplete", FrameStatus.SIZE_MISMATCH: "size_mismatch",
@@ -232,6 +222,18 @@ class FrameAssembler:
             StereoGeometry(b.focal_px, b.cx, b.cy, b.baseline_m, b.calibration_id), status)
 
     def _deliver(self, frame: Frame) -> None:
+        """In sequence order: a frame waits behind an older capture still under repair."""
+        if self._repairing and min(self._repairing) < frame.sequence:
+            bisect.insort(self._held, (frame.sequence, frame), key=lambda h: h[0])
+            return
+        self._enqueue(frame)
+
+    def _release_held(self) -> None:
+        oldest = min(self._repairing, default=None)
+        while self._held and (oldest is None or self._held[0][0] < oldest):
+            self._enqueue(self._held.pop(0)[1])
+
+    def _enqueue(self, frame: Frame) -> None:
         self.stats.frames += frame.status is FrameStatus.COMPLETE
         while True:
             try:

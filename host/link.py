@@ -11,11 +11,12 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.errors import (CameraTimeoutError, DeviceError, DisconnectedError, ProtocolError, StereoCamError,
-                             TransportError)
-from stereocam.protocol.framing import FLAG_RESEND, Decoder, Packet
+from stereocam.protocol.errors import (CameraTimeoutError, DeviceError, DisconnectedError, LinkFailedError,
+                                      ProtocolError, StereoCamError, TransportError)
+from stereocam.protocol.framing import FLAG_RESEND, HOST_MESSAGE_TIMEOUT, Decoder, Packet
 from stereocam.protocol.params import BY_ID
 
+from .arguments import timeout_arg
 from .transports.base import Transport
 
 READ_CHUNK = 1 << 20
@@ -26,7 +27,7 @@ class LinkStats:
     requests: int = 0
     retries: int = 0
     timeouts: int = 0
-    stray_replies: int = 0  # replies nobody waited for (late answers to timed-out requests)
+    stray_replies: int = 0  # replies nobody waited for (late answers to timed-out requests, stale ones)
     undecodable: int = 0  # packets with a valid CRC but an unknown type or malformed payload
 
 
@@ -38,15 +39,22 @@ class _Pending:
     error: StereoCamError | None = None
 
 
+def _answers(pending: _Pending, msg_type: int, msg: m.Message | None) -> bool:
+    """Whether a reply with this request id answers ``pending`` (request ids repeat across sessions)."""
+    if msg_type == m.MsgType.NACK:
+        return not isinstance(msg, m.Nack) or msg.request_type == pending.expect & ~m.REPLY_BIT
+    return msg_type == pending.expect
+
+
 class Link:
     """Request/reply over a Transport, plus a stream of unsolicited device messages."""
 
     def __init__(self, transport: Transport, *, timeout: float = 1.0, retries: int = 2,
                  on_event: Callable[[m.Message], None] | None = None, first_request_id: int = 1):
         self.transport = transport
-        self.timeout = timeout
+        self.timeout = timeout_arg(timeout)
         self.retries = retries
-        self.decoder = Decoder()
+        self.decoder = Decoder(message_timeout=HOST_MESSAGE_TIMEOUT)
         self.stats = LinkStats()
         self._on_event = on_event
         self._lock = threading.Lock()
@@ -67,7 +75,7 @@ class Link:
 
     def request(self, msg: m.Message, timeout: float | None = None, retries: int | None = None) -> m.Message:
         """Send ``msg``, return the device's reply; DeviceError on NACK, CameraTimeoutError after retries."""
-        timeout = self.timeout if timeout is None else timeout
+        timeout = self.timeout if timeout is None else timeout_arg(timeout)
         retries = self.retries if retries is None else retries
         self.check_alive()
         rid = self._allocate_id()
@@ -124,18 +132,29 @@ class Link:
 
     # -- reader ---------------------------------------------------------------------------------
     def _read_loop(self) -> None:
+        """Any failure here ends the link with a typed error: waiting requests fail at once,
+        later calls raise it, and ``Camera(auto_reconnect=True)`` reconnects on it."""
         while not self._closed.is_set():
             try:
                 data = self.transport.read(READ_CHUNK, 0.05)
+                for packet in self.decoder.feed(data) if data else self.decoder.expire():
+                    self._dispatch(packet)
             except StereoCamError as exc:
                 self._die(exc)
                 return
             except OSError as exc:
                 self._die(DisconnectedError(f"read from {self.transport.url} failed: {exc}"))
                 return
-            if data:
-                for packet in self.decoder.feed(data):
-                    self._dispatch(packet)
+            except Exception as exc:  # noqa: BLE001 - a bug or MemoryError must not leave a zombie link
+                self.fail(exc)
+                return
+
+    def fail(self, exc: BaseException) -> None:
+        """End the link because a background thread serving it failed with ``exc``."""
+        err = LinkFailedError(f"link to {self.transport.url} failed in a background thread: "
+                              f"{type(exc).__name__}: {exc}")
+        err.__cause__ = exc
+        self._die(err)
 
     def _dispatch(self, packet: Packet) -> None:
         try:
@@ -147,7 +166,9 @@ class Link:
         if packet.msg_type & m.REPLY_BIT:
             with self._lock:
                 pending = self._pending.get(packet.request_id)
-            if pending is None or pending.event.is_set():
+            if pending is None or pending.event.is_set() or not _answers(pending, packet.msg_type, msg):
+                # nobody waits for it, or it answers another request that had this id (a late reply
+                # from before a timeout, or one left in a pty by an earlier session): not this one's
                 self.stats.stray_replies += 1
                 return
             if bad is not None:  # the answer came but cannot be read: fail now, do not wait
@@ -155,9 +176,6 @@ class Link:
             elif isinstance(msg, m.Nack):
                 param = BY_ID[msg.param_id].name if msg.param_id in BY_ID else None
                 pending.error = DeviceError(msg.code, msg.message, param, msg.request_type)
-            elif packet.msg_type != pending.expect:
-                pending.error = ProtocolError(f"reply type 0x{packet.msg_type:04x} to a request expecting "
-                                              f"0x{pending.expect:04x}")
             else:
                 pending.reply = msg
             pending.event.set()

@@ -28,6 +28,7 @@ class ErrorCode(enum.IntEnum):
     INTERNAL = 7
     UNSUPPORTED_VERSION = 8
     STORAGE = 9  # flash write or verify failed; the previous stored data is still in force
+    IMAGE_REJECTED = 10  # since 1.2: a firmware image refused; the text starts with the reason (SPEC §13.4)
 
 
 class DeviceError(StereoCamError):
@@ -56,6 +57,14 @@ class TransportError(StereoCamError):
 
 class DisconnectedError(TransportError):
     """The device went away (cable pulled, process ended, socket closed)."""
+
+
+class LinkFailedError(DisconnectedError):
+    """The host's link ended because its reader or event path failed (the cause is chained)."""
+
+
+class StreamStoppedError(StereoCamError):
+    """The device stopped a stream the host had started (watchdog) and restarting it failed."""
 
 
 class VerificationError(StereoCamError):

@@ -13,17 +13,24 @@ from __future__ import annotations
 
 import binascii
 import logging
+import math
 import struct
+import time
 import zlib
 from dataclasses import dataclass, field
 
+from .crc_range import CrcIndex
+
 MAGIC = b"STOC"
 VERSION_MAJOR = 1
-VERSION_MINOR = 1
+VERSION_MINOR = 2
 HEADER_LEN = 20
 MAX_HEADER_LEN = 64
 TRAILER_LEN = 4
 MAX_PAYLOAD = 1 << 20  # hard v1 limit; a device may advertise less
+
+DEVICE_MESSAGE_TIMEOUT = 1.0  # s: a device abandons a request frame not complete this long after its header
+HOST_MESSAGE_TIMEOUT = 5.0  # s: the host's limit (a 128 KiB chunk takes 1.4 s at 921600 baud)
 
 FLAG_RESEND = 0x01  # request: this is a retry of the same request id
 
@@ -70,11 +77,13 @@ class DecoderStats:
     payload_crc_errors: int = 0
     oversize: int = 0  # valid header announcing more than max_payload: rescanned, never buffered
     unsupported_version: int = 0  # valid header of another major version: rescanned
+    message_timeouts: int = 0  # valid header whose frame did not complete within message_timeout: rescanned
 
     @property
     def dropped(self) -> int:
         """Frames lost to corruption or policy."""
-        return self.header_crc_errors + self.bad_headers + self.payload_crc_errors + self.oversize + self.unsupported_version
+        return (self.header_crc_errors + self.bad_headers + self.payload_crc_errors + self.oversize
+                + self.unsupported_version + self.message_timeouts)
 
     def as_dict(self) -> dict[str, int]:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -82,25 +91,43 @@ class DecoderStats:
 
 @dataclass
 class Decoder:
-    """Incremental decoder: feed arbitrary chunks, get complete packets back.
+    """Incremental decoder: feed arbitrary chunks, get complete packets back (SPEC §3).
 
     Resynchronises after garbage or corruption by scanning for the next magic whose header CRC
     checks out; its buffer never holds more than one maximum-size frame plus one read chunk.
+    ``message_timeout`` (float seconds, None: never) bounds how long a frame whose header has
+    arrived may take to complete; after it the frame is abandoned like a corrupt one. Time is the
+    ``now`` given to ``feed`` (default ``time.monotonic()``); an idle receiver calls ``expire``.
+    Work per input byte is bounded (SPEC §3.1): a rescan inside a rejected frame reuses the
+    checksums already computed instead of checksumming the same bytes again.
     """
 
     max_payload: int = MAX_PAYLOAD
     stats: DecoderStats = field(default_factory=DecoderStats)
+    message_timeout: float | None = None
     _buf: bytearray = field(default_factory=bytearray, repr=False)
+    _base: int = field(default=0, repr=False)  # absolute stream offset of _buf[0]
+    _waiting: tuple[int, float] = field(default=(-1, 0.0), repr=False)  # (offset, since) of a partial frame
+    _failed: tuple[int, int] = field(default=(-1, -1), repr=False)  # payload range of the last rejected frame
+    _index: CrcIndex | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not 0 <= self.max_payload <= MAX_PAYLOAD:
             raise ValueError(f"max_payload must be within 0..{MAX_PAYLOAD}")
+        t = self.message_timeout
+        if t is not None and not (isinstance(t, (int, float)) and math.isfinite(t) and t > 0):
+            raise ValueError(f"message_timeout must be a finite number of seconds > 0, got {t!r}")
 
     @property
     def buffered(self) -> int:
         return len(self._buf)
 
-    def feed(self, data: bytes | bytearray | memoryview) -> list[Packet]:
+    def expire(self, now: float | None = None) -> list[Packet]:
+        """For an idle receiver: abandon a partial frame older than ``message_timeout`` and return
+        the packets the bytes behind it complete."""
+        return self.feed(b"", now)
+
+    def feed(self, data: bytes | bytearray | memoryview, now: float | None = None) -> list[Packet]:
         """Consume ``data``; return the packets completed by it (possibly none)."""
         self.stats.bytes_in += len(data)
         self._buf += data
@@ -120,12 +147,11 @@ class Decoder:
             pos = i
             if end - pos < HEADER_LEN:
                 break
-            _, major, minor, hlen, flags, mtype, rid, plen, _ = _HEAD.unpack_from(buf, pos)
-            (hcrc,) = _CRC16.unpack_from(buf, pos + 18)
-            if hcrc != header_crc(memoryview(buf)[pos:pos + 18]):
-                st.header_crc_errors += 1
+            if buf[pos + 18] | buf[pos + 19] << 8 != binascii.crc_hqx(buf[pos:pos + 18], 0xFFFF):
+                st.header_crc_errors += 1  # (the cheapest check first: a magic in garbage costs this much)
                 pos += 1
                 continue
+            _, major, minor, hlen, flags, mtype, rid, plen, _ = _HEAD.unpack_from(buf, pos)
             if not HEADER_LEN <= hlen <= MAX_HEADER_LEN:
                 st.bad_headers += 1
                 pos += 1
@@ -141,21 +167,59 @@ class Decoder:
                 continue
             total = hlen + plen + TRAILER_LEN
             if end - pos < total:
+                if self._timed_out(self._base + pos, now):
+                    st.message_timeouts += 1
+                    pos += 1
+                    continue
                 break
-            body = memoryview(buf)[pos + HEADER_LEN:pos + hlen + plen]
             (crc,) = _CRC32.unpack_from(buf, pos + hlen + plen)
-            if crc != zlib.crc32(body):
-                body.release()
+            if crc != self._payload_crc(pos + HEADER_LEN, pos + hlen + plen):
                 st.payload_crc_errors += 1
                 _log.info("payload CRC error in a type 0x%04x packet (request id %d, %d payload bytes); "
                           "dropped, resyncing", mtype, rid, plen)
                 pos += 1
                 continue
-            payload = bytes(body[hlen - HEADER_LEN:])
-            body.release()
+            payload = bytes(buf[pos + hlen:pos + hlen + plen])
             out.append(Packet(mtype, rid, flags, payload, (major, minor)))
             st.packets += 1
             pos += total
         if pos:
-            del buf[:pos]
+            self._discard(pos)
         return out
+
+    def _timed_out(self, offset: int, now: float | None) -> bool:
+        """Whether the partial frame at absolute ``offset`` has waited longer than message_timeout."""
+        if self.message_timeout is None:
+            return False
+        now = time.monotonic() if now is None else now
+        if self._waiting[0] != offset:
+            self._waiting = (offset, now)
+            return False
+        return now - self._waiting[1] > self.message_timeout
+
+    def _payload_crc(self, a: int, b: int) -> int:
+        """CRC-32 of ``_buf[a:b]``. A range overlapping bytes already checksummed for a rejected
+        frame goes through the CRC index, so no byte is checksummed more than twice."""
+        base, buf = self._base, self._buf
+        lo, hi = base + a, base + b
+        if self._index is not None and lo < self._index.tip:
+            return self._index.crc(buf, base, lo, hi)
+        self._index = None
+        if lo < self._failed[1]:  # inside the last rejected frame: index from here on
+            self._index = CrcIndex(lo)
+            return self._index.crc(buf, base, lo, hi)
+        with memoryview(buf) as mv:
+            crc = zlib.crc32(mv[a:b])
+        self._failed = (lo, hi)  # kept in case it fails; a delivered frame is never rescanned
+        return crc
+
+    def _discard(self, pos: int) -> None:
+        """Drop ``_buf[:pos]`` (consumed), keeping the CRC index usable for what remains."""
+        cut = self._base + pos
+        if self._index is not None:
+            if self._index.tip <= cut:
+                self._index = None
+            else:
+                self._index.drop_before(self._buf, self._base, cut)
+        del self._buf[:pos]
+        self._base = cut

@@ -17,6 +17,12 @@ from .errors import ProtocolError
 from .frame_messages import (DISPARITY_S16_Q4, FRAME_OK, FRAME_RECTIFIED, FRAME_SENSOR_OVERRUN, FrameBegin,
                              FrameData, FrameEnd)
 from .framing import Packet, encode_frame
+from .repair_messages import (MAX_FRAME_CHUNK, MAX_RESEND_RANGES, MIN_FRAME_CHUNK, RESEND_GONE, RESEND_SENT,
+                              FrameLink, FrameResend, FrameResent, SetFrameLink)
+from .update_messages import (BEGIN_REPLACE, MAX_UPDATE_CHUNK, UPDATE_MESSAGES, UPDATE_REPLIES, BootMode, SlotInfo,
+                              SlotReport, SlotState, UpdateActivate, UpdateActivating, UpdateBegin, UpdateBegun,
+                              UpdateConfirm, UpdateConfirmed, UpdateData, UpdateProgress, UpdateState, UpdateStatus,
+                              UpdateVerified, UpdateVerify, UpdateWritten)
 from .message_base import EVENT_BIT, REPLY_BIT, Message, MsgType, _Empty, _read_str, _str, reply_type
 
 
@@ -74,6 +80,8 @@ class Capability:
     TIME_SYNC = 0x08
     CALIBRATION = 0x10  # since 1.1: CALIB_* messages (SPEC §12)
     RAW_OUTPUT = 0x20  # since 1.1: `rectify` = 0 gives raw (unrectified) frames (SPEC §5.1, §8.2)
+    FRAME_REPAIR = 0x40  # since 1.2: SET_FRAME_LINK and FRAME_RESEND (SPEC §13)
+    FIRMWARE_UPDATE = 0x80  # since 1.2: UPDATE_* messages (SPEC §14)
 
 
 class UsbSpeed:
@@ -173,6 +181,7 @@ COUNTERS: tuple[str, ...] = (
     "frames_captured", "frames_sent", "frames_dropped", "triggers", "rx_bytes", "rx_packets",
     "rx_garbage_bytes", "rx_header_crc_errors", "rx_payload_crc_errors", "rx_oversize",
     "rx_unsupported_version", "nacks", "resends_replayed", "heartbeat_timeouts",
+    "rx_message_timeouts",  # since 1.2
 )
 
 
@@ -236,7 +245,8 @@ MESSAGES: dict[int, type[Message]] = {
     cls.TYPE: cls for cls in (
         GetInfo, GetConfig, SetConfig, Trigger, Start, Stop, Heartbeat, TimeSync, Info, Config,
         ConfigApplied, Triggered, Started, Stopped, Status, Time, Nack, FrameBegin, FrameData, FrameEnd,
-        CalibRead, CalibData, CalibWrite, CalibWritten, CalibCommit, CalibRestore, CalibCommitted, CalibRestored)
+        CalibRead, CalibData, CalibWrite, CalibWritten, CalibCommit, CalibRestore, CalibCommitted, CalibRestored,
+        SetFrameLink, FrameLink, FrameResend, FrameResent, *UPDATE_MESSAGES)
 }
 
 # request type -> reply class
@@ -245,6 +255,8 @@ REPLIES: dict[int, type[Message]] = {
     MsgType.TRIGGER: Triggered, MsgType.START: Started, MsgType.STOP: Stopped,
     MsgType.HEARTBEAT: Status, MsgType.TIME_SYNC: Time, MsgType.CALIB_READ: CalibData,
     MsgType.CALIB_WRITE: CalibWritten, MsgType.CALIB_COMMIT: CalibCommitted, MsgType.CALIB_RESTORE: CalibRestored,
+    MsgType.SET_FRAME_LINK: FrameLink, MsgType.FRAME_RESEND: FrameResent,
+    **UPDATE_REPLIES,
 }
 
 
@@ -279,4 +291,9 @@ __all__ = [  # the whole message catalogue, whichever module defines each part
     "FrameBegin", "FrameData", "FrameEnd", "DISPARITY_S16_Q4", "FRAME_RECTIFIED", "FRAME_OK", "FRAME_SENSOR_OVERRUN",
     "CalibSource", "CalibRead", "CalibData", "CalibWrite", "CalibWritten", "CalibCommit", "CalibRestore",
     "CalibState", "CalibCommitted", "CalibRestored", "MAX_CALIB_CHUNK", "calib_id",
+    "SetFrameLink", "FrameLink", "FrameResend", "FrameResent", "MIN_FRAME_CHUNK", "MAX_FRAME_CHUNK",
+    "MAX_RESEND_RANGES", "RESEND_SENT", "RESEND_GONE",
+    "UpdateBegin", "UpdateBegun", "UpdateData", "UpdateWritten", "UpdateProgress", "UpdateVerify", "UpdateVerified",
+    "UpdateActivate", "UpdateActivating", "UpdateConfirm", "UpdateConfirmed", "UpdateStatus", "UpdateState",
+    "SlotInfo", "SlotReport", "SlotState", "BootMode", "MAX_UPDATE_CHUNK", "BEGIN_REPLACE",
 ]

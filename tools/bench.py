@@ -33,7 +33,9 @@ def bench_protocol(seconds: float = 2.0) -> dict[str, float]:
     return {"decode_MBps": mbps}
 
 
-MODES = ("protocol", "transport", "usb", "matching", "calibration", "calib-real", "all")
+MODES = ("protocol", "decoder", "transport", "usb", "matching", "calibration", "calib-real", "sync", "firmware",
+         "record", "rematch",
+         "all")
 
 
 @click.command("bench", context_settings={"ignore_unknown_options": True},
@@ -47,22 +49,37 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
 
     \b
     protocol     decoder throughput (MB/s): 640x480 frame messages fed in 64 KiB chunks
+    decoder      the decoder's cost per byte on adversarial streams against its clean cost
     transport    end-to-end fps, MB/s, drops, latency p50/p99 at 640x480 over sim, pty, tcp,
                  usb high and super speed (--algorithm bm|sgm, --transport KIND), stage profile
     usb          the USB path alone: bulk IN MB/s through pyusb
     matching     the numba matching core against cv2.StereoBM
     calibration  calibration accuracy against the simulator's truth, solver and device tool
     calib-real   the offline tool on real calibration sets against OpenCV's all-pairs solution
+    sync         three heads on one trigger line: skew within matched sets, clock-map error vs truth
+    firmware     a 2 MiB signed image installed per transport, and one update's state trace
+    record       the recorder's ceiling (MB/s), a live recording's drops, seek time by frame index
+    rematch      stereocam rematch frames/s with 1 and 2 local Dask workers
     all          protocol, transport, matching and calibration (default)
 
     Arguments after WHAT that this command does not know go to the transport, usb or matching bench."""
     rest = list(extra)
     if what in ("protocol", "all"):
         bench_protocol()
+    if what in ("decoder", "all"):
+        importlib.import_module("stereocam.tools.bench_decoder").main([])
     if what in ("transport", "all"):
         importlib.import_module("stereocam.tools.bench_transport").main(rest if what == "transport" else [], seconds)
+    if what == "sync":  # minutes of capture: only when asked for; --seconds given after WHAT goes to it
+        importlib.import_module("stereocam.tools.bench_sync").main(rest)
+    if what == "firmware":
+        importlib.import_module("stereocam.tools.bench_firmware").main(rest)
     if what == "calib-real":
         importlib.import_module("stereocam.tools.bench_calib_real").main(rest)
+    if what == "record":
+        importlib.import_module("stereocam.tools.bench_record").main(rest + ["--seconds", str(seconds)])
+    if what == "rematch":
+        importlib.import_module("stereocam.tools.bench_rematch").main(rest)
     if what == "usb":
         importlib.import_module("stereocam.tools.bench_usb").main(rest)
     if what in ("matching", "all"):

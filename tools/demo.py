@@ -10,11 +10,14 @@ import numpy as np
 from tqdm import tqdm
 
 from stereocam.camera import Camera
+from stereocam.tools import demo_group
 from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.ground_truth import GROUND_TRUTH_KEEP
 from stereocam.camera import Camera
+from stereocam.tools import demo_group
 from stereocam.device_sim.links.inprocess import InProcessTransport
 
+from . import demo_group
 from .capture import save_frame
 from .session import output_dir
 
@@ -49,11 +52,15 @@ def keep_up_note(fps: float, asked: int, dropped: int) -> str:
 @click.option("--fps", type=click.IntRange(1, 120), default=15, show_default=True, help="Frame rate to ask for.")
 @click.option("--seed", type=int, default=1, show_default=True, help="Which simulated unit.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object instead of lines.")
-def command(out: Path, seconds: float, fps: int, seed: int, as_json: bool) -> int:
+@click.option("--heads", type=click.IntRange(1, 8), default=1, show_default=True,
+              help="Several heads on one trigger line, streamed as matched sets (CameraGroup).")
+def command(out: Path, seconds: float, fps: int, seed: int, as_json: bool, heads: int) -> int:
     """Stream from an in-process simulated camera at 640x480, save the last frame's outputs and print a
     summary: frame rate (and whether this machine kept up), drops, link errors, depth accuracy against
     the simulator's ground truth."""
     output_dir(out)
+    if heads > 1:
+        return demo_group.run(heads, seconds, fps, seed, out)
     sim = SimulatedCamera(seed=seed)
     with Camera(InProcessTransport(sim, f"sim://?seed={seed}")) as cam:
         info = cam.info()

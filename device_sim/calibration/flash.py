@@ -9,6 +9,11 @@ Semantics (those of a SPI NOR part such as a W25Q):
     programmed (FlashProtectedError). It is kept in a sidecar file "<path>.sr" (the status
     register) and changing it counts as a step.
 
+  * a one-time-programmable security register of `OTP_SIZE` bytes (W25Q "security register"):
+    programmed like the array, never erased, and once locked (`otp_lock`) never written again.
+    It is kept in "<path>.otp" (its last byte is the lock bit, 0 = locked); the firmware keeps
+    the trusted firmware-signing key there.
+
 Power loss: `power_loss_after(n)` lets n more program/erase/status steps complete; the next one
 raises PowerLossError. With tear=False the file is left exactly as after the n-th step; with
 tear=True the interrupted step is half done (the first half of the bytes programmed, or the first
@@ -26,6 +31,7 @@ from stereocam.protocol.errors import StereoCamError
 
 SECTOR_SIZE = 4096
 PAGE_SIZE = 256
+OTP_SIZE = 256
 
 
 class FlashError(StereoCamError):
@@ -96,6 +102,39 @@ class NorFlash:
         tmp = self._sr_path.with_name(self._sr_path.name + ".tmp")
         tmp.write_bytes(struct.pack("<I", protected_below))
         os.replace(tmp, self._sr_path)
+
+    # -- security register (OTP) ---------------------------------------------------------------
+    def _otp(self) -> bytes:
+        path = self.path.with_name(self.path.name + ".otp")
+        return path.read_bytes() if path.exists() else b"\xff" * (OTP_SIZE + 1)
+
+    def otp_read(self) -> bytes:
+        """The security register's contents."""
+        return self._otp()[:OTP_SIZE]
+
+    @property
+    def otp_locked(self) -> bool:
+        return self._otp()[OTP_SIZE] == 0
+
+    def _otp_write(self, offset: int, data: bytes) -> None:
+        old = self._otp()
+        if old[OTP_SIZE] == 0:
+            raise FlashProtectedError("the security register is locked")
+        if self._step():
+            raise PowerLossError("power lost while writing the security register")
+        merged = bytes(a & b for a, b in zip(old[offset:offset + len(data)], data))
+        path = self.path.with_name(self.path.name + ".otp")
+        path.write_bytes(old[:offset] + merged + old[offset + len(data):])
+
+    def otp_program(self, data: bytes) -> None:
+        """Program the security register from its start (bits only clear, as in the array)."""
+        if len(data) > OTP_SIZE:
+            raise FlashAddressError(f"{len(data)} bytes do not fit the {OTP_SIZE}-byte security register")
+        self._otp_write(0, data)
+
+    def otp_lock(self) -> None:
+        """Set the register's lock bit: it can never be written again."""
+        self._otp_write(OTP_SIZE, b"\x00")
 
     # -- array ------------------------------------------------------------------------------
     def _check(self, addr: int, length: int) -> None:

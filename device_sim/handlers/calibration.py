@@ -25,8 +25,8 @@ MAX_BODY = 4096
 
 
 class CalibrationService:
-    def __init__(self, flash_path: str | Path, truth: StereoCalibration, factory_calibrated: bool):
-        self.flash = NorFlash(flash_path)
+    def __init__(self, flash: str | Path | NorFlash, truth: StereoCalibration, factory_calibrated: bool):
+        self.flash = flash if isinstance(flash, NorFlash) else NorFlash(flash)
         self.store = CalibrationStore(self.flash)
         if factory_calibrated and self.store.read_factory() is None and not self.store.factory_locked:
             # what the factory line did to this unit before it shipped
@@ -39,6 +39,10 @@ class CalibrationService:
         self.record: StoredRecord | None = None
         self.calibration: StereoCalibration | None = None
         self.rejected_records = 0  # valid CRC but a body this firmware cannot use
+        self._load()
+
+    def reload(self) -> None:
+        """Boot: read the calibration in force from flash again."""
         self._load()
 
     # -- state in force -------------------------------------------------------------------------

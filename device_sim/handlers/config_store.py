@@ -16,6 +16,11 @@ class ConfigStore:
         self._values = defaults()
         self._lock = threading.Lock()
 
+    def reset(self, values: dict[str, int]) -> None:
+        """Boot: every parameter back to ``values`` (the booted build's defaults)."""
+        with self._lock:
+            self._values = {**defaults(), **values}
+
     def snapshot(self) -> dict[str, int]:
         with self._lock:
             return dict(self._values)

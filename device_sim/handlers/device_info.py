@@ -5,8 +5,9 @@ from dataclasses import dataclass
 from typing import Callable
 
 from stereocam.protocol import messages as m
+from stereocam.protocol.firmware_image import FirmwareBuild
 from stereocam.protocol.framing import MAX_PAYLOAD, VERSION_MAJOR, VERSION_MINOR
-from stereocam.protocol.params import BY_NAME
+from stereocam.protocol.params import BY_NAME, defaults
 
 from ..link_layer.dispatcher import Handler
 from ..rig.sensor import SENSOR_H, SENSOR_W
@@ -15,7 +16,13 @@ from .calibration import CalibrationService
 MODEL = "STOC-SIM"
 FIRMWARE_VERSION = "1.1.0"
 CAPABILITIES = (m.Capability.DISPARITY | m.Capability.SOFTWARE_TRIGGER | m.Capability.EXTERNAL_TRIGGER
-                | m.Capability.TIME_SYNC | m.Capability.CALIBRATION | m.Capability.RAW_OUTPUT)
+                | m.Capability.TIME_SYNC | m.Capability.CALIBRATION | m.Capability.RAW_OUTPUT
+                | m.Capability.FRAME_REPAIR)
+PROTOCOL_MINOR = VERSION_MINOR  # 1.2: frame repair (SPEC §13) and the update messages (§14)
+FACTORY_BUILD = FirmwareBuild(FIRMWARE_VERSION, PROTOCOL_MINOR, CAPABILITIES | m.Capability.FIRMWARE_UPDATE, defaults())
+"""The build the factory line signs into slot A of a blank unit."""
+RECOVERY_BUILD = FirmwareBuild("recovery", PROTOCOL_MINOR, m.Capability.FIRMWARE_UPDATE, {})
+"""What the boot stage's recovery reports: it only identifies itself and takes updates."""
 
 
 @dataclass(frozen=True)
@@ -23,6 +30,8 @@ class Identity:
     model: str
     serial: str
     firmware_version: str
+    protocol_minor: int = VERSION_MINOR  # the booted build's
+    capabilities: int = CAPABILITIES
 
 
 class InfoHandler:
@@ -36,6 +45,6 @@ class InfoHandler:
 
     def get_info(self, _: m.Message) -> m.Info:
         i = self._identity
-        return m.Info(i.model, i.serial, i.firmware_version, (VERSION_MAJOR, VERSION_MINOR), CAPABILITIES,
+        return m.Info(i.model, i.serial, i.firmware_version, (VERSION_MAJOR, i.protocol_minor), i.capabilities,
                       SENSOR_W, SENSOR_H, MAX_PAYLOAD, BY_NAME["width"].hi, BY_NAME["height"].hi,
                       self._calibration.calibration_id, self._usb_speed())

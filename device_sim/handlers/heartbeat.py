@@ -40,7 +40,7 @@ class HeartbeatHandlers:
                  rx_bytes=st.bytes_in, rx_packets=st.packets, rx_garbage_bytes=st.garbage_bytes,
                  rx_header_crc_errors=st.header_crc_errors + st.bad_headers,
                  rx_payload_crc_errors=st.payload_crc_errors, rx_oversize=st.oversize,
-                 rx_unsupported_version=st.unsupported_version)
+                 rx_unsupported_version=st.unsupported_version, rx_message_timeouts=st.message_timeouts)
         return c
 
     def watchdog(self) -> None:

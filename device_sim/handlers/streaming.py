@@ -47,8 +47,9 @@ class StreamingHandlers:
         self._engine.stop()
         return m.Stopped()
 
-    def on_pulse(self, trigger_id: int) -> None:
-        """A pulse on the trigger input: a capture in external mode while streaming, else ignored."""
+    def on_pulse(self, trigger_id: int, at: float) -> None:
+        """The trigger input fired (exposure at host-monotonic ``at``): a capture in external mode
+        while streaming, else ignored."""
         if self._store.snapshot()["trigger_mode"] == TriggerMode.EXTERNAL and self._engine.streaming:
             self._counters["triggers"] += 1
-            self._engine.trigger(trigger_id, TriggerMode.EXTERNAL)
+            self._engine.trigger(trigger_id, TriggerMode.EXTERNAL, at)

@@ -7,7 +7,7 @@ import threading
 import time
 from typing import Callable
 
-from stereocam.protocol.framing import Decoder, DecoderStats
+from stereocam.protocol.framing import DEVICE_MESSAGE_TIMEOUT, Decoder, DecoderStats
 
 from .dispatcher import Dispatcher
 
@@ -15,10 +15,14 @@ Sink = Callable[[bytes], None]
 
 
 class DeviceLink:
-    """One host at a time. ``on_lost`` runs when the host goes (detach, or a sink that fails)."""
+    """One host at a time. ``on_lost`` runs when the host goes (detach, or a sink that fails);
+    ``on_attach`` when a new host comes (per-link state such as the frame-repair chunk size resets).
+    A request whose bytes stop arriving is abandoned after DEVICE_MESSAGE_TIMEOUT (SPEC §3)."""
 
-    def __init__(self, dispatcher: Dispatcher, on_lost: Callable[[], None]):
-        self.decoder = Decoder()
+    def __init__(self, dispatcher: Dispatcher, on_lost: Callable[[], None],
+                 on_attach: Callable[[], None] = lambda: None):
+        self.decoder = Decoder(message_timeout=DEVICE_MESSAGE_TIMEOUT)
+        self._on_attach = on_attach
         self.last_rx = time.monotonic()  # when the host last sent a whole frame (the watchdog's clock)
         self._dispatcher = dispatcher
         self._on_lost = on_lost
@@ -41,7 +45,8 @@ class DeviceLink:
             self._sink = sink
         with self._rx_lock:  # a new host: its request ids say nothing about the last one's
             self._dispatcher.cache.clear()
-            self.decoder = Decoder(stats=self.decoder.stats)
+            self._on_attach()
+            self.decoder = Decoder(stats=self.decoder.stats, message_timeout=DEVICE_MESSAGE_TIMEOUT)
         self.last_rx = time.monotonic()
 
     def detach(self) -> None:

@@ -1,7 +1,8 @@
 """``sim://`` — a simulated camera in this process, joined by an in-memory byte pipe.
 
-``sim://?seed=N`` makes a fresh unit (closed with the transport); ``sim://?seed=N&serial=S`` one
-with that serial; a bare ``sim://`` unit 0. ``sim://?serial=S`` (no seed) only opens the live,
+``sim://?seed=N`` makes a fresh unit (closed with the transport); ``sim://?seed=N&serial=S`` opens
+the live unit S if this process has it free, else makes one with that seed and serial (never two
+units with one serial); a bare ``sim://`` unit 0. ``sim://?serial=S`` (no seed) only opens the live,
 unattached simulator with that serial in this process (``stereocam.list_devices`` lists them) and
 raises TransportError when there is none: a serial that is not found never makes a new unit.
 ``scene=lab|wall|board`` sets what the unit looks at (a simulator setting, not a device parameter;
@@ -66,7 +67,14 @@ class InProcessTransport(Transport):
         self.url = url
         self._owns = owns
         self._fifo = ByteFifo()
+        self._unsubscribe = sim.on_power(self._on_power)
         sim.attach(self._fifo.put)
+
+    def _on_power(self, event: str) -> None:
+        """The unit went down (reboot, power cut): this link is gone; the host reconnects by serial."""
+        if event == "down":
+            self._unsubscribe()
+            self._fifo.close()
 
     def write(self, data: bytes) -> None:
         if self._fifo.closed:
@@ -83,33 +91,41 @@ class InProcessTransport(Transport):
         if self._fifo.closed:
             return
         self._fifo.close()
+        self._unsubscribe()
         self.sim.detach()
         if self._owns:
             self.sim.close()
 
 
+SEED_MAX = (1 << 32) - 1
+
+
 def open_transport(url: str, timeout: float) -> InProcessTransport:
-    query = parse_qs(urlsplit(url).query)
+    query = parse_qs(urlsplit(url).query, keep_blank_values=True)
     unknown = set(query) - {"seed", "serial", "scene"}
     if unknown:
         raise ConfigError(f"sim:// URL: unknown option(s) {sorted(unknown)}; known: seed, serial, scene")
-    try:
-        seed = int(query.get("seed", ["0"])[0])
-    except ValueError as exc:
-        raise ConfigError(f"sim:// URL: seed must be an integer, got {query['seed'][0]!r}") from exc
+    if any(len(v) > 1 for v in query.values()):
+        raise ConfigError(f"sim:// URL: an option given twice in {url!r}")
+    text = query.get("seed", ["0"])[0]
+    if not (text.isascii() and text.isdigit()) or int(text) > SEED_MAX:
+        raise ConfigError(f"sim:// URL: seed must be an integer 0..{SEED_MAX}, got {text!r}")
+    seed = int(text)
     scene = Scene.parse(query["scene"][0]) if "scene" in query else None
     serial = query.get("serial", [None])[0]
-    if serial is not None and "seed" not in query:
-        live = registry.find_free(serial)
-        if live is None:
-            held = [s.serial for s in registry.live_simulators()]
-            state = "held by another link" if serial in held else "not found"
-            raise TransportError(f"{url}: simulator {serial!r} {state} in this process (free ones: "
-                                 f"{[e.serial for e in discover()] or 'none'}); "
-                                 f"sim://?seed=N&serial={serial} makes a new one")
+    live = registry.find_free(serial) if serial is not None else None
+    if live is not None and not live.powered:
+        raise DisconnectedError(f"simulated unit {serial} is off or rebooting")
+    if live is not None:  # the unit with that serial is alive here: open it, never a second one
         if scene is not None:
             live.scene = scene
         return InProcessTransport(live, url, owns=False)
+    if serial is not None and "seed" not in query:
+        held = [s.serial for s in registry.live_simulators()]
+        state = "held by another link" if serial in held else "not found"
+        raise TransportError(f"{url}: simulator {serial!r} {state} in this process (free ones: "
+                             f"{[e.serial for e in discover()] or 'none'}); "
+                             f"sim://?seed=N&serial={serial} makes a new one")
     from ..firmware import SimulatedCamera
 
     return InProcessTransport(SimulatedCamera(serial=serial, seed=seed, scene=scene or Scene.LAB), url)
@@ -122,4 +138,10 @@ def discover() -> list[DeviceEntry]:
 
 
 def reopen_url(url: str, serial: str) -> str:
+    """The same unit again: the live one with that serial if it is still here (after a reboot), else
+    (a unit opened by seed closes with its link) the same seed and serial freshly booted."""
+    query = parse_qs(urlsplit(url).query)
+    if "seed" in query:
+        scene = f"&scene={query['scene'][0]}" if "scene" in query else ""
+        return f"sim://?seed={query['seed'][0]}&serial={serial}{scene}"
     return f"sim://?serial={serial}"

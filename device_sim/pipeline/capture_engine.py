@@ -81,8 +81,9 @@ class CaptureEngine:
         if self._thread is not None and threading.current_thread() is not self._thread:
             self._thread.join(timeout=5)
 
-    def trigger(self, trigger_id: int, source: TriggerMode) -> CaptureRequest | None:
-        """Queue one exposure for a trigger from ``source``; None if not accepted.
+    def trigger(self, trigger_id: int, source: TriggerMode, at: float | None = None) -> CaptureRequest | None:
+        """Queue one exposure for a trigger from ``source`` (exposing at host-monotonic ``at``,
+        default now); None if not accepted.
 
         A pulse that finds the queue full still consumes a sequence number (it is a real missed
         exposure, counted as dropped); a software trigger is refused instead so the host knows.
@@ -96,7 +97,7 @@ class CaptureEngine:
                     self.dropped += 1
                 return None
             self.sequence += 1
-            req = CaptureRequest(self.sequence, trigger_id, time.monotonic(), self.epoch)
+            req = CaptureRequest(self.sequence, trigger_id, time.monotonic() if at is None else at, self.epoch)
             self._queue.append(req)
             self._cond.notify_all()
             return req

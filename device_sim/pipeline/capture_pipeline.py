@@ -13,20 +13,21 @@ import numpy as np
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.params import Output
-from stereocam.protocol.segmentation import REFERENCE_CHUNK, capture_messages
+from stereocam.protocol.segmentation import capture_messages, plane_bytes
 
 from ..clock import DeviceClock
 from ..ground_truth import Exposure, TruthLog
 from ..handlers.calibration import CalibrationService
 from ..handlers.config_store import ConfigStore
+from ..handlers.frame_repair import FrameRepair
 from ..matching import warm_up as matching_warm_up
 from ..rig.scene import Scene
 from ..rig.sensor import Geometry, SensorRig
+from ..replay import ReplaySource
 from .capture_engine import CaptureRequest
 from .handoff import Handoff
 from .stereo import StereoStage
 
-CHUNK = REFERENCE_CHUNK  # FRAME_DATA data bytes per message
 Send = Callable[[CaptureRequest, bytes], bool]  # one message of a capture; False: stop sending it
 STAGES = ("render", "rectify", "match", "send")
 
@@ -66,7 +67,9 @@ class StageProfile:
 class CapturePipeline:
     def __init__(self, seed: int, rig: SensorRig, store: ConfigStore, calibration: CalibrationService,
                  clock: DeviceClock, truth: TruthLog, send: Send, counters: collections.Counter[str],
-                 on_drop: Callable[[], None]):
+                 repair: FrameRepair, on_drop: Callable[[], None], source: ReplaySource | None = None):
+        """``source``: a recording whose captures replace the rig's (replay.py). ``on_drop``: a
+        capture the delivery stage failed on (it counts as dropped)."""
         self.scene = Scene.LAB  # what the rig looks at (a simulator setting)
         self._seed = seed
         self._rig = rig
@@ -76,6 +79,8 @@ class CapturePipeline:
         self._truth = truth
         self._send = send
         self._counters = counters
+        self._repair = repair  # the link's chunk size, and recent captures kept for FRAME_RESEND
+        self.source = source
         self._stereo = StereoStage()
         self._view_rays: dict[Geometry, np.ndarray] = {}
         self.profile = StageProfile()
@@ -99,6 +104,9 @@ class CapturePipeline:
         """Exposure stage (capture engine thread): render both raw images, hand them on."""
         t0 = time.perf_counter()
         cfg = self._store.snapshot()
+        if self.source is not None:  # replay: the recorded capture, re-matched if the matching changed
+            replayed = self.source.capture(req, cfg, self._stereo.disparity)
+            return self._send_all(req, replayed.begin, replayed.planes, t0)
         self._rig.set_format(cfg["width"], cfg["height"])
         t = req.time - self._clock.boot
         view = self.scene
@@ -138,8 +146,14 @@ class CapturePipeline:
             req.sequence & 0xFFFFFFFF, req.trigger_id & 0xFFFFFFFF, self._clock.at(req.time), cfg["exposure_us"],
             cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
             cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, calib_id, focal, cx, cy, baseline)
-        images = {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: disp}
-        for msg in capture_messages(begin, images, CHUNK):
+        self._send_all(req, begin, {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: disp}, t0)
+
+    def _send_all(self, req: CaptureRequest, begin: m.FrameBegin, images: dict[Output, np.ndarray | None],
+                  t0: float) -> None:
+        """Frame and send one capture (``t0``: when its send stage began, for the profile)."""
+        raw = plane_bytes(begin, images, copy=True)  # kept unchanged for FRAME_RESEND
+        self._repair.remember(req.sequence, {int(p): v for p, v in raw.items()})
+        for msg in capture_messages(begin, raw, self._repair.chunk):
             if not self._send(req, m.encode(msg)):
                 return  # the link went, or the stream was stopped: cut off at a message boundary
         self.profile.add("send", t0)

@@ -12,7 +12,7 @@ BLOCK_MATCHING, SEMI_GLOBAL = 0, 1  # values of the ``algorithm`` parameter
 
 def params_from_config(cfg: Mapping[str, int]) -> MatchParams | SGMParams:
     """Block-matching or SGM parameters per ``cfg["algorithm"]``."""
-    if cfg["algorithm"] == SEMI_GLOBAL:
+    if cfg.get("algorithm", BLOCK_MATCHING) == SEMI_GLOBAL:  # recordings made before 1.2 have no algorithm
         return SGMParams(
             num_disparities=cfg["num_disparities"], min_disparity=cfg["min_disparity"],
             census_width=cfg["census_width"], census_height=cfg["census_height"],

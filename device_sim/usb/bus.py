@@ -69,6 +69,8 @@ class SimUsbBus:
             device = SimUsbDevice(self, sim, descriptors, port, address, link, zlp=zlp,
                                   in_capacity=in_capacity, out_capacity=out_capacity)
             self._devices.append(device)
+        device.plug_options = dict(vendor_id=vendor_id, product_id=product_id, zlp=zlp, speed=speed,
+                                   in_capacity=in_capacity, out_capacity=out_capacity)
         return device
 
     def unplug_all(self) -> None:

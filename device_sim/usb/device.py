@@ -92,6 +92,10 @@ class SimUsbDevice:
                                         name=f"usb-sim-{bus.number}-{address}")
         if hasattr(sim, "usb_speed"):  # firmware that reports its link speed (INFO) reads it from here
             sim.usb_speed = speed.libusb_speed
+        self.plug_options: dict[str, object] = {}  # set by the bus: how to enumerate again after a reboot
+        self.successor: SimUsbDevice | None = None  # this unit's next enumeration, after a reboot
+        on_power = getattr(sim, "on_power", None)
+        self._unsubscribe = on_power(self._on_power) if on_power is not None else (lambda: None)
         sim.attach(self.in_pipe.push)
         self._thread.start()
 
@@ -106,8 +110,23 @@ class SimUsbDevice:
 
     # -- cable -------------------------------------------------------------------------------
 
+    def _on_power(self, event: str) -> None:
+        """The firmware reboots: it drops off the bus, and enumerates anew once it is up."""
+        if event == "down":
+            self._disconnect()
+        elif event == "up" and self.successor is None:
+            self._unsubscribe()
+            self.successor = self.bus.plug(self.sim, **self.plug_options)  # type: ignore[arg-type]
+
     def unplug(self) -> None:
-        """Pull the cable; idempotent. Never blocks on the firmware for more than ~2 s."""
+        """Pull the cable (from this unit, whichever enumeration it is in now); idempotent. Never
+        blocks on the firmware for more than ~2 s."""
+        self._unsubscribe()
+        if self.successor is not None:
+            self.successor.unplug()
+        self._disconnect()
+
+    def _disconnect(self) -> None:
         with self._lock:
             if not self.plugged:
                 return

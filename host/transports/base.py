@@ -13,6 +13,7 @@ class Transport(ABC):
     """
 
     url: str = ""
+    frame_chunk: int | None = None  # FRAME_DATA bytes per message this link wants (None: device default)
 
     @abstractmethod
     def write(self, data: bytes) -> None:

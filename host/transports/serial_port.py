@@ -2,10 +2,11 @@
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
+from urllib.parse import urlsplit
 
 import serial
 
-from stereocam.protocol.errors import DisconnectedError, TransportError
+from stereocam.protocol.errors import ConfigError, DisconnectedError, TransportError
 
 from stereocam.protocol.usb_identity import CAMERA_IDS
 
@@ -15,12 +16,17 @@ if TYPE_CHECKING:
     from ..discovery import DeviceEntry
 
 
+SERIAL_FRAME_CHUNK = 1024  # a noisy serial line loses (and resends) a small chunk, not 128 KiB
+
+
 class SerialTransport(Transport):
-    """A pyserial port as a byte pipe."""
+    """A pyserial port as a byte pipe; a serial line (a device path, not a network URL) asks for
+    small frame chunks."""
 
     def __init__(self, port: serial.SerialBase, url: str):
         self.port = port
         self.url = url
+        self.frame_chunk = None if "://" in url else SERIAL_FRAME_CHUNK
 
     def write(self, data: bytes) -> None:
         try:
@@ -51,11 +57,31 @@ class SerialTransport(Transport):
         self.port.close()
 
 
+NETWORK_SCHEMES = ("socket", "rfc2217")
+
+
+def _check_network_url(url: str) -> None:
+    """``socket://HOST:PORT`` and ``rfc2217://HOST:PORT`` need a port 0..65535 (pyserial's own
+    complaint names none)."""
+    parts = urlsplit(url)
+    if parts.scheme.lower() not in NETWORK_SCHEMES:
+        return
+    try:
+        port = parts.port
+    except ValueError as exc:
+        raise ConfigError(f"{url!r}: the port must be a number 0..65535 ({exc})") from exc
+    if port is None:
+        raise ConfigError(f"{url!r} names no port: use {parts.scheme}://HOST:PORT")
+
+
 def open_transport(url: str, timeout: float) -> SerialTransport:
+    _check_network_url(url)
     try:
         port = serial.serial_for_url(url, baudrate=921600, timeout=timeout, write_timeout=max(timeout, 5.0))
     except (serial.SerialException, OSError, ValueError) as exc:
         raise TransportError(f"cannot open {url}: {exc}") from exc
+    except Exception as exc:  # noqa: BLE001 - pyserial's URL handlers raise KeyError, TypeError, ...
+        raise TransportError(f"cannot open {url}: {type(exc).__name__}: {exc}") from exc
     return SerialTransport(port, url)
 
 

@@ -17,11 +17,25 @@ from tests.support.device import SMALL
 from tests.support.faults import FaultyTransport, PacketFilter
 
 
+def as_v1_1_info(p) -> bytes | None:
+    """Rewrite INFO as a protocol 1.1 device sends it: no FRAME_REPAIR capability."""
+    if p.msg_type != m.MsgType.INFO:
+        return None
+    info = m.decode_packet(p)
+    return m.encode(dataclasses.replace(info, protocol_version=(1, 1),
+                                        capabilities=info.capabilities & ~m.Capability.FRAME_REPAIR), p.request_id)
+
+
 @pytest.fixture
 def faulty(request, device_url):
-    """A camera behind a fault-injecting wrapper of its real transport (any device, any link)."""
+    """A camera behind a fault-injecting wrapper of its real transport (any device, any link).
+    ``{"v1_1": True}``: the host is told (INFO rewritten on the way in) that the device speaks 1.1,
+    so it never asks for frame repair; ``{"deliver_incomplete": True}``: flawed frames are delivered."""
+    opts = getattr(request, "param", {})
     link = FaultyTransport(open_transport(device_url, 0.5))
-    cam = Camera(link, timeout=0.5, retries=2, deliver_incomplete=getattr(request, "param", False))
+    if opts.get("v1_1"):
+        link.set_manipulator(read=PacketFilter(as_v1_1_info))
+    cam = Camera(link, timeout=0.5, retries=2, deliver_incomplete=opts.get("deliver_incomplete", False))
     cam.configure(**{**defaults(), **SMALL})
     yield cam, link
     cam.close()
@@ -71,8 +85,10 @@ def test_request_ids_wrap_and_skip_zero(device_url):
     assert ids == [0xFFFE, 0xFFFF, 1, 2]
 
 
-@pytest.mark.parametrize("faulty", [False, True], ids=["dropped", "delivered"], indirect=True)
+@pytest.mark.parametrize("faulty", [{"v1_1": True}, {"v1_1": True, "deliver_incomplete": True}],
+                         ids=["dropped", "delivered"], indirect=True)
 def test_corrupted_frame_is_dropped_and_counted(faulty):
+    """Against a 1.1 device (no repair) a damaged chunk costs its capture."""
     cam, link = faulty
     hits = []
 

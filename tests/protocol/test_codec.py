@@ -35,7 +35,7 @@ LIGHT = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCh
 
 # -- helpers -----------------------------------------------------------------------------------
 def raw_frame(msg_type: int, request_id: int = 0, payload: bytes = b"", *, flags: int = 0, major: int = 1,
-              minor: int = 1, header_len: int = HEADER_LEN, payload_len: int | None = None,
+              minor: int = 2, header_len: int = HEADER_LEN, payload_len: int | None = None,
               ext: bytes | None = None) -> bytes:
     """A frame built by hand (not through encode_frame), with a correct header CRC for whatever it claims."""
     ext = bytes(header_len - HEADER_LEN) if ext is None else ext
@@ -86,7 +86,7 @@ def assert_every_byte_accounted(dec: Decoder, packets: list[Packet]) -> None:
 
 
 def packet_of(msg: m.Message, rid: int = 0, flags: int = 0) -> Packet:
-    return Packet(msg.TYPE, rid, flags, msg.pack(), (1, 1))  # what this code (v1.1) sends
+    return Packet(msg.TYPE, rid, flags, msg.pack(), (1, 2))  # what this code (v1.2) sends
 
 
 # -- strategies --------------------------------------------------------------------------------
@@ -106,6 +106,8 @@ f32 = st.floats(allow_nan=False, min_value=-3.4e38, max_value=3.4e38).map(
     lambda x: struct.unpack("<f", struct.pack("<f", x))[0]) | st.sampled_from([float("inf"), float("-inf"), -0.0])
 short_str = st.text(max_size=60)  # <= 240 UTF-8 bytes: fits the u8 length prefix
 param_values = st.dictionaries(u16, i32, max_size=24)
+sha = st.binary(min_size=32, max_size=32)
+slot_info = st.builds(m.SlotInfo, slot=u8, state=u8, security_counter=u32, sha256=sha, version=short_str)
 
 MESSAGE_STRATEGIES: dict[type[m.Message], st.SearchStrategy[m.Message]] = {
     m.GetInfo: st.just(m.GetInfo()),
@@ -146,6 +148,26 @@ MESSAGE_STRATEGIES: dict[type[m.Message], st.SearchStrategy[m.Message]] = {
     m.CalibRestore: st.just(m.CalibRestore()),
     m.CalibCommitted: st.builds(m.CalibCommitted, source=u8, generation=u32, calibration_id=u32),
     m.CalibRestored: st.builds(m.CalibRestored, source=u8, generation=u32, calibration_id=u32),
+    # v1.2 frame repair (SPEC §13)
+    m.SetFrameLink: st.builds(m.SetFrameLink, chunk_size=u32),
+    m.FrameLink: st.builds(m.FrameLink, chunk_size=u32, kept_captures=u16),
+    m.FrameResend: st.builds(m.FrameResend, sequence=u32,
+                             ranges=st.lists(st.tuples(u8, u32, u32), max_size=20).map(tuple)),
+    m.FrameResent: st.builds(m.FrameResent, sequence=u32, result=u8, frame_status=u8, chunks=u32),
+    # v1.2 firmware update (SPEC §14)
+    m.UpdateBegin: st.builds(m.UpdateBegin, size=u32, sha256=sha, flags=u8),
+    m.UpdateBegun: st.builds(m.UpdateBegun, slot=u8, received=u32, size=u32),
+    m.UpdateData: st.builds(m.UpdateData, offset=u32, data=st.binary(max_size=300)),
+    m.UpdateWritten: st.builds(m.UpdateWritten, slot=u8, received=u32, size=u32),
+    m.UpdateVerify: st.just(m.UpdateVerify()),
+    m.UpdateVerified: st.builds(m.UpdateVerified, slot_info),
+    m.UpdateActivate: st.just(m.UpdateActivate()),
+    m.UpdateActivating: st.builds(m.UpdateActivating, slot_info),
+    m.UpdateConfirm: st.just(m.UpdateConfirm()),
+    m.UpdateConfirmed: st.builds(m.UpdateConfirmed, slot_info),
+    m.UpdateStatus: st.just(m.UpdateStatus()),
+    m.UpdateState: st.builds(m.UpdateState, running_slot=u8, boot_mode=u8, received=u32, size=u32, sha256=sha,
+                             security_counter=u32, slots=st.lists(slot_info, max_size=3).map(tuple)),
 }
 any_message = st.one_of(*MESSAGE_STRATEGIES.values())
 framed = st.tuples(any_message, u16, u8)  # (message, request_id, flags)
@@ -218,9 +240,10 @@ def test_overlong_strings_are_truncated_at_the_byte_limit() -> None:
     assert out.message == text[:65535]
 
 
-@pytest.mark.parametrize("cls", [m.Info, m.Nack, m.Status], ids=lambda c: c.__name__)
+@pytest.mark.parametrize("cls", [m.Info, m.Nack, m.Status, m.UpdateState], ids=lambda c: c.__name__)
 def test_trailing_fields_tolerated_where_spec_allows(cls) -> None:
-    """SPEC §11: a v1.x sender may append fields to INFO (after v1.1's calibration_id), NACK and STATUS."""
+    """SPEC §11: a v1.x sender may append fields to INFO (after v1.1's calibration_id), NACK, STATUS and
+    (1.2) UPDATE_STATE."""
     msg = SAMPLES[cls]
     assert decode_packet(Packet(cls.TYPE, 0, 0, msg.pack() + b"\x01\x02new fields")) == msg
 
@@ -297,13 +320,24 @@ def test_calibration_types_sources_and_codes() -> None:
     assert {t.name: int(t) for t in m.MsgType if t.name.startswith("CALIB")} == {
         "CALIB_READ": 0x0009, "CALIB_WRITE": 0x000A, "CALIB_COMMIT": 0x000B, "CALIB_RESTORE": 0x000C,
         "CALIB_DATA": 0x8009, "CALIB_WRITTEN": 0x800A, "CALIB_COMMITTED": 0x800B, "CALIB_RESTORED": 0x800C}
-    assert {int(k): v for k, v in m.REPLIES.items() if k >= 0x0009} == {
+    assert {int(k): v for k, v in m.REPLIES.items() if 0x0009 <= k <= 0x000C} == {
         0x0009: m.CalibData, 0x000A: m.CalibWritten, 0x000B: m.CalibCommitted, 0x000C: m.CalibRestored}
     for req, reply in m.REPLIES.items():
         assert reply.TYPE == m.reply_type(req) and m.MESSAGES[req].TYPE == req
     assert [(s.name, int(s)) for s in m.CalibSource] == [("ACTIVE", 0), ("FACTORY", 1), ("USER", 2)]
-    assert int(ErrorCode.STORAGE) == 9 and max(ErrorCode) is ErrorCode.STORAGE
+    assert int(ErrorCode.STORAGE) == 9
     assert m.MAX_CALIB_CHUNK == 61440
+
+
+def test_update_types_replies_and_codes() -> None:
+    """SPEC §14: requests 0x000F..0x0014 (after frame repair's 0x000D, 0x000E), replies request | 0x8000;
+    error code 10."""
+    assert {int(k): v for k, v in m.REPLIES.items() if k >= 0x000F} == {
+        0x000F: m.UpdateBegun, 0x0010: m.UpdateWritten, 0x0011: m.UpdateVerified, 0x0012: m.UpdateActivating,
+        0x0013: m.UpdateConfirmed, 0x0014: m.UpdateState}
+    assert int(ErrorCode.IMAGE_REJECTED) == 10 and max(ErrorCode) is ErrorCode.IMAGE_REJECTED
+    assert m.Capability.FIRMWARE_UPDATE == 0x80
+    assert m.MAX_UPDATE_CHUNK + 4 <= MAX_PAYLOAD
 
 
 def test_max_calib_chunk_fits_one_frame() -> None:
@@ -793,16 +827,29 @@ SAMPLES: dict[type[m.Message], m.Message] = {
     m.CalibCommit: m.CalibCommit(m.CalibSource.USER, 248, 0x01234567),
     m.CalibCommitted: m.CalibCommitted(m.CalibSource.USER, 2, 0x76543210),
     m.CalibRestored: m.CalibRestored(m.CalibSource.FACTORY, 1, 0xFEDCBA98),
+    m.SetFrameLink: m.SetFrameLink(1024),
+    m.FrameLink: m.FrameLink(1024, 8),
+    m.FrameResend: m.FrameResend(7, ((4, 1024, 2048),)),
+    m.FrameResent: m.FrameResent(7, m.RESEND_SENT, 0, 2),
+    m.UpdateBegin: m.UpdateBegin(4096, bytes(range(32)), 1),
+    m.UpdateBegun: m.UpdateBegun(1, 0, 4096),
+    m.UpdateData: m.UpdateData(256, b"image"),
+    m.UpdateWritten: m.UpdateWritten(0, 512, 4096),
+    m.UpdateVerified: m.UpdateVerified(m.SlotInfo(1, m.SlotState.STANDBY, 7, bytes(32), "1.2.0")),
+    m.UpdateActivating: m.UpdateActivating(m.SlotInfo(1, m.SlotState.PENDING, 7, bytes(32), "1.2.0")),
+    m.UpdateConfirmed: m.UpdateConfirmed(m.SlotInfo(1, m.SlotState.ACTIVE, 7, bytes(32), "1.2.0")),
+    m.UpdateState: m.UpdateState(0, 0, 0, 0, bytes(32), 3, (m.SlotInfo(0, 1, 3, bytes(32), "1.1.0"),)),
 }
 FIXED_SIZE = {m.Triggered: 8, m.Time: 8, m.FrameBegin: 56, m.FrameEnd: 17, m.CalibRead: 9, m.CalibWritten: 4,
-              m.CalibCommit: 9, m.CalibCommitted: 9, m.CalibRestored: 9}
+              m.CalibCommit: 9, m.CalibCommitted: 9, m.CalibRestored: 9, m.SetFrameLink: 4, m.FrameLink: 6,
+              m.FrameResend: 14, m.FrameResent: 10, m.UpdateBegin: 37, m.UpdateBegun: 9, m.UpdateWritten: 9}
 # messages whose payload ends in data running to the end: the fixed head, then any number of bytes
-HEAD_THEN_DATA = {m.FrameData: 9, m.CalibData: 17, m.CalibWrite: 8}
+HEAD_THEN_DATA = {m.FrameData: 9, m.CalibData: 17, m.CalibWrite: 8, m.UpdateData: 4}
 EMPTY = [cls for cls in m.MESSAGES.values() if cls not in SAMPLES]
 
 
 def test_samples_cover_every_message_with_a_payload() -> None:
-    assert len(EMPTY) == 10 and all(isinstance(cls(), m._Empty) for cls in EMPTY)
+    assert len(EMPTY) == 14 and all(isinstance(cls(), m._Empty) for cls in EMPTY)
     assert m.CalibRestore in EMPTY
     for cls, size in FIXED_SIZE.items():
         assert len(SAMPLES[cls].pack()) == size
@@ -859,7 +906,7 @@ def test_counts_that_do_not_match_the_payload() -> None:
             decode_packet(Packet(cls.TYPE, 0, 0, struct.pack("<HHiHi", 1, 1, 1, 2, 2)))
 
 
-@pytest.mark.parametrize("mtype", [0x0000, 0x000D, 0x8000, 0x800D, 0x4004, 0x1234, 0xFFFE, 0x0089, 0xC009])
+@pytest.mark.parametrize("mtype", [0x0000, 0x0015, 0x8000, 0x8015, 0x4004, 0x1234, 0xFFFE, 0x0089, 0xC009])
 def test_unknown_type(mtype: int) -> None:
     with pytest.raises(UnknownMessageError, match=f"unknown message type 0x{mtype:04x}"):
         decode_packet(Packet(mtype, 0, 0, b""))
@@ -888,9 +935,9 @@ def test_decoder_max_payload_in_range(ok: int) -> None:
 
 def test_stats_dropped_sums_every_loss_counter() -> None:
     s = DecoderStats(bytes_in=1, packets=2, garbage_bytes=3, header_crc_errors=4, bad_headers=5,
-                     payload_crc_errors=6, oversize=7, unsupported_version=8)
-    assert s.dropped == 30
-    assert s.as_dict()["unsupported_version"] == 8 and "dropped" not in s.as_dict() and len(s.as_dict()) == 8
+                     payload_crc_errors=6, oversize=7, unsupported_version=8, message_timeouts=9)
+    assert s.dropped == 39
+    assert s.as_dict()["unsupported_version"] == 8 and "dropped" not in s.as_dict() and len(s.as_dict()) == 9
 
 
 # -- the parameter table -----------------------------------------------------------------------

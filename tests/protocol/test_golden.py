@@ -15,6 +15,8 @@ then review the diff of tests/golden/protocol_v1.json byte by byte.
 History: v1.1 rewrote every vector (header byte 5, ver_minor, 0 -> 1; INFO gained its trailing
 calibration_id) and added the eight CALIB_* messages of SPEC §12. Retiring parameter id 20 (a
 simulator control, SPEC §5.1) shortened the CONFIG vector (every parameter of the table) by one entry.
+v1.2 rewrote every vector again (ver_minor 1 -> 2) and added the four frame-repair messages of SPEC §13
+and the twelve UPDATE_* messages of SPEC §14.
 """
 from __future__ import annotations
 
@@ -37,7 +39,7 @@ from tests.support import paths
 
 GOLDEN = paths.GOLDEN / "protocol_v1.json"
 SPEC = paths.REPO / "protocol" / "SPEC.md"
-VERSION = (1, 1)  # the version these vectors pin; a change here is a protocol change
+VERSION = (1, 2)  # the version these vectors pin; a change here is a protocol change
 
 _COUNTERS = {name: (i + 1) * 1_000_003 for i, name in enumerate(m.COUNTERS)}
 _COUNTERS["rx_bytes"] = (1 << 64) - 1  # full u64 range
@@ -84,6 +86,30 @@ CASES: list[tuple[m.Message, int, int]] = [
     (m.CalibRestore(), 0xFFFE, 0),
     (m.CalibCommitted(source=m.CalibSource.USER, generation=0x00C0FFEE, calibration_id=0x12345678), 0x0B0B, 0),
     (m.CalibRestored(source=m.CalibSource.FACTORY, generation=0xFFFFFFFF, calibration_id=1), 0xFFFE, 0),
+    # v1.2: frame repair (SPEC §13)
+    (m.SetFrameLink(chunk_size=1024), 0x0D0D, 0),
+    (m.FrameLink(chunk_size=1024, kept_captures=8), 0x0D0D, 0),
+    (m.FrameResend(sequence=0x01020304, ranges=((1, 0x400, 0x400), (4, 0x00012340, 0x0001FFFF))), 0x0E0E, FLAG_RESEND),
+    (m.FrameResent(sequence=0x01020304, result=m.RESEND_SENT, frame_status=m.FRAME_OK, chunks=0x00000021), 0x0E0E, 0),
+    # v1.2: firmware update (SPEC §14)
+    (m.UpdateBegin(size=0x00200123, sha256=bytes(range(32)), flags=m.BEGIN_REPLACE), 0x0D0D, 0),
+    (m.UpdateBegun(slot=1, received=0x0001F000, size=0x00200123), 0x0D0D, 0),
+    (m.UpdateData(offset=0x0001F000, data=b"SCFW" + MAGIC + bytes(range(250, 256)) + b"\x00"), 0x0E0E, FLAG_RESEND),
+    (m.UpdateWritten(slot=0, received=0x0001F00F, size=0x00200123), 0x0E0E, 0),
+    (m.UpdateVerify(), 0x0F0F, 0),
+    (m.UpdateVerified(m.SlotInfo(slot=1, state=m.SlotState.STANDBY, security_counter=0x01020000,
+                                 sha256=bytes(range(255, 223, -1)), version="1.2.0+ß")), 0x0F0F, 0),
+    (m.UpdateActivate(), 0x1010, 0),
+    (m.UpdateActivating(m.SlotInfo(slot=1, state=m.SlotState.PENDING, security_counter=0x01020000,
+                                   sha256=bytes(32), version="1.2.0")), 0x1010, 0),
+    (m.UpdateConfirm(), 0x1111, 0),
+    (m.UpdateConfirmed(m.SlotInfo(slot=1, state=m.SlotState.ACTIVE, security_counter=0xFFFFFFFF,
+                                  sha256=b"\xff" * 32, version="")), 0x1111, 0),
+    (m.UpdateStatus(), 0x1212, 0),
+    (m.UpdateState(running_slot=1, boot_mode=m.BootMode.TRIAL, received=4096, size=0x00200123,
+                   sha256=bytes(range(32)), security_counter=0x01010000,
+                   slots=(m.SlotInfo(0, m.SlotState.STANDBY, 0x01010000, b"\xa5" * 32, "1.1.0"),
+                          m.SlotInfo(1, m.SlotState.TRIAL, 0x01020000, b"\x5a" * 32, "1.2.0"))), 0x1212, 0),
 ]
 BY_NAME = {type(msg).__name__: (msg, rid, flags) for msg, rid, flags in CASES}
 
@@ -95,6 +121,8 @@ def _jsonable(v):
         return int(v)
     if isinstance(v, (bytes, bytearray, memoryview)):
         return {"hex": bytes(v).hex()}
+    if dataclasses.is_dataclass(v):
+        return fields_json(v)
     if isinstance(v, (tuple, list)):
         return [_jsonable(x) for x in v]
     if isinstance(v, dict):
@@ -134,16 +162,16 @@ def vector(name: str) -> dict:
 # -- coverage ----------------------------------------------------------------------------------
 def test_every_message_class_has_exactly_one_vector() -> None:
     classes = sorted(cls.__name__ for cls in m.MESSAGES.values())
-    assert len(classes) == 28  # v1.0: 20; v1.1 added the eight CALIB_* messages
+    assert len(classes) == 44  # v1.0: 20; v1.1 added the eight CALIB_* messages; v1.2 four repair, twelve UPDATE_*
     assert sorted(BY_NAME) == classes
     assert len(CASES) == len(BY_NAME)
     assert sorted(NAMES) == classes
-    assert load_golden()["protocol_version"] == [1, 1]
+    assert load_golden()["protocol_version"] == [1, 2]
 
 
 def test_the_code_speaks_the_pinned_version() -> None:
-    assert (VERSION_MAJOR, VERSION_MINOR) == VERSION == (1, 1)
-    assert {(v["hex"][8:10], v["hex"][10:12]) for v in VECTORS} == {("01", "01")}
+    assert (VERSION_MAJOR, VERSION_MINOR) == VERSION == (1, 2)
+    assert {(v["hex"][8:10], v["hex"][10:12]) for v in VECTORS} == {("01", "02")}
 
 
 def test_info_is_the_v1_0_layout_plus_trailing_calibration_id_and_usb_speed() -> None:
@@ -213,7 +241,7 @@ def test_header_and_trailer_fields_by_hand(name: str) -> None:
     wire = bytes.fromhex(vector(name)["hex"])
     payload = wire[20:-4]
     assert wire[0:4] == b"STOC"
-    assert (wire[4], wire[5]) == (1, 1)  # version 1.1
+    assert (wire[4], wire[5]) == (1, 2)  # version 1.2
     assert wire[6] == 20  # header_len
     assert wire[7] == flags
     assert int.from_bytes(wire[8:10], "little") == msg.TYPE
@@ -226,7 +254,7 @@ def test_header_and_trailer_fields_by_hand(name: str) -> None:
 
 def test_little_endian_fields_literally() -> None:
     wire = bytes.fromhex(vector("SetConfig")["hex"])
-    assert wire[:16] == b"STOC\x01\x01\x14\x01\x03\x00\x34\x12" + struct.pack("<I", 2 + 5 * 6)
+    assert wire[:16] == b"STOC\x01\x02\x14\x01\x03\x00\x34\x12" + struct.pack("<I", 2 + 5 * 6)
     # payload: u16 count, then (u16 id, i32 value) pairs in insertion order
     assert wire[20:22] == b"\x05\x00"
     assert wire[22:28] == b"\x01\x00" + (1280).to_bytes(4, "little")
@@ -235,7 +263,7 @@ def test_little_endian_fields_literally() -> None:
 
     wire = bytes.fromhex(vector("GetInfo")["hex"])
     assert len(wire) == 24
-    assert wire[:18] == b"STOC\x01\x01\x14\x00\x01\x00\x01\x00" + bytes(6)
+    assert wire[:18] == b"STOC\x01\x02\x14\x00\x01\x00\x01\x00" + bytes(6)
     assert wire[20:] == bytes(4)  # CRC-32 of an empty payload
 
     wire = bytes.fromhex(vector("Trigger")["hex"])
@@ -308,12 +336,26 @@ def test_calibration_messages_literally() -> None:
     assert restored[20:-4] == b"\x01" + b"\xff\xff\xff\xff" + b"\x01\x00\x00\x00"
 
 
-SPEC_GET_INFO = "53 54 4f 43 01 01 14 00 01 00 01 00 00 00 00 00 00 00 3a 79 00 00 00 00"
-SPEC_SET_CONFIG = "53 54 4f 43 01 01 14 00 03 00 02 00 08 00 00 00 00 00 87 62 01 00 03 00 00 00 00 00 59 ad 1c 2f"
-SPEC_NACK = ("53 54 4f 43 01 01 14 00 ff ff 02 00 1c 00 00 00 00 00 54 2e"
+def test_frame_repair_fields_literally() -> None:
+    """SPEC §13 layouts, v1.2."""
+    wire = bytes.fromhex(vector("SetFrameLink")["hex"])
+    assert wire[8:16] == b"\x0d\x00\x0d\x0d\x04\x00\x00\x00" and wire[20:-4] == b"\x00\x04\x00\x00"
+    wire = bytes.fromhex(vector("FrameLink")["hex"])
+    assert wire[8:10] == b"\x0d\x80" and wire[20:-4] == b"\x00\x04\x00\x00" + b"\x08\x00"
+    wire = bytes.fromhex(vector("FrameResend")["hex"])
+    assert wire[7] == FLAG_RESEND and wire[8:16] == b"\x0e\x00\x0e\x0e\x17\x00\x00\x00"
+    assert wire[20:-4] == (b"\x04\x03\x02\x01\x02" + b"\x01\x00\x04\x00\x00\x00\x04\x00\x00"
+                           + b"\x04\x40\x23\x01\x00\xff\xff\x01\x00")
+    wire = bytes.fromhex(vector("FrameResent")["hex"])
+    assert wire[8:10] == b"\x0e\x80" and wire[20:-4] == b"\x04\x03\x02\x01\x00\x00\x21\x00\x00\x00"
+
+
+SPEC_GET_INFO = "53 54 4f 43 01 02 14 00 01 00 01 00 00 00 00 00 00 00 9f b6 00 00 00 00"
+SPEC_SET_CONFIG = "53 54 4f 43 01 02 14 00 03 00 02 00 08 00 00 00 00 00 22 ad 01 00 03 00 00 00 00 00 59 ad 1c 2f"
+SPEC_NACK = ("53 54 4f 43 01 02 14 00 ff ff 02 00 1c 00 00 00 00 00 f1 e1"
              "03 00 04 00 03 00 14 00 66 70 73 3d 30 20 6f 75 74 73 69 64 65 20 31 2e 2e 31 32 30"
              "3f 04 0b fe")
-SPEC_CALIB_READ = ("53 54 4f 43 01 01 14 00 09 00 03 00 09 00 00 00 00 00 35 f4"
+SPEC_CALIB_READ = ("53 54 4f 43 01 02 14 00 09 00 03 00 09 00 00 00 00 00 90 3b"
                    "00 00 00 00 00 00 f0 00 00 7e 67 cd 53")
 
 
@@ -322,8 +364,8 @@ def test_spec_worked_examples() -> None:
     assert m.encode(m.GetInfo(), 1) == bytes.fromhex(SPEC_GET_INFO)
     # the RESEND retry of it: flags 01, header CRC value 0xA173 (on the wire LE: 73 a1)
     retry = m.encode(m.GetInfo(), 1, FLAG_RESEND)
-    assert retry[7] == 0x01 and int.from_bytes(retry[18:20], "little") == 0xA173
-    assert int.from_bytes(bytes.fromhex(SPEC_GET_INFO)[18:20], "little") == 0x793A
+    assert retry[7] == 0x01 and int.from_bytes(retry[18:20], "little") == 0x6ED6
+    assert int.from_bytes(bytes.fromhex(SPEC_GET_INFO)[18:20], "little") == 0xB69F
     assert m.encode(m.SetConfig({3: 0}), 2) == bytes.fromhex(SPEC_SET_CONFIG)
     nack = bytes.fromhex(SPEC_NACK)
     assert m.encode(m.Nack(m.MsgType.SET_CONFIG, ErrorCode.OUT_OF_RANGE, 3, "fps=0 outside 1..120"), 2) == nack
@@ -332,7 +374,7 @@ def test_spec_worked_examples() -> None:
     assert m.decode_packet(p) == m.Nack(3, 4, 3, "fps=0 outside 1..120")
     read = bytes.fromhex(SPEC_CALIB_READ)
     assert m.encode(m.CalibRead(m.CalibSource.ACTIVE, 0, m.MAX_CALIB_CHUNK), 3) == read
-    assert int.from_bytes(read[18:20], "little") == 0xF435 and int.from_bytes(read[-4:], "little") == 0x53CD677E
+    assert int.from_bytes(read[18:20], "little") == 0x3B90 and int.from_bytes(read[-4:], "little") == 0x53CD677E
 
 
 @pytest.mark.parametrize("example", [SPEC_GET_INFO, SPEC_SET_CONFIG, SPEC_NACK, SPEC_CALIB_READ],

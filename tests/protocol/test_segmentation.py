@@ -15,6 +15,13 @@ from stereocam.protocol.segmentation import PLANE_ORDER, capture_messages, plane
 W, H = 96, 40
 
 
+def assembler(**kw) -> FrameAssembler:
+    """A host assembler that negotiated limits this test's format fits in (INFO max_width/max_height)."""
+    asm = FrameAssembler(ClockMap(), **kw)
+    asm.set_limits(1280, 960)
+    return asm
+
+
 def begin(planes: Output, sequence: int = 5) -> m.FrameBegin:
     return m.FrameBegin(sequence, 0, 1000, 4000, 0, W, H, int(planes), m.FRAME_RECTIFIED, m.DISPARITY_S16_Q4, 16, 0,
                         32, -16, 0xABCD, 100.0, 48.0, 20.0, 0.1)
@@ -39,7 +46,7 @@ def test_segmented_capture_reassembles_byte_for_byte(chunk: int, planes: Output)
     end = msgs[-1]
     assert (end.left_bytes, end.right_bytes, end.disparity_bytes) == tuple(
         plane_size(p, W, H) if p in planes else 0 for p in PLANE_ORDER)
-    asm = FrameAssembler(ClockMap())
+    asm = assembler()
     for msg in Decoder().feed(b"".join(m.encode(x) for x in msgs)):  # through the real codec
         asm.on_message(m.decode_packet(msg))
     frame = asm.frames.get_nowait()
@@ -53,7 +60,7 @@ def test_segmented_capture_reassembles_byte_for_byte(chunk: int, planes: Output)
 
 def test_a_chunk_lost_on_the_way_is_missing_data() -> None:
     msgs = list(capture_messages(begin(Output.LEFT | Output.RIGHT), images(1), 1024))
-    asm = FrameAssembler(ClockMap(), deliver_incomplete=True)
+    asm = assembler(deliver_incomplete=True)
     for x in msgs[:3] + msgs[4:]:
         asm.on_message(x)
     assert asm.frames.get_nowait().status is FrameStatus.MISSING_DATA and asm.stats.incomplete == 1

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from stereocam.device_sim.process import ServedSimulator
+from stereocam.protocol.framing import VERSION_MAJOR, VERSION_MINOR
 
 
 def stereocam(*args: str, timeout: float = 180) -> subprocess.CompletedProcess:
@@ -25,9 +26,10 @@ def test_usage_lists_commands():
 def test_info():
     r = stereocam("info", "sim://?seed=2")
     assert r.returncode == 0, r.stderr
-    assert "serial SIM00002" in r.stdout and "protocol 1.1" in r.stdout and "config.num_disparities 64" in r.stdout
     assert "config.trigger_mode free_run" in r.stdout and "config.outputs left+right+disparity" in r.stdout
     assert "calibration id " in r.stdout and "source factory generation 1" in r.stdout
+    assert "serial SIM00002" in r.stdout and f"protocol {VERSION_MAJOR}.{VERSION_MINOR}" in r.stdout
+    assert "config.num_disparities 64" in r.stdout
 
 
 def test_info_on_a_dead_url_is_a_clean_error():

@@ -1,0 +1,169 @@
+"""A recording as the frame source of the simulated firmware: replay as a device.
+
+``ReplaySource`` stands where the sensor rig stands: per capture it gives what the unit sent then
+(rectified left and right, disparity, sequence number, trigger id, device time, geometry). The
+firmware around it is the same one that serves every simulator (INFO, configuration, calibration
+reads, streaming over every transport), so a host cannot tell a replay from the camera:
+
+* identity: the recorded model, serial and firmware version; the recorded configuration at boot;
+  the recorded calibration in flash (same body, so the same calibration id in every frame);
+* timing: ``realtime`` plays captures at their recorded device-time spacing, else as fast as the
+  host reads (the link's back-pressure paces it); ``loop`` starts over at the end, else the stream
+  ends; ``start`` is the first frame index (found through the file's index, nothing before read);
+* disparity: with the recorded matching configuration the recorded plane is resent as it was;
+  after the host changes any matching parameter the recorded images are matched again on board.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterator
+
+import numpy as np
+
+from stereocam.protocol import messages as m
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.errors import ConfigError
+from stereocam.protocol.params import Output, TriggerMode, defaults
+from stereocam.recording.reader import RecordedCapture, Recording
+
+from .pipeline.capture_engine import CaptureEngine, CaptureRequest
+from .pipeline.stereo import params_from_config
+
+Matcher = Callable[[dict, np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class ReplayedCapture:
+    """One capture ready for the wire: its FRAME_BEGIN and its planes (None: not sent)."""
+
+    begin: m.FrameBegin
+    planes: dict[Output, np.ndarray]
+
+
+class ReplayClock:
+    """The device clock of a replay: it reads the recorded device time of the start frame when the
+    replay opens and runs at real speed from there (what TIME_SYNC answers)."""
+
+    def __init__(self, start_us: int):
+        self.boot = time.monotonic()
+        self.epoch_us = start_us
+
+    def now_us(self) -> int:
+        return self.at(time.monotonic())
+
+    def at(self, host_monotonic: float) -> int:
+        return int((host_monotonic - self.boot) * 1e6) + self.epoch_us
+
+    def uptime_us(self) -> int:
+        return int((time.monotonic() - self.boot) * 1e6)
+
+
+class ReplaySource:
+    """Captures of a recording, in order from ``start``, for the firmware to send."""
+
+    def __init__(self, path: str | Path, *, realtime: bool = True, loop: bool = False, start: int = 0):
+        self.recording = Recording(path)
+        if not len(self.recording):
+            raise ConfigError(f"{path} holds no captures to replay")
+        if not 0 <= start < len(self.recording):
+            raise ConfigError(f"start frame {start} outside a recording of {len(self.recording)} frames")
+        d = self.recording.device
+        self.model, self.serial, self.firmware_version = d["model"], d["serial"], d["firmware_version"]
+        self.config = self.recording.config
+        stored = self.recording.calibration
+        self.calibration: StereoCalibration | None = stored.calibration if stored else None
+        self.realtime, self.loop, self.start = realtime, loop, start
+        self.clock = ReplayClock(self.recording.capture(start).info.device_time_us)
+        self._lock = threading.Lock()
+        self._iter: Iterator[RecordedCapture] | None = None
+        self._pending: RecordedCapture | None = None
+        self._t0: tuple[float, int] | None = None  # (host monotonic, device µs) the pacing counts from
+        self.sent = 0
+
+    # -- the engine's side: what to capture next, and when -------------------------------------
+    def restart(self) -> None:
+        """A new stream: play from ``start`` again (a capture taken for the old stream stays pending:
+        the firmware finds it no longer current and does not send it)."""
+        with self._lock:
+            self._iter, self._t0 = None, None
+
+    def next_request(self, epoch: int) -> CaptureRequest | None:
+        """The next capture as a request (recorded sequence and trigger id), once it is due; None at
+        the end of a recording played once."""
+        with self._lock:
+            if self._iter is None:
+                self._iter = self.recording.captures(self.start)
+            cap = next(self._iter, None)
+            if cap is None and self.loop:
+                self._iter = self.recording.captures(self.start)
+                self._t0 = None
+                cap = next(self._iter, None)
+            self._pending = cap
+        if cap is None:
+            return None
+        now = time.monotonic()
+        if self._t0 is None:
+            self._t0 = (now, cap.info.device_time_us)
+        due = self._t0[0] + (cap.info.device_time_us - self._t0[1]) / 1e6 if self.realtime else now
+        if due > now:
+            time.sleep(due - now)
+        return CaptureRequest(cap.info.sequence, cap.info.trigger_id, max(due, now), epoch)
+
+    # -- the firmware's side: the planes of that capture ---------------------------------------
+    def capture(self, req: CaptureRequest, cfg: dict[str, int], match: Matcher) -> ReplayedCapture:
+        """The capture ``req`` stands for, as ``cfg`` asks for it: the recorded disparity when the
+        matching configuration is the recorded one, else the recorded images matched again."""
+        cap = self._pending
+        assert cap is not None and cap.info.sequence == req.sequence
+        i = cap.info
+        wanted = Output(cfg["outputs"]) & Output(i.planes | (Output.DISPARITY if i.rectified else 0))
+        planes = {Output.LEFT: cap.left, Output.RIGHT: cap.right}
+        same = params_from_config(cfg) == params_from_config({**defaults(), **self.config})  # the recorded matching
+        if Output.DISPARITY in wanted and same and cap.disparity is not None:
+            planes[Output.DISPARITY] = cap.disparity
+            fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)
+        elif Output.DISPARITY in wanted:
+            planes[Output.DISPARITY] = match(cfg, cap.left, cap.right)
+            fmt = (16, cfg["min_disparity"], cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16)
+        else:
+            fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)
+        planes = {p: a for p, a in planes.items() if p in wanted and a is not None}
+        outputs = sum(int(p) for p in planes)
+        begin = m.FrameBegin(i.sequence, i.trigger_id, i.device_time_us, i.exposure_us, i.gain, i.width, i.height,
+                             outputs, m.FRAME_RECTIFIED if i.rectified else 0, m.DISPARITY_S16_Q4, *fmt,
+                             i.calibration_id, i.focal_px, i.cx, i.cy, i.baseline_m)
+        self.sent += 1
+        return ReplayedCapture(begin, planes)
+
+    def close(self) -> None:
+        self.recording.close()
+
+
+class ReplayEngine(CaptureEngine):
+    """The capture engine of a replay: free-run exposures come from the recording (its sequence
+    numbers, at its pace or as fast as the link takes them) instead of a frame-rate timer."""
+
+    def __init__(self, source: ReplaySource, produce, watchdog):
+        super().__init__(produce, watchdog)
+        self.source = source
+
+    def start(self, mode: TriggerMode, fps: int) -> None:
+        self.source.restart()
+        super().start(mode, fps)
+
+    def _next_request(self) -> CaptureRequest | None:
+        with self._cond:
+            if self._closed:
+                return None
+            if not self._streaming or self._mode != TriggerMode.FREE_RUN:
+                self._cond.wait(0.05)
+                return None
+            epoch = self.epoch
+        req = self.source.next_request(epoch)
+        if req is None:  # played once to the end: the stream stays started and sends nothing more
+            with self._cond:  # (were it stopped, a host would rightly restart it: SPEC §9)
+                self._cond.wait(0.05)
+        return req

@@ -1,0 +1,34 @@
+"""Checks on what a caller passes in: timeouts and integer parameters, with errors naming the argument."""
+from __future__ import annotations
+
+import math
+import numbers
+
+from stereocam.protocol.errors import ConfigError
+
+INT32 = (-(1 << 31), (1 << 31) - 1)  # every configuration value is an int32 on the wire (SPEC §5)
+
+
+def timeout_arg(value: object, name: str = "timeout") -> float:
+    """``value`` as float seconds: a finite, non-negative real number (bool refused), else ConfigError."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ConfigError(f"{name} must be a number of seconds, got {value!r}")
+    seconds = float(value)
+    if not math.isfinite(seconds) or seconds < 0:
+        raise ConfigError(f"{name} must be finite and non-negative, got {value!r}")
+    return seconds
+
+
+def int32_arg(value: object, name: str) -> int:
+    """``value`` as an int32: any integral number (numpy's included) or an integer-valued float."""
+    if isinstance(value, bool):
+        raise ConfigError(f"{name} must be an integer, got {value!r}")
+    if isinstance(value, numbers.Integral):
+        number = int(value)
+    elif isinstance(value, numbers.Real) and float(value).is_integer():
+        number = int(value)
+    else:
+        raise ConfigError(f"{name} must be an integer, got {value!r}")
+    if not INT32[0] <= number <= INT32[1]:
+        raise ConfigError(f"{name}={number} does not fit the protocol's int32 ({INT32[0]}..{INT32[1]})")
+    return number

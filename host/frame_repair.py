@@ -1,0 +1,82 @@
+"""Host side of frame repair (protocol 1.2, SPEC §13): which bytes of a capture are still missing,
+and the worker that asks the device to send them again without blocking the reader thread."""
+from __future__ import annotations
+
+import queue
+import threading
+from typing import Callable
+
+import numpy as np
+
+from stereocam.protocol import messages as m
+from stereocam.protocol.errors import StereoCamError
+
+REPAIR_WINDOW = 3.0  # s after a capture's end (or its successor's start) to complete it by resends
+MAX_ROUNDS = 8  # FRAME_RESEND requests per capture at most
+MAX_REPAIRING = 8  # captures under repair at once (what the reference device keeps); older ones given up
+REPAIR_THREADS = 3  # requests in flight at once, so one lost request does not stall the others
+
+Ranges = tuple[tuple[int, int, int], ...]
+
+
+class Coverage:
+    """Which bytes of each plane have arrived (duplicates from resends count once)."""
+
+    def __init__(self, sizes: dict[int, int]):
+        self._have = {p: np.zeros(n, dtype=bool) for p, n in sizes.items()}
+
+    def add(self, plane: int, offset: int, length: int) -> None:
+        self._have[plane][offset:offset + length] = True
+
+    def complete(self) -> bool:
+        return all(h.all() for h in self._have.values())
+
+    def missing(self, limit: int = m.MAX_RESEND_RANGES) -> Ranges:
+        """Up to ``limit`` (plane, offset, length) runs of bytes not yet received, in order."""
+        out: list[tuple[int, int, int]] = []
+        for plane, have in self._have.items():
+            edges = np.diff((~have).astype(np.int8), prepend=0, append=0)
+            starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+            out += [(plane, int(a), int(b - a)) for a, b in zip(starts, ends)]
+            if len(out) >= limit:
+                break
+        return tuple(out[:limit])
+
+
+class RepairWorker:
+    """Sends FRAME_RESEND requests from a few threads and reports each outcome (the reply, or None
+    when it failed) to ``on_result``; a bug there ends the link via ``on_error``."""
+
+    def __init__(self, request: Callable[[m.Message], m.Message],
+                 on_result: Callable[[int, m.FrameResent | None], None], on_error: Callable[[BaseException], None]):
+        self._request = request
+        self._on_result = on_result
+        self._on_error = on_error
+        self._jobs: queue.SimpleQueue[tuple[int, Ranges] | None] = queue.SimpleQueue()
+        self._threads = [threading.Thread(target=self._run, name="stereocam-repair", daemon=True)
+                         for _ in range(REPAIR_THREADS)]
+        for t in self._threads:
+            t.start()
+
+    def submit(self, sequence: int, ranges: Ranges) -> None:
+        self._jobs.put((sequence, ranges))
+
+    def _run(self) -> None:
+        while (job := self._jobs.get()) is not None:
+            sequence, ranges = job
+            try:
+                reply = self._request(m.FrameResend(sequence, ranges))
+            except StereoCamError:
+                reply = None
+            try:
+                self._on_result(sequence, reply if isinstance(reply, m.FrameResent) else None)
+            except Exception as exc:  # noqa: BLE001 - surfaced as the link's error, never silent
+                self._on_error(exc)
+                return
+
+    def close(self) -> None:
+        for _ in self._threads:
+            self._jobs.put(None)
+        for t in self._threads:
+            if threading.current_thread() is not t:
+                t.join(timeout=2)

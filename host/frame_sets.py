@@ -1,0 +1,142 @@
+"""Frames from several cameras matched into sets by trigger id (the logic of ``CameraGroup``).
+
+A set is emitted, in trigger-id order, once every camera has either delivered its frame for that
+id or moved past it (a camera's frames arrive in order, so a later id means this one will never
+come), or once ``deadline`` seconds have passed since the set's first frame arrived. A camera
+without its frame is named in ``missing``: a set is never completed with a frame of another
+trigger. Pulses no camera captured show as sets missing every camera.
+"""
+from __future__ import annotations
+
+import collections
+import statistics
+from dataclasses import dataclass, field
+from typing import Iterable
+
+from .frames import Frame
+
+MAX_PENDING = 256  # sets waiting for frames; beyond this the oldest is emitted as it stands
+
+
+@dataclass(frozen=True)
+class MatchedSet:
+    """One trigger: a frame per camera (by name), and the cameras whose frame did not come."""
+
+    trigger_id: int
+    frames: dict[str, Frame]
+    missing: tuple[str, ...] = ()
+
+    @property
+    def complete(self) -> bool:
+        return not self.missing
+
+    @property
+    def host_times(self) -> dict[str, float]:
+        """Each frame's capture time on the host's monotonic clock (s)."""
+        return {name: f.host_time for name, f in self.frames.items()}
+
+    @property
+    def skew(self) -> float:
+        """Spread of the capture times in this set (s; 0 with fewer than two frames)."""
+        t = list(self.host_times.values())
+        return max(t) - min(t) if len(t) > 1 else 0.0
+
+
+@dataclass
+class SetStats:
+    complete: int = 0
+    incomplete: int = 0
+    missing: collections.Counter[str] = field(default_factory=collections.Counter)  # by camera
+    late: collections.Counter[str] = field(default_factory=collections.Counter)  # frames after their set went
+    before_start: int = 0  # frames of triggers before every camera was streaming
+
+
+class SetMatcher:
+    """Not thread-safe: ``CameraGroup`` calls it under its lock."""
+
+    def __init__(self, names: Iterable[str], deadline: float):
+        self.names = tuple(names)
+        self.deadline = deadline
+        self.stats = SetStats()
+        self._pending: dict[int, dict[str, Frame]] = {}
+        self._arrived: dict[int, float] = {}  # when each pending set's first frame arrived
+        self._first: dict[str, int] = {}  # each camera's first trigger id
+        self._last: dict[str, int] = {}  # each camera's latest trigger id
+        self._since: float | None = None  # arrival of the very first frame
+        self._start: int | None = None  # the first trigger id every camera was expected to capture
+        self._emitted: int | None = None  # the last trigger id emitted
+
+    def add(self, name: str, frame: Frame, now: float) -> None:
+        tid = frame.trigger_id
+        self._first.setdefault(name, tid)
+        self._last[name] = max(self._last.get(name, tid), tid)
+        self._since = now if self._since is None else self._since
+        if self._emitted is not None and tid <= self._emitted:
+            self.stats.late[name] += 1
+            return
+        self._pending.setdefault(tid, {})[name] = frame
+        self._arrived.setdefault(tid, now)
+
+    def pop_ready(self, now: float) -> list[MatchedSet]:
+        if self._start is None and not self._find_start(now):
+            return []
+        out: list[MatchedSet] = []
+        while self._pending:
+            tid = min(self._pending)
+            frames = self._pending[tid]
+            settled = all(n in frames or self._last.get(n, tid) > tid for n in self.names)
+            if not (settled or now - self._arrived[tid] > self.deadline or len(self._pending) > MAX_PENDING):
+                break
+            first_gap = tid if self._emitted is None else self._emitted + 1
+            out.extend(self._emit(gap, {}) for gap in range(first_gap, tid))  # pulses nobody captured
+            del self._pending[tid], self._arrived[tid]
+            out.append(self._emit(tid, frames))
+        return out
+
+    def _find_start(self, now: float) -> bool:
+        """Sets begin at the first trigger every camera streamed for (or, if a camera stays silent
+        past the deadline, the first any camera did); earlier frames are discarded."""
+        if len(self._first) == len(self.names):
+            self._start = max(self._first.values())
+        elif self._pending and self._since is not None and now - self._since > self.deadline:
+            self._start = min(self._pending)
+        else:
+            return False
+        for tid in [t for t in self._pending if t < self._start]:
+            self.stats.before_start += len(self._pending.pop(tid))
+            del self._arrived[tid]
+        return True
+
+    def _emit(self, tid: int, frames: dict[str, Frame]) -> MatchedSet:
+        missing = tuple(n for n in self.names if n not in frames)
+        self._emitted = tid
+        if missing:
+            self.stats.incomplete += 1
+            self.stats.missing.update(missing)
+        else:
+            self.stats.complete += 1
+        return MatchedSet(tid, {n: frames[n] for n in self.names if n in frames}, missing)
+
+
+def sync_problems(sets: Iterable[MatchedSet], max_skew: float) -> list[str]:
+    """Why these sets are not trustworthy synchronised captures (empty: none found).
+
+    Two things are looked for: device timestamps identical across heads (separate units count on
+    their own clocks, so identical stamps did not come from them: the false-positive sync), and a
+    set whose capture times spread more than ``max_skew`` seconds, naming the camera farthest
+    from the others (a head a frame behind shows as one frame period)."""
+    problems = []
+    for s in sets:
+        if len(s.frames) < 2:
+            continue
+        stamps = [f.device_time_us for f in s.frames.values()]
+        if len(set(stamps)) < len(stamps):
+            problems.append(f"trigger {s.trigger_id}: identical device timestamps across {', '.join(s.frames)}; "
+                            "separate units have their own clocks")
+        if s.skew > max_skew:
+            times = s.host_times
+            mid = statistics.median(times.values())
+            name = max(times, key=lambda n: abs(times[n] - mid))
+            problems.append(f"trigger {s.trigger_id}: capture times spread {s.skew * 1e6:.0f} µs > "
+                            f"{max_skew * 1e6:.0f} µs; {name} is {(times[name] - mid) * 1e3:+.3f} ms from the others")
+    return problems

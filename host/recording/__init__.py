@@ -1,0 +1,11 @@
+"""Recording: captures of a unit to MCAP files in the ROS 2 profile, and reading them back.
+
+``Camera.record(path, frames=N)`` or ``record(camera, path, ...)`` writes a file; ``Recorder`` is the
+writer underneath (frames in, file out, on its own thread). Topics and message types: ``schemas``.
+"""
+from .convert import LinkCounters
+from .recorder import Recorder, RecorderStats, RecordingError, UnitDescription
+from .session import Progress, describe, record
+
+__all__ = ["record", "describe", "Recorder", "RecorderStats", "RecordingError", "UnitDescription", "LinkCounters",
+           "Progress"]

@@ -1,0 +1,218 @@
+"""The recorder: frames in on the caller's thread, an MCAP file written on its own thread.
+
+``put`` never blocks: a frame that finds the bounded queue full is not written and counted as a
+recorder drop, apart from the camera's and the link's own drops; every CaptureInfo message
+carries all those counters so far, and the summary metadata the final ones.
+"""
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from mcap.well_known import MessageEncoding, SchemaEncoding
+
+import stereocam
+from stereocam.calibration_io import StoredCalibration
+from stereocam.frames import Frame
+from stereocam.protocol.errors import StereoCamError
+
+from . import convert, schemas
+from .mcapwriter import DEFAULT_CHUNK_BYTES, DEFAULT_LEVEL, ChunkedWriter
+
+DEFAULT_QUEUE_BYTES = 512 << 20
+FRAME_INDEX = "stereocam/frame_index"  # attachment: int64 log time (ns) of every capture, in order
+FRAME_INDEX_TYPE = "application/x-stereocam-frame-index-int64le"
+
+
+class RecordingError(StereoCamError):
+    """The recording could not be written (disk full, file not writable, ...)."""
+
+
+@dataclass(frozen=True)
+class UnitDescription:
+    """What the file says about the unit: INFO, configuration, stored calibration."""
+
+    info: dict[str, str]
+    config: dict[str, int]
+    calibration: StoredCalibration | None
+
+
+@dataclass
+class RecorderStats:
+    frames: int = 0  # captures written
+    recorder_dropped: int = 0  # captures the writer could not take (queue full)
+    camera_bytes: int = 0  # plane bytes as the camera sent them, written
+    file_bytes: int = 0  # bytes in the file so far (compressed)
+    counters: convert.LinkCounters = field(default_factory=convert.LinkCounters)
+
+
+def _frame_bytes(frame: Frame) -> int:
+    return sum(p.nbytes for p in (frame.left, frame.right, frame.disparity) if p is not None)
+
+
+class Recorder:
+    """Write captures of one unit to an MCAP file (ROS 2 profile). ``put`` frames, then ``close``."""
+
+    def __init__(self, path: str | Path, unit: UnitDescription, *, queue_bytes: int = DEFAULT_QUEUE_BYTES,
+                 level: int = DEFAULT_LEVEL, threads: int = 2, chunk_bytes: int = DEFAULT_CHUNK_BYTES,
+                 clock_offset_ns: int | None = None, extra_metadata: dict[str, dict[str, str]] | None = None):
+        """``clock_offset_ns``: host wall clock minus monotonic clock for the stamps (default: now;
+        re-writing a recording passes the original's so every stamp stays the same)."""
+        self.path = Path(path)
+        try:
+            self._writer = ChunkedWriter(self.path, library=f"stereocam {stereocam.__version__}", level=level,
+                                         threads=threads, chunk_bytes=chunk_bytes)
+        except OSError as exc:
+            raise RecordingError(f"cannot write {self.path}: {exc}") from exc
+        self.unit = unit
+        self.stats = RecorderStats()
+        self.clock_offset_ns = time.time_ns() - time.monotonic_ns() if clock_offset_ns is None else clock_offset_ns
+        self._encoders = {name: schemas.encoder(name) for name in set(schemas.TOPICS.values())}
+        ids = {name: self._writer.register_schema(name, SchemaEncoding.ROS2, schemas.msgdef(name).encode())
+               for name in self._encoders}
+        self._channels = {topic: self._writer.register_channel(topic, MessageEncoding.CDR, ids[name])
+                          for topic, name in schemas.TOPICS.items()}
+        self._write_unit(unit)
+        for name, data in (extra_metadata or {}).items():
+            self._writer.add_metadata(name, data)
+        self._infos: dict[tuple[int, int, int, bool], tuple[dict, dict]] = {}
+        self._log_times: list[int] = []
+        self._upstream_dropped = 0
+        self._queue: collections.deque[tuple[Frame, convert.LinkCounters]] = collections.deque()
+        self._queued_bytes = 0
+        self._queue_bytes = queue_bytes
+        self._cond = threading.Condition()
+        self._closing = False
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="stereocam-recorder", daemon=True)
+        self._thread.start()
+
+    def _write_unit(self, unit: UnitDescription) -> None:
+        w = self._writer
+        w.add_metadata("stereocam.device", unit.info)
+        w.add_metadata("stereocam.config", {k: str(v) for k, v in unit.config.items()})
+        cal = unit.calibration
+        if cal is not None:
+            w.add_metadata("stereocam.calibration", {
+                "body_hex": cal.body.hex(), "source": cal.source, "generation": str(cal.generation),
+                "calibration_id": str(cal.calibration_id)})
+        w.add_metadata("stereocam.recording", {
+            "clock_offset_ns": str(self.clock_offset_ns), "sdk_version": stereocam.__version__,
+            "stamps": "header stamps and log times: the capture's device time mapped to the host's monotonic "
+                      "clock, plus clock_offset_ns (host wall clock at the start of the recording)",
+            "disparity": "stereo_msgs/DisparityImage 32FC1 in px, delta_d 1/16: round(d*16) is the camera's "
+                         "int16 Q4 plane; invalid = min_disparity - 1"})
+
+    # -- caller's side ------------------------------------------------------------------------
+    def put(self, frame: Frame, counters: convert.LinkCounters = convert.LinkCounters()) -> bool:
+        """Queue ``frame`` for writing; False (and a recorder drop) if the queue is full."""
+        if self._error is not None:
+            raise RecordingError(f"writing {self.path} failed: {self._error}") from self._error
+        size = _frame_bytes(frame)
+        with self._cond:
+            if self._closing:
+                raise RecordingError(f"recorder for {self.path} is closed")
+            if self._queued_bytes + size > self._queue_bytes and self._queue:
+                self.stats.recorder_dropped += 1
+                return False
+            self._queue.append((frame, counters))
+            self._queued_bytes += size
+            self._cond.notify()
+        return True
+
+    def put_wait(self, frame: Frame, counters: convert.LinkCounters = convert.LinkCounters()) -> None:
+        """Queue ``frame``, waiting for room (benchmarks and re-writing files: nothing is dropped)."""
+        with self._cond:
+            while self._queue and self._queued_bytes + _frame_bytes(frame) > self._queue_bytes:
+                self._cond.wait(0.1)
+        self.put(frame, counters)
+
+    @property
+    def backlog_bytes(self) -> int:
+        return self._queued_bytes
+
+    def close(self) -> RecorderStats:
+        """Write what is queued, then the summary; returns the final figures."""
+        with self._cond:
+            self._closing = True
+            self._cond.notify_all()
+        self._thread.join()
+        if self._error is not None:
+            raise RecordingError(f"writing {self.path} failed: {self._error}") from self._error
+        return self.stats
+
+    def __enter__(self) -> "Recorder":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- writer thread ------------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            while True:
+                with self._cond:
+                    while not self._queue and not self._closing:
+                        self._cond.wait()
+                    if not self._queue:
+                        break
+                    frame, counters = self._queue.popleft()
+                self._write(frame, counters)
+                with self._cond:
+                    self._queued_bytes -= _frame_bytes(frame)
+                    self._cond.notify_all()
+            self._finish()
+        except BaseException as exc:  # noqa: BLE001 - reported to the caller by put/close
+            self._error = exc
+            self._writer.abandon()
+
+    def _write(self, frame: Frame, counters: convert.LinkCounters) -> None:
+        ns = int(frame.host_time * 1e9) + self.clock_offset_ns
+        if self._log_times and ns <= self._log_times[-1]:
+            ns = self._log_times[-1] + 1  # log times stay unique and increasing: one per capture
+        self._upstream_dropped = counters.recorder_dropped  # an earlier writer's drops (re-written files)
+        counters = convert.LinkCounters(**{**counters.__dict__, "recorder_dropped": counters.recorder_dropped
+                                           + self.stats.recorder_dropped})
+        msgs = [(schemas.CAPTURE, convert.capture_info(ns, frame, counters))]
+        key = (frame.geometry.calibration_id, frame.width, frame.height, frame.rectified)
+        if key not in self._infos:
+            cal = self.unit.calibration.calibration if self.unit.calibration and key[0] else None
+            self._infos[key] = convert.camera_infos(cal, frame.width, frame.height, frame.rectified)
+        for topic, body, side in ((schemas.LEFT_INFO, self._infos[key][0], "left"),
+                                  (schemas.RIGHT_INFO, self._infos[key][1], "right")):
+            msgs.append((topic, {**body, "header": convert.header(ns, schemas.FRAME_IDS[side])}))
+        for topic, body in msgs:
+            self._writer.add_message(self._channels[topic], ns, [self._encoders[schemas.TOPICS[topic]](body)], ns,
+                                     frame.sequence)
+        blobs = []
+        for topic, side, plane in ((schemas.LEFT, "left", frame.left), (schemas.RIGHT, "right", frame.right)):
+            if plane is not None:
+                body = convert.image(ns, schemas.FRAME_IDS[side], plane)
+                blobs.append((topic, body, body, convert.blob(plane)))
+        if frame.disparity is not None:
+            body = convert.disparity(ns, frame)
+            blobs.append((schemas.DISPARITY_TOPIC, body, body["image"], convert.blob(convert.disparity_to_float(frame))))
+        for topic, body, slot, data in blobs:
+            encoded = schemas.encode_with_blob(self._encoders[schemas.TOPICS[topic]], body, slot, data)
+            self._writer.add_message(self._channels[topic], ns, encoded, ns, frame.sequence)
+        self._log_times.append(ns)
+        st = self.stats
+        st.frames += 1
+        st.camera_bytes += _frame_bytes(frame)
+        st.file_bytes = self._writer.position
+        st.counters = counters
+
+    def _finish(self) -> None:
+        self._writer.flush()
+        self._writer.add_attachment(FRAME_INDEX, FRAME_INDEX_TYPE, np.asarray(self._log_times, "<i8").tobytes())
+        st = self.stats
+        self._writer.add_metadata("stereocam.summary", {
+            "frames": str(st.frames), "camera_bytes": str(st.camera_bytes),
+            **{k: str(v) for k, v in asdict(st.counters).items()},
+            "recorder_dropped": str(self._upstream_dropped + st.recorder_dropped)})
+        self._writer.finish()
+        st.file_bytes = self._writer.position

@@ -1,0 +1,92 @@
+"""Record a live camera: read what the file says about the unit, stream, hand frames to a Recorder."""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable
+
+from stereocam.protocol.errors import CameraTimeoutError, ConfigError
+
+from .convert import LinkCounters
+from .recorder import Recorder, RecorderStats, UnitDescription
+
+if TYPE_CHECKING:
+    from stereocam.camera import Camera
+
+PROGRESS_PERIOD = 0.5  # seconds between progress reports
+
+
+@dataclass(frozen=True)
+class Progress:
+    frames: int
+    seconds: float
+    fps: float
+    camera_mbps: float  # plane bytes per second, as the camera sends them
+    file_mbps: float
+    counters: LinkCounters  # drops so far by where they happened
+    backlog_mb: float  # queued for the writer
+
+    def line(self) -> str:
+        c = self.counters
+        return (f"{self.frames} frames  {self.seconds:6.1f} s  {self.fps:5.1f} fps  {self.camera_mbps:6.1f} MB/s in  "
+                f"{self.file_mbps:6.1f} MB/s to disk  drops: sequence gaps {c.link_lost} (device skipped "
+                f"{c.device_dropped}) incomplete {c.link_incomplete} host {c.host_queue_overflow} recorder "
+                f"{c.recorder_dropped}  "
+                f"backlog {self.backlog_mb:.0f} MB")
+
+
+def describe(camera: "Camera") -> UnitDescription:
+    """INFO, configuration and the stored calibration of ``camera``, read now."""
+    info = {k: ".".join(map(str, v)) if isinstance(v, tuple) else str(v) for k, v in asdict(camera.info()).items()}
+    return UnitDescription(info, camera.config(), camera.read_calibration())
+
+
+def counters_of(camera: "Camera") -> LinkCounters:
+    """The camera's and the link's drop counters so far (the recorder adds its own)."""
+    st = camera.assembler.stats
+    status = camera.last_status
+    return LinkCounters(st.lost, st.incomplete + st.size_mismatch + st.device_errors, st.queue_overflow,
+                        status.counters.get("frames_dropped", 0) if status else 0)
+
+
+def record(camera: "Camera", path: str | Path, *, frames: int | None = None, seconds: float | None = None,
+           progress: Callable[[Progress], None] | None = None, **recorder_options) -> RecorderStats:
+    """Record ``camera`` to ``path`` until ``frames`` captures or ``seconds`` have gone by (or the
+    stream stops); starts streaming if it was not, and stops it again then."""
+    if frames is None and seconds is None:
+        raise ConfigError("record needs a limit: frames or seconds")
+    started_here = not camera._streaming
+    recorder = Recorder(path, describe(camera), **recorder_options)
+    t0 = time.monotonic()
+    next_report = t0 + PROGRESS_PERIOD
+    n = 0
+    try:
+        if started_here:
+            camera.start()
+        while (frames is None or n < frames) and (seconds is None or time.monotonic() - t0 < seconds):
+            try:
+                frame = camera.get_frame(timeout=max(camera.timeout, 2.0))
+            except CameraTimeoutError:
+                break
+            n += 1
+            recorder.put(frame, counters_of(camera))
+            now = time.monotonic()
+            if progress is not None and now >= next_report:
+                next_report = now + PROGRESS_PERIOD
+                progress(_progress(recorder, n, now - t0))
+    finally:
+        if started_here and camera.link.alive:
+            camera.stop()
+        stats = recorder.close()
+    if progress is not None:
+        progress(_progress(recorder, n, time.monotonic() - t0))
+    return stats
+
+
+def _progress(recorder: Recorder, frames: int, dt: float) -> Progress:
+    st = recorder.stats
+    dt = max(dt, 1e-9)
+    return Progress(frames, dt, frames / dt, st.camera_bytes / dt / 1e6, st.file_bytes / dt / 1e6,
+                    LinkCounters(**{**st.counters.__dict__, "recorder_dropped": st.recorder_dropped}),
+                    recorder.backlog_bytes / 1e6)

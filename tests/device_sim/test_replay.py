@@ -1,0 +1,125 @@
+"""Replay as a device: through ``replay://`` and a served simulator, the host gets the recorded unit
+and byte-identical planes, sequence numbers and device timestamps; seeking reads only the index."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import stereocam
+from stereocam.device_sim.matching import Matcher
+from stereocam.device_sim.pipeline.stereo import params_from_config
+from stereocam.recording.reader import Recording
+from stereocam.tools.bench_record import synthetic_recording
+
+N = 8
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    path = tmp_path_factory.mktemp("replay") / "run.mcap"
+    with stereocam.open("sim://?seed=6", timeout=3.0) as cam:
+        cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=15)
+        cam.record(path, frames=N)
+    with Recording(path) as rec:
+        return path, list(rec.captures()), rec.calibration
+
+
+def _same(frames, captures):
+    for f, c in zip(frames, captures, strict=True):
+        assert (f.sequence, f.trigger_id, f.device_time_us) == (c.info.sequence, c.info.trigger_id,
+                                                                  c.info.device_time_us)
+        assert f.left.tobytes() == c.left.tobytes() and f.right.tobytes() == c.right.tobytes()
+        assert f.disparity.tobytes() == c.disparity.tobytes()
+
+
+def test_replay_url_is_the_recorded_unit(recording):
+    path, caps, calibration = recording
+    with stereocam.open(f"replay://{path}?speed=fast", timeout=3.0) as cam:
+        info = cam.info()
+        assert (info.model, info.serial) == ("STOC-SIM", "SIM00006")
+        assert cam.config()["block_size"] == 11 and cam.config()["width"] == 320
+        assert cam.read_calibration().body == calibration.body
+        cam.start()
+        frames = [cam.get_frame(timeout=10.0) for _ in range(N)]
+        _same(frames, caps)
+        with pytest.raises(stereocam.CameraTimeoutError):  # played once: the stream ends
+            cam.get_frame(timeout=0.5)
+        assert frames[0].geometry.calibration_id == calibration.calibration_id and cam.geometry_mismatches == 0
+
+
+def test_start_index_and_loop(recording):
+    path, caps, _ = recording
+    with stereocam.open(f"replay://{path}?speed=fast&start={N - 2}&loop=1", timeout=3.0) as cam:
+        cam.start()
+        frames = [cam.get_frame(timeout=10.0) for _ in range(5)]
+    _same(frames, [caps[N - 2], caps[N - 1], caps[N - 2], caps[N - 1], caps[N - 2]])
+
+
+def test_recorded_speed(recording):
+    path, caps, _ = recording
+    with stereocam.open(f"replay://{path}", timeout=3.0) as cam:
+        cam.start()
+        arrivals = []
+        for _ in range(4):
+            cam.get_frame(timeout=10.0)
+            arrivals.append(time.monotonic())
+    span = (caps[3].info.device_time_us - caps[0].info.device_time_us) / 1e6
+    assert arrivals[3] - arrivals[0] >= 0.9 * span  # not sooner than recorded (later only under load)
+
+
+def test_other_matching_config_rematches_on_board(recording):
+    path, caps, _ = recording
+    with stereocam.open(f"replay://{path}?speed=fast", timeout=3.0) as cam:
+        cam.configure(block_size=21)
+        cam.start()
+        f = cam.get_frame(timeout=10.0)
+    c = caps[0]
+    assert f.left.tobytes() == c.left.tobytes() and f.sequence == c.info.sequence
+    assert not np.array_equal(f.disparity, c.disparity)
+    with Recording(path) as rec:
+        cfg = rec.config | {"block_size": 21}
+    params = params_from_config(cfg)
+    expected = Matcher(c.left.shape, params).match(c.left, c.right)
+    assert np.array_equal(f.disparity, expected)
+
+
+def test_served_replay_over_tcp(recording):
+    path, caps, _ = recording
+    proc = subprocess.Popen([sys.executable, "-m", "stereocam.device_sim", "--serve", "tcp:127.0.0.1:0", "--replay",
+                             str(path), "--fast", "--start", "3"], stdout=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        url = proc.stdout.readline().strip()
+        assert url.startswith("socket://")
+        with stereocam.open(url, timeout=3.0) as cam:
+            assert cam.info().serial == "SIM00006"
+            cam.start()
+            frames = [cam.get_frame(timeout=10.0) for _ in range(N - 3)]
+        _same(frames, caps[3:])
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def _bytes_read() -> int:
+    with open("/proc/self/io") as f:
+        return int(next(line for line in f if line.startswith("rchar")).split()[1])
+
+
+def test_seek_reads_only_the_index_and_one_chunk(tmp_path):
+    path = tmp_path / "long.mcap"
+    synthetic_recording(path, 10_000)
+    with Recording(path) as rec:
+        assert len(rec) == 10_000
+        biggest = max(c.chunk_length for c in rec.summary.chunk_indexes)
+        assert path.stat().st_size > 20 * biggest
+        for i in (9_999, 5_000, 17):
+            before = _bytes_read()
+            cap = rec.capture(i)
+            assert cap.info.sequence == i + 1 and cap.info.device_time_us == 1_000_000 + i * 33_333
+            assert _bytes_read() - before < 2 * biggest

@@ -1,0 +1,108 @@
+"""A clumsy caller gets a typed error naming what was wrong, never a hang or a raw exception (issue 9, 7 and 10)."""
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+import pytest
+
+import stereocam
+
+
+def _returns_within(seconds: float, fn, *args, **kwargs):
+    """Run ``fn`` in a thread; fail the test if it has not returned in time (a hang, not an error)."""
+    box: dict[str, object] = {}
+
+    def run() -> None:
+        try:
+            box["value"] = fn(*args, **kwargs)
+        except BaseException as exc:  # noqa: BLE001 - handed back to the test
+            box["error"] = exc
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    t.join(seconds)
+    assert not t.is_alive(), f"{fn.__name__}{args}{kwargs} did not return within {seconds} s"
+    if "error" in box:
+        raise box["error"]  # type: ignore[misc]
+    return box.get("value")
+
+
+@pytest.fixture(scope="module")
+def cam():
+    camera = stereocam.open("sim://?seed=5", timeout=1.0)
+    yield camera
+    camera.close()
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -1, -0.5, "x", None.__class__, True])
+def test_get_frame_timeout_must_be_a_finite_non_negative_number(cam, bad):
+    with pytest.raises(stereocam.ConfigError, match="timeout") as err:
+        _returns_within(5, cam.get_frame, timeout=bad)
+    assert isinstance(err.value, ValueError)
+
+
+def test_get_frame_zero_timeout_polls(cam):
+    with pytest.raises(stereocam.CameraTimeoutError):
+        _returns_within(5, cam.get_frame, timeout=0)
+
+
+@pytest.mark.parametrize("call", ["open", "request", "reconnect"])
+def test_other_timeouts_are_checked_too(cam, call):
+    from stereocam.protocol import messages as m
+
+    fns = {"open": lambda: stereocam.open("sim://?seed=5", timeout=math.nan),
+           "request": lambda: cam.request(m.GetInfo(), timeout=-1),
+           "reconnect": lambda: cam.reconnect(timeout=math.inf)}
+    with pytest.raises(stereocam.ConfigError, match="timeout"):
+        _returns_within(5, fns[call])
+    assert cam.link.alive
+
+
+@pytest.mark.parametrize("value", [2**31, -2**31 - 1, 10**20])
+def test_configure_value_beyond_the_wire_names_the_parameter(cam, value):
+    with pytest.raises(stereocam.ConfigError, match="width"):
+        cam.configure(width=value)
+
+
+def test_configure_accepts_numpy_integers(cam):
+    assert cam.configure(width=np.int64(320), height=np.uint16(240))["width"] == 320
+
+
+@pytest.mark.parametrize("value", [np.float64(1.5), "640", None, True, 640.5])
+def test_configure_refuses_non_integers_naming_the_parameter(cam, value):
+    with pytest.raises(stereocam.ConfigError, match="width"):
+        cam.configure(width=value)
+
+
+@pytest.mark.parametrize("url,problem", [
+    ("sim://?seed=-1", "seed"), ("sim://?seed=12345678901234567890", "seed"), ("sim://?seed=", "seed"),
+    ("sim://?seed=1&seed=2", "seed"), ("sim://?seed=x", "seed"),
+    ("socket://127.0.0.1", "port"), ("socket://127.0.0.1:99999", "port"), ("socket://127.0.0.1:x", "port"),
+    ("socket://:80x", "port"), ("rfc2217://host", "port"),
+])
+def test_malformed_urls_get_a_typed_error_naming_the_problem(url, problem):
+    with pytest.raises(stereocam.ConfigError, match=problem):
+        _returns_within(30, stereocam.open, url, timeout=0.5)
+
+
+def test_a_url_pyserial_chokes_on_stays_in_the_error_tree():
+    with pytest.raises(stereocam.StereoCamError, match="loop://"):
+        stereocam.open("loop://?logging=nonsense", timeout=0.5)
+
+
+@pytest.mark.parametrize("source", ["bogus", None, 3])
+def test_read_calibration_source_is_checked(cam, source):
+    with pytest.raises(stereocam.ConfigError, match="source"):
+        cam.read_calibration(source)
+
+
+@pytest.mark.parametrize("calibration", [None, "cal", b"\x00" * 248])
+def test_write_calibration_needs_a_calibration(cam, calibration):
+    with pytest.raises(stereocam.ConfigError, match="StereoCalibration"):
+        cam.write_calibration(calibration)
+
+
+def test_write_calibration_target_is_checked(cam):
+    with pytest.raises(stereocam.ConfigError, match="target"):
+        cam.write_calibration(cam.read_calibration().calibration, target="bogus")

@@ -1,0 +1,139 @@
+"""CameraGroup: three heads on one trigger line, matched sets by trigger id, missing frames named,
+capture times checked against the simulator's truth (in-process and over TCP, each head its own
+process)."""
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from pathlib import Path
+
+import pytest
+
+import stereocam
+from stereocam.device_sim import SimulatedCamera, TriggerLine
+from stereocam.device_sim.process import ServedSimulator
+from stereocam.frame_sets import MatchedSet, sync_problems
+
+pytestmark = pytest.mark.sim_only("checks capture times against the simulator's truth")
+
+SEEDS = (4, 14, 25)  # drifts of -46, +50, +45 ppm
+SMALL = dict(width=160, height=120, outputs=int(stereocam.Output.LEFT))
+PERIOD = 0.06  # the test's own pulses: slow enough for a loaded machine to keep every one
+TRUTH_TOL = 1e-3  # capture time vs true exposure instant (the bench measures the real figure)
+
+
+@pytest.fixture
+def heads():
+    line = TriggerLine()
+    sims = [SimulatedCamera(serial=f"GRP{s}", seed=s, trigger_line=line) for s in SEEDS]
+    yield line, sims
+    for sim in sims:
+        sim.close()
+
+
+def pulse(line, n: int) -> None:
+    for _ in range(n):
+        line.pulse()
+        time.sleep(PERIOD)
+
+
+def collect(group: stereocam.CameraGroup, n: int) -> list[MatchedSet]:
+    return [group.get_set(timeout=20) for _ in range(n)]
+
+
+def check_against_truth(sets: list[MatchedSet], truth) -> None:
+    """Each frame belongs to its set's trigger and was stamped by its own head's clock: its
+    host_time is its own true exposure instant, and the heads' device clocks disagree."""
+    for s in sets:
+        assert all(f.trigger_id == s.trigger_id for f in s.frames.values())
+        for name, f in s.frames.items():
+            assert abs(f.host_time - truth(name, f.sequence)) < TRUTH_TOL, (name, s.trigger_id)
+    assert sync_problems(sets, max_skew=TRUTH_TOL) == []
+
+
+def group_urls(sims) -> list[str]:
+    return [f"sim://?serial={sim.serial}" for sim in sims]
+
+
+def test_three_heads_in_process_stream_matched_sets(heads):
+    line, sims = heads
+    by_name = {sim.serial: sim for sim in sims}
+    with stereocam.CameraGroup(group_urls(sims), config=SMALL, settle=0.5) as group:
+        pulse(line, 12)
+        sets = collect(group, 12)
+        assert set(group.clock_errors()) == set(by_name)
+        assert all(e.samples > 8 and 0 < e.sigma < TRUTH_TOL for e in group.clock_errors().values())
+    assert [s.trigger_id for s in sets] == list(range(sets[0].trigger_id, sets[0].trigger_id + 12))
+    assert all(s.complete and list(s.frames) == list(by_name) for s in sets)
+    check_against_truth(sets, lambda name, seq: by_name[name].truth.exposure_instant(seq))
+    for s in sets:  # separate units: one pulse, three different device timestamps, one host instant
+        assert len({f.device_time_us for f in s.frames.values()}) == 3
+
+
+def test_a_missed_frame_is_reported_by_camera_and_trigger_id(heads):
+    line, sims = heads
+    with stereocam.CameraGroup(group_urls(sims), config=SMALL, settle=0.2, deadline=0.5) as group:
+        pulse(line, 3)
+        sims[1].trigger_input.miss_next = 1  # this head misses the next edge
+        pulse(line, 4)
+        sets = collect(group, 7)
+        stats = group.stats
+    (missed,) = sims[1].trigger_input.missed
+    incomplete = [s for s in sets if not s.complete]
+    assert [(s.trigger_id, s.missing) for s in incomplete] == [(missed, (sims[1].serial,))]
+    assert set(incomplete[0].frames) == {sims[0].serial, sims[2].serial}  # never filled from another trigger
+    assert all(f.trigger_id == s.trigger_id for s in sets for f in s.frames.values())
+    assert stats.missing == {sims[1].serial: 1} and stats.incomplete == 1 and stats.complete == 6
+
+
+def test_a_head_one_frame_behind_fails_the_sync_check(heads):
+    line, sims = heads
+    sims[2].trigger_input.delay_frames = 1  # exposes each pulse's capture on the next pulse
+    with stereocam.CameraGroup(group_urls(sims), config=SMALL, settle=0.2) as group:
+        pulse(line, 6)
+        sets = [s for s in collect(group, 4) if s.complete]
+    problems = sync_problems(sets, max_skew=TRUTH_TOL)
+    assert sets and len(problems) == len(sets)
+    lag_ms = float(problems[0].split(f"{sims[2].serial} is ")[1].split(" ms")[0])
+    assert all(sims[2].serial in p for p in problems) and PERIOD * 1e3 <= lag_ms < PERIOD * 1e3 + 30  # one pulse later
+
+
+def test_identical_timestamps_across_separate_heads_fail_the_sync_check(heads):
+    """The false-positive sync: stamps that agree exactly did not come from the heads' own clocks."""
+    line, sims = heads
+    with stereocam.CameraGroup(group_urls(sims), config=SMALL, settle=0.2) as group:
+        pulse(line, 3)
+        sets = collect(group, 3)
+    assert sync_problems(sets, max_skew=TRUTH_TOL) == []
+    forged = []
+    for s in sets:  # every head stamped as if by the first head's clock
+        first = next(iter(s.frames.values()))
+        frames = {n: dataclasses.replace(f, device_time_us=first.device_time_us, host_time=first.host_time)
+                  for n, f in s.frames.items()}
+        forged.append(dataclasses.replace(s, frames=frames))
+    problems = sync_problems(forged, max_skew=TRUTH_TOL)
+    assert len(problems) == len(sets) and all("identical device timestamps" in p for p in problems)
+
+
+@pytest.mark.slow
+def test_three_heads_served_over_tcp_on_a_shared_line(tmp_path: Path):
+    line = f"test-{os.getpid()}"
+    logs = {f"SIM{s:05d}": tmp_path / f"{s}.truth" for s in SEEDS}
+    servers = []
+    try:
+        for i, s in enumerate(SEEDS):
+            extra = ["--trigger-line", line, "--truth-log", str(logs[f"SIM{s:05d}"])]
+            servers.append(ServedSimulator("tcp:127.0.0.1:0", seed=s, extra=extra + (["--trigger-master", "15"] if i == 0 else [])))
+        with stereocam.CameraGroup([srv.url for srv in servers], config=SMALL, settle=0.5, timeout=5.0) as group:
+            sets = collect(group, 30)
+    finally:
+        for srv in servers:
+            srv.stop()
+    truth = {name: dict((int(a), float(b)) for a, b in (ln.split() for ln in path.read_text().splitlines()))
+             for name, path in logs.items()}
+    complete = [s for s in sets if s.complete]
+    assert len(complete) >= 20  # a loaded machine may drop a few; those sets name who missed
+    assert all(s.missing and set(s.missing) | set(s.frames) == set(logs) for s in sets if not s.complete)
+    assert [s.trigger_id for s in sets] == list(range(sets[0].trigger_id, sets[0].trigger_id + 30))
+    check_against_truth(complete, lambda name, seq: truth[name][seq])

@@ -1,0 +1,35 @@
+"""``stereocam demo --heads N`` and ``stereocam bench sync`` (short runs: the figures are the bench's job)."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from stereocam.tools import bench_sync, demo
+
+
+def test_demo_with_three_heads_prints_sets_and_saves_each_head(tmp_path, capsys):
+    assert demo.main(["--heads", "3", "--seconds", "2", "--fps", "8", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    line = [ln for ln in out.splitlines() if ln.startswith("summary:")][0]
+    fields = dict(kv.split("=") for kv in line.split()[1:] if "=" in kv)
+    assert int(fields["complete"]) >= 1 and int(fields["sets"]) == int(fields["complete"]) + int(fields["incomplete"])
+    assert out.count("clock map error estimate") == 3
+    assert {p.name.split("_t")[0] for p in tmp_path.glob("*_left.png")} == {"demo_HEAD1", "demo_HEAD2", "demo_HEAD3"}
+
+
+@pytest.mark.slow
+def test_bench_sync_reports_skew_and_clock_errors_per_transport(capsys):
+    out = bench_sync.main(["--seconds", "3", "--transports", "inprocess,tcp"])
+    assert set(out) == {"inprocess", "tcp"}
+    for fig in out.values():
+        assert fig["sets"] > 0 and 0 <= fig["skew_p50_us"] <= fig["skew_p99_us"] <= fig["skew_max_us"]
+        assert sum(k.endswith("_err_sigma_us") for k in fig) == 3
+    assert "clock map error vs truth" in capsys.readouterr().out
+
+
+def test_trigger_master_needs_a_line():
+    r = subprocess.run([sys.executable, "-m", "stereocam.device_sim", "--serve", "tcp:127.0.0.1:0",
+                        "--trigger-master", "30"], capture_output=True, text=True, timeout=60)
+    assert r.returncode != 0 and "--trigger-line" in r.stderr

@@ -1,0 +1,106 @@
+"""``stereocam rematch RECORDINGS... --out DIR``: match recorded images again, on a Dask cluster.
+
+Each recording is split into frame ranges that follow its chunks; every range is one task (re-match
+its frames into a part file), and one task per recording joins the parts into DIR/NAME.mcap: the
+original images, camera infos and capture metadata beside the new disparity, and the new matching
+configuration in the file's configuration (so replaying it resends the new disparity). Tasks are
+retried; outputs are written under temporary names and renamed, so a killed worker loses nothing.
+
+By default a local cluster of worker processes (nothing to set up); ``--scheduler tcp://HOST:PORT``
+uses a running Dask scheduler (its workers need stereocam installed and must see the same paths).
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from pathlib import Path
+
+from stereocam.device_sim.pipeline.stereo import params_from_config
+from stereocam.protocol.errors import ConfigError
+from stereocam.protocol.params import BY_NAME
+from stereocam.recording.reader import Recording
+from stereocam.tools import rematch_tasks as tasks
+from stereocam.tools.record import _setting
+
+RETRIES = 3
+
+
+def _client(scheduler: str | None, workers: int):
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        return Client(scheduler, timeout="10s"), None
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.WARNING,  # the cluster's own INFO lines are not ours to print
+                           env={"NUMBA_NUM_THREADS": "1"})  # one core per worker: scale by processes
+    return Client(cluster), cluster
+
+
+def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, algorithm: str = "bm",
+            scheduler: str | None = None, workers: int = 2, chunks_per_task: int = 1, client=None) -> dict:
+    """Re-match ``recordings`` into ``out``; returns frames, seconds and the output files."""
+    if algorithm not in tasks.ALGORITHMS:
+        raise ConfigError(f"unknown algorithm {algorithm!r}; known: {', '.join(tasks.ALGORITHMS)}")
+    unknown = set(overrides) - set(BY_NAME)
+    if unknown:
+        raise ConfigError(f"unknown parameter(s) {sorted(unknown)}")
+    why = [w for k, v in overrides.items() if (w := BY_NAME[k].check(v))]
+    if why:
+        raise ConfigError("; ".join(why))
+    for path in recordings:
+        with Recording(path) as rec:  # a bad file or a bad combination fails here, before any work
+            try:
+                params_from_config(rec.config | overrides)
+            except ValueError as exc:
+                raise ConfigError(f"{path}: {exc}") from exc
+    out.mkdir(parents=True, exist_ok=True)
+    own, cluster = (None, None) if client is not None else _client(scheduler, workers)
+    client = client or own
+    t0 = time.perf_counter()
+    try:
+        joins = []
+        for path in recordings:
+            src = str(path.resolve())
+            parts, futures = [], []
+            for a, b in tasks.plan(src, chunks_per_task):
+                part = str((out / f".{path.stem}.{a:08d}-{b:08d}.part.mcap").resolve())
+                parts.append(part)
+                futures.append(client.submit(tasks.rematch_range, src, a, b, overrides, part, retries=RETRIES,
+                                             key=f"rematch-{path.stem}-{a}-{b}-{time.time_ns()}"))
+            provenance = {"algorithm": algorithm, **{k: str(v) for k, v in overrides.items()}}
+            joins.append(client.submit(_join_after, futures, src, parts, str((out / path.name).resolve()), provenance,
+                                       retries=RETRIES, key=f"join-{path.stem}-{time.time_ns()}"))
+        frames = sum(client.gather(joins))
+    finally:
+        if own is not None:
+            own.close()
+        if cluster is not None:
+            cluster.close()
+    dt = time.perf_counter() - t0
+    return {"frames": frames, "seconds": dt, "fps": frames / dt, "outputs": [out / p.name for p in recordings]}
+
+
+def _join_after(done: list[tuple[int, float]], source: str, parts: list[str], out: str, provenance: dict) -> int:
+    """Join once every range of the recording is re-matched (``done``: their results)."""
+    return tasks.join(source, parts, out, provenance)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="stereocam rematch", description=__doc__.splitlines()[0])
+    ap.add_argument("recordings", nargs="+", type=Path)
+    ap.add_argument("--out", type=Path, required=True, help="folder for the re-matched recordings")
+    ap.add_argument("--algorithm", default="bm", help=f"matcher: {', '.join(tasks.ALGORITHMS)} (default bm)")
+    ap.add_argument("--set", type=_setting, action="append", default=[], metavar="NAME=VALUE",
+                    help="matching parameter to change from the recorded configuration (repeatable)")
+    ap.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="a running Dask scheduler")
+    ap.add_argument("--workers", type=int, default=2, help="local worker processes (without --scheduler)")
+    ap.add_argument("--chunks-per-task", type=int, default=1, help="file chunks per task")
+    args = ap.parse_args(argv)
+    if any(p.resolve().parent == args.out.resolve() for p in args.recordings):
+        raise ConfigError("--out must not be the folder of the input recordings (outputs keep their names)")
+    r = rematch(args.recordings, args.out, dict(args.set), algorithm=args.algorithm, scheduler=args.scheduler,
+                workers=args.workers, chunks_per_task=args.chunks_per_task)
+    print(f"{r['frames']} frames re-matched in {r['seconds']:.1f} s ({r['fps']:.1f} frames/s) -> "
+          + ", ".join(str(p) for p in r["outputs"]))
+    return 0
