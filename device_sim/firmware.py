@@ -73,6 +73,7 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         self.clock = source.clock if source else DeviceClock(seed)
         self.config = ConfigStore()
         self.counters: collections.Counter[str] = collections.Counter()
+        self.usb_speed = m.UsbSpeed.NOT_USB  # set by the simulated USB bus while plugged (INFO reports it)
         self._truth_cal = true_calibration(seed)
         self.rig = SensorRig(seed, self._truth_cal)
         self._scratch = None
@@ -99,7 +100,8 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         self.repair = FrameRepair(lambda wire: self.link.send(wire, lambda: True))
         self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset)
         self.pipeline = CapturePipeline(seed, self.rig, self.config, self.calibration, self.clock, self.truth,
-                                        self._send_capture_part, self.counters, self.repair, source)
+                                        self._send_capture_part, self.counters, self.repair,
+                                        self.engine.count_drop, source)
         self.scene = scene
         self.heartbeat = HeartbeatHandlers(self.clock, self.config, self.engine, self.link, self.counters)
         self.streaming = StreamingHandlers(self.config, self.engine, self.counters)
@@ -129,7 +131,8 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
             self.config.apply({BY_NAME[k].pid: v for k, v in self._source.config.items() if k in BY_NAME}, False)
         self.update = UpdateService(slots, states, booted)
         identity = Identity(self.model, self.serial, self.firmware_version, build.protocol_minor, build.capabilities)
-        groups: list[dict] = [InfoHandler(identity, self.calibration).handlers(), self.heartbeat.handlers()]
+        groups: list[dict] = [InfoHandler(identity, self.calibration, lambda: self.usb_speed).handlers(),
+                              self.heartbeat.handlers()]
         if booted.image is None:
             groups.append({m.MsgType.STOP: self.streaming.handlers()[m.MsgType.STOP]})
         else:
@@ -256,6 +259,7 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         registry.unregister(self)
         self.watchdog.close()
         self.engine.close()
+        self.pipeline.close()
         if self.trigger_line is not None:
             self.trigger_line.detach(self.trigger_input.on_pulse)
         self.link.close()

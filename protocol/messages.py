@@ -84,6 +84,14 @@ class Capability:
     FIRMWARE_UPDATE = 0x80  # since 1.2: UPDATE_* messages (SPEC §14)
 
 
+class UsbSpeed:
+    """INFO.usb_speed (SPEC §4.1): the speed the unit's USB link enumerated at (libusb_speed values)."""
+
+    NOT_USB = 0  # another link, or a device before 1.2
+    HIGH = 3  # USB 2.0 high speed, 480 Mbit/s
+    SUPER = 4  # USB 3.x super speed, 5 Gbit/s
+
+
 @dataclass(frozen=True)
 class Info(Message):
     TYPE: ClassVar[int] = MsgType.INFO
@@ -99,12 +107,13 @@ class Info(Message):
     max_width: int
     max_height: int
     calibration_id: int = 0  # since 1.1: the active calibration, 0 = uncalibrated
+    usb_speed: int = 0  # since 1.2: the USB link's speed (UsbSpeed), 0 = not on USB
 
     def pack(self) -> bytes:
         head = self._S.pack(*self.protocol_version, self.capabilities, self.sensor_width, self.sensor_height,
                             self.max_payload, self.max_width, self.max_height)
         return head + _str(self.model) + _str(self.serial) + _str(self.firmware_version) + \
-            struct.pack("<I", self.calibration_id)
+            struct.pack("<IB", self.calibration_id, self.usb_speed)
 
     @classmethod
     def unpack(cls, payload: bytes) -> "Info":
@@ -114,7 +123,8 @@ class Info(Message):
         serial, off = _read_str(payload, off)
         fw, off = _read_str(payload, off)
         cid = struct.unpack_from("<I", payload, off)[0] if len(payload) >= off + 4 else 0  # 1.0 devices
-        return cls(model, serial, fw, (major, minor), caps, sw, sh, mp, mw, mh, cid)
+        speed = payload[off + 4] if len(payload) >= off + 5 else 0  # 1.0 and 1.1 devices
+        return cls(model, serial, fw, (major, minor), caps, sw, sh, mp, mw, mh, cid, speed)
 
 
 _KV = struct.Struct("<Hi")

@@ -1,14 +1,11 @@
 """stereocam bench: benchmark figures, not pass/fail (see the command's help for the modes)."""
 from __future__ import annotations
 
-import contextlib
 import importlib
 import time
-from typing import Iterator
 
 import click
 import numpy as np
-from tqdm import tqdm
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import Decoder
@@ -36,69 +33,6 @@ def bench_protocol(seconds: float = 2.0) -> dict[str, float]:
     return {"decode_MBps": mbps}
 
 
-def _stream_fps(url: str, seconds: float, algorithm: int = 0, desc: str = "") -> tuple[float, float, int]:
-    import stereocam
-
-    with stereocam.open(url, timeout=3.0) as cam:
-        cam.configure(width=640, height=480, fps=60, num_disparities=64, block_size=15,
-                      algorithm=algorithm)
-        cam.start()
-        cam.get_frame(timeout=60.0)  # warm-up (JIT cache load)
-        n = 0
-        t0 = time.monotonic()
-        with tqdm(total=round(seconds * 60), unit="frame", desc=desc, leave=False) as bar:
-            while time.monotonic() - t0 < seconds:
-                cam.get_frame(timeout=5.0)
-                n += 1
-                bar.update()
-        dt = time.monotonic() - t0
-        cam.stop()
-        dropped = cam.stats["frames_dropped"]
-    return n / dt, n * 640 * 480 * 4 / dt / 1e6, dropped
-
-
-@contextlib.contextmanager
-def _device(kind: str) -> Iterator[str]:
-    """A simulator reachable over ``kind``; yields its URL."""
-    from stereocam.device_sim import SimulatedCamera
-    from stereocam.device_sim.process import ServedSimulator  # the same child-process servers the tests use
-
-    if kind == "sim":
-        yield "sim://?seed=1"
-    elif kind == "usb":
-        import stereocam.device_sim.usb as simusb
-
-        sim = SimulatedCamera(serial="BENCH-USB", seed=1)
-        handle = simusb.plug(sim)
-        try:
-            yield "usb://?serial=BENCH-USB"
-        finally:
-            handle.unplug()
-            sim.close()
-    else:
-        with ServedSimulator("pty" if kind == "pty" else "tcp:127.0.0.1:0", seed=1) as server:
-            yield server.url
-
-
-ALGORITHMS = {0: "bm", 1: "sgm"}  # values of the device's ``algorithm`` parameter
-
-
-def bench_transport(seconds: float = 5.0, kinds: tuple[str, ...] = ("sim", "pty", "tcp", "usb")) -> dict[str, float]:
-    out = {}
-    print(f"end-to-end at 640x480, 64 disparities, all three planes ({seconds:.0f} s each; sim and usb "
-          "run the device in this process, pty and tcp in a second one). The camera is asked for 60 fps: "
-          "fps is what the whole pipeline (render, rectify, match, link, host) sustains; drops are the "
-          "exposures the device skipped, counted and visible as sequence gaps:")
-    print(f"  {'transport':<10} {'matcher':<8} {'fps':>6} {'MB/s':>7} {'drops':>6}")
-    for kind in kinds:
-        for algorithm, label in ALGORITHMS.items():
-            with _device(kind) as url:
-                fps, mbps, dropped = _stream_fps(url, seconds, algorithm, f"{kind} {label}")
-            out[f"{kind}_{label}_fps"] = fps
-            print(f"  {kind:<10} {label:<8} {fps:6.1f} {mbps:7.1f} {dropped:6d}")
-    return out
-
-
 MODES = ("protocol", "decoder", "transport", "usb", "matching", "calibration", "calib-real", "sync", "firmware",
          "record", "rematch",
          "all")
@@ -116,7 +50,8 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
     \b
     protocol     decoder throughput (MB/s): 640x480 frame messages fed in 64 KiB chunks
     decoder      the decoder's cost per byte on adversarial streams against its clean cost
-    transport    end-to-end fps and MB/s at 640x480 over sim, pty, tcp and usb, side by side
+    transport    end-to-end fps, MB/s, drops, latency p50/p99 at 640x480 over sim, pty, tcp,
+                 usb high and super speed (--algorithm bm|sgm, --transport KIND), stage profile
     usb          the USB path alone: bulk IN MB/s through pyusb
     matching     the numba matching core against cv2.StereoBM
     calibration  calibration accuracy against the simulator's truth, solver and device tool
@@ -127,14 +62,14 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
     rematch      stereocam rematch frames/s with 1 and 2 local Dask workers
     all          protocol, transport, matching and calibration (default)
 
-    Arguments after WHAT that this command does not know go to the usb or matching bench."""
+    Arguments after WHAT that this command does not know go to the transport, usb or matching bench."""
     rest = list(extra)
     if what in ("protocol", "all"):
         bench_protocol()
     if what in ("decoder", "all"):
         importlib.import_module("stereocam.tools.bench_decoder").main([])
     if what in ("transport", "all"):
-        bench_transport(seconds)
+        importlib.import_module("stereocam.tools.bench_transport").main(rest if what == "transport" else [], seconds)
     if what == "sync":  # minutes of capture: only when asked for; --seconds given after WHAT goes to it
         importlib.import_module("stereocam.tools.bench_sync").main(rest)
     if what == "firmware":

@@ -5,7 +5,8 @@ undistort_rectify_map() is cv2.initUndistortRectifyMap (float32 maps) for plumb_
 rational_polynomial lenses and cv2.fisheye.initUndistortRectifyMap for equidistant ones; remap_bilinear() is
 cv2.remap(INTER_LINEAR, BORDER_CONSTANT 0) in double precision with rounding to nearest, as
 OpenCV 5 computes it for float maps (OpenCV 4 quantised to 1/32 px; both agree to ±1 DN on
-smooth images).
+smooth images). What depends only on the maps (source pixel, weights, which pixels touch the
+border) is worked out once per map (``RemapPlan``), so a frame costs four loads and a blend.
 """
 from __future__ import annotations
 
@@ -18,6 +19,36 @@ from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.rectification import RectifiedGeometry, stereo_rectify
 
 
+INSIDE_NONE, INSIDE_BORDER = -1, -2  # RemapPlan.index: sampled at no raw pixel / partly outside
+
+
+@dataclass(frozen=True)
+class RemapPlan:
+    """A float map prepared for raw images of ``source_shape``: per output pixel the flat index of
+    its top-left source pixel when all four lie inside (else INSIDE_NONE or INSIDE_BORDER) and the
+    bilinear weights, exactly as ``_remap`` computes them per pixel."""
+
+    source_shape: tuple[int, int]
+    map_x: np.ndarray
+    map_y: np.ndarray
+    index: np.ndarray
+    ax: np.ndarray
+    ay: np.ndarray
+
+    @classmethod
+    def of(cls, map_x: np.ndarray, map_y: np.ndarray, source_shape: tuple[int, int]) -> "RemapPlan":
+        if map_x.shape != map_y.shape or map_x.dtype != np.float32 or map_y.dtype != np.float32:
+            raise ValueError("map_x and map_y must be float32 arrays of the same shape")
+        h, w = source_shape
+        return cls((h, w), map_x, map_y, *_plan(map_x, map_y, w, h))
+
+    def apply(self, img: np.ndarray) -> np.ndarray:
+        """The remapped u8 image (see ``remap_bilinear``)."""
+        if img.dtype != np.uint8 or img.shape != self.source_shape:
+            raise ValueError(f"remap takes a {self.source_shape} uint8 image, got {img.dtype} {img.shape}")
+        return _remap_planned(np.ascontiguousarray(img), self.index, self.ax, self.ay, self.map_x, self.map_y)
+
+
 @dataclass(frozen=True)
 class RectificationMaps:
     """Geometry plus per-camera float32 maps: rectified (u, v) → raw (map_x, map_y)."""
@@ -28,9 +59,15 @@ class RectificationMaps:
     right_x: np.ndarray
     right_y: np.ndarray
 
+    def __post_init__(self) -> None:
+        shape = (self.geometry.image_size[1], self.geometry.image_size[0])  # raw images have the rectified format
+        object.__setattr__(self, "_plans", (RemapPlan.of(self.left_x, self.left_y, shape),
+                                            RemapPlan.of(self.right_x, self.right_y, shape)))
+
     def rectify(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rectify a raw u8 pair."""
-        return remap_bilinear(left, self.left_x, self.left_y), remap_bilinear(right, self.right_x, self.right_y)
+        plan_l, plan_r = self._plans  # type: ignore[attr-defined]
+        return plan_l.apply(left), plan_r.apply(right)
 
 
 @numba.njit(parallel=True, nogil=True, cache=True)
@@ -80,24 +117,60 @@ def rectification_maps(calib: StereoCalibration) -> RectificationMaps:
     return RectificationMaps(g, lx, ly, rx, ry)
 
 
-@numba.njit(parallel=True, nogil=True, cache=True)
-def _remap(src: np.ndarray, map_x: np.ndarray, map_y: np.ndarray) -> np.ndarray:
+@numba.njit(cache=True, inline="always")
+def _sample_any(src: np.ndarray, x: float, y: float) -> int:
+    """Bilinear sample at (x, y) with zeros outside, rounded to nearest (cv2.remap on float maps)."""
     h, w = src.shape
-    out = np.empty(map_x.shape, dtype=np.uint8)
+    x0, y0 = int(np.floor(x)), int(np.floor(y))
+    if not (-1 <= x0 < w and -1 <= y0 < h):
+        return 0
+    ax, ay = x - x0, y - y0
+    v00 = np.float64(src[y0, x0]) if 0 <= x0 and 0 <= y0 else 0.0
+    v01 = np.float64(src[y0, x0 + 1]) if x0 + 1 < w and 0 <= y0 else 0.0
+    v10 = np.float64(src[y0 + 1, x0]) if 0 <= x0 and y0 + 1 < h else 0.0
+    v11 = np.float64(src[y0 + 1, x0 + 1]) if x0 + 1 < w and y0 + 1 < h else 0.0
+    v = (1.0 - ay) * ((1.0 - ax) * v00 + ax * v01) + ay * ((1.0 - ax) * v10 + ax * v11)
+    return min(255, int(np.rint(v)))
+
+
+@numba.njit(parallel=True, nogil=True, cache=True)
+def _plan(map_x: np.ndarray, map_y: np.ndarray, w: int, h: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    index = np.empty(map_x.shape, np.int32)
+    ax = np.empty(map_x.shape, np.float64)
+    ay = np.empty(map_x.shape, np.float64)
     for i in numba.prange(map_x.shape[0]):
         for j in range(map_x.shape[1]):
             x, y = np.float64(map_x[i, j]), np.float64(map_y[i, j])
             x0, y0 = int(np.floor(x)), int(np.floor(y))
-            if not (-1 <= x0 < w and -1 <= y0 < h):
+            ax[i, j], ay[i, j] = x - x0, y - y0
+            if 0 <= x0 < w - 1 and 0 <= y0 < h - 1:
+                index[i, j] = y0 * w + x0
+            elif -1 <= x0 < w and -1 <= y0 < h:
+                index[i, j] = INSIDE_BORDER
+            else:
+                index[i, j] = INSIDE_NONE
+    return index, ax, ay
+
+
+@numba.njit(parallel=True, nogil=True, cache=True)
+def _remap_planned(src: np.ndarray, index: np.ndarray, ax_: np.ndarray, ay_: np.ndarray, map_x: np.ndarray,
+                   map_y: np.ndarray) -> np.ndarray:
+    w = src.shape[1]
+    flat = src.ravel()
+    out = np.empty(index.shape, dtype=np.uint8)
+    for i in numba.prange(index.shape[0]):
+        for j in range(index.shape[1]):
+            k = index[i, j]
+            if k >= 0:
+                ax, ay = ax_[i, j], ay_[i, j]
+                v00, v01 = np.float64(flat[k]), np.float64(flat[k + 1])
+                v10, v11 = np.float64(flat[k + w]), np.float64(flat[k + w + 1])
+                v = (1.0 - ay) * ((1.0 - ax) * v00 + ax * v01) + ay * ((1.0 - ax) * v10 + ax * v11)
+                out[i, j] = min(255, int(np.rint(v)))
+            elif k == INSIDE_NONE:
                 out[i, j] = 0
-                continue
-            ax, ay = x - x0, y - y0
-            v00 = np.float64(src[y0, x0]) if 0 <= x0 and 0 <= y0 else 0.0
-            v01 = np.float64(src[y0, x0 + 1]) if x0 + 1 < w and 0 <= y0 else 0.0
-            v10 = np.float64(src[y0 + 1, x0]) if 0 <= x0 and y0 + 1 < h else 0.0
-            v11 = np.float64(src[y0 + 1, x0 + 1]) if x0 + 1 < w and y0 + 1 < h else 0.0
-            v = (1.0 - ay) * ((1.0 - ax) * v00 + ax * v01) + ay * ((1.0 - ax) * v10 + ax * v11)
-            out[i, j] = min(255, int(np.rint(v)))
+            else:
+                out[i, j] = _sample_any(src, np.float64(map_x[i, j]), np.float64(map_y[i, j]))
     return out
 
 
@@ -105,6 +178,4 @@ def remap_bilinear(img: np.ndarray, map_x: np.ndarray, map_y: np.ndarray) -> np.
     """Bilinear u8 remap: out[i, j] = img sampled at (map_x[i, j], map_y[i, j]); outside → 0."""
     if img.dtype != np.uint8 or img.ndim != 2:
         raise ValueError(f"remap_bilinear takes a 2-D uint8 image, got {img.dtype} {img.shape}")
-    if map_x.shape != map_y.shape or map_x.dtype != np.float32 or map_y.dtype != np.float32:
-        raise ValueError("map_x and map_y must be float32 arrays of the same shape")
-    return _remap(np.ascontiguousarray(img), map_x, map_y)
+    return RemapPlan.of(map_x, map_y, img.shape).apply(img)

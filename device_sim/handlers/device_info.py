@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.firmware_image import FirmwareBuild
@@ -34,9 +35,10 @@ class Identity:
 
 
 class InfoHandler:
-    def __init__(self, identity: Identity, calibration: CalibrationService):
+    def __init__(self, identity: Identity, calibration: CalibrationService, usb_speed: Callable[[], int]):
         self._identity = identity
         self._calibration = calibration
+        self._usb_speed = usb_speed  # what the USB controller enumerated at (m.UsbSpeed)
 
     def handlers(self) -> dict[int, Handler]:
         return {m.MsgType.GET_INFO: self.get_info}
@@ -45,4 +47,4 @@ class InfoHandler:
         i = self._identity
         return m.Info(i.model, i.serial, i.firmware_version, (VERSION_MAJOR, i.protocol_minor), i.capabilities,
                       SENSOR_W, SENSOR_H, MAX_PAYLOAD, BY_NAME["width"].hi, BY_NAME["height"].hi,
-                      self._calibration.calibration_id)
+                      self._calibration.calibration_id, self._usb_speed())

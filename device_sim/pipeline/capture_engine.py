@@ -124,6 +124,11 @@ class CaptureEngine:
             self.sequence += 1
             return CaptureRequest(self.sequence, 0, t, self.epoch)
 
+    def count_drop(self) -> None:
+        """A later pipeline stage failed on a capture: it counts as dropped."""
+        with self._cond:
+            self.dropped += 1
+
     def current(self, req: CaptureRequest) -> bool:
         """Whether ``req`` still belongs to the running stream (not stopped or restarted since)."""
         return self._streaming and req.epoch == self.epoch

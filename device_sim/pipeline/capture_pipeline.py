@@ -1,8 +1,12 @@
-"""One capture, start to finish: expose both sensors, rectify with the calibration in force,
-match, and send it as messages (protocol/segmentation.py) — on the capture engine's thread."""
+"""One capture, start to finish, in two overlapping stages: the capture engine's thread exposes
+both sensors (``produce``) and hands the raw pair to the delivery thread, which rectifies with the
+calibration in force, matches and sends the capture as messages (protocol/segmentation.py) while
+the next exposure is rendered. Per-stage times (ms) accumulate in ``profile``."""
 from __future__ import annotations
 
 import collections
+import time
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -21,16 +25,51 @@ from ..rig.scene import Scene
 from ..rig.sensor import Geometry, SensorRig
 from ..replay import ReplaySource
 from .capture_engine import CaptureRequest
+from .handoff import Handoff
 from .stereo import StereoStage
 
 Send = Callable[[CaptureRequest, bytes], bool]  # one message of a capture; False: stop sending it
+STAGES = ("render", "rectify", "match", "send")
+
+
+@dataclass(frozen=True)
+class Exposed:
+    """A raw pair on its way from the exposure stage to the delivery stage."""
+
+    req: CaptureRequest
+    cfg: dict[str, int]  # the configuration in force at the exposure
+    scene_time: float
+    view: Scene
+    left: np.ndarray
+    right: np.ndarray
+
+
+class StageProfile:
+    """Wall time per stage per frame (ms), summed since the last ``reset``."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.frames = 0
+        self.ms = dict.fromkeys(STAGES, 0.0)
+
+    def add(self, stage: str, since: float) -> float:
+        now = time.perf_counter()
+        self.ms[stage] += (now - since) * 1e3
+        return now
+
+    def per_frame(self) -> dict[str, float]:
+        """Mean ms per frame of every stage over the frames delivered since ``reset``."""
+        return {k: v / max(self.frames, 1) for k, v in self.ms.items()}
 
 
 class CapturePipeline:
     def __init__(self, seed: int, rig: SensorRig, store: ConfigStore, calibration: CalibrationService,
                  clock: DeviceClock, truth: TruthLog, send: Send, counters: collections.Counter[str],
-                 repair: FrameRepair, source: ReplaySource | None = None):
-        """``source``: a recording whose captures replace the rig's (replay.py)."""
+                 repair: FrameRepair, on_drop: Callable[[], None], source: ReplaySource | None = None):
+        """``source``: a recording whose captures replace the rig's (replay.py). ``on_drop``: a
+        capture the delivery stage failed on (it counts as dropped)."""
         self.scene = Scene.LAB  # what the rig looks at (a simulator setting)
         self._seed = seed
         self._rig = rig
@@ -44,6 +83,8 @@ class CapturePipeline:
         self.source = source
         self._stereo = StereoStage()
         self._view_rays: dict[Geometry, np.ndarray] = {}
+        self.profile = StageProfile()
+        self._delivery: Handoff[Exposed] = Handoff(self._deliver, lambda _: on_drop(), "capture-delivery")
 
     def warm_up(self) -> None:
         """What firmware does before it answers: compile (or load from numba's cache) every kernel
@@ -55,16 +96,30 @@ class CapturePipeline:
         if maps is not None:
             maps.rectify(left, right)
 
+    def close(self) -> None:
+        """Stop the delivery thread (after the capture engine has stopped producing)."""
+        self._delivery.close()
+
     def produce(self, req: CaptureRequest) -> None:
+        """Exposure stage (capture engine thread): render both raw images, hand them on."""
+        t0 = time.perf_counter()
         cfg = self._store.snapshot()
         if self.source is not None:  # replay: the recorded capture, re-matched if the matching changed
             replayed = self.source.capture(req, cfg, self._stereo.disparity)
-            return self._send_all(req, replayed.begin, replayed.planes)
-        w, h = cfg["width"], cfg["height"]
-        self._rig.set_format(w, h)
+            return self._send_all(req, replayed.begin, replayed.planes, t0)
+        self._rig.set_format(cfg["width"], cfg["height"])
         t = req.time - self._clock.boot
         view = self.scene
         left, right = self._rig.capture(t, view, cfg["exposure_us"], cfg["gain"], req.sequence ^ (self._seed << 20))
+        self.profile.add("render", t0)
+        self._delivery.put(Exposed(req, cfg, t, view, left, right))
+
+    def _deliver(self, exp: Exposed) -> None:
+        """Delivery stage (its own thread): rectify, match, frame and send one capture."""
+        t0 = time.perf_counter()
+        req, cfg, t, view = exp.req, exp.cfg, exp.scene_time, exp.view
+        w, h = cfg["width"], cfg["height"]
+        left, right = exp.left, exp.right
         maps, calib_id = self._calibration.maps(w, h)
         if not cfg["rectify"]:
             maps = None
@@ -84,17 +139,23 @@ class CapturePipeline:
             focal = cx = cy = baseline = 0.0
             self._truth.remember(Exposure(req.sequence, req.time, t, view, self._rig.left_rays, np.eye(3), 0.0, 0.0))
             flags = 0
+        t0 = self.profile.add("rectify", t0)
         disp = self._stereo.disparity(cfg, left, right) if Output.DISPARITY in outputs else None
+        t0 = self.profile.add("match", t0)
         begin = m.FrameBegin(
             req.sequence & 0xFFFFFFFF, req.trigger_id & 0xFFFFFFFF, self._clock.at(req.time), cfg["exposure_us"],
             cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
             cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, calib_id, focal, cx, cy, baseline)
-        self._send_all(req, begin, {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: disp})
+        self._send_all(req, begin, {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: disp}, t0)
 
-    def _send_all(self, req: CaptureRequest, begin: m.FrameBegin, images: dict[Output, np.ndarray | None]) -> None:
+    def _send_all(self, req: CaptureRequest, begin: m.FrameBegin, images: dict[Output, np.ndarray | None],
+                  t0: float) -> None:
+        """Frame and send one capture (``t0``: when its send stage began, for the profile)."""
         raw = plane_bytes(begin, images, copy=True)  # kept unchanged for FRAME_RESEND
         self._repair.remember(req.sequence, {int(p): v for p, v in raw.items()})
         for msg in capture_messages(begin, raw, self._repair.chunk):
             if not self._send(req, m.encode(msg)):
                 return  # the link went, or the stream was stopped: cut off at a message boundary
+        self.profile.add("send", t0)
+        self.profile.frames += 1
         self._counters["frames_sent"] += 1

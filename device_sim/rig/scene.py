@@ -61,6 +61,13 @@ def _sphere(center, radius, albedo=0.55, contrast=0.5, texscale=1024.0, texoff=0
     return row
 
 
+def moving_primitives(scene: Scene) -> np.ndarray:
+    """Indices of the rows of ``primitives(scene, t)`` that change with ``t``; the renderer keeps
+    the view of the others per format (it checks they really stayed the same, so a wrong entry
+    here costs speed, never exactness)."""
+    return np.array(_MOVING.get(scene, ()), np.int64)
+
+
 def primitives(scene: Scene, t: float) -> np.ndarray:
     """The scene's primitives at time ``t`` seconds, as an (N, PRIM_FIELDS) float64 array (the
     board is rendered by ``calibration.board``, not from primitives)."""
@@ -80,3 +87,6 @@ def primitives(scene: Scene, t: float) -> np.ndarray:
     else:
         raise ValueError(f"no primitives for scene {scene!r}")
     return np.array(rows, dtype=np.float64)
+
+
+_MOVING: dict[Scene, tuple[int, ...]] = {Scene.LAB: (2, 4)}  # rows of primitives() that move

@@ -48,6 +48,16 @@ class Geometry:
         return r
 
 
+@dataclass(frozen=True)
+class _StaticLayer:
+    """Per-pixel nearest hit and radiance of a scene's static primitives in one eye."""
+
+    key: bytes  # the static primitives' values it was rendered from
+    rad: np.ndarray
+    t: np.ndarray
+    hit: np.ndarray
+
+
 @nb.njit(cache=True, inline="always")
 def _hash(k: np.uint64) -> np.uint64:
     """splitmix64 finaliser: a counter-based generator, reproducible per (frame, pixel)."""
@@ -96,6 +106,7 @@ class SensorRig:
         self._format: tuple[int, int] | None = None
         self._board: StereoBoardRenderer | None = None
         self._board_poses: list[BoardPose] = []
+        self._layers: dict[tuple[int, scene.Scene], _StaticLayer] = {}
 
     def set_format(self, width: int, height: int) -> None:
         if self._format == (width, height):
@@ -104,9 +115,10 @@ class SensorRig:
         self.calibration = cal
         self._rays = [pixel_rays(cal.K_left, cal.D_left, width, height),
                       pixel_rays(cal.K_right, cal.D_right, width, height)]
+        self._cones = [render.ray_cones(r) for r in self._rays]
         self._poses = [(np.zeros(3), np.eye(3)), (-cal.R.T @ cal.T.ravel(), cal.R.T)]
-        self._rad = np.empty((height, width), np.float32)
         self._board = None
+        self._layers = {}
         self._format = (width, height)
 
     @property
@@ -128,16 +140,33 @@ class SensorRig:
         if view == scene.Scene.BOARD:
             return self._board_view(t, frame_seed)
         prims = scene.primitives(view, t)
+        moving = scene.moving_primitives(view)
         scale = 255.0 * exposure_us / EXPOSURE_REF_US * 10.0 ** (gain / 200.0)
-        scratch = np.empty_like(self._rad)
         images = []
         for eye, (origin, rot) in enumerate(self._poses):
-            render.render_radiance(self._rays[eye], origin, rot, prims, self.texture, self.tex_offsets,
-                                   self.tex_side, LIGHT, self._rad, scratch)
-            img = np.empty(self._rad.shape, np.uint8)
-            expose(self._rad, scale, (frame_seed * 2 + eye) ^ (self.seed << 32), img)
+            layer = self._static_layer(eye, view, prims, moving)
+            rad = np.empty(layer.rad.shape, np.float32)
+            render.render_over(self._rays[eye], self._cones[eye], origin, rot, prims, moving, layer.rad, layer.t,
+                               layer.hit, self.texture, self.tex_offsets, self.tex_side, LIGHT, rad)
+            img = np.empty(rad.shape, np.uint8)
+            expose(rad, scale, (frame_seed * 2 + eye) ^ (self.seed << 32), img)
             images.append(img)
         return images[0], images[1]
+
+    def _static_layer(self, eye: int, view: scene.Scene, prims: np.ndarray, moving: np.ndarray) -> _StaticLayer:
+        """One eye's view of the scene's static primitives, rendered once per format (again only if
+        they changed: the key is their exact values)."""
+        static = np.setdiff1d(np.arange(prims.shape[0]), moving)
+        key = prims[static].tobytes()
+        layer = self._layers.get((eye, view))
+        if layer is None or layer.key != key:
+            h, w = self._rays[eye].shape[:2]
+            layer = _StaticLayer(key, np.empty((h, w), np.float32), np.empty((h, w)), np.empty((h, w), np.int64))
+            origin, rot = self._poses[eye]
+            render.render_layer(self._rays[eye], origin, rot, prims, static, self.texture, self.tex_offsets,
+                                self.tex_side, LIGHT, layer.rad, layer.t, layer.hit)
+            self._layers[(eye, view)] = layer
+        return layer
 
     def depth(self, t: float, view: scene.Scene, rays: np.ndarray, rot: np.ndarray) -> np.ndarray:
         """True depth (m, inf = nothing) along the optical axis of a view from the left imager's

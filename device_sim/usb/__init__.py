@@ -1,15 +1,18 @@
 """Simulated USB: a bus that simulated cameras plug into and out of at run time, seen by pyusb.
 
     import usb.core, device_sim.usb as simusb
-    handle = simusb.plug(SimulatedCamera(serial="SC0001"))
+    handle = simusb.plug(SimulatedCamera(serial="SC0001"), speed="super")  # or "high" (USB 2.0)
     dev = usb.core.find(backend=simusb.get_backend(), idVendor=simusb.VENDOR_ID)
     ...
     handle.unplug()
 
-Every device has full USB 2.0 high-speed descriptors (VID:PID 0x1209:0x0001, bcdDevice =
+Every device has full USB descriptors (VID:PID 0x1209:0x0001, bcdDevice =
 firmware version, manufacturer/product/serial strings), one configuration and one
-vendor-specific interface with bulk OUT 0x01 and bulk IN 0x81 (512-byte packets). ``pipes``
-documents the transfer rules (packets, ZLP, timeouts); errors are libusb1's (``errors``).
+vendor-specific interface with bulk OUT 0x01 and bulk IN 0x81. A unit enumerates at the speed
+it is plugged at: high speed (USB 2.0: bcdUSB 2.00, 512-byte bulk packets, ~40 MB/s of bulk
+payload) or super speed (USB 3.x: 3.20, 1024-byte packets, ~400 MB/s); its bulk IN pipe keeps
+to that rate (``descriptors.SPEEDS``). ``pipes`` documents the transfer rules (packets, ZLP,
+timeouts, bus time); errors are libusb1's (``errors``).
 """
 from __future__ import annotations
 
@@ -29,7 +32,7 @@ register_backend("sim", BUS.backend)
 
 def plug(sim: UsbFunction, **options: object) -> SimUsbDevice:
     """Plug ``sim`` into the default bus; ``handle.unplug()`` pulls it out again.
-    ``options`` go to ``SimUsbBus.plug`` (serial, product, firmware_version, zlp, ...)."""
+    ``options`` go to ``SimUsbBus.plug`` (speed, serial, product, firmware_version, zlp, ...)."""
     return BUS.plug(sim, **options)  # type: ignore[arg-type]
 
 

@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING
 
 import usb.backend
 
-from .descriptors import SPEED_HIGH
 from .device import SimHandle, SimUsbDevice
 from .errors import LibusbError, usb_error
 
@@ -46,7 +45,7 @@ class SimBackend(usb.backend.IBackend):
     def get_device_descriptor(self, dev: SimUsbDevice) -> SimpleNamespace:
         return SimpleNamespace(**asdict(dev.descriptors.device), bus=dev.bus.number,
                                address=dev.address, port_number=dev.port,
-                               port_numbers=(dev.port,), speed=SPEED_HIGH)
+                               port_numbers=(dev.port,), speed=dev.speed.libusb_speed)
 
     def get_configuration_descriptor(self, dev: SimUsbDevice, config: int) -> SimpleNamespace:
         configs = dev.descriptors.configurations

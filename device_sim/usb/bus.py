@@ -5,8 +5,8 @@ from __future__ import annotations
 import threading
 from typing import TYPE_CHECKING
 
-from .descriptors import PRODUCT_ID, VENDOR_ID, camera_descriptors
-from .device import DEFAULT_IN_CAPACITY, DEFAULT_OUT_CAPACITY, SimUsbDevice, UsbFunction
+from .descriptors import PRODUCT_ID, VENDOR_ID, bus_speed, camera_descriptors
+from .device import DEFAULT_OUT_CAPACITY, SimUsbDevice, UsbFunction
 
 if TYPE_CHECKING:
     from .backend import SimBackend
@@ -45,16 +45,19 @@ class SimUsbBus:
 
     def plug(self, sim: UsbFunction, *, serial: str | None = None, product: str | None = None,
              firmware_version: str | None = None, vendor_id: int = VENDOR_ID,
-             product_id: int = PRODUCT_ID, zlp: bool = True,
-             in_capacity: int = DEFAULT_IN_CAPACITY,
+             product_id: int = PRODUCT_ID, zlp: bool = True, speed: str = "high",
+             in_capacity: int | None = None,
              out_capacity: int = DEFAULT_OUT_CAPACITY) -> SimUsbDevice:
-        """Plug ``sim`` in; it enumerates at once. Descriptor strings default to the sim's
-        ``serial``, ``model`` and ``firmware_version`` attributes. ``zlp=False`` models firmware
-        that omits zero-length packets (see ``pipes``)."""
+        """Plug ``sim`` in; it enumerates at once, at ``speed`` ("high": USB 2.0, ~40 MB/s of bulk
+        payload; "super": USB 3.x, ~400 MB/s), which its descriptors report and its bulk IN pipe
+        keeps to. Descriptor strings default to the sim's ``serial``, ``model`` and
+        ``firmware_version`` attributes. ``zlp=False`` models firmware that omits zero-length
+        packets (see ``pipes``). ``in_capacity``: the device's IN FIFO (default: ~25 ms of the bus)."""
+        link = bus_speed(speed)
         serial = serial if serial is not None else str(getattr(sim, "serial", ""))
         product = product if product is not None else str(getattr(sim, "model", "StereoCam"))
         version = firmware_version or str(getattr(sim, "firmware_version", "0.0.0"))
-        descriptors = camera_descriptors(serial, product, version, vendor_id, product_id)
+        descriptors = camera_descriptors(serial, product, version, vendor_id, product_id, link)
         with self._lock:
             if any(d.sim is sim for d in self._devices):
                 raise ValueError(f"{sim!r} is already plugged into {self!r}")
@@ -63,11 +66,11 @@ class SimUsbBus:
             if port is None:
                 raise RuntimeError(f"all {self.ports} ports of {self!r} are in use")
             address = self._allocate_address()
-            device = SimUsbDevice(self, sim, descriptors, port, address, zlp=zlp,
+            device = SimUsbDevice(self, sim, descriptors, port, address, link, zlp=zlp,
                                   in_capacity=in_capacity, out_capacity=out_capacity)
             self._devices.append(device)
-        device.plug_options = dict(vendor_id=vendor_id, product_id=product_id, zlp=zlp, in_capacity=in_capacity,
-                                   out_capacity=out_capacity)
+        device.plug_options = dict(vendor_id=vendor_id, product_id=product_id, zlp=zlp, speed=speed,
+                                   in_capacity=in_capacity, out_capacity=out_capacity)
         return device
 
     def unplug_all(self) -> None:

@@ -9,10 +9,12 @@ import re
 import struct
 from dataclasses import dataclass, field
 
+from stereocam.protocol.messages import UsbSpeed
 from stereocam.protocol.usb_identity import (EP_IN, EP_OUT, INTERFACE_NUMBER, PRODUCT_ID,  # noqa: F401
                                              VENDOR_ID)
 from stereocam.protocol.usb_identity import INTERFACE_CLASS as CLASS_VENDOR_SPECIFIC
 from stereocam.protocol.usb_identity import MAX_PACKET_SIZE_HS as MAX_PACKET_SIZE
+from stereocam.protocol.usb_identity import MAX_PACKET_SIZE_SS
 
 CONFIGURATION_VALUE = 1
 LANGID_EN_US = 0x0409
@@ -21,8 +23,36 @@ INTERFACE_NAME = "StereoCam bulk stream"
 
 DT_DEVICE, DT_CONFIG, DT_STRING, DT_INTERFACE, DT_ENDPOINT = 1, 2, 3, 4, 5
 ATTR_BULK = 0x02
-SPEED_HIGH = 3
-"""libusb_speed value for USB 2.0 high speed (480 Mbit/s)."""
+SPEED_HIGH = UsbSpeed.HIGH
+"""libusb_speed value for USB 2.0 high speed (480 Mbit/s); INFO reports the same numbers."""
+SPEED_SUPER = UsbSpeed.SUPER
+"""libusb_speed value for USB 3.x super speed (5 Gbit/s)."""
+
+
+@dataclass(frozen=True)
+class BusSpeed:
+    """How fast a unit's link is: what its descriptors say and how many bulk payload bytes per
+    second the bus carries (protocol overhead, other traffic and host scheduling taken off)."""
+
+    name: str
+    libusb_speed: int
+    bcd_usb: int
+    max_packet: int
+    bulk_bytes_per_s: float
+
+
+SPEEDS = {
+    "high": BusSpeed("high", SPEED_HIGH, 0x0200, MAX_PACKET_SIZE, 40e6),  # 480 Mbit/s: ~40 MB/s of bulk in practice
+    "super": BusSpeed("super", SPEED_SUPER, 0x0320, MAX_PACKET_SIZE_SS, 400e6),  # 5 Gbit/s: ~400 MB/s
+}
+
+
+def bus_speed(name: str) -> BusSpeed:
+    """The speed called ``name`` ("high" or "super"); ValueError naming the known ones otherwise."""
+    try:
+        return SPEEDS[name]
+    except KeyError:
+        raise ValueError(f"unknown USB speed {name!r}; known: {', '.join(SPEEDS)}") from None
 
 
 def bcd_version(version: str) -> int:
@@ -151,11 +181,14 @@ class DescriptorSet:
 
 
 def camera_descriptors(serial: str, product: str, firmware_version: str,
-                       vendor_id: int = VENDOR_ID, product_id: int = PRODUCT_ID) -> DescriptorSet:
+                       vendor_id: int = VENDOR_ID, product_id: int = PRODUCT_ID,
+                       speed: BusSpeed = SPEEDS["high"]) -> DescriptorSet:
     """The descriptor set of a camera: one configuration, one vendor-specific interface with a
-    bulk OUT (commands) and a bulk IN (replies and frames) endpoint, high-speed packet size."""
-    interface = InterfaceDescriptor(endpoints=(EndpointDescriptor(EP_OUT), EndpointDescriptor(EP_IN)))
-    device = DeviceDescriptor(bcdDevice=bcd_version(firmware_version),
+    bulk OUT (commands) and a bulk IN (replies and frames) endpoint; bcdUSB and the bulk packet
+    size follow the bus ``speed`` the unit enumerated at."""
+    interface = InterfaceDescriptor(endpoints=(EndpointDescriptor(EP_OUT, wMaxPacketSize=speed.max_packet),
+                                               EndpointDescriptor(EP_IN, wMaxPacketSize=speed.max_packet)))
+    device = DeviceDescriptor(bcdDevice=bcd_version(firmware_version), bcdUSB=speed.bcd_usb,
                               idVendor=vendor_id, idProduct=product_id)
     strings = {1: MANUFACTURER, 2: product, 3: serial, 4: INTERFACE_NAME}
     return DescriptorSet(device, (ConfigurationDescriptor(interfaces=(interface,)),), strings)

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from .descriptors import (CONFIGURATION_VALUE, DT_CONFIG, DT_DEVICE, DT_STRING, EP_IN, EP_OUT,
-                          INTERFACE_NUMBER, MAX_PACKET_SIZE, DescriptorSet)
+                          INTERFACE_NUMBER, BusSpeed, DescriptorSet)
 from .errors import LibusbError, usb_error
 from .function import UsbFunction
 from .pipes import InPipe, OutPipe
@@ -31,7 +31,8 @@ GET_STATUS, CLEAR_FEATURE, SET_FEATURE = 0x00, 0x01, 0x03
 GET_DESCRIPTOR, GET_CONFIGURATION, SET_CONFIGURATION = 0x06, 0x08, 0x09
 GET_INTERFACE, SET_INTERFACE = 0x0A, 0x0B
 FEATURE_ENDPOINT_HALT = 0
-DEFAULT_IN_CAPACITY = 4 * 1024 * 1024
+IN_FIFO_SECONDS = 0.025  # the device's IN FIFO holds about this much of its bus's time
+MIN_IN_CAPACITY = 1024 * 1024
 DEFAULT_OUT_CAPACITY = 64 * 1024
 
 
@@ -60,23 +61,28 @@ class SimUsbDevice:
     firmware writers get ``BrokenPipeError``."""
 
     def __init__(self, bus: "SimUsbBus", sim: UsbFunction, descriptors: DescriptorSet,
-                 port: int, address: int, zlp: bool = True,
-                 in_capacity: int = DEFAULT_IN_CAPACITY,
+                 port: int, address: int, speed: BusSpeed, zlp: bool = True,
+                 in_capacity: int | None = None,
                  out_capacity: int = DEFAULT_OUT_CAPACITY) -> None:
         self.bus = bus
         self.sim = sim
         self.descriptors = descriptors
         self.port = port
         self.address = address
+        self.speed = speed
         self.plugged = True
         self.configuration = CONFIGURATION_VALUE  # the OS configures a device on enumeration
         self.claims: dict[int, SimHandle] = {}
-        self.in_pipe = InPipe(EP_IN, MAX_PACKET_SIZE, in_capacity, zlp=zlp)
+        if in_capacity is None:
+            in_capacity = max(MIN_IN_CAPACITY, int(speed.bulk_bytes_per_s * IN_FIFO_SECONDS))
+        self.in_pipe = InPipe(EP_IN, speed.max_packet, in_capacity, zlp=zlp, bytes_per_s=speed.bulk_bytes_per_s)
         self.out_pipe = OutPipe(EP_OUT, out_capacity)
         self._lock = threading.RLock()
         self._handles: set[SimHandle] = set()
         self._thread = threading.Thread(target=self._firmware_loop, daemon=True,
                                         name=f"usb-sim-{bus.number}-{address}")
+        if hasattr(sim, "usb_speed"):  # firmware that reports its link speed (INFO) reads it from here
+            sim.usb_speed = speed.libusb_speed
         self.plug_options: dict[str, object] = {}  # set by the bus: how to enumerate again after a reboot
         self.successor: SimUsbDevice | None = None  # this unit's next enumeration, after a reboot
         on_power = getattr(sim, "on_power", None)
@@ -120,6 +126,8 @@ class SimUsbDevice:
         self.bus._remove(self)
         self.in_pipe.close()
         self.out_pipe.close()
+        if hasattr(self.sim, "usb_speed"):
+            self.sim.usb_speed = 0
         try:
             self.sim.detach()
         except Exception:  # a firmware bug must not stop the unplug

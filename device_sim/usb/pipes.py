@@ -15,6 +15,11 @@ the buffer is a babble/overflow error (``EOVERFLOW``) and its data is lost: read
 controller NAKs until the host reads); closing the pipe (unplug) wakes every waiter, and the
 firmware's blocked or later pushes raise ``BrokenPipeError``.
 
+The bus has a speed: ``bytes_per_s`` of bulk payload. A host transfer occupies the bus for its
+length divided by that rate, from when its first packet is taken (or the bus is done with the
+previous transfer, if later), and completes only then; so a host cannot drain the FIFO faster
+than the bus could carry it, and a firmware producing faster blocks on the full FIFO.
+
 OUT (host → device). A bulk write is accepted while the firmware's receive buffer has room, and
 each accepted chunk is handed to the firmware thread in order; a full buffer NAKs (the write
 waits), and a timeout returns the partial count, or raises if nothing was accepted.
@@ -82,9 +87,12 @@ class _Endpoint:
 class InPipe(_Endpoint):
     """Device → host FIFO of IN transfers (see the module docstring for the packet rules)."""
 
-    def __init__(self, address: int, max_packet: int, capacity: int, zlp: bool = True) -> None:
+    def __init__(self, address: int, max_packet: int, capacity: int, zlp: bool = True,
+                 bytes_per_s: float = float("inf")) -> None:
         super().__init__(address)
         self.max_packet = max_packet
+        self.bytes_per_s = bytes_per_s
+        self._bus_free = 0.0  # monotonic instant the bus is done carrying the transfers so far
         self.capacity = capacity
         self.zlp = zlp
         self._queue: deque[list] = deque()  # [data: bytes, pos: int, zlp_pending: bool]
@@ -123,21 +131,34 @@ class InPipe(_Endpoint):
         """One host bulk IN transfer into ``out``; returns the byte count (0 for a lone ZLP)."""
         deadline = _deadline(timeout_ms)
         got = 0
+        first: float | None = None  # when the bus started on this transfer
         with self.cond:
             while True:
                 self._host_check(check)
                 if self._queue:
+                    if first is None:
+                        first = max(time.monotonic(), self._bus_free)
                     got, done = self._take_packets(out, got)
                     self.cond.notify_all()  # room for a blocked writer
                     if done:
-                        return got
+                        return self._on_the_wire(first, got)
                     continue
                 left = _remaining(deadline)
                 if left is not None and left <= 0:
                     if got:
-                        return got
+                        return self._on_the_wire(first, got)
                     raise usb_error(LibusbError.TIMEOUT)
                 self.cond.wait(left)
+
+    def _on_the_wire(self, first: float | None, got: int) -> int:
+        """Hold the transfer (lock released) until the bus has carried its ``got`` bytes."""
+        if first is None or self.bytes_per_s == float("inf"):
+            return got
+        end = first + got / self.bytes_per_s
+        self._bus_free = end
+        while (left := end - time.monotonic()) > 0 and not self.closed:
+            self.cond.wait(left)
+        return got
 
     def _take_packets(self, out: memoryview, got: int) -> tuple[int, bool]:
         """Move whole packets from the queue head into ``out``; (new count, transfer ended)."""

@@ -342,3 +342,54 @@ def test_open_after_unplug_fails_with_enodev(bus):
     with pytest.raises(usb.core.USBError) as err:
         dev.set_configuration()
     assert err.value.errno == errno.ENODEV
+
+
+# -- bus speed ------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("speed,libusb_speed,bcd_usb,packet", [("high", 3, 0x0200, 512), ("super", 4, 0x0320, 1024)])
+def test_descriptors_follow_the_bus_speed(bus, speed, libusb_speed, bcd_usb, packet):
+    bus.plug(EchoDevice(serial=speed), speed=speed)
+    dev = find(bus)
+    assert (dev.speed, dev.bcdUSB) == (libusb_speed, bcd_usb)
+    intf = dev.get_active_configuration()[(0, 0)]
+    assert [ep.wMaxPacketSize for ep in intf] == [packet, packet]
+    raw = bytes(dev.ctrl_transfer(0x80, 6, 0x0200, 0, 32))
+    assert struct.unpack_from("<H", raw, 18 + 4)[0] == packet  # the wire bytes say the same
+    dev.write(EP_OUT, b"x" * 3000)
+    assert read(dev, 4096) == b"x" * 3000
+
+
+def test_unknown_bus_speed_is_refused(bus):
+    with pytest.raises(ValueError, match="known: high, super"):
+        bus.plug(EchoDevice(), speed="full")
+
+
+def test_high_speed_bus_caps_bulk_throughput(bus):
+    """USB 2.0 carries ~40 MB/s of bulk payload: a host cannot read a fast source faster."""
+    bus.plug(SourceDevice(serial="FAST", chunk=1 << 20), speed="high")
+    dev = find(bus)
+    total = 6_000_000
+    dev.write(EP_OUT, str(total).encode())
+    got, start = 0, time.monotonic()
+    while got < total:
+        got += len(dev.read(EP_IN, 256 * 1024, 2000))
+    rate = total / (time.monotonic() - start)
+    assert rate < 48e6  # 40 MB/s plus slack for the first transfer's start
+
+
+@pytest.mark.parametrize("speed,reported", [("high", 3), ("super", 4)])
+def test_info_says_which_speed_the_unit_is_plugged_at(speed, reported):
+    import stereocam
+    import stereocam.device_sim.usb as simusb
+    from stereocam.device_sim import SimulatedCamera
+    from stereocam.protocol import messages as m
+
+    sim = SimulatedCamera(serial=f"INFO-{speed}", seed=43)
+    handle = simusb.plug(sim, speed=speed)
+    try:
+        with stereocam.open(f"usb://?serial=INFO-{speed}", timeout=3.0) as cam:
+            assert cam.request(m.GetInfo()).usb_speed == reported
+    finally:
+        handle.unplug()
+    assert sim.usb_speed == m.UsbSpeed.NOT_USB  # unplugged: on no USB link
+    sim.close()

@@ -120,7 +120,7 @@ MESSAGE_STRATEGIES: dict[type[m.Message], st.SearchStrategy[m.Message]] = {
     m.TimeSync: st.just(m.TimeSync()),
     m.Info: st.builds(m.Info, model=short_str, serial=short_str, firmware_version=short_str,
                       protocol_version=st.tuples(u8, u8), capabilities=u32, sensor_width=u16, sensor_height=u16,
-                      max_payload=u32, max_width=u16, max_height=u16, calibration_id=u32),
+                      max_payload=u32, max_width=u16, max_height=u16, calibration_id=u32, usb_speed=u8),
     m.Config: st.builds(m.Config, param_values),
     m.ConfigApplied: st.builds(m.ConfigApplied, param_values),
     m.Triggered: st.builds(m.Triggered, trigger_id=u32, sequence=u32),
@@ -273,31 +273,34 @@ def test_info_from_a_v1_1_device_carries_calibration_id() -> None:
     payload = info_v10_payload(minor=1) + b"\x78\x56\x34\x12"
     out = decode_packet(Packet(m.MsgType.INFO, 1, 0, payload))
     assert out == dataclasses.replace(V10_INFO, protocol_version=(1, 1), calibration_id=0x12345678)
-    assert out.pack() == payload  # a 1.1 sender always writes the field, 0 included
+    assert out.pack() == payload + b"\x00"  # this sender always writes its fields (usb_speed since 1.2), 0 included
     uncalibrated = dataclasses.replace(out, calibration_id=0)
-    assert uncalibrated.pack() == info_v10_payload(minor=1) + bytes(4)
+    assert uncalibrated.pack() == info_v10_payload(minor=1) + bytes(5)
     assert m.Info("a", "b", "c", (1, 1), 0, 0, 0, 0, 0, 0).calibration_id == 0  # the default
 
 
-@pytest.mark.parametrize("tail, calibration_id", [
-    (b"", 0),  # 1.0 device: field absent
-    (b"\x01", 0), (b"\x01\x02", 0), (b"\x01\x02\x03", 0),  # fewer than 4 bytes: taken as absent, ignored
-    (b"\x01\x02\x03\x04", 0x04030201),
-    (b"\xff\xff\xff\xff", 0xFFFFFFFF),
-    (b"\x01\x02\x03\x04\x05later v1.x fields", 0x04030201),  # a later minor's fields after it: ignored
+@pytest.mark.parametrize("tail, calibration_id, usb_speed", [
+    (b"", 0, 0),  # 1.0 device: fields absent
+    (b"\x01", 0, 0), (b"\x01\x02", 0, 0), (b"\x01\x02\x03", 0, 0),  # fewer than 4 bytes: taken as absent
+    (b"\x01\x02\x03\x04", 0x04030201, 0),  # 1.1 device: no usb_speed
+    (b"\xff\xff\xff\xff", 0xFFFFFFFF, 0),
+    (b"\x01\x02\x03\x04\x03", 0x04030201, m.UsbSpeed.HIGH),  # 1.2 device on a USB 2.0 link
+    (b"\x01\x02\x03\x04\x04later v1.x fields", 0x04030201, m.UsbSpeed.SUPER),  # later fields: ignored
 ])
-def test_info_trailing_calibration_id(tail: bytes, calibration_id: int) -> None:
+def test_info_trailing_calibration_id_and_usb_speed(tail: bytes, calibration_id: int, usb_speed: int) -> None:
     out = decode_packet(Packet(m.MsgType.INFO, 0, 0, info_v10_payload() + tail))
-    assert out == dataclasses.replace(V10_INFO, calibration_id=calibration_id)
+    assert out == dataclasses.replace(V10_INFO, calibration_id=calibration_id, usb_speed=usb_speed)
 
 
 @LIGHT
 @given(msg=MESSAGE_STRATEGIES[m.Info])
-def test_info_without_its_last_4_bytes_is_the_v1_0_message(msg: m.Info) -> None:
-    """The 1.1 INFO is the 1.0 INFO plus 4 bytes: what a 1.0 host reads of it is unchanged."""
+def test_info_without_its_trailing_fields_is_the_older_message(msg: m.Info) -> None:
+    """INFO is the 1.0 INFO plus 4 bytes (1.1) plus 1 (1.2): what an older host reads of it is unchanged."""
     payload = msg.pack()
-    assert payload[-4:] == struct.pack("<I", msg.calibration_id)
-    assert decode_packet(Packet(m.MsgType.INFO, 0, 0, payload[:-4])) == dataclasses.replace(msg, calibration_id=0)
+    assert payload[-5:] == struct.pack("<IB", msg.calibration_id, msg.usb_speed)
+    assert decode_packet(Packet(m.MsgType.INFO, 0, 0, payload[:-5])) == dataclasses.replace(msg, calibration_id=0,
+                                                                                            usb_speed=0)
+    assert decode_packet(Packet(m.MsgType.INFO, 0, 0, payload[:-1])) == dataclasses.replace(msg, usb_speed=0)
     assert decode_packet(Packet(m.MsgType.INFO, 0, 0, payload)) == msg
 
 
@@ -856,8 +859,8 @@ def test_samples_cover_every_message_with_a_payload() -> None:
 def test_every_truncation_is_a_protocol_error_naming_the_message(cls) -> None:
     payload = SAMPLES[cls].pack()
     assert decode_packet(Packet(cls.TYPE, 0, 0, payload)) == SAMPLES[cls]
-    # data running to the end may legitimately be shorter; INFO's trailing calibration_id (v1.1) may be absent
-    limit = HEAD_THEN_DATA.get(cls, len(payload) - 4 if cls is m.Info else len(payload))
+    # data running to the end may legitimately be shorter; INFO's trailing fields (1.1, 1.2) may be absent
+    limit = HEAD_THEN_DATA.get(cls, len(payload) - 5 if cls is m.Info else len(payload))
     for n in range(limit):
         with pytest.raises(ProtocolError, match=cls.__name__) as info:
             decode_packet(Packet(cls.TYPE, 0, 0, payload[:n]))

@@ -174,14 +174,14 @@ def test_the_code_speaks_the_pinned_version() -> None:
     assert {(v["hex"][8:10], v["hex"][10:12]) for v in VECTORS} == {("01", "02")}
 
 
-def test_info_is_the_v1_0_layout_plus_a_trailing_calibration_id() -> None:
-    """A 1.0 host reads a 1.1 INFO unchanged: the 1.0 fields, then 4 bytes it ignores (SPEC §4.1, §11)."""
+def test_info_is_the_v1_0_layout_plus_trailing_calibration_id_and_usb_speed() -> None:
+    """A 1.0 host reads INFO unchanged: the 1.0 fields, then 4 + 1 bytes it ignores (SPEC §4.1, §11)."""
     info, _, _ = BY_NAME["Info"]
     p = bytes.fromhex(vector("Info")["hex"])[HEADER_LEN:-TRAILER_LEN]
     strings = b"".join(len(s.encode()).to_bytes(1, "little") + s.encode()
                        for s in (info.model, info.serial, info.firmware_version))
     v10_part = struct.pack("<BBIHHIHH", 1, 1, 0xA5A50F0F, 1280, 960, 1 << 20, 1280, 960) + strings
-    assert p == v10_part + b"\x0d\xf0\xad\x8b"  # calibration_id 0x8BADF00D, u32 LE
+    assert p == v10_part + b"\x0d\xf0\xad\x8b" + b"\x00"  # calibration_id 0x8BADF00D, u32 LE; usb_speed 0
     # no trailing field: as a 1.0 device sends it
     assert m.Info.unpack(v10_part) == dataclasses.replace(info, calibration_id=0)
 
