@@ -1,10 +1,8 @@
 """One simulated USB device: descriptors, endpoint 0 requests, bulk pipes, and its firmware thread.
 
-The device wraps any byte-level firmware object (``UsbFunction``: ``attach(sink)``,
-``detach()``, ``receive(data)``, e.g. ``device_sim.SimulatedCamera``). Bulk OUT transfers are
-handed to ``receive`` in order on the device's own firmware thread (so a host write never waits
-for the firmware to finish a command, as on real hardware); whatever the firmware passes to the
-sink is queued on the bulk IN pipe (see ``pipes`` for the packet rules).
+It wraps any byte-level firmware (``function.UsbFunction``, e.g. ``SimulatedCamera``). Bulk OUT
+transfers go to ``receive`` in order on the device's own firmware thread (a host write never waits
+for a command to finish, as on real hardware); what the firmware sends is queued on bulk IN.
 """
 from __future__ import annotations
 

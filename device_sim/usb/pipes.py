@@ -97,6 +97,7 @@ class InPipe(_Endpoint):
         self.zlp = zlp
         self._queue: deque[list] = deque()  # [data: bytes, pos: int, zlp_pending: bool]
         self._queued = 0
+        self._flushes = 0  # counts flush(): a push blocked across one is dropped
 
     @property
     def queued(self) -> int:
@@ -109,11 +110,14 @@ class InPipe(_Endpoint):
         threads never hang on a vanished host."""
         data = bytes(data)
         with self.cond:
-            while (not self.closed and self._queued
+            flushes = self._flushes
+            while (not self.closed and self._queued and flushes == self._flushes
                    and self._queued + len(data) > self.capacity):
                 self.cond.wait()
             if self.closed:
                 raise BrokenPipeError("USB device unplugged")
+            if flushes != self._flushes:  # flushed while it waited: it belonged to what was dropped
+                return
             zlp = self.zlp and len(data) % self.max_packet == 0
             if data or zlp:
                 self._queue.append([data, 0, zlp])
@@ -121,10 +125,11 @@ class InPipe(_Endpoint):
                 self.cond.notify_all()
 
     def flush(self) -> None:
-        """Drop everything queued (device reset)."""
+        """Drop everything queued (device reset), and what a blocked ``push`` was about to queue."""
         with self.cond:
             self._queue.clear()
             self._queued = 0
+            self._flushes += 1
             self.cond.notify_all()
 
     def read_transfer(self, out: memoryview, timeout_ms: int, check: Check) -> int:
