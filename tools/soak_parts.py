@@ -133,7 +133,7 @@ def fuzz_device(url: str, inputs: int, seed: int = 0, reply_timeout: float = 3.0
     return rep
 
 
-class _Truth:
+class PlaneTruth:
     """What an in-process simulator sent: plane CRCs by sequence (corruption check)."""
 
     def __init__(self, sim):
@@ -163,7 +163,7 @@ def stream_with_faults(url: str, seconds: float, flip: float, drop: float = 0.0,
     if chunk is not None:
         link.frame_chunk = chunk
     sim = getattr(inner, "sim", None)
-    truth = _Truth(sim) if sim is not None else None
+    truth = PlaneTruth(sim) if sim is not None else None
     rep = Report(f"stream, flip {flip:g}/byte")
     cam = Camera(link, timeout=1.0, retries=3)
     delivered = corrupted = 0

@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 
 import time
-import zlib
 
 import pytest
 
@@ -17,6 +16,7 @@ from stereocam.link import Link
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import encode_frame
 
+from stereocam.tools.soak_parts import PlaneTruth  # what the device sent, by plane CRC
 from tests.support.faults import FaultyTransport, LineNoise, PacketFilter
 
 
@@ -40,30 +40,13 @@ def as_v1_1_device(sim: SimulatedCamera) -> None:
     del handlers[m.MsgType.SET_FRAME_LINK], handlers[m.MsgType.FRAME_RESEND]
 
 
-class _Recorder:
-    """Wraps the device's resend cache: the CRC of every plane the device sent, by sequence."""
-
-    def __init__(self, sim: SimulatedCamera):
-        self.sent: dict[int, dict[int, int]] = {}
-        real = sim.repair.remember
-
-        def remember(sequence, planes):
-            self.sent[sequence] = {p: zlib.crc32(v) for p, v in planes.items()}
-            real(sequence, planes)
-        sim.repair.remember = remember
-
-    def intact(self, frame) -> bool:
-        got = {1: frame.left, 2: frame.right, 4: frame.disparity}
-        return all(zlib.crc32(got[p].tobytes()) == crc for p, crc in self.sent[frame.sequence].items())
-
-
 def _camera(chunk: int | None = None, seed: int = 51, v1_1: bool = False):
     sim = SimulatedCamera(seed=seed)
     if v1_1:
         as_v1_1_device(sim)
     link = FaultyTransport(InProcessTransport(sim))
     link.frame_chunk = chunk
-    return sim, link, _Recorder(sim)
+    return sim, link, PlaneTruth(sim)
 
 
 def test_a_damaged_chunk_is_resent_and_the_frame_delivered_intact():
