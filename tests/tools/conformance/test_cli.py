@@ -27,9 +27,7 @@ from tests.support.broken_devices import (RewritingProxy, clamp_into_range, forg
 # Checks the reference simulator fails today, and why. The suite is right about them; the
 # simulator is fixed elsewhere. Remove an entry when its fix lands: the tests then demand a PASS.
 # A camera given with --device gets no such allowance.
-KNOWN_SIMULATOR_GAPS = {
-    "link.large_length_header": "decoder waits for a legal 1 MiB payload that never comes (issue 9, item 1)",
-}
+KNOWN_SIMULATOR_GAPS: dict[str, str] = {}  # check name -> why the simulator may fail it (none today)
 # Through the rewriting proxy: the checks the breakage is about, and enough around them to show
 # that everything else still passes (the proxy re-encodes requests, so the decoder-level link
 # checks are judged directly against the devices, not through it).
