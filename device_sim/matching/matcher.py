@@ -46,6 +46,14 @@ def _contiguous(img: np.ndarray) -> np.ndarray:
     return img if img.flags.writeable else img.copy()  # one compiled signature only
 
 
+def prepared_pair(left: np.ndarray, right: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The pair as the kernels take it (checked, of the matcher's ``shape``, C-contiguous, writable)."""
+    check_pair(left, right)
+    if left.shape != shape:
+        raise ValueError(f"image shape {left.shape} differs from the matcher's {shape}")
+    return _contiguous(left), _contiguous(right)
+
+
 class Matcher:
     """Block matcher for one (shape, params); scratch buffers live between frames.
 
@@ -120,10 +128,7 @@ class Matcher:
 
     def match(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """Disparity map (int16, disparity * 16; invalid = (min_disparity - 1) * 16)."""
-        check_pair(left, right)
-        if left.shape != self.shape:
-            raise ValueError(f"image shape {left.shape} differs from the matcher's {self.shape}")
-        left, right = _contiguous(left), _contiguous(right)
+        left, right = prepared_pair(left, right, self.shape)
         p, g = self.params, self.geom
         inv = p.invalid_value
         disp = np.empty(self.shape, np.int16)

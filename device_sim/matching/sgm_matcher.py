@@ -9,7 +9,7 @@ import numpy as np
 
 from . import sgm as _sgm
 from .census import census_pair
-from .matcher import STRIPES_PER_THREAD, _aligned, _contiguous, _stripes, check_pair
+from .matcher import STRIPES_PER_THREAD, _aligned, _stripes, prepared_pair
 from .postfilter import filter_speckles
 from .sgm_params import SGMGeometry, SGMParams, sgm_geometry
 
@@ -79,10 +79,7 @@ class SGMMatcher:
 
     def match(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """Disparity map (int16, disparity * 16; invalid = (min_disparity - 1) * 16)."""
-        check_pair(left, right)
-        if left.shape != self.shape:
-            raise ValueError(f"image shape {left.shape} differs from the matcher's {self.shape}")
-        left, right = _contiguous(left), _contiguous(right)
+        left, right = prepared_pair(left, right, self.shape)
         p = self.params
         disp = np.empty(self.shape, np.int16)
         with self._lock:
