@@ -5,6 +5,7 @@ import math
 import numbers
 
 from stereocam.protocol.errors import ConfigError
+from stereocam.protocol.params import BY_NAME
 
 INT32 = (-(1 << 31), (1 << 31) - 1)  # every configuration value is an int32 on the wire (SPEC §5)
 
@@ -32,3 +33,15 @@ def int32_arg(value: object, name: str) -> int:
     if not INT32[0] <= number <= INT32[1]:
         raise ConfigError(f"{name}={number} does not fit the protocol's int32 ({INT32[0]}..{INT32[1]})")
     return number
+
+
+def config_update(params: dict[str, object]) -> dict[int, int]:
+    """Parameters by name as a SET_CONFIG update (wire id → int32); ConfigError for an unknown name
+    or a value that is not an integer fitting the wire."""
+    update = {}
+    for name, value in params.items():
+        p = BY_NAME.get(name)
+        if p is None:
+            raise ConfigError(f"unknown parameter {name!r}; known: {', '.join(BY_NAME)}")
+        update[p.pid] = int32_arg(value, name)
+    return update

@@ -7,7 +7,6 @@ import os
 import queue
 import threading
 import time
-from dataclasses import dataclass
 from typing import Iterator
 
 from stereocam.protocol import messages as m
@@ -21,7 +20,8 @@ from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, Param, TriggerMode
 from stereocam.protocol.rectification import stereo_rectify
 
 from . import calibration_io, firmware_update, presets
-from .arguments import int32_arg, timeout_arg
+from .arguments import config_update, timeout_arg
+from .device_types import DeviceInfo, DeviceStatus, config_names
 from .calibration_io import StoredCalibration
 from .callbacks import FrameCallback, FrameCallbacks
 from .clock import ArrivalStamp, ClockMap, SyncSample
@@ -34,29 +34,6 @@ SYNC_SAMPLES = 8
 SYNC_PERIOD = 1.0  # seconds between background time-sync bursts (the map needs them to follow drift)
 SYNC_BURST = 3  # round trips per burst: one of them usually finds the link free of frame data
 _log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class DeviceInfo:
-    model: str
-    serial: str
-    firmware_version: str
-    protocol_version: tuple[int, int]
-    capabilities: int
-    sensor_width: int
-    sensor_height: int
-    max_payload: int
-    calibration_id: int  # the calibration in force when this was read; 0 = uncalibrated
-    max_width: int = 0  # largest frame width the device may send (INFO)
-    max_height: int = 0
-
-
-@dataclass(frozen=True)
-class DeviceStatus:
-    uptime_us: int
-    streaming: bool
-    trigger_mode: TriggerMode
-    counters: dict[str, int]
 
 
 class Camera:
@@ -238,24 +215,24 @@ class Camera:
 
     def config(self) -> dict[str, int]:
         r = self.request(m.GetConfig())
-        return _names(r.values)  # type: ignore[attr-defined]
+        return config_names(r.values)  # type: ignore[attr-defined]
 
     def configure(self, **params: int) -> dict[str, int]:
         """Change parameters by name (protocol/params.py); returns the whole new configuration.
 
         All or nothing: the device checks the whole set and a refusal changes nothing.
         """
-        update = _wire_update(params)
+        update = config_update(params)
         r = self.request(m.SetConfig(update))
         self._applied.update({BY_ID[k].name: v for k, v in update.items()})
-        return _names(r.values)  # type: ignore[attr-defined]
+        return config_names(r.values)  # type: ignore[attr-defined]
 
     def check_config(self, **params: int) -> dict[str, int]:
         """The configuration ``configure(**params)`` would give, checked here against the
         protocol's rules (protocol/config_rules.py) without changing the device; ConfigRejected
         (a ConfigError naming the parameter, ``.param``, and the NACK code) if the device would
         refuse it. The device stays the authority: ``configure`` still sends the request."""
-        return merge(self.config(), _wire_update(params), self._streaming)
+        return merge(self.config(), config_update(params), self._streaming)
 
     def set_trigger_mode(self, mode: TriggerMode | str) -> None:
         if isinstance(mode, str):
@@ -453,22 +430,6 @@ class Camera:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _wire_update(params: dict[str, object]) -> dict[int, int]:
-    """Parameters by name as a SET_CONFIG update (wire id → int32); ConfigError for an unknown name
-    or a value that is not an integer fitting the wire."""
-    update = {}
-    for name, value in params.items():
-        p = BY_NAME.get(name)
-        if p is None:
-            raise ConfigError(f"unknown parameter {name!r}; known: {', '.join(BY_NAME)}")
-        update[p.pid] = int32_arg(value, name)
-    return update
-
-
-def _names(values: dict[int, int]) -> dict[str, int]:
-    return {BY_ID[k].name if k in BY_ID else f"param_{k}": v for k, v in values.items()}
 
 
 def _fields(obj: LinkStats | AssemblyStats) -> dict[str, int]:
