@@ -83,6 +83,8 @@ class SimUsbDevice:
             sim.usb_speed = speed.libusb_speed
         self.plug_options: dict[str, object] = {}  # set by the bus: how to enumerate again after a reboot
         self.successor: SimUsbDevice | None = None  # this unit's next enumeration, after a reboot
+        self._cable = threading.Lock()  # a reboot's re-enumeration and a pulled cable never interleave
+        self._cable_pulled = False
         on_power = getattr(sim, "on_power", None)
         self._unsubscribe = on_power(self._on_power) if on_power is not None else (lambda: None)
         self._link_up()
@@ -103,16 +105,22 @@ class SimUsbDevice:
         """The firmware reboots: it drops off the bus, and enumerates anew once it is up."""
         if event == "down":
             self._disconnect()
-        elif event == "up" and self.successor is None:
-            self._unsubscribe()
-            self.successor = self.bus.plug(self.sim, **self.plug_options)  # type: ignore[arg-type]
+        elif event == "up":
+            with self._cable:
+                if self._cable_pulled or self.successor is not None:
+                    return  # a unit whose cable is out does not enumerate again
+                self._unsubscribe()
+                self.successor = self.bus.plug(self.sim, **self.plug_options)  # type: ignore[arg-type]
 
     def unplug(self) -> None:
         """Pull the cable (from this unit, whichever enumeration it is in now); idempotent. Never
-        blocks on the firmware for more than ~2 s."""
-        self._unsubscribe()
-        if self.successor is not None:
-            self.successor.unplug()
+        blocks on the firmware for more than ~2 s. A reboot finishing meanwhile does not re-plug."""
+        with self._cable:
+            self._cable_pulled = True
+            self._unsubscribe()
+            successor = self.successor
+        if successor is not None:
+            successor.unplug()
         self._disconnect()
 
     def _disconnect(self) -> None:

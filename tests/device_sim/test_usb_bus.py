@@ -103,6 +103,44 @@ def test_plug_unplug_replug_enumeration(bus):
     assert again.address not in {d.address for d in devices}  # a fresh address, as on real USB
 
 
+class RebootingDevice(EchoDevice):
+    """An echo firmware that tells its listeners when it goes down and comes up (as a reboot does)."""
+
+    def __init__(self, serial: str = "REBOOT1") -> None:
+        super().__init__(serial)
+        self.listeners: list = []
+
+    def on_power(self, listener):
+        self.listeners.append(listener)
+        return lambda: self.listeners.remove(listener) if listener in self.listeners else None
+
+    def notify(self, event: str, listeners=None) -> None:
+        for listener in list(self.listeners if listeners is None else listeners):
+            listener(event)
+
+
+def test_a_reboot_re_enumerates_the_unit(bus):
+    sim = RebootingDevice()
+    first = bus.plug(sim)
+    sim.notify("down")
+    assert bus.devices == []
+    sim.notify("up")
+    assert [d.sim for d in bus.devices] == [sim] and first.successor is bus.devices[0]
+    first.unplug()  # the cable, from whichever enumeration the unit is in
+    assert bus.devices == []
+
+
+def test_a_reboot_finishing_after_the_cable_is_pulled_does_not_plug_the_unit_back(bus):
+    sim = RebootingDevice()
+    handle = bus.plug(sim)
+    in_flight = list(sim.listeners)  # the firmware took its listener list before the cable went
+    sim.notify("down")
+    handle.unplug()
+    sim.notify("up", in_flight)
+    assert bus.devices == []
+    assert bus.plug(sim).sim is sim  # plugged again by hand, not "already plugged"
+
+
 # -- claiming -----------------------------------------------------------------------------------
 
 def test_second_claim_from_another_handle_is_busy(bus):
