@@ -10,11 +10,13 @@ camera at all; a device with narrower mechanical limits passes its own ``Plausib
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from .calibration import CalibrationFormatError, StereoCalibration
+from .rectification import stereo_rectify
 
 
 class CalibrationImplausible(CalibrationFormatError):
@@ -50,6 +52,63 @@ class PlausibilityLimits:
 
 
 DEFAULT_LIMITS = PlausibilityLimits()
+
+
+# What rectification maps built from a calibration must do (SPEC §12.4 step 4). Each side builds
+# the maps with its own engine (the firmware its remap tables, the host OpenCV) at the probe size.
+PROBE_WIDTH = 160  # maps are tried at this width (the calibration scaled): cheap, same geometry
+MIN_INSIDE = 0.5  # share of rectified pixels that must sample inside the raw image, per camera
+MIN_ORDERED = 0.99  # share of neighbouring rectified pixels whose raw samples keep their order (no fold)
+
+
+def probe_size(image_size: tuple[int, int]) -> tuple[int, int]:
+    """The (width, height) at which rectification maps are checked."""
+    w, h = image_size
+    pw = min(w, PROBE_WIDTH)
+    return pw, max(1, round(h * pw / w))
+
+
+MapBuilder = Callable[[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[int, int]],
+                     tuple[np.ndarray, np.ndarray]]
+"""(lens_model, K, D, R, P, (width, height)) -> (map_x, map_y): one camera's float maps, rectified
+(u, v) -> raw (x, y), as cv2.initUndistortRectifyMap makes them."""
+
+
+def check_rectifiable(calib: StereoCalibration, build_map: MapBuilder) -> None:
+    """Raise CalibrationImplausible unless ``calib`` rectifies (finite geometry, positive focal) to
+    views that sample each sensor in at least MIN_INSIDE of their pixels without folding
+    (neighbouring rectified pixels keep the order of their raw samples in MIN_ORDERED of cases)."""
+    small = calib.scaled(*probe_size(calib.image_size))
+    try:
+        with np.errstate(all="ignore"):
+            g = stereo_rectify(small)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        raise CalibrationImplausible("rectification", f"no rectification possible: {exc}") from exc
+    if not (np.isfinite(g.focal_px) and g.focal_px > 0 and np.isfinite(g.P2).all() and np.isfinite(g.Q).all()):
+        raise CalibrationImplausible("rectification", f"rectification gives no usable view (focal "
+                                     f"{g.focal_px:.6g} px)")
+    for side, K, D, R, P in (("left", small.K_left, small.D_left, g.R1, g.P1),
+                             ("right", small.K_right, small.D_right, g.R2, g.P2)):
+        with np.errstate(all="ignore"):
+            map_x, map_y = build_map(small.lens_model, K, D, R, P, g.image_size)
+        h, w = map_x.shape
+        with np.errstate(invalid="ignore"):
+            inside = (map_x >= 0) & (map_x <= w - 1) & (map_y >= 0) & (map_y <= h - 1)
+        share = float(np.mean(inside))
+        if not share >= MIN_INSIDE:
+            raise CalibrationImplausible("rectification", f"the rectified {side} view sees the sensor in only "
+                                         f"{share:.0%} of its pixels (at least {MIN_INSIDE:.0%} needed)")
+        ordered = min(_ordered(map_x, inside, 1), _ordered(map_y, inside, 0))
+        if not ordered >= MIN_ORDERED:
+            raise CalibrationImplausible("rectification", f"the {side} lens model folds the image: only "
+                                         f"{ordered:.0%} of neighbouring pixels keep their order (distortion)")
+
+
+def _ordered(coord: np.ndarray, inside: np.ndarray, axis: int) -> float:
+    """Share of neighbour pairs (both inside) along ``axis`` whose sample coordinate increases."""
+    both = np.logical_and(*(np.moveaxis(inside, axis, 0)[s] for s in (np.s_[1:], np.s_[:-1])))
+    steps = np.diff(np.moveaxis(coord, axis, 0).astype(np.float64), axis=0)
+    return float(np.mean(steps[both] > 0)) if both.any() else 0.0
 
 
 def _within(value: float, bounds: tuple[float, float]) -> bool:

@@ -25,9 +25,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.calibration_limits import CalibrationImplausible, check_rectifiable
 from stereocam.protocol.rectification import RectifiedGeometry, stereo_rectify
 from stereocam.tools.calib_lens import (
-    LensSolveError, MonoFit, StereoFit, calibrate_mono, calibrate_stereo, project, solve_pose, undistort,
+    LensSolveError, MonoFit, StereoFit, calibrate_mono, calibrate_stereo, project, rectify_map, solve_pose,
+    undistort,
 )
 
 METRICS = ("reproj_left", "reproj_right", "stereo", "epipolar")
@@ -83,6 +85,10 @@ def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], sta
         raise LensSolveError(f"{model}: {exc}") from exc
     if not (np.all(np.isfinite(geometry.P2)) and geometry.focal_px > 0):
         raise LensSolveError(f"{model}: the fitted lens does not invert over the whole image (no rectification)")
+    try:  # the rule a camera applies before it stores a calibration (SPEC §12.4 step 4): a fit can
+        check_rectifiable(calib, rectify_map)  # match every corner and still fold where none was seen
+    except CalibrationImplausible as exc:
+        raise LensSolveError(f"{model}: {exc}") from exc
     return HeadFit(fl, fr, st, calib, geometry)
 
 

@@ -136,6 +136,13 @@ def undistort(model: str, pts: np.ndarray, K: np.ndarray, D: np.ndarray, R: np.n
     return cv2.undistortPoints(p, K, D, R=R, P=P, criteria=UNDISTORT).reshape(-1, 2)
 
 
+def rectify_map(model: str, K: np.ndarray, D: np.ndarray, R: np.ndarray, P: np.ndarray,
+                size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Float32 maps (H, W): rectified pixel -> raw pixel, through the lens (OpenCV's initUndistortRectifyMap)."""
+    init = cv2.fisheye.initUndistortRectifyMap if model == "equidistant" else cv2.initUndistortRectifyMap
+    return init(K, D, R, P, size, cv2.CV_32FC1)
+
+
 def project(model: str, obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray,
             D: np.ndarray) -> np.ndarray:
     """Board points (N, 3) to pixels (N, 2) through a pose and the lens."""

@@ -16,6 +16,8 @@ the device's raw stream in device mode — and returns a CalibrationResult.
      views and min_holdout held-out pairs are in, so an endless stream is fine.
   3. Outliers, lens model, final fit: tools/calib_fit.py (residual-based outlier removal, model
      chosen on held-out pairs — every holdout_every-th pair kept — final fit on every pair kept).
+     A fit whose lens model folds the image, or whose rectified views miss the sensors, counts as
+     no fit (the rule a camera applies before storing, SPEC §12.4): the next model is chosen.
   4. Metrics (px of the raw image, N = number of corners):
        rms_left / rms_right = sqrt( Σ_views Σ_corners |x_obs − x_proj|² / N ) of that camera's own
          solve on every pair kept; rms_stereo = the stereo solve's RMS over both cameras;
