@@ -39,11 +39,14 @@ def _client(scheduler: str | None, workers: int):
     return Client(cluster), cluster
 
 
-def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, algorithm: str = "bm",
+def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, algorithm: str | None = None,
             scheduler: str | None = None, workers: int = 2, chunks_per_task: int = 1, client=None) -> dict:
-    """Re-match ``recordings`` into ``out``; returns frames, seconds and the output files."""
-    if algorithm not in tasks.ALGORITHMS:
-        raise ConfigError(f"unknown algorithm {algorithm!r}; known: {', '.join(tasks.ALGORITHMS)}")
+    """Re-match ``recordings`` into ``out`` with ``algorithm`` ("bm" or "sgm"; None: the recorded
+    one) and the recorded settings changed by ``overrides``; returns frames, seconds and the outputs."""
+    if algorithm is not None:
+        if algorithm not in tasks.ALGORITHMS:
+            raise ConfigError(f"unknown algorithm {algorithm!r}; known: {', '.join(tasks.ALGORITHMS)}")
+        overrides = {**overrides, "algorithm": tasks.ALGORITHMS[algorithm]}
     unknown = set(overrides) - set(BY_NAME)
     if unknown:
         raise ConfigError(f"unknown parameter(s) {sorted(unknown)}")
@@ -53,7 +56,7 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
     for path in recordings:
         with Recording(path) as rec:  # a bad file or a bad combination fails here, before any work
             try:
-                params_from_config(rec.config | overrides)
+                params_from_config(tasks.matching_config(rec.config, overrides))
             except ValueError as exc:
                 raise ConfigError(f"{path}: {exc}") from exc
     out.mkdir(parents=True, exist_ok=True)
@@ -70,7 +73,10 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
                 parts.append(part)
                 futures.append(client.submit(tasks.rematch_range, src, a, b, overrides, part, retries=RETRIES,
                                              key=f"rematch-{path.stem}-{a}-{b}-{time.time_ns()}"))
-            provenance = {"algorithm": algorithm, **{k: str(v) for k, v in overrides.items()}}
+            with Recording(src) as rec:
+                used = tasks.matching_config(rec.config, overrides)["algorithm"]
+            provenance = {**{k: str(v) for k, v in overrides.items()},
+                          "algorithm": next(k for k, v in tasks.ALGORITHMS.items() if v == used)}
             joins.append(client.submit(_join_after, futures, src, parts, str((out / path.name).resolve()), provenance,
                                        retries=RETRIES, key=f"join-{path.stem}-{time.time_ns()}"))
         frames = sum(client.gather(joins))
@@ -93,7 +99,8 @@ def main(argv: list[str] | None = None) -> int:
                                  epilog=EXIT_CODES)
     ap.add_argument("recordings", nargs="+", type=Path)
     ap.add_argument("--out", type=Path, required=True, help="folder for the re-matched recordings")
-    ap.add_argument("--algorithm", default="bm", help=f"matcher: {', '.join(tasks.ALGORITHMS)} (default bm)")
+    ap.add_argument("--algorithm", choices=sorted(tasks.ALGORITHMS), default=None,
+                    help="matcher: bm (block matching) or sgm (semi-global); default: the recorded one")
     ap.add_argument("--set", type=_setting, action="append", default=[], metavar="NAME=VALUE",
                     help="matching parameter to change from the recorded configuration (repeatable)")
     ap.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="a running Dask scheduler")

@@ -16,15 +16,22 @@ from mcap.reader import make_reader
 from mcap.records import Chunk, MessageIndex
 from mcap.stream_reader import StreamReader
 
-from stereocam.device_sim.matching import Matcher
-from stereocam.device_sim.pipeline.stereo import params_from_config
+from stereocam.device_sim.matching import Matcher, SGMMatcher
+from stereocam.device_sim.pipeline.stereo import BLOCK_MATCHING, SEMI_GLOBAL, matcher_for, params_from_config
+from stereocam.protocol.params import defaults
 from stereocam.frames import DisparityFormat
 from stereocam.recording import LinkCounters, Recorder
 from stereocam.recording.mcapwriter import ChunkedWriter
 from stereocam.recording.reader import Recording
 from stereocam.recording.recorder import FRAME_INDEX, FRAME_INDEX_TYPE
 
-ALGORITHMS = ("bm",)  # the board's block matcher (StereoBM); SGM when the matching core has it
+ALGORITHMS = {"bm": BLOCK_MATCHING, "sgm": SEMI_GLOBAL}  # --algorithm -> the ``algorithm`` parameter
+
+
+def matching_config(recorded: dict[str, int], overrides: dict[str, int]) -> dict[str, int]:
+    """The configuration to match under: the recorded one changed by ``overrides``; parameters the
+    recording predates (a 1.1 unit has no SGM settings) take the protocol's defaults."""
+    return defaults() | recorded | overrides
 
 
 def plan(path: str, chunks_per_task: int) -> list[tuple[int, int]]:
@@ -46,18 +53,17 @@ def rematch_range(path: str, start: int, stop: int, overrides: dict[str, int], p
     out = Path(part)
     tmp = _atomic(out)
     with Recording(path) as rec:
-        cfg = rec.config | overrides
+        cfg = matching_config(rec.config, overrides)
         params = params_from_config(cfg)
         fmt = DisparityFormat(16, params.min_disparity, params.num_disparities, params.invalid_value)
-        matcher: Matcher | None = None
+        matcher: Matcher | SGMMatcher | None = None
         unit = replace(rec.unit, config=cfg)
         try:
             with Recorder(tmp, unit, clock_offset_ns=rec.clock_offset_ns) as writer:
                 for cap in rec.captures(start, stop):
                     frame = cap.to_frame()
                     if frame.rectified and frame.left is not None and frame.right is not None:
-                        if matcher is None or matcher.shape != frame.left.shape:
-                            matcher = Matcher(frame.left.shape, params)
+                        matcher = matcher_for(cfg, frame.left.shape, matcher)
                         frame.disparity, frame.disparity_format = matcher.match(frame.left, frame.right), fmt
                     i = cap.info
                     writer.put_wait(frame, LinkCounters(i.link_lost, i.link_incomplete, i.host_queue_overflow,

@@ -15,8 +15,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 import stereocam
-from stereocam.device_sim.matching import Matcher
-from stereocam.device_sim.pipeline.stereo import params_from_config
+from stereocam.device_sim.pipeline.stereo import matcher_for
 from stereocam.recording.reader import Recording
 from stereocam.tools import cli
 from stereocam.tools.rematch import rematch
@@ -33,12 +32,13 @@ def source(tmp_path_factory):
     return path
 
 
-def _check(source, out, block_size):
+def _check(source, out, block_size, algorithm="bm"):
     with Recording(source) as a, Recording(out) as b:
         assert len(b) == len(a) == N and np.array_equal(a.log_times, b.log_times)
-        assert b.config["block_size"] == block_size and b.metadata["stereocam.rematch"]["algorithm"] == "bm"
+        assert b.config["block_size"] == block_size and b.metadata["stereocam.rematch"]["algorithm"] == algorithm
+        assert b.config["algorithm"] == {"bm": 0, "sgm": 1}[algorithm]
         assert b.device == a.device and b.calibration.body == a.calibration.body
-        matcher = Matcher((240, 320), params_from_config(b.config))
+        matcher = matcher_for(b.config, (240, 320))  # the matching core, as the board would run it
         for ca, cb in zip(a.captures(), b.captures(), strict=True):
             assert cb.info.sequence == ca.info.sequence and cb.info.device_time_us == ca.info.device_time_us
             assert cb.left.tobytes() == ca.left.tobytes() and cb.right.tobytes() == ca.right.tobytes()
@@ -57,6 +57,15 @@ def test_rematch_cli_local_cluster(source, tmp_path):
     assert cli.main(["rematch", str(source), "--out", str(tmp_path / "out"), "--set", "block_size=21",
                      "--workers", "2"]) == 0
     _check(source, tmp_path / "out" / "run.mcap", 21)
+
+
+def test_rematch_with_sgm(source, tmp_path):
+    """Block-matched recordings re-matched with the SGM engine: its disparity, its settings in the file."""
+    assert cli.main(["rematch", str(source), "--out", str(tmp_path / "out"), "--algorithm", "sgm",
+                     "--set", "sgm_paths=4", "--workers", "1"]) == 0
+    _check(source, tmp_path / "out" / "run.mcap", 11, "sgm")
+    with Recording(tmp_path / "out" / "run.mcap") as b:
+        assert b.config["sgm_paths"] == 4
 
 
 def test_killed_worker_loses_no_output(source, tmp_path):
@@ -81,5 +90,5 @@ def test_bad_arguments(source, tmp_path):
     with pytest.raises(stereocam.ConfigError):
         rematch([source], tmp_path, {"block_size": 4})  # even block size: refused before any work
     with pytest.raises(stereocam.ConfigError):
-        rematch([source], tmp_path, {}, algorithm="sgm")
+        rematch([source], tmp_path, {}, algorithm="census")  # no such matcher
     assert cli.main(["rematch", str(source), "--out", str(source.parent)]) == 1
