@@ -41,10 +41,10 @@ MODES = ("protocol", "decoder", "transport", "usb", "matching", "calibration", "
 @click.command("bench", context_settings={"ignore_unknown_options": True},
                epilog="Exit codes: 0 done (figures, never pass/fail); 1 a camera or simulator failed; 2 bad usage.")
 @click.argument("what", type=click.Choice(MODES), default="all")
-@click.option("--seconds", type=click.FloatRange(0, min_open=True), default=5.0, show_default=True,
-              help="Streaming time per transport (transport mode).")
+@click.option("--seconds", type=click.FloatRange(0, min_open=True), default=None,
+              help="Capture time per transport (transport: 5 s, record: 5 s, sync: 120 s when not given).")
 @click.argument("extra", nargs=-1, type=click.UNPROCESSED)
-def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
+def command(what: str, seconds: float | None, extra: tuple[str, ...]) -> int:
     """Print benchmark figures. WHAT is one of:
 
     \b
@@ -64,20 +64,22 @@ def command(what: str, seconds: float, extra: tuple[str, ...]) -> int:
 
     Arguments after WHAT that this command does not know go to the transport, usb or matching bench."""
     rest = list(extra)
+    timed = rest + ([] if seconds is None else ["--seconds", str(seconds)])  # for the modes with a --seconds
     if what in ("protocol", "all"):
         bench_protocol()
     if what in ("decoder", "all"):
         importlib.import_module("stereocam.tools.bench_decoder").main([])
     if what in ("transport", "all"):
-        importlib.import_module("stereocam.tools.bench_transport").main(rest if what == "transport" else [], seconds)
-    if what == "sync":  # minutes of capture: only when asked for; --seconds given after WHAT goes to it
-        importlib.import_module("stereocam.tools.bench_sync").main(rest)
+        importlib.import_module("stereocam.tools.bench_transport").main(rest if what == "transport" else [],
+                                                                        5.0 if seconds is None else seconds)
+    if what == "sync":  # minutes of capture: only when asked for
+        importlib.import_module("stereocam.tools.bench_sync").main(timed)
     if what == "firmware":
         importlib.import_module("stereocam.tools.bench_firmware").main(rest)
     if what == "calib-real":
         importlib.import_module("stereocam.tools.bench_calib_real").main(rest)
     if what == "record":
-        importlib.import_module("stereocam.tools.bench_record").main(rest + ["--seconds", str(seconds)])
+        importlib.import_module("stereocam.tools.bench_record").main(timed)
     if what == "rematch":
         importlib.import_module("stereocam.tools.bench_rematch").main(rest)
     if what == "usb":

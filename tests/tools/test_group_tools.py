@@ -29,6 +29,14 @@ def test_bench_sync_reports_skew_and_clock_errors_per_transport(capsys):
     assert "clock map error vs truth" in capsys.readouterr().out
 
 
+@pytest.mark.slow
+def test_bench_sync_through_the_command_tree_takes_its_seconds(capsys):
+    """`stereocam bench sync --seconds N` captures N s per transport (not the mode's 120 s default)."""
+    assert cli.main(["bench", "sync", "--seconds", "2", "--transports", "inprocess"]) == 0
+    out = capsys.readouterr().out
+    assert "2 s per transport" in out and "inprocess" in out
+
+
 def test_trigger_master_needs_a_line():
     r = subprocess.run([sys.executable, "-m", "stereocam.device_sim", "--serve", "tcp:127.0.0.1:0",
                         "--trigger-master", "30"], capture_output=True, text=True, timeout=60)
