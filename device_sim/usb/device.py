@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import itertools
 import logging
-import struct
 import threading
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from .descriptors import (CONFIGURATION_VALUE, DT_CONFIG, DT_DEVICE, DT_STRING, EP_IN, EP_OUT,
-                          INTERFACE_NUMBER, BusSpeed, DescriptorSet)
+from .control import control_transfer
+from .descriptors import CONFIGURATION_VALUE, EP_IN, EP_OUT, INTERFACE_NUMBER, BusSpeed, DescriptorSet
 from .errors import LibusbError, usb_error
 from .function import UsbFunction
 from .pipes import InPipe, OutPipe
@@ -24,11 +23,6 @@ if TYPE_CHECKING:
 
 _log = logging.getLogger(__name__)
 
-# Standard requests (USB 2.0 table 9-4).
-GET_STATUS, CLEAR_FEATURE, SET_FEATURE = 0x00, 0x01, 0x03
-GET_DESCRIPTOR, GET_CONFIGURATION, SET_CONFIGURATION = 0x06, 0x08, 0x09
-GET_INTERFACE, SET_INTERFACE = 0x0A, 0x0B
-FEATURE_ENDPOINT_HALT = 0
 IN_FIFO_SECONDS = 0.025  # the device's IN FIFO holds about this much of its bus's time
 MIN_IN_CAPACITY = 1024 * 1024
 DEFAULT_OUT_CAPACITY = 64 * 1024
@@ -145,7 +139,7 @@ class SimUsbDevice:
 
     def halt(self, endpoint: int) -> None:
         """Fault injection: STALL ``endpoint`` as firmware does on a protocol error."""
-        self._pipe(endpoint).halt()
+        self.endpoint(endpoint).halt()
 
     def _link_up(self) -> None:
         """Link the firmware to the IN pipe. A firmware that drops a silent host (SPEC §9) hangs up
@@ -221,7 +215,8 @@ class SimUsbDevice:
 
     # -- bulk transfers --------------------------------------------------------------------
 
-    def _pipe(self, endpoint: int) -> InPipe | OutPipe:
+    def endpoint(self, endpoint: int) -> InPipe | OutPipe:
+        """The pipe of ``endpoint`` (EP_IN or EP_OUT)."""
         if endpoint == EP_IN:
             return self.in_pipe
         if endpoint == EP_OUT:
@@ -233,7 +228,7 @@ class SimUsbDevice:
         handle.check()
         if self.configuration == 0:
             raise usb_error(LibusbError.NOT_FOUND, "device not configured")
-        pipe = self._pipe(endpoint)
+        pipe = self.endpoint(endpoint)
         if self.claims.get(INTERFACE_NUMBER) is not handle:
             self.claim(handle, INTERFACE_NUMBER)
         return pipe
@@ -252,57 +247,11 @@ class SimUsbDevice:
 
     def clear_halt(self, handle: SimHandle, endpoint: int) -> None:
         handle.check()
-        self._pipe(endpoint).clear_halt()
+        self.endpoint(endpoint).clear_halt()
 
     # -- endpoint 0 ------------------------------------------------------------------------
 
     def control(self, handle: SimHandle, request_type: int, request: int, value: int,
                 index: int, data: memoryview) -> int:
-        """A control transfer on endpoint 0; returns the byte count (IN: written into ``data``).
-        Requests the device does not support STALL (EPIPE), as on real hardware."""
-        handle.check()
-        if request_type & 0x80:
-            reply = self._control_in(request_type, request, value, index)
-            n = min(len(reply), len(data))
-            data[:n] = reply[:n]
-            return n
-        self._control_out(handle, request_type, request, value, index)
-        return len(data)
-
-    def _control_in(self, request_type: int, request: int, value: int, index: int) -> bytes:
-        d = self.descriptors
-        if request_type == 0x80 and request == GET_DESCRIPTOR:
-            kind, number = value >> 8, value & 0xFF
-            if kind == DT_DEVICE and number == 0:
-                return d.device.pack()
-            if kind == DT_CONFIG and number < len(d.configurations):
-                return d.configurations[number].pack()
-            if kind == DT_STRING:
-                text = d.string(number, index)
-                if text is not None:
-                    return text
-        elif request_type == 0x80 and request == GET_CONFIGURATION:
-            return bytes((self.configuration,))
-        elif request_type == 0x80 and request == GET_STATUS:
-            return b"\x00\x00"  # bus powered, no remote wakeup
-        elif request_type == 0x81 and request in (GET_STATUS, GET_INTERFACE):
-            if index == INTERFACE_NUMBER:
-                return b"\x00\x00" if request == GET_STATUS else b"\x00"
-        elif request_type == 0x82 and request == GET_STATUS:
-            return struct.pack("<H", int(self._pipe(index).halted))
-        raise usb_error(LibusbError.PIPE, f"request 0x{request_type:02x}/0x{request:02x} stalled")
-
-    def _control_out(self, handle: SimHandle, request_type: int, request: int, value: int,
-                     index: int) -> None:
-        if request_type == 0x00 and request == SET_CONFIGURATION:
-            self.set_configuration(handle, value)
-        elif request_type == 0x02 and request in (CLEAR_FEATURE, SET_FEATURE) \
-                and value == FEATURE_ENDPOINT_HALT:
-            pipe = self._pipe(index)
-            pipe.clear_halt() if request == CLEAR_FEATURE else pipe.halt()
-        elif request_type == 0x01 and request == SET_INTERFACE and index == INTERFACE_NUMBER \
-                and value == 0:
-            pass
-        else:
-            raise usb_error(LibusbError.PIPE,
-                            f"request 0x{request_type:02x}/0x{request:02x} stalled")
+        """A control transfer on endpoint 0 (see ``control``); returns the byte count."""
+        return control_transfer(self, handle, request_type, request, value, index, data)

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import stereocam
+from stereocam.recording.reader import Recording
 from stereocam.tools.viewer.server import ViewerServer
 from stereocam.tools.viewer.session import ViewerSession
 from tests.support.browser import Chromium, find_chromium
@@ -26,10 +27,10 @@ needs_browser = pytest.mark.skipif(CHROMIUM is None, reason="no Chromium on this
 
 
 @pytest.fixture
-def viewer():
+def viewer(tmp_path):
     cam = stereocam.open("sim://?seed=6", timeout=2.0)
     cam.configure(**SMALL, fps=10)
-    server = ViewerServer(ViewerSession(cam))
+    server = ViewerServer(ViewerSession(cam, tmp_path / "recordings"))
     thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.1}, daemon=True)
     thread.start()
     cam.start()
@@ -53,6 +54,37 @@ def test_images_are_always_the_newest_frame(viewer):
     img = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_GRAYSCALE)
     assert img.shape == (240, 320)
     assert viewer.session.cam.stats["queue_overflow"] == 0
+
+
+def _post(url: str, doc: dict | None = None) -> tuple[int, dict]:
+    req = urllib.request.Request(url, data=json.dumps(doc or {}).encode(), method="POST")
+    try:
+        with urllib.request.urlopen(req, timeout=30) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as err:
+        return err.code, json.loads(err.read())
+
+
+def test_record_button_records_every_frame_while_the_page_shows_the_newest(viewer):
+    (viewer.session.record_dir).mkdir()
+    status, doc = _post(viewer.url + "api/record/start")
+    assert status == 200 and not doc["recording"]["done"]
+    assert _post(viewer.url + "api/record/start")[0] == 400  # one recording at a time, said so
+    time.sleep(1.5)
+    status, doc = _post(viewer.url + "api/record/stop")
+    rec = doc["recording"]
+    assert status == 200 and rec["done"] and rec["frames"] >= 5 and rec["recorder_dropped"] == 0
+    assert _post(viewer.url + "api/record/stop")[0] == 400
+    with Recording(rec["path"]) as r:  # a finished file: summary, index, every frame in order
+        assert len(r) == rec["frames"] and r.device["serial"] == "SIM00006"
+        sequences = [c.info.sequence for c in r.captures()]
+    assert sequences == list(range(sequences[0], sequences[0] + len(sequences)))  # none skipped
+
+
+def test_recording_into_a_folder_that_is_not_there_is_refused_with_the_reason(viewer):
+    status, doc = _post(viewer.url + "api/record/start")  # record_dir was never made
+    assert status == 400 and "recordings" in doc["reason"]
+    assert json.loads(_get(viewer.url + "api/state")[1])["recording"] is None
 
 
 @needs_browser
@@ -90,6 +122,14 @@ def test_viewer_page_in_a_headless_browser(viewer, tmp_path):
         browser.wait_for(page, "document.getElementById('cursor').textContent.includes('(')")
         cursor = browser.evaluate(page, "document.getElementById('cursor').textContent")
         assert "depth" in cursor or "no depth" in cursor
+        viewer.session.record_dir.mkdir()
+        browser.evaluate(page, "document.getElementById('record').click()")
+        browser.wait_for(page, "document.getElementById('record').textContent === 'Stop recording'")
+        time.sleep(1.0)
+        browser.evaluate(page, "document.getElementById('record').click()")
+        saved = browser.wait_for(page, "document.getElementById('recording').textContent.startsWith('saved') && "
+                                       "document.getElementById('recording').textContent")
+        assert ".mcap" in saved and list(viewer.session.record_dir.glob("*.mcap"))
         time.sleep(1.0)
         out = Path(os.environ.get("STEREOCAM_SCREENSHOT", tmp_path / "viewer.png"))
         out.write_bytes(browser.screenshot(page))

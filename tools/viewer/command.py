@@ -5,6 +5,7 @@ import contextlib
 import signal
 import threading
 import webbrowser
+from pathlib import Path
 
 import click
 
@@ -27,14 +28,16 @@ def _interrupt(signum: int, frame: object) -> None:  # noqa: ARG001
 @click.option("--host", default="127.0.0.1", show_default=True, help="Address to listen on.")
 @click.option("--no-browser", is_flag=True, help="Do not open the browser; just print the address.")
 @click.option("--keep-config", is_flag=True, help="Leave the configuration changed in the viewer on the camera.")
-def command(url: str, port: int, host: str, no_browser: bool, keep_config: bool) -> int:
+@click.option("--record-dir", type=click.Path(file_okay=False, writable=True, path_type=Path), default=".",
+              show_default=True, help="Folder for the recordings started with the page's Record button.")
+def command(url: str, port: int, host: str, no_browser: bool, keep_config: bool, record_dir: Path) -> int:
     """Live viewer: left, right and disparity (colour bar in metres), depth and 3-D point under the
     cursor, frame rate, drops, link and device counters, the configuration with the device's ranges,
-    trigger, start/stop, snapshots (PNG, PLY). The first line printed is the viewer's address. Runs
+    trigger, start/stop, snapshots (PNG, PLY), recording to MCAP. The first line printed is the viewer's address. Runs
     until Ctrl-C; then the camera's configuration is put back as found unless --keep-config."""
     with stereocam.open(url, timeout=2.0) as cam, \
             (contextlib.nullcontext() if keep_config else preserved_configuration(cam)):
-        session = ViewerSession(cam)
+        session = ViewerSession(cam, record_dir)
         try:
             server = ViewerServer(session, host, port)
         except OSError as exc:

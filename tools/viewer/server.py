@@ -7,6 +7,7 @@ GET  /image/PLANE.jpg       the newest frame's left, right or colour-mapped disp
 GET  /api/point?x=&y=       disparity, depth and 3-D point under the cursor
 POST /api/config            {"name": value, ...}; a refusal answers 409 with the device's reason
 POST /api/start|stop|trigger
+POST /api/record/start|stop every frame to an MCAP file in the viewer's --record-dir (its path answered)
 GET  /snapshot/NAME         the newest frame as left.png, right.png, disparity.png (depth colour bar)
                             or points.ply, as a download
 """
@@ -23,6 +24,7 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 import stereocam
+from stereocam.recording import RecordingError
 from stereocam.tools.capture import save_frame
 
 from .session import ViewerSession
@@ -117,7 +119,8 @@ class _Handler(BaseHTTPRequestHandler):
                                          f'attachment; filename="frame{frame.sequence:06d}_{name}"'})
 
     def do_POST(self) -> None:  # noqa: N802 - http.server's name
-        cam = self.server.session.cam
+        session = self.server.session
+        cam = session.cam
         path = urlsplit(self.path).path
         try:
             length = int(self.headers.get("Content-Length", 0))
@@ -132,12 +135,16 @@ class _Handler(BaseHTTPRequestHandler):
                 self._json({"streaming": False})
             elif path == "/api/trigger":
                 self._json({"trigger_id": cam.trigger()})
+            elif path == "/api/record/start":
+                self._json({"recording": session.start_recording()})
+            elif path == "/api/record/stop":
+                self._json({"recording": session.stop_recording()})
             else:
                 self._json({"error": f"no such action {path}"}, HTTPStatus.NOT_FOUND)
         except stereocam.DeviceError as exc:
             self._json({"error": str(exc), "reason": exc.device_message, "param": exc.param,
                         "code": getattr(exc.code, "name", exc.code)}, HTTPStatus.CONFLICT)
-        except (stereocam.ConfigError, ValueError, TypeError) as exc:
+        except (stereocam.ConfigError, RecordingError, ValueError, TypeError, OSError) as exc:
             self._json({"error": str(exc), "reason": str(exc)}, HTTPStatus.BAD_REQUEST)
         except stereocam.StereoCamError as exc:
             self._json({"error": str(exc), "reason": str(exc)}, HTTPStatus.BAD_GATEWAY)

@@ -1,17 +1,21 @@
 """The viewer's side of the camera: a grab thread that keeps only the newest frame, JPEGs made on
-demand (never queued), the point under the cursor, rates and counters."""
+demand (never queued), the point under the cursor, rates and counters, and a recording that gets
+every frame (the page shows the newest; the file misses none)."""
 from __future__ import annotations
 
 import collections
 import threading
 import time
 from dataclasses import asdict
+from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
 import stereocam
+from stereocam.recording import Recorder, describe
+from stereocam.recording.session import counters_of
 from stereocam.tools.info import value_name
 from stereocam.tools.pictures import colorize, depth_ticks, disparity_range
 
@@ -28,8 +32,11 @@ def turbo_stops(n: int = 16) -> list[str]:
 class ViewerSession:
     """Owns the grab thread; every method is safe to call from any HTTP handler thread."""
 
-    def __init__(self, cam: stereocam.Camera):
+    def __init__(self, cam: stereocam.Camera, record_dir: Path | None = None):
         self.cam = cam
+        self.record_dir = Path.cwd() if record_dir is None else Path(record_dir)
+        self._recorder: Recorder | None = None
+        self._recorded = 0
         self._cond = threading.Condition()
         self._frame: stereocam.Frame | None = None
         self._jpegs: dict[tuple[int, str], bytes] = {}
@@ -45,7 +52,9 @@ class ViewerSession:
         while not self._stop.is_set():
             try:
                 frame = self.cam.get_frame(timeout=0.1)
-                while (newer := self.cam.try_get_frame()) is not None:  # only the newest counts
+                self._record(frame)
+                while (newer := self.cam.try_get_frame()) is not None:  # only the newest is shown
+                    self._record(newer)
                     frame, self.skipped = newer, self.skipped + 1
             except stereocam.CameraTimeoutError:
                 continue
@@ -61,6 +70,45 @@ class ViewerSession:
                 self._jpegs = {k: v for k, v in self._jpegs.items() if k[0] == frame.sequence}
                 self._arrivals.append(time.monotonic())
                 self._cond.notify_all()
+
+    # -- recording ------------------------------------------------------------------------------
+    def _record(self, frame: stereocam.Frame) -> None:
+        with self._cond:
+            recorder = self._recorder
+            if recorder is not None:
+                recorder.put(frame, counters_of(self.cam))
+                self._recorded += 1
+
+    def start_recording(self) -> dict[str, Any]:
+        """Record every frame from now on to a new MCAP file in ``record_dir``; returns its state."""
+        with self._cond:
+            if self._recorder is not None:
+                raise ValueError(f"already recording to {self._recorder.path}")
+        info = self.cam.info()
+        path = self.record_dir / f"view_{info.serial}_{time.strftime('%Y%m%d-%H%M%S')}.mcap"
+        recorder = Recorder(path, describe(self.cam))
+        with self._cond:
+            self._recorder, self._recorded = recorder, 0
+        return self.recording() or {}
+
+    def stop_recording(self) -> dict[str, Any]:
+        """Finish the file (summary and index); returns its final state."""
+        with self._cond:
+            recorder, self._recorder = self._recorder, None
+        if recorder is None:
+            raise ValueError("not recording")
+        stats = recorder.close()
+        return {"path": str(recorder.path), "frames": self._recorded, "recorder_dropped": stats.recorder_dropped,
+                "megabytes": round(stats.file_bytes / 1e6, 2), "done": True}
+
+    def recording(self) -> dict[str, Any] | None:
+        with self._cond:
+            recorder = self._recorder
+        if recorder is None:
+            return None
+        return {"path": str(recorder.path), "frames": self._recorded,
+                "recorder_dropped": recorder.stats.recorder_dropped,
+                "megabytes": round(recorder.stats.file_bytes / 1e6, 2), "done": False}
 
     def newest(self, after: int = -1, wait: float = 1.0) -> stereocam.Frame | None:
         """The newest frame, waiting up to ``wait`` seconds for one newer than ``after``."""
@@ -132,7 +180,7 @@ class ViewerSession:
         return {
             "url": cam.url, "model": info.model, "serial": info.serial, "firmware": info.firmware_version,
             "streaming": cam.streaming, "fps": round(self.fps(), 1), "viewer_skipped": self.skipped,
-            "error": self.error, "host": cam.stats, "device": dict(status.counters) if status else {},
+            "error": self.error, "recording": self.recording(), "host": cam.stats, "device": dict(status.counters) if status else {},
             "config": config, "config_names": {k: value_name(k, v) for k, v in config.items()},
             "options": [{**asdict(p), "value": config.get(p.name)} for p in cam.options() if p.name in config],
         }
@@ -140,3 +188,5 @@ class ViewerSession:
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=2)
+        if self._recorder is not None:
+            self.stop_recording()

@@ -57,11 +57,28 @@ async function refreshState() {
       `viewer_skipped ${doc.viewer_skipped} crc ${h.header_crc_errors + h.payload_crc_errors} ` +
       `retries ${h.retries} timeouts ${h.timeouts}\n` +
       `device: ${Object.entries(doc.device).map(([k, v]) => `${k} ${v}`).join(" ")}`;
+    if (doc.recording || recording) showRecording(doc.recording); // a saved file's line stays
     buildConfig(doc);
   } catch (e) {
     $("error").textContent = `viewer: ${e}`;
   }
 }
+
+let recording = null;
+function showRecording(rec) {
+  recording = rec && !rec.done ? rec : null;
+  $("record").textContent = recording ? "Stop recording" : "Record";
+  $("recording").textContent = rec
+    ? `${rec.done ? "saved" : "recording"} ${rec.path}: ${rec.frames} frames, ${rec.megabytes} MB, ` +
+      `${rec.recorder_dropped} dropped by the recorder`
+    : "";
+}
+
+$("record").addEventListener("click", async () => {
+  const {ok, doc} = await api(recording ? "/api/record/stop" : "/api/record/start", {});
+  if (ok) showRecording(doc.recording);
+  else $("error").textContent = `recording refused: ${doc.reason || doc.error}`;
+});
 
 function buildConfig(doc) {
   const form = $("config");
