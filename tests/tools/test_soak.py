@@ -21,3 +21,13 @@ def test_soak_command_short(capsys):
     out = capsys.readouterr().out
     assert rc == 0, out
     assert "soak: clean" in out and "corrupted: 0" in out and "counters add up: yes" in out
+    assert "delivery goal: met (at least 50%)" in out
+
+
+def test_soak_fails_a_stream_short_of_its_delivery_goal():
+    """A report whose delivery is below the goal for its flip rate fails the soak, said so."""
+    rep = soak.Report("stream, flip 1e-05/byte")
+    rep.figures.update({"frames sent": 100, "delivered": 94, "corrupted": 0})
+    assert soak._failed(rep, 1e-5) and rep.figures["delivery goal"].startswith("NOT MET")
+    rep.figures["delivered"] = 95
+    assert not soak._failed(rep, 1e-5)
