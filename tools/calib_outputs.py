@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from stereocam.tools.calib_report import write_report
+from stereocam.tools.calib_report import write_html, write_report
 from stereocam.tools.calib_coverage import PARAM_NAMES
 from stereocam.tools.calib_solve import CalibrationResult, Progress
 from stereocam.tools.camera_info import ros_camera_info, write_camera_info
@@ -69,12 +69,13 @@ def write_outputs(result: CalibrationResult, outdir: Path,
     """Write the files listed in the module docstring (camera_info/ for `sizes`); returns the paths written."""
     outdir.mkdir(parents=True, exist_ok=True)
     c, q, r = result.calibration, result.quality, result.rectification
-    written = [outdir / "calibration.json", outdir / "report.png"]
+    written = [outdir / "calibration.json", outdir / "report.png", outdir / "report.html"]
     doc = c.to_json_dict(q)
     doc["dropped"] = [{"pair": v.label, "reason": v.reason} for v in result.dropped]
     doc["lens_model_scores"] = result.model_scores
     written[0].write_text(json.dumps(doc, indent=2) + "\n")
     write_report(result, written[1])
+    write_html(result, written[2], written[1].name)
     if not result.passed:
         for name in _PASS_ONLY:
             (outdir / name).unlink(missing_ok=True)

@@ -27,7 +27,8 @@ Outputs in OUTDIR:
   left.yaml, right.yaml   ROS camera_info (plumb_bob, rational_polynomial or equidistant) (if passed)
   camera_info/left_WxH.yaml, right_WxH.yaml   device mode: camera_info for every stream size the
                      unit offers (tools/camera_info.py)                              (if passed)
-  report.png         per-view errors, coverage, rectified pair with epipolar lines
+  report.png         per-view errors named by file (worst views called out), coverage, rectified pair
+  report.html        the same as tables: every pair's fate and errors, the lens models tried
 Exit status: 0 passed; 1 the camera could not be reached; 2 bad arguments or unreadable images;
 3 no solution (board never found, too few views); 4 the solution failed the gate (calibration.json
 says passed: false, the YAML files are not written and stale ones from an earlier run are removed);

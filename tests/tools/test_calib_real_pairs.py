@@ -44,3 +44,8 @@ def test_real_pairs_pass_the_default_gate(tmp_path):
     assert doc["T"][0] < 0  # right camera to the right of the left one
     for name in ("calibration.yaml", "left.yaml", "right.yaml", "report.png"):
         assert (tmp_path / name).exists()
+    page = (tmp_path / "report.html").read_text()
+    for d in doc["dropped"]:  # each dropped file named with its reason, on the page and in the picture's caption
+        assert d["pair"].split("|")[0] in page and d["reason"].split(" ")[0] in page
+    used = [f"left{n:02d}.jpg" for n in range(1, 15) if f"left{n:02d}.jpg" not in str(doc["dropped"])]
+    assert sum(name in page for name in used) >= 10 and page.count("<li>") >= 3 + 3  # worst views, lens models

@@ -1,6 +1,8 @@
 """The disparity picture carries a colour bar whose ticks read depth in metres; the demo says when it fell short."""
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import cv2
 import pytest
 
@@ -41,3 +43,16 @@ def test_disparity_png_has_a_colour_bar(frame, tmp_path):
 def test_demo_says_plainly_when_the_machine_fell_short():
     assert "could not keep up" in keep_up_note(6.3, 15, 36) and "6.3 of the 15 fps" in keep_up_note(6.3, 15, 36)
     assert keep_up_note(14.9, 15, 0).startswith("kept up")
+
+
+def test_calibration_report_names_views_by_file_and_calls_out_the_worst():
+    from stereocam.tools.calib_report import short_label, worst_views
+    from stereocam.tools.calib_solve import ViewRecord
+
+    views = [ViewRecord(i, f"/data/left_{i:02d}.jpg|/data/right_{i:02d}.jpg", "used", rms_left=0.1 + i / 100,
+                        rms_right=0.1) for i in range(6)]
+    views[2].rms_right = 0.7  # the outlier a reader must find by name
+    views.append(ViewRecord(6, "left_06.jpg|right_06.jpg", "dropped", reason="epipolar 2.0 px > 1.0 px"))
+    worst = worst_views(SimpleNamespace(views=views), 2)  # what worst_views reads of a CalibrationResult
+    assert [(short_label(v), name, round(px, 2)) for v, name, px in worst] == [
+        ("left_02.jpg", "right reprojection", 0.7), ("left_05.jpg", "left reprojection", 0.15)]
