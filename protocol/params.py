@@ -113,6 +113,13 @@ PARAMS = tuple(replace(p, description=DESCRIPTIONS.get(p.name, p.description)) f
 BY_ID: dict[int, Param] = {p.pid: p for p in PARAMS}
 BY_NAME: dict[str, Param] = {p.name: p for p in PARAMS}
 
+VALUE_NAMES: dict[str, dict[int, str]] = {  # enumerated parameters: value -> name (outputs is a bit set)
+    "trigger_mode": {int(t): t.name.lower() for t in TriggerMode},
+    "pre_filter_type": {0: "xsobel", 1: "normalized"},
+    "rectify": {0: "raw", 1: "rectified"},
+    "algorithm": {0: "block_matching", 1: "sgm"},
+}
+
 
 def defaults() -> dict[str, int]:
     return {p.name: int(p.default) for p in PARAMS}

@@ -41,7 +41,6 @@ captured or written; every attempt is recorded in the factory database (tools/fa
 from __future__ import annotations
 
 import argparse
-import os
 import re
 import socket
 import sys
@@ -54,6 +53,7 @@ import numpy as np
 from stereocam.tools.calib_boards import describe, parse_board
 from stereocam.tools.calib_outputs import PairProgress, print_summary, write_outputs
 from stereocam.tools.camera_info import stream_sizes
+from stereocam.tools.session import writable_dir
 from stereocam.tools.factory.db import FactoryDB, FactoryDBError, default_url
 from stereocam.tools.factory.record import make_attempt, now_utc
 from stereocam.tools.calib_fit import OutlierRules
@@ -173,14 +173,6 @@ def _fail(code: int, text: str) -> int:
     return code
 
 
-def _writable(path: Path) -> bool:
-    """True when `path` is a writable folder or could be created as one (nothing is created)."""
-    probe = path.resolve()
-    while not probe.exists():
-        probe = probe.parent
-    return probe.is_dir() and os.access(probe, os.W_OK | os.X_OK)
-
-
 def _record(db: FactoryDB, args: argparse.Namespace, serial: str, started: str, result: CalibrationResult | None,
             code: int, reason: str, blob: bytes | None) -> None:
     attempt = make_attempt(serial=serial, started_at=started, station=args.station,
@@ -197,7 +189,9 @@ def _record(db: FactoryDB, args: argparse.Namespace, serial: str, started: str, 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     started = now_utc()
-    if (args.url is None) == (args.images is None):
+    if args.url is None and args.images is None:
+        return _fail(EXIT_USAGE, "nothing to calibrate: give a camera URL (device mode) or --images DIR (offline)")
+    if args.url is not None and args.images is not None:
         return _fail(EXIT_USAGE, "give a camera URL (device mode) or --images DIR (offline), not both")
     charuco = args.board.lower().startswith("charuco:")
     if args.square_size is None and not charuco:
@@ -215,8 +209,10 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         return _fail(EXIT_USAGE, str(exc))
     config = _config(args)
-    if not _writable(args.out):  # checked before anything is captured or written to a camera
-        return _fail(EXIT_USAGE, f"--out {args.out} is not a writable folder; nothing was done")
+    try:  # made and written to before anything is captured or written to a camera
+        writable_dir(args.out, keep=False)
+    except OSError as exc:
+        return _fail(EXIT_USAGE, f"--out: {exc.strerror or exc}; nothing was done")
     try:
         db = FactoryDB(args.db)
     except FactoryDBError as exc:

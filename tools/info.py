@@ -8,13 +8,14 @@ import click
 
 import stereocam
 from stereocam.protocol.messages import Capability
-from stereocam.protocol.params import Output, TriggerMode
+from stereocam.protocol.params import VALUE_NAMES, Output
 
 
 def value_name(name: str, value: int) -> str | int:
-    """Enumerated parameters by name (trigger_mode software, outputs left+right); others as numbers."""
-    if name == "trigger_mode" and value in TriggerMode._value2member_map_:
-        return TriggerMode(value).name.lower()
+    """Enumerated parameters by name (trigger_mode software, outputs left+right, algorithm sgm);
+    others as numbers."""
+    if value in VALUE_NAMES.get(name, {}):
+        return VALUE_NAMES[name][value]
     if name == "outputs":
         return "+".join(p.name.lower() for p in Output if value & p) or "none"
     return value

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import contextlib
-import os
+import tempfile
 from pathlib import Path
 from typing import Iterator
 
@@ -26,14 +26,27 @@ def preserved_configuration(cam: stereocam.Camera) -> Iterator[dict[str, int]]:
                 cam.configure(**{k: found[k] for k in changed})
 
 
-def output_dir(path: Path) -> Path:
-    """Create ``path`` (and parents) now, before any camera is touched; BadParameter (exit 2) if it
-    cannot be created or written."""
+def writable_dir(path: Path, keep: bool = True) -> Path:
+    """Create ``path`` (and parents) and write a file into it now; OSError naming the folder if either
+    fails (permission bits say nothing to root, and a file system may be read-only or full). With
+    ``keep=False`` the folders made for the test are removed again: nothing is left behind."""
+    made = [p for p in (path, *path.parents) if not p.exists()]
     try:
         path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
     except OSError as exc:
-        raise click.BadParameter(f"cannot create directory {str(path)!r}: {exc.strerror or exc}",
-                                 param_hint="'--out'") from exc
-    if not os.access(path, os.W_OK | os.X_OK):
-        raise click.BadParameter(f"directory {str(path)!r} is not writable", param_hint="'--out'")
+        raise OSError(exc.errno, f"cannot write into directory {str(path)!r}: {exc.strerror or exc}") from exc
+    finally:
+        for folder in made if not keep else ():
+            with contextlib.suppress(OSError):
+                folder.rmdir()
     return path
+
+
+def output_dir(path: Path) -> Path:
+    """``writable_dir`` before any camera is touched, as a usage error (exit 2) if it fails."""
+    try:
+        return writable_dir(path)
+    except OSError as exc:
+        raise click.BadParameter(exc.strerror or str(exc), param_hint="'--out'") from exc

@@ -130,4 +130,16 @@ def test_cli_device_mode(tmp_path):
 def test_cli_needs_a_url_or_images(tmp_path):
     r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "--out", str(tmp_path)],
                        capture_output=True, text=True, timeout=60)
-    assert r.returncode == 2 and "URL" in r.stderr
+    assert r.returncode == 2 and "nothing to calibrate" in r.stderr and "not both" not in r.stderr
+    both = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "sim://?seed=1", "--images",
+                           str(tmp_path), "--out", str(tmp_path)], capture_output=True, text=True, timeout=60)
+    assert both.returncode == 2 and "not both" in both.stderr
+
+
+def test_an_out_folder_that_cannot_be_written_stops_before_the_camera(tmp_path):
+    """/proc refuses new folders even to root (whose permission bits always say yes): exit 2 at once."""
+    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "sim://?seed=75&scene=board",
+                        "--out", "/proc/stereocam-nope/out", "--db", str(tmp_path / "f.sqlite")],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "cannot write into directory" in r.stderr and "nothing was done" in r.stderr
+    assert not (tmp_path / "f.sqlite").exists()  # not even the factory record was opened

@@ -55,6 +55,8 @@ def test_info_json_names_enums_and_shows_calibration():
     doc = json.loads(r.stdout)
     assert doc["serial"] == "SIM00002" and doc["config"]["trigger_mode"] == "free_run"
     assert doc["config"]["outputs"] == "left+right+disparity"
+    assert (doc["config"]["algorithm"], doc["config"]["pre_filter_type"], doc["config"]["rectify"]) == (
+        "block_matching", "xsobel", "rectified")
     assert doc["calibration"]["source"] == "factory" and doc["calibration"]["id"] > 0
     assert "frames_sent" in doc["counters"] or doc["counters"]
 

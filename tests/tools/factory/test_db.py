@@ -113,4 +113,4 @@ def test_newer_schema_and_unusable_db_are_refused_before_anything(tmp_path: Path
     assert _run("postgresql://nobody@127.0.0.1:1/none", out) == calibrate.EXIT_USAGE
     (tmp_path / "file").write_text("x")
     assert _run(str(tmp_path / "db.sqlite"), tmp_path / "file" / "sub") == calibrate.EXIT_USAGE
-    assert "not a writable folder" in capsys.readouterr().err
+    assert "cannot write into directory" in capsys.readouterr().err
