@@ -6,6 +6,7 @@ the monotonic clock. A retry carries FLAG_RESEND so the device replays instead o
 """
 from __future__ import annotations
 
+import logging
 import threading
 from dataclasses import dataclass, field
 from typing import Callable
@@ -18,6 +19,8 @@ from stereocam.protocol.params import BY_ID
 
 from .arguments import timeout_arg
 from .transports.base import Transport
+
+_log = logging.getLogger(__name__)
 
 READ_CHUNK = 1 << 20
 
@@ -73,6 +76,11 @@ class Link:
             self._next_id = self._next_id % 0xFFFF + 1  # 1..65535, wraps and skips 0
             return rid
 
+    def _retry(self, msg: m.Message, rid: int, attempt: int, retries: int, why: str) -> None:
+        self.stats.retries += 1
+        _log.info("%s (request id %d): %s; resending (try %d of %d)", type(msg).__name__, rid, why, attempt + 2,
+                  retries + 1)
+
     def request(self, msg: m.Message, timeout: float | None = None, retries: int | None = None) -> m.Message:
         """Send ``msg``, return the device's reply; DeviceError on NACK, CameraTimeoutError after retries."""
         timeout = self.timeout if timeout is None else timeout_arg(timeout)
@@ -89,13 +97,13 @@ class Link:
                     self._write(m.encode(msg, rid, FLAG_RESEND if attempt else 0))
                 except CameraTimeoutError:  # the device did not take the bytes in time: one try spent
                     if attempt < retries:
-                        self.stats.retries += 1
+                        self._retry(msg, rid, attempt, retries, "the device did not take the request in time")
                     continue
                 if pending.event.wait(timeout):
                     break
                 self.check_alive()
                 if attempt < retries:
-                    self.stats.retries += 1
+                    self._retry(msg, rid, attempt, retries, f"no reply in {timeout:.3g} s")
             else:
                 self.stats.timeouts += 1
                 raise CameraTimeoutError(f"no reply to {type(msg).__name__} (request id {rid}) after "

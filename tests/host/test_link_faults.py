@@ -41,8 +41,9 @@ def faulty(request, device_url):
     cam.close()
 
 
-def test_lost_reply_is_retried_and_never_applied_twice(faulty):
+def test_lost_reply_is_retried_and_never_applied_twice(faulty, caplog):
     cam, link = faulty
+    caplog.set_level("INFO", logger="stereocam.link")
     cam.set_trigger_mode("software")
     cam.start()
     before = cam.status().counters
@@ -68,6 +69,7 @@ def test_lost_reply_is_retried_and_never_applied_twice(faulty):
     with pytest.raises(stereocam.CameraTimeoutError):
         cam.get_frame(timeout=0.5)  # and exactly one capture came of it
     assert cam.stats["retries"] >= 1
+    assert any("Trigger" in r.getMessage() and "resending (try 2 of 3)" in r.getMessage() for r in caplog.records)
 
 
 def test_request_ids_wrap_and_skip_zero(device_url):
