@@ -10,6 +10,7 @@ from __future__ import annotations
 from stereocam.tools.exit_codes import EXIT_CODES
 
 import argparse
+import json
 from pathlib import Path
 
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
@@ -77,6 +78,14 @@ def update(args: argparse.Namespace) -> int:
 def status(args: argparse.Namespace) -> int:
     with stereocam.open(args.url, timeout=args.timeout) as cam:
         st = cam.firmware_status()
+    if args.json:
+        print(json.dumps({"url": args.url, "running": st.running, "mode": st.mode.name.lower(),
+                          "security_counter": st.security_counter,
+                          "transfer": {"received": st.transfer[0], "size": st.transfer[1]},
+                          "slots": [{"slot": s.slot, "version": s.version, "state": s.state.name.lower(),
+                                     "confirmed": s.confirmed, "security_counter": s.security_counter,
+                                     "sha256": s.sha256} for s in st.slots]}, indent=2))
+        return 0
     table = Table(title=f"{args.url}: running {st.running} ({st.mode.name.lower()}), "
                         f"minimum security counter {st.security_counter}")
     for col in ("slot", "version", "state", "confirmed", "security counter", "sha256"):
@@ -113,6 +122,8 @@ def main(argv: list[str] | None = None) -> int:
         if name == "update":
             p.add_argument("image", type=Path)
             p.add_argument("--replace", action="store_true", help="abandon another image's transfer in progress")
+        else:
+            p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
         p.add_argument("--timeout", type=float, default=2.0)
         p.set_defaults(run=fn)
     args = ap.parse_args(argv)

@@ -9,6 +9,7 @@ from __future__ import annotations
 from stereocam.tools.exit_codes import EXIT_CODES
 
 import argparse
+import json
 from pathlib import Path
 
 from stereocam.recording.reader import Recording
@@ -16,31 +17,52 @@ from stereocam.recording.repair import repair
 from stereocam.tools.capture import save_frame
 
 
-def info(path: Path) -> None:
+DROP_KEYS = ("link_lost", "link_incomplete", "host_queue_overflow", "device_dropped", "recorder_dropped")
+
+
+def describe_file(path: Path) -> dict:
+    """What ``recording info`` shows, as plain data."""
     with Recording(path) as rec:
-        d, s = rec.device, rec.metadata.get("stereocam.summary", {})
-        print(f"file      {path} ({path.stat().st_size / 1e6:.1f} MB, {len(rec.summary.chunk_indexes)} chunks)")
-        print(f"unit      {d.get('model')} serial {d.get('serial')} firmware {d.get('firmware_version')} "
-              f"protocol {d.get('protocol_version')}")
-        print(f"frames    {len(rec)} over {rec.duration_s:.2f} s"
-              + (f" ({(len(rec) - 1) / rec.duration_s:.1f} fps)" if rec.duration_s else ""))
-        print("drops     " + ", ".join(f"{k} {s[k]}" for k in ("link_lost", "link_incomplete", "host_queue_overflow",
-                                                                 "device_dropped", "recorder_dropped") if k in s)
-              + (" (repaired file)" if s.get("repaired") else ""))
-        cfg = rec.config
-        print(f"config    {cfg.get('width')}x{cfg.get('height')} @ {cfg.get('fps')} fps, outputs {cfg.get('outputs')}, "
-              f"{cfg.get('num_disparities')} disparities, block {cfg.get('block_size')}")
-        cal = rec.calibration
-        if cal is None:
-            print("calib     none stored (raw frames)")
-        else:
-            c = cal.calibration
-            print(f"calib     {cal.source} generation {cal.generation} id {cal.calibration_id:08x}: "
-                  f"{c.image_size[0]}x{c.image_size[1]}, fx {c.K_left[0, 0]:.1f}, baseline {abs(c.T[0]) * 1000:.1f} mm")
-        print("topics")
-        for ch in rec.summary.channels.values():
-            schema = rec.summary.schemas[ch.schema_id].name
-            print(f"  {ch.topic:<28} {rec.topics[ch.topic]:>7}  {schema}")
+        s, cal = rec.metadata.get("stereocam.summary", {}), rec.calibration
+        return {
+            "file": str(path), "megabytes": round(path.stat().st_size / 1e6, 3),
+            "chunks": len(rec.summary.chunk_indexes), "unit": dict(rec.device), "frames": len(rec),
+            "duration_s": round(rec.duration_s, 6),
+            "fps": round((len(rec) - 1) / rec.duration_s, 3) if rec.duration_s else None,
+            "drops": {k: int(s[k]) for k in DROP_KEYS if k in s}, "repaired": bool(s.get("repaired")),
+            "config": rec.config,
+            "calibration": None if cal is None else {
+                "source": cal.source, "generation": cal.generation, "id": f"{cal.calibration_id:08x}",
+                "image_size": list(cal.calibration.image_size), "fx_px": float(cal.calibration.K_left[0, 0]),
+                "baseline_mm": float(cal.calibration.baseline_m * 1000), "lens_model": cal.calibration.lens_model},
+            "topics": {ch.topic: {"messages": rec.topics[ch.topic], "schema": rec.summary.schemas[ch.schema_id].name}
+                       for ch in rec.summary.channels.values()},
+        }
+
+
+def info(path: Path, as_json: bool = False) -> None:
+    doc = describe_file(path)
+    if as_json:
+        print(json.dumps(doc, indent=2))
+        return
+    d, cfg, cal = doc["unit"], doc["config"], doc["calibration"]
+    print(f"file      {path} ({doc['megabytes']:.1f} MB, {doc['chunks']} chunks)")
+    print(f"unit      {d.get('model')} serial {d.get('serial')} firmware {d.get('firmware_version')} "
+          f"protocol {d.get('protocol_version')}")
+    print(f"frames    {doc['frames']} over {doc['duration_s']:.2f} s" + (f" ({doc['fps']:.1f} fps)" if doc["fps"] else ""))
+    print("drops     " + ", ".join(f"{k} {v}" for k, v in doc["drops"].items())
+          + (" (repaired file)" if doc["repaired"] else ""))
+    print(f"config    {cfg.get('width')}x{cfg.get('height')} @ {cfg.get('fps')} fps, outputs {cfg.get('outputs')}, "
+          f"{cfg.get('num_disparities')} disparities, block {cfg.get('block_size')}")
+    if cal is None:
+        print("calib     none stored (raw frames)")
+    else:
+        w, h = cal["image_size"]
+        print(f"calib     {cal['source']} generation {cal['generation']} id {cal['id']}: {w}x{h}, "
+              f"fx {cal['fx_px']:.1f}, baseline {cal['baseline_mm']:.1f} mm, {cal['lens_model']}")
+    print("topics")
+    for topic, t in doc["topics"].items():
+        print(f"  {topic:<28} {t['messages']:>7}  {t['schema']}")
 
 
 def export(path: Path, out: Path, start: int, stop: int | None) -> int:
@@ -56,7 +78,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="stereocam recording", description=__doc__.splitlines()[0].replace("``", ""),
                                  epilog=EXIT_CODES)
     sub = ap.add_subparsers(dest="what", required=True)
-    sub.add_parser("info", help="what a recording holds").add_argument("file", type=Path)
+    p = sub.add_parser("info", help="what a recording holds")
+    p.add_argument("file", type=Path)
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of lines")
     p = sub.add_parser("repair", help="rewrite a recording cut short with its summary and indexes")
     p.add_argument("file", type=Path)
     p.add_argument("--out", type=Path, default=None, help="write here instead of in place")
@@ -67,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--stop", type=int, default=None, help="frame to stop before")
     args = ap.parse_args(argv)
     if args.what == "info":
-        info(args.file)
+        info(args.file, args.json)
     elif args.what == "repair":
         r = repair(args.file, args.out)
         state = "was complete" if r.was_complete else "was cut short"

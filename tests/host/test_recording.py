@@ -1,6 +1,8 @@
 """Recordings checked by independent readers: mcap's summary and index, rosbags' ROS 2 types."""
 from __future__ import annotations
 
+import json
+
 
 import numpy as np
 import pytest
@@ -118,6 +120,10 @@ def test_camera_record_and_tools(tmp_path, capsys):
     assert recording_tool.main(["info", str(path)]) == 0
     out = capsys.readouterr().out
     assert "SIM00004" in out and "frames    4" in out and "stereo_msgs/msg/DisparityImage" in out
+    assert recording_tool.main(["info", str(path), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["unit"]["serial"] == "SIM00004" and doc["frames"] == 4 and doc["drops"]["recorder_dropped"] == 0
+    assert doc["topics"]["/stereo/disparity"]["messages"] == 4 and doc["calibration"]["lens_model"] == "plumb_bob"
     assert recording_tool.main(["export", str(path), "--out", str(tmp_path / "x"), "--stop", "2"]) == 0
     names = sorted(p.name for p in (tmp_path / "x").iterdir())
     assert names[:5] == ["frame000000_disparity.npy", "frame000000_disparity.png", "frame000000_left.png",

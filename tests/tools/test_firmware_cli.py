@@ -82,6 +82,10 @@ def test_update_over_usb_from_the_cli(signed, usb_bus, capsys):
     assert "1.2.0 -> 1.1.0 in slot A" in capsys.readouterr().out
     assert cli.main(["firmware", "status", url]) == 0
     assert "running A (normal)" in capsys.readouterr().out
+    assert cli.main(["firmware", "status", url, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert (doc["running"], doc["mode"]) == ("A", "normal") and [s["slot"] for s in doc["slots"]] == ["A", "B"]
+    assert {s["version"] for s in doc["slots"]} == {"1.1.0", "1.2.0"} and all(len(s["sha256"]) == 64 for s in doc["slots"])
     assert usb_bus.devices[0].descriptors.device.bcdDevice == 0x0110  # re-enumerated as what it runs
     usb_bus.unplug_all()
     sim.close()
