@@ -14,9 +14,7 @@ from .wire import Reply, WireSession
 KEEP_ALIVE_S = 0.5  # how often a waiting check sends HEARTBEAT while streaming (SPEC §9 host rate)
 LATE_WINDOW_S = 0.15  # how long the suite listens after STOPPED for capture messages that must not come
 
-CAPABILITY_NAMES = {m.Capability.DISPARITY: "DISPARITY", m.Capability.SOFTWARE_TRIGGER: "SOFTWARE_TRIGGER",
-                    m.Capability.EXTERNAL_TRIGGER: "EXTERNAL_TRIGGER", m.Capability.TIME_SYNC: "TIME_SYNC",
-                    m.Capability.CALIBRATION: "CALIBRATION", m.Capability.RAW_OUTPUT: "RAW_OUTPUT"}
+CAPABILITY_NAMES = {bit: name for name, bit in vars(m.Capability).items() if name.isupper()}  # the protocol's list
 
 
 @dataclass
