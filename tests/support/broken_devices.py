@@ -66,6 +66,16 @@ def without_capabilities(bits: int) -> Rewrite:
     return rewrite
 
 
+def stale_slot_report(p: Packet) -> Packet:
+    """Device-to-host: UPDATE_STATE names another version in every slot (bookkeeping that says an
+    update took when the unit still runs the old image, or the reverse)."""
+    if p.msg_type != m.MsgType.UPDATE_STATE:
+        return p
+    st = m.UpdateState.unpack(p.payload)
+    slots = tuple(dataclasses.replace(s, version=s.version + "-stale") for s in st.slots)
+    return Packet(p.msg_type, p.request_id, p.flags, dataclasses.replace(st, slots=slots).pack())
+
+
 class RewritingProxy:
     """Listens on 127.0.0.1; each host connection gets its own connection to ``upstream``."""
 

@@ -21,8 +21,8 @@ from stereocam.protocol.framing import Packet
 from stereocam.protocol.params import BY_ID
 from stereocam.tools.conformance import cli
 from stereocam.tools.conformance.checks.config import UNUSED_PARAM_ID
-from tests.support.broken_devices import (RewritingProxy, clamp_into_range, forget_resend, unchanged,
-                                          without_capabilities)
+from tests.support.broken_devices import (RewritingProxy, clamp_into_range, forget_resend, stale_slot_report,
+                                          unchanged, without_capabilities)
 
 # Checks the reference simulator fails today, and why. The suite is right about them; the
 # simulator is fixed elsewhere. Remove an entry when its fix lands: the tests then demand a PASS.
@@ -144,6 +144,15 @@ def test_fails_against_a_device_that_applies_a_retried_command_twice(tcp_sim, tm
 
 
 @BUILT_HERE
+def test_fails_against_a_device_whose_slot_report_disagrees_with_what_runs(tcp_sim):
+    with RewritingProxy(tcp_sim.url, unchanged, to_host=stale_slot_report) as proxy:
+        rc, out = _run_cli([proxy.url, "--json", "-k", "update"])
+    report = json.loads(out)
+    assert rc == 1 and _failures(report) == {"update.status"}, out
+    detail = next(c["detail"] for c in report["checks"] if c["name"] == "update.status")
+    assert "-stale" in detail and "INFO" in detail
+
+
 def test_fails_against_a_device_that_accepts_out_of_range_values(tcp_sim):
     with RewritingProxy(tcp_sim.url, clamp_into_range) as proxy:
         rc, out = _run_cli([proxy.url, "-k", PROXY_CHECKS])
