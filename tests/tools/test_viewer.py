@@ -157,3 +157,97 @@ def test_view_command_prints_its_address_first_and_restores_the_camera(tmp_path)
             assert proc.wait(timeout=30) == 0, proc.stderr.read()
         with stereocam.open(sim.url, timeout=2.0) as cam:
             assert cam.config()["gain"] == 0  # put back as found
+
+
+@pytest.fixture
+def group_viewer():
+    """Three in-process heads on one trigger line driven by the first one's crystal, viewed as a group."""
+    from stereocam.device_sim import SimulatedCamera, TriggerLine
+    from stereocam.device_sim.trigger import TriggerMaster
+    from stereocam.tools.viewer.group_session import GroupViewerSession
+
+    line = TriggerLine()
+    sims = [SimulatedCamera(serial=f"VIEW{i}", seed=30 + i, trigger_line=line) for i in range(3)]
+    group = stereocam.CameraGroup([f"sim://?serial={s.serial}" for s in sims], settle=0.3, timeout=5.0,
+                                  config=dict(width=160, height=120, num_disparities=16, block_size=9))
+    group.open()
+    master = TriggerMaster(line, 10, sims[0].clock)
+    server = ViewerServer(GroupViewerSession(group))
+    thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.1}, daemon=True)
+    thread.start()
+    yield server, sims
+    server.shutdown()
+    server.server_close()
+    server.session.close()
+    master.close()
+    group.close()
+    for s in sims:
+        s.close()
+
+
+def test_group_view_serves_the_newest_matched_set_and_names_a_missed_head(group_viewer):
+    server, sims = group_viewer
+    first = json.loads(_get(server.url + "api/group/set")[1])
+    assert set(first["frames"]) == {"VIEW0", "VIEW1", "VIEW2"} and first["skew_us"] < 1000
+    headers, body = _get(server.url + "image/VIEW2/disparity.jpg")
+    assert int(headers["X-Trigger"]) >= first["trigger_id"]
+    assert cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_COLOR).shape == (120, 160, 3)
+    sims[1].trigger_input.miss_next = 1  # this head misses the next edge
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        state = json.loads(_get(server.url + "api/group/state")[1])
+        if state["missed"]:
+            break
+        time.sleep(0.2)
+    assert state["missed"][0]["missing"] == ["VIEW1"] and state["sets"]["incomplete"] >= 1
+    assert [c["name"] for c in state["cameras"]] == ["VIEW0", "VIEW1", "VIEW2"]
+    assert all(0 < c["clock_sigma_us"] < 1000 for c in state["cameras"])
+    later = json.loads(_get(server.url + f"api/group/set?after={first['trigger_id']}")[1])
+    assert later["trigger_id"] > first["trigger_id"]
+
+
+@needs_browser
+def test_group_view_page_in_a_headless_browser(group_viewer, tmp_path):
+    server, _ = group_viewer
+    browser = Chromium(CHROMIUM)
+    try:
+        page = browser.page(server.url)
+        browser.wait_for(page, "document.querySelectorAll('img.head').length === 6 && "
+                               "[...document.querySelectorAll('img.head')].every(i => i.naturalWidth > 0)")
+        t1 = int(browser.evaluate(page, "document.getElementById('trigger').textContent"))
+        browser.wait_for(page, f"Number(document.getElementById('trigger').textContent) > {t1 + 2}")
+        skew = float(browser.evaluate(page, "document.getElementById('skew').textContent"))
+        assert 0 <= skew < 1000
+        identity = browser.wait_for(page, "document.getElementById('identity').textContent.includes('clock map') && "
+                                          "document.getElementById('identity').textContent")
+        assert all(f"VIEW{i}" in identity for i in range(3))
+        out = Path(os.environ.get("STEREOCAM_GROUP_SCREENSHOT", tmp_path / "group.png"))
+        out.write_bytes(browser.screenshot(page))
+    finally:
+        browser.close()
+
+
+def test_view_command_with_several_urls_shows_a_group_and_puts_each_head_back():
+    from stereocam.device_sim.process import ServedSimulator
+
+    line = f"view-{os.getpid()}"
+    servers = [ServedSimulator("tcp:127.0.0.1:0", seed=40 + i,
+                               extra=["--trigger-line", line] + (["--trigger-master", "10"] if i == 0 else []))
+               for i in range(2)]
+    try:
+        proc = subprocess.Popen([sys.executable, "-m", "stereocam.tools.cli", "view", *(s.url for s in servers),
+                                 "--no-browser"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            url = proc.stdout.readline().strip()
+            assert url.startswith("http://127.0.0.1:"), proc.stderr.read()
+            s = json.loads(_get(url + "api/group/set")[1])
+            assert set(s["frames"]) == {"SIM00040", "SIM00041"} and s["complete"]
+        finally:
+            proc.terminate()
+            assert proc.wait(timeout=30) == 0, proc.stderr.read()
+        for srv in servers:
+            with stereocam.open(srv.url, timeout=2.0) as cam:
+                assert cam.config()["trigger_mode"] == 0  # free run again, as found
+    finally:
+        for srv in servers:
+            srv.stop()

@@ -6,12 +6,14 @@ import signal
 import threading
 import webbrowser
 from pathlib import Path
+from typing import Callable
 
 import click
 
 import stereocam
 from stereocam.tools.session import preserved_configuration
 
+from .group_session import GroupViewerSession
 from .server import ViewerServer
 from .session import ViewerSession
 
@@ -22,7 +24,7 @@ def _interrupt(signum: int, frame: object) -> None:  # noqa: ARG001
 
 @click.command("view", epilog="Exit codes: 0 stopped with Ctrl-C (130 if interrupted before serving); "
                "1 camera unreachable; 2 bad usage (including a port that is taken).")
-@click.argument("url")
+@click.argument("urls", nargs=-1, required=True, metavar="URL [URL...]")
 @click.option("--port", type=click.IntRange(0, 65535), default=0, show_default=True,
               help="Local port to serve on (0: any free port).")
 @click.option("--host", default="127.0.0.1", show_default=True, help="Address to listen on.")
@@ -30,30 +32,56 @@ def _interrupt(signum: int, frame: object) -> None:  # noqa: ARG001
 @click.option("--keep-config", is_flag=True, help="Leave the configuration changed in the viewer on the camera.")
 @click.option("--record-dir", type=click.Path(file_okay=False, writable=True, path_type=Path), default=".",
               show_default=True, help="Folder for the recordings started with the page's Record button.")
-def command(url: str, port: int, host: str, no_browser: bool, keep_config: bool, record_dir: Path) -> int:
+def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_config: bool,
+            record_dir: Path) -> int:
     """Live viewer: left, right and disparity (colour bar in metres), depth and 3-D point under the
     cursor, frame rate, drops, link and device counters, the configuration with the device's ranges,
-    trigger, start/stop, snapshots (PNG, PLY), recording to MCAP. The first line printed is the viewer's address. Runs
-    until Ctrl-C; then the camera's configuration is put back as found unless --keep-config."""
-    with stereocam.open(url, timeout=2.0) as cam, \
+    trigger, start/stop, snapshots (PNG, PLY), recording to MCAP. With several URLs: a camera group on
+    one external trigger line (a head or a trigger generator drives it), shown as matched sets with
+    the spread of their capture times, each head's clock-map error and the sets a head missed. The
+    first line printed is the viewer's address. Runs until Ctrl-C; then each camera's configuration
+    is put back as found unless --keep-config."""
+    if len(urls) > 1:
+        return _view_group(list(urls), port, host, no_browser, keep_config)
+    with stereocam.open(urls[0], timeout=2.0) as cam, \
             (contextlib.nullcontext() if keep_config else preserved_configuration(cam)):
-        session = ViewerSession(cam, record_dir)
-        try:
-            server = ViewerServer(session, host, port)
-        except OSError as exc:
-            session.close()
-            raise click.BadParameter(f"cannot listen on {host}:{port}: {exc.strerror or exc}",
-                                     param_hint="'--port'") from exc
-        click.echo(server.url)
-        if not no_browser:
-            threading.Thread(target=webbrowser.open, args=(server.url,), daemon=True).start()
-        signal.signal(signal.SIGTERM, _interrupt)  # a service manager's stop is a Ctrl-C too
-        try:
-            cam.start()
-            server.serve_forever(poll_interval=0.2)
-        except KeyboardInterrupt:
-            click.echo("viewer stopped", err=True)
-        finally:
-            server.server_close()
-            server.session.close()
+        _serve(ViewerSession(cam, record_dir), host, port, no_browser, cam.start)
     return 0
+
+
+def _view_group(urls: list[str], port: int, host: str, no_browser: bool, keep_config: bool) -> int:
+    found = {}
+    if not keep_config:
+        for url in urls:
+            with stereocam.open(url, timeout=2.0) as cam:
+                found[url] = cam.config()
+    try:
+        with stereocam.CameraGroup(urls, timeout=5.0) as group:
+            _serve(GroupViewerSession(group), host, port, no_browser, lambda: None)
+    finally:
+        for url, config in found.items():  # each head as found (the group put it on external trigger)
+            with stereocam.open(url, timeout=2.0) as cam:
+                cam.configure(**config)
+    return 0
+
+
+def _serve(session: ViewerSession | GroupViewerSession, host: str, port: int, no_browser: bool,
+           start: Callable[[], object]) -> None:
+    try:
+        server = ViewerServer(session, host, port)
+    except OSError as exc:
+        session.close()
+        raise click.BadParameter(f"cannot listen on {host}:{port}: {exc.strerror or exc}",
+                                 param_hint="'--port'") from exc
+    click.echo(server.url)
+    if not no_browser:
+        threading.Thread(target=webbrowser.open, args=(server.url,), daemon=True).start()
+    signal.signal(signal.SIGTERM, _interrupt)  # a service manager's stop is a Ctrl-C too
+    try:
+        start()
+        server.serve_forever(poll_interval=0.2)
+    except KeyboardInterrupt:
+        click.echo("viewer stopped", err=True)
+    finally:
+        server.server_close()
+        session.close()

@@ -10,6 +10,12 @@ POST /api/start|stop|trigger
 POST /api/record/start|stop every frame to an MCAP file in the viewer's --record-dir (its path answered)
 GET  /snapshot/NAME         the newest frame as left.png, right.png, disparity.png (depth colour bar)
                             or points.ply, as a download
+
+A camera group (``GroupViewerSession``) has its own page instead:
+GET  /                      static/group.html (group.js, viewer.css)
+GET  /api/group/state       every head (name, URL, clock-map error), set counts, the sets a head missed
+GET  /api/group/set?after=T the newest matched set after trigger T: skew, each frame's offset
+GET  /image/CAMERA/PLANE.jpg  a head's left or colour-mapped disparity image in that set
 """
 from __future__ import annotations
 
@@ -27,10 +33,13 @@ import stereocam
 from stereocam.recording import RecordingError
 from stereocam.tools.capture import save_frame
 
+from .group_session import GroupViewerSession
 from .session import ViewerSession
 
 STATIC = {"/": ("index.html", "text/html; charset=utf-8"), "/viewer.js": ("viewer.js", "text/javascript"),
           "/viewer.css": ("viewer.css", "text/css")}
+GROUP_STATIC = {"/": ("group.html", "text/html; charset=utf-8"), "/group.js": ("group.js", "text/javascript"),
+                "/viewer.css": ("viewer.css", "text/css")}
 SNAPSHOTS = {"left.png": "left", "right.png": "right", "disparity.png": "disparity_png", "points.ply": "ply"}
 _log = logging.getLogger(__name__)
 
@@ -38,7 +47,7 @@ _log = logging.getLogger(__name__)
 class ViewerServer(ThreadingHTTPServer):
     daemon_threads = True
 
-    def __init__(self, session: ViewerSession, host: str = "127.0.0.1", port: int = 0):
+    def __init__(self, session: ViewerSession | GroupViewerSession, host: str = "127.0.0.1", port: int = 0):
         self.session = session
         super().__init__((host, port), _Handler)
 
@@ -76,6 +85,9 @@ class _Handler(BaseHTTPRequestHandler):
         url = urlsplit(self.path)
         query = {k: v[0] for k, v in parse_qs(url.query).items()}
         session = self.server.session
+        if isinstance(session, GroupViewerSession):
+            self._group_get(session, url.path, query)
+            return
         try:
             if url.path in STATIC:
                 name, ctype = STATIC[url.path]
@@ -102,6 +114,30 @@ class _Handler(BaseHTTPRequestHandler):
         except stereocam.StereoCamError as exc:
             self._json({"error": str(exc)}, HTTPStatus.BAD_GATEWAY)
 
+    def _group_get(self, session: GroupViewerSession, path: str, query: dict[str, str]) -> None:
+        try:
+            if path in GROUP_STATIC:
+                name, ctype = GROUP_STATIC[path]
+                self._send(resources.files(__package__).joinpath("static", name).read_bytes(), ctype)
+            elif path == "/api/group/state":
+                self._json(session.state())
+            elif path == "/api/group/set":
+                s = session.newest(int(query.get("after", -1)), wait=1.0)
+                self._json(None if s is None else session.set_meta(s))
+            elif path.startswith("/image/") and path.endswith(".jpg") and path.count("/") == 3:
+                camera, plane = path[len("/image/"):-4].split("/")
+                got = session.jpeg(camera, plane)
+                if got is None:
+                    self._json({"error": f"no {plane} image of {camera} in the newest set"}, HTTPStatus.NOT_FOUND)
+                else:
+                    self._send(got[1], "image/jpeg", headers={"X-Trigger": str(got[0])})
+            else:
+                self._json({"error": f"no such page {path}"}, HTTPStatus.NOT_FOUND)
+        except (KeyError, ValueError) as exc:
+            self._json({"error": f"bad request: {exc}"}, HTTPStatus.BAD_REQUEST)
+        except stereocam.StereoCamError as exc:
+            self._json({"error": str(exc)}, HTTPStatus.BAD_GATEWAY)
+
     def _snapshot(self, name: str) -> None:
         frame = self.server.session.newest(wait=0)
         if frame is None:
@@ -120,6 +156,9 @@ class _Handler(BaseHTTPRequestHandler):
 
     def do_POST(self) -> None:  # noqa: N802 - http.server's name
         session = self.server.session
+        if isinstance(session, GroupViewerSession):
+            self._json({"error": "a group is viewed, not configured, here"}, HTTPStatus.NOT_FOUND)
+            return
         cam = session.cam
         path = urlsplit(self.path).path
         try:
