@@ -62,8 +62,10 @@ class SGMMatcher:
         self.lbuf = np.full((2, 3 * stride + 6 * cols * stride), 255, np.uint8)
         self.lbuf[:, 2 * stride + 1:3 * stride - 1] = 0
         self.mv = np.empty((2, 2, 3, cols), np.int16)
-        self.meta = np.zeros((2, 16), np.int64)
-        self.pm = np.zeros((2, 4), np.int16)
+        # written at every pixel by both threads: each group's slice 128 bytes away from the
+        # other's, never on one cache line (false sharing made two threads slower than one)
+        self.meta = np.zeros((2, 32), np.int64)  # 16 used
+        self.pm = np.zeros((2, 64), np.int16)  # 4 used
         self.acc = _aligned((2, cols * nd), np.int16)
         self.rmin = np.empty((2, cols + nd - 1), np.int16)
         self.rarg = np.zeros((2, cols + nd - 1), np.int16)
