@@ -60,7 +60,7 @@ def command(what: str, seconds: float | None, extra: tuple[str, ...]) -> int:
     firmware     a 2 MiB signed image installed per transport, and one update's state trace
     record       the recorder's ceiling (MB/s), a live recording's drops, seek time by frame index
     rematch      stereocam rematch frames/s with 1 and 2 local Dask workers
-    all          protocol, transport, matching and calibration (default)
+    all          protocol, decoder, transport, matching and calibration (default)
 
     Arguments after WHAT that this command does not know go to the transport, usb or matching bench."""
     rest = list(extra)

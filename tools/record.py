@@ -11,6 +11,8 @@ from stereocam.tools.exit_codes import EXIT_CODES
 import argparse
 import sys
 
+from tqdm import tqdm
+
 import stereocam
 from stereocam.protocol.errors import ConfigError
 
@@ -34,21 +36,27 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", type=_setting, action="append", default=[], metavar="NAME=VALUE",
                     help="configure the camera before recording (repeatable)")
     ap.add_argument("--level", type=int, default=1, help="zstd level of the chunks (default 1)")
-    ap.add_argument("--quiet", action="store_true", help="no progress line")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
     if (args.frames is not None and args.frames <= 0) or (args.seconds is not None and args.seconds <= 0):
         raise ConfigError("--frames and --seconds must be positive")
 
-    def show(p) -> None:
-        print("\r" + p.line(), end="", file=sys.stderr, flush=True)
+    bar = tqdm(total=args.frames or args.seconds, unit=" frames" if args.frames else " s", file=sys.stderr,
+               disable=args.quiet, bar_format="{l_bar}{bar}| {n:.%df}/{total:.%df}{unit} [{elapsed}<{remaining}{postfix}]"
+               % ((0, 0) if args.frames else (1, 1)))
 
-    with stereocam.open(args.url, timeout=2.0) as cam:
+    def show(p) -> None:
+        c = p.counters
+        bar.n = p.frames if args.frames else min(p.seconds, args.seconds)
+        bar.set_postfix_str(f"{p.fps:.1f} fps, {p.camera_mbps:.1f} MB/s in, {p.file_mbps:.1f} MB/s to disk, drops: "
+                            f"gaps {c.link_lost} incomplete {c.link_incomplete} host {c.host_queue_overflow} "
+                            f"recorder {c.recorder_dropped}")
+
+    with bar, stereocam.open(args.url, timeout=2.0) as cam:
         if args.set:
             cam.configure(**dict(args.set))
         stats = cam.record(args.out, frames=args.frames, seconds=args.seconds, level=args.level,
                            progress=None if args.quiet else show)
-    if not args.quiet:
-        print(file=sys.stderr)
     c = stats.counters
     print(f"{args.out}: {stats.frames} frames, {stats.file_bytes / 1e6:.1f} MB; drops: sequence gaps {c.link_lost} "
           f"(device skipped {c.device_dropped}), incomplete {c.link_incomplete}, host {c.host_queue_overflow}, "

@@ -54,6 +54,30 @@ def report_lines(attempts: list[Attempt]) -> list[str]:
     return lines
 
 
+def report_doc(db: str, attempts: list[Attempt]) -> dict:
+    """The report as plain data: per (day, station) and in total, attempts, passes, yield and the
+    metrics' median / p90 / max; failure reasons with their counts."""
+    groups: dict[str, list[Attempt]] = defaultdict(list)
+    for a in attempts:
+        groups[f"{a.started_at[:10]} {a.station}"].append(a)
+
+    def summary(rows: list[Attempt]) -> dict:
+        out: dict = {"attempts": len(rows), "passed": sum(a.passed for a in rows)}
+        out["yield"] = out["passed"] / len(rows) if rows else None
+        for m in METRICS:
+            v = np.array([getattr(a, m) for a in rows if getattr(a, m) is not None], float)
+            out[m] = None if not v.size else {"median": float(np.median(v)), "p90": float(np.percentile(v, 90)),
+                                              "max": float(v.max())}
+        return out
+
+    reasons: dict[str, int] = defaultdict(int)
+    for a in attempts:
+        if not a.passed:
+            reasons[a.reason.split(":")[0]] += 1
+    return {"db": db, "groups": {k: summary(v) for k, v in sorted(groups.items())}, "total": summary(attempts),
+            "failures": dict(reasons)}
+
+
 def write_csv(attempts: list[Attempt], path: Path) -> None:
     cols = [c for c in COLUMNS if c != "calibration"] + ["calibration_bytes"]
     with path.open("w", newline="") as f:
@@ -69,10 +93,13 @@ def main(argv: list[str] | None = None) -> int:
                                  epilog=EXIT_CODES,
                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     sub = ap.add_subparsers(dest="command", required=True)
-    rep = sub.add_parser("report", help="yield and metric distributions per day and station")
+    rep = sub.add_parser("report", help="yield and metric distributions per day and station", epilog=EXIT_CODES,
+                         description=__doc__.split("\n\n", 1)[1].strip(),
+                         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     rep.add_argument("--db", default=default_url(), help="SQLite path / sqlite:///PATH or postgresql://...")
     rep.add_argument("--since", default=None, help="only attempts from this ISO date (UTC), e.g. 2026-11-01")
     rep.add_argument("--csv", type=Path, default=None, help="also write every attempt to this CSV file")
+    rep.add_argument("--json", action="store_true", help="print one JSON object: yield and metrics per day and station")
     args = ap.parse_args(argv)
     try:
         with FactoryDB(args.db) as db:
@@ -80,8 +107,11 @@ def main(argv: list[str] | None = None) -> int:
     except FactoryDBError as exc:
         print(f"stereocam factory: error: {exc}", file=sys.stderr)
         return 2
-    print(f"factory record {args.db}: {len(attempts)} attempts" + (f" since {args.since}" if args.since else ""))
-    print("\n".join(report_lines(attempts)))
+    if args.json:
+        print(json.dumps(report_doc(args.db, attempts), indent=2))
+    else:
+        print(f"factory record {args.db}: {len(attempts)} attempts" + (f" since {args.since}" if args.since else ""))
+        print("\n".join(report_lines(attempts)))
     if args.csv is not None:
         write_csv(attempts, args.csv)
         print(f"wrote {args.csv}")

@@ -72,6 +72,12 @@ def test_every_attempt_is_recorded_and_reported(db_url: str, tmp_path: Path, cap
     assert json.loads(table[0]["metrics"])["lens_model_scores"] == ok.metrics["lens_model_scores"]
     assert factory_cli.main(["report", "--db", db_url, "--since", "2999-01-01"]) == 0
     assert "0 attempts" in capsys.readouterr().out
+    assert factory_cli.main(["report", "--db", db_url, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert (doc["total"]["attempts"], doc["total"]["passed"], doc["total"]["yield"]) == (2, 1, 0.5)
+    assert set(doc["groups"]) == {f"{day} line-1", f"{day} line-2"}
+    assert doc["groups"][f"{day} line-1"]["rms_stereo"]["median"] == ok.rms_stereo
+    assert doc["failures"] == {"calibration FAILED the gate": 1}
 
 
 def test_device_blob_round_trips(db_url: str) -> None:
