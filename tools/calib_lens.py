@@ -10,13 +10,18 @@ undistorted to convergence (100 iterations or 1e-12), never with OpenCV's defaul
 """
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import ParamSpec, TypeVar
 
 import cv2
 import numpy as np
 
 from stereocam.protocol.calibration import N_DIST
 
+P = ParamSpec("P")
+R = TypeVar("R")
 SOLVE = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
 UNDISTORT = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
 MODELS = ("plumb_bob", "rational_polynomial", "equidistant")  # simplest first: ties go to the earlier
@@ -27,6 +32,21 @@ ALIASES = {"standard": "plumb_bob", "plumb_bob": "plumb_bob", "rational": "ratio
 def _fisheye_flag(name: str) -> int:
     """cv2.fisheye.CALIB_* in OpenCV 4, the shared cv2.CALIB_* in OpenCV 5."""
     return getattr(cv2.fisheye, name, None) or getattr(cv2, name)
+
+
+def _one_thread(solve: Callable[P, R]) -> Callable[P, R]:
+    """Run an OpenCV solver on one thread: its parallel Jacobian sums change the last bits from run
+    to run, and an ill-conditioned fit (a rational model on a few views) turns those bits into other
+    outliers and other model scores. A factory tool gives the same answer for the same images."""
+    @functools.wraps(solve)
+    def run(*args: P.args, **kwargs: P.kwargs) -> R:
+        threads = cv2.getNumThreads()
+        cv2.setNumThreads(1)
+        try:
+            return solve(*args, **kwargs)
+        finally:
+            cv2.setNumThreads(threads)
+    return run
 
 
 class LensSolveError(ValueError):
@@ -57,6 +77,7 @@ def _fisheye_pts(pts: list[np.ndarray], dim: int) -> list[np.ndarray]:
     return [np.asarray(p, np.float64).reshape(1, -1, dim) for p in pts]
 
 
+@_one_thread
 def calibrate_mono(model: str, obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int],
                    start: MonoFit | None = None) -> MonoFit:
     """Fit one camera; `start` (a plumb_bob fit) seeds the rational and fisheye models."""
@@ -92,6 +113,7 @@ def calibrate_mono(model: str, obj: list[np.ndarray], img: list[np.ndarray], siz
     return MonoFit(float(rms), K, D, err.ravel())
 
 
+@_one_thread
 def calibrate_stereo(model: str, obj: list[np.ndarray], left: list[np.ndarray], right: list[np.ndarray],
                      size: tuple[int, int], fl: MonoFit, fr: MonoFit) -> StereoFit:
     """Extrinsics with both cameras' intrinsics fixed."""
