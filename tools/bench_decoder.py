@@ -2,7 +2,7 @@
 
 Every stream is fed in 64 KiB reads to a fresh Decoder; the figure is wall time per input byte and
 its ratio to the clean cost (a stream of 640x480 capture messages). SPEC §3.1 states the bound
-these shapes probe; tests/test_decoder_hostile.py checks it with a generous margin.
+these shapes probe; tests/protocol/test_decoder_hostile.py checks it with a generous margin.
 """
 from __future__ import annotations
 

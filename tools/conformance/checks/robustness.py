@@ -8,7 +8,7 @@ import time
 import zlib
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.framing import FLAG_RESEND, MAGIC, header_crc
+from stereocam.protocol.framing import DEVICE_MESSAGE_TIMEOUT, FLAG_RESEND, MAGIC, header_crc
 from stereocam.protocol.params import BY_NAME
 
 from ..context import Context
@@ -17,7 +17,9 @@ from ..results import expect
 
 GARBAGE_BYTES = 4096
 QUIET_S = 0.3  # how long the suite waits to be sure a dropped frame got no answer
-LARGE_LENGTH_BUDGET_S = 2.0  # a stalled header may cost the device at most this before it answers again
+# a stalled header may cost the device at most the SPEC's message timeout (§3.1), plus a second for
+# the suite's resend cadence and a loaded link, before it answers again
+LARGE_LENGTH_BUDGET_S = DEVICE_MESSAGE_TIMEOUT + 1.0
 
 
 def header(msg_type: int, rid: int, payload_len: int, *, major: int = 1, minor: int = 1, header_len: int = 20,
