@@ -85,11 +85,11 @@ def _undistort_pinhole(D: np.ndarray, x0: np.ndarray, y0: np.ndarray, steps: int
     k1, k2, p1, p2, k3, k4, k5, k6 = (*D, 0.0, 0.0, 0.0)[:8]
     x, y = x0.copy(), y0.copy()
     for _ in range(steps):
-        r2 = x * x + y * y
-        with np.errstate(divide="ignore", invalid="ignore"):  # far outside a rational lens's valid field: NaN
+        with np.errstate(all="ignore"):  # far outside a rational lens's valid field: inf / NaN, judged by callers
+            r2 = x * x + y * y
             icdist = (1.0 + ((k6 * r2 + k5) * r2 + k4) * r2) / (1.0 + ((k3 * r2 + k2) * r2 + k1) * r2)
-        nx, ny = ((x0 - (2 * p1 * x * y + p2 * (r2 + 2 * x * x))) * icdist,
-                  (y0 - (p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)) * icdist)
+            nx, ny = ((x0 - (2 * p1 * x * y + p2 * (r2 + 2 * x * x))) * icdist,
+                      (y0 - (p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)) * icdist)
         done = np.all(np.abs(nx - x) < 1e-14) and np.all(np.abs(ny - y) < 1e-14)
         x, y = nx, ny
         if done:
