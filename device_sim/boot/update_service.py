@@ -17,17 +17,18 @@ from stereocam.protocol.firmware_image import (HEADER_LEN, FirmwareImage, ImageE
                                                key_id, parse_header)
 from stereocam.protocol.update_messages import BootMode, SlotInfo, SlotState
 
+from ..link_layer.refusal import Refusal
 from .boot_stage import Booted
 from .boot_state import BootState, BootStateStore
 from .slots import Slots
 
 
-class UpdateRefused(Exception):
-    """A request the update service will not carry out (the handler's NACK)."""
+class UpdateRefused(Refusal):
+    """A request the update service will not carry out: the firmware's one refusal, NACKed by the
+    dispatcher like every other."""
 
     def __init__(self, code: ErrorCode, message: str):
-        super().__init__(message)
-        self.code = code
+        super().__init__(code, message)
 
 
 @dataclass

@@ -9,7 +9,7 @@ from typing import Callable
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode
 
-from ..boot.update_service import UpdateRefused, UpdateService
+from ..boot.update_service import UpdateService
 from ..calibration.flash import FlashError, PowerLossError
 from ..link_layer.dispatcher import Handler
 from ..link_layer.refusal import Refusal
@@ -18,14 +18,12 @@ REBOOT_DELAY = 0.05  # s between the ACTIVATE reply and the reboot (the reply le
 
 
 def _refusals(fn: Callable) -> Callable:
-    """UpdateRefused → NACK; a flash failure → NACK STORAGE; a power cut turns the unit off."""
+    """A flash failure → NACK STORAGE; a power cut turns the unit off (refusals NACK themselves)."""
 
     @functools.wraps(fn)
     def wrapper(self: "UpdateHandlers", msg: m.Message) -> m.Message:
         try:
             return fn(self, msg)
-        except UpdateRefused as exc:
-            raise Refusal(exc.code, str(exc)) from exc
         except PowerLossError:
             self._power_cut()  # the unit is off: no reply leaves it
             raise
