@@ -85,58 +85,61 @@ class _Handler(BaseHTTPRequestHandler):
         url = urlsplit(self.path)
         query = {k: v[0] for k, v in parse_qs(url.query).items()}
         session = self.server.session
-        if isinstance(session, GroupViewerSession):
-            self._group_get(session, url.path, query)
-            return
         try:
-            if url.path in STATIC:
-                name, ctype = STATIC[url.path]
-                self._send(resources.files(__package__).joinpath("static", name).read_bytes(), ctype)
-            elif url.path == "/api/state":
-                self._json(session.state())
-            elif url.path == "/api/frame":
-                frame = session.newest(int(query.get("after", -1)), wait=1.0)
-                self._json(None if frame is None else session.frame_meta(frame))
-            elif url.path.startswith("/image/") and url.path.endswith(".jpg"):
-                got = session.jpeg(url.path[len("/image/"):-4])
-                if got is None:
-                    self._json({"error": "no such image in the newest frame"}, HTTPStatus.NOT_FOUND)
-                else:
-                    self._send(got[1], "image/jpeg", headers={"X-Sequence": str(got[0])})
-            elif url.path == "/api/point":
-                self._json(session.point(int(query["x"]), int(query["y"])))
-            elif url.path.startswith("/snapshot/") and url.path[len("/snapshot/"):] in SNAPSHOTS:
-                self._snapshot(url.path[len("/snapshot/"):])
+            if isinstance(session, GroupViewerSession):
+                self._group_get(session, url.path, query)
             else:
-                self._json({"error": f"no such page {url.path}"}, HTTPStatus.NOT_FOUND)
+                self._camera_get(session, url.path, query)
         except (KeyError, ValueError) as exc:
             self._json({"error": f"bad request: {exc}"}, HTTPStatus.BAD_REQUEST)
         except stereocam.StereoCamError as exc:
             self._json({"error": str(exc)}, HTTPStatus.BAD_GATEWAY)
 
-    def _group_get(self, session: GroupViewerSession, path: str, query: dict[str, str]) -> None:
-        try:
-            if path in GROUP_STATIC:
-                name, ctype = GROUP_STATIC[path]
-                self._send(resources.files(__package__).joinpath("static", name).read_bytes(), ctype)
-            elif path == "/api/group/state":
-                self._json(session.state())
-            elif path == "/api/group/set":
-                s = session.newest(int(query.get("after", -1)), wait=1.0)
-                self._json(None if s is None else session.set_meta(s))
-            elif path.startswith("/image/") and path.endswith(".jpg") and path.count("/") == 3:
-                camera, plane = path[len("/image/"):-4].split("/")
-                got = session.jpeg(camera, plane)
-                if got is None:
-                    self._json({"error": f"no {plane} image of {camera} in the newest set"}, HTTPStatus.NOT_FOUND)
-                else:
-                    self._send(got[1], "image/jpeg", headers={"X-Trigger": str(got[0])})
+    def _static(self, pages: dict[str, tuple[str, str]], path: str) -> bool:
+        if path not in pages:
+            return False
+        name, ctype = pages[path]
+        self._send(resources.files(__package__).joinpath("static", name).read_bytes(), ctype)
+        return True
+
+    def _camera_get(self, session: ViewerSession, path: str, query: dict[str, str]) -> None:
+        if self._static(STATIC, path):
+            return
+        if path == "/api/state":
+            self._json(session.state())
+        elif path == "/api/frame":
+            frame = session.newest(int(query.get("after", -1)), wait=1.0)
+            self._json(None if frame is None else session.frame_meta(frame))
+        elif path.startswith("/image/") and path.endswith(".jpg"):
+            got = session.jpeg(path[len("/image/"):-4])
+            if got is None:
+                self._json({"error": "no such image in the newest frame"}, HTTPStatus.NOT_FOUND)
             else:
-                self._json({"error": f"no such page {path}"}, HTTPStatus.NOT_FOUND)
-        except (KeyError, ValueError) as exc:
-            self._json({"error": f"bad request: {exc}"}, HTTPStatus.BAD_REQUEST)
-        except stereocam.StereoCamError as exc:
-            self._json({"error": str(exc)}, HTTPStatus.BAD_GATEWAY)
+                self._send(got[1], "image/jpeg", headers={"X-Sequence": str(got[0])})
+        elif path == "/api/point":
+            self._json(session.point(int(query["x"]), int(query["y"])))
+        elif path.startswith("/snapshot/") and path[len("/snapshot/"):] in SNAPSHOTS:
+            self._snapshot(path[len("/snapshot/"):])
+        else:
+            self._json({"error": f"no such page {path}"}, HTTPStatus.NOT_FOUND)
+
+    def _group_get(self, session: GroupViewerSession, path: str, query: dict[str, str]) -> None:
+        if self._static(GROUP_STATIC, path):
+            return
+        if path == "/api/group/state":
+            self._json(session.state())
+        elif path == "/api/group/set":
+            s = session.newest(int(query.get("after", -1)), wait=1.0)
+            self._json(None if s is None else session.set_meta(s))
+        elif path.startswith("/image/") and path.endswith(".jpg") and path.count("/") == 3:
+            camera, plane = path[len("/image/"):-4].split("/")
+            got = session.jpeg(camera, plane)
+            if got is None:
+                self._json({"error": f"no {plane} image of {camera} in the newest set"}, HTTPStatus.NOT_FOUND)
+            else:
+                self._send(got[1], "image/jpeg", headers={"X-Trigger": str(got[0])})
+        else:
+            self._json({"error": f"no such page {path}"}, HTTPStatus.NOT_FOUND)
 
     def _snapshot(self, name: str) -> None:
         frame = self.server.session.newest(wait=0)
