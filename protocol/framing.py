@@ -149,7 +149,6 @@ class Decoder:
                 break
             if buf[pos + 18] | buf[pos + 19] << 8 != binascii.crc_hqx(buf[pos:pos + 18], 0xFFFF):
                 st.header_crc_errors += 1  # (the cheapest check first: a magic in garbage costs this much)
-                _log.debug("header CRC error at stream offset %d; resyncing", self._base + pos)
                 pos += 1
                 continue
             _, major, minor, hlen, flags, mtype, rid, plen, _ = _HEAD.unpack_from(buf, pos)
