@@ -53,12 +53,15 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
     why = [w for k, v in overrides.items() if (w := BY_NAME[k].check(v))]
     if why:
         raise ConfigError("; ".join(why))
+    used = {}  # recording -> the algorithm its frames are matched with
     for path in recordings:
         with Recording(path) as rec:  # a bad file or a bad combination fails here, before any work
+            cfg = tasks.matching_config(rec.config, overrides)
             try:
-                params_from_config(tasks.matching_config(rec.config, overrides))
+                params_from_config(cfg)
             except ValueError as exc:
                 raise ConfigError(f"{path}: {exc}") from exc
+        used[path] = next(k for k, v in tasks.ALGORITHMS.items() if v == cfg["algorithm"])
     out.mkdir(parents=True, exist_ok=True)
     own, cluster = (None, None) if client is not None else _client(scheduler, workers)
     client = client or own
@@ -73,10 +76,7 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
                 parts.append(part)
                 futures.append(client.submit(tasks.rematch_range, src, a, b, overrides, part, retries=RETRIES,
                                              key=f"rematch-{path.stem}-{a}-{b}-{time.time_ns()}"))
-            with Recording(src) as rec:
-                used = tasks.matching_config(rec.config, overrides)["algorithm"]
-            provenance = {**{k: str(v) for k, v in overrides.items()},
-                          "algorithm": next(k for k, v in tasks.ALGORITHMS.items() if v == used)}
+            provenance = {**{k: str(v) for k, v in overrides.items()}, "algorithm": used[path]}
             joins.append(client.submit(_join_after, futures, src, parts, str((out / path.name).resolve()), provenance,
                                        retries=RETRIES, key=f"join-{path.stem}-{time.time_ns()}"))
         frames = sum(client.gather(joins))

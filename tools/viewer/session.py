@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 import stereocam
-from stereocam.recording import Recorder, describe
+from stereocam.recording import Recorder, RecordingError, describe
 from stereocam.recording.session import counters_of
 from stereocam.tools.info import value_name
 from stereocam.tools.pictures import colorize, depth_ticks, disparity_range
@@ -75,9 +75,13 @@ class ViewerSession:
     def _record(self, frame: stereocam.Frame) -> None:
         with self._cond:
             recorder = self._recorder
-            if recorder is not None:
+            if recorder is None:
+                return
+            try:
                 recorder.put(frame, counters_of(self.cam))
                 self._recorded += 1
+            except RecordingError as exc:  # the disk failed: the recording ends, said so; the view goes on
+                self._recorder, self.error = None, f"recording stopped: {exc}"
 
     def start_recording(self) -> dict[str, Any]:
         """Record every frame from now on to a new MCAP file in ``record_dir``; returns its state."""
