@@ -90,11 +90,23 @@ def test_raw_noise_and_flat_images() -> None:
 
 
 @pytest.fixture(scope="module")
-def motorcycle_small():
+def motorcycle():
     skimage_data = pytest.importorskip("skimage.data")
     left, right, _ = skimage_data.stereo_motorcycle()
-    grey = [cv2.cvtColor(im, cv2.COLOR_RGB2GRAY) for im in (left, right)]
-    return [cv2.resize(g, (183, 123), interpolation=cv2.INTER_AREA) for g in grey]
+    return [cv2.cvtColor(im, cv2.COLOR_RGB2GRAY) for im in (left, right)]
+
+
+@pytest.fixture(scope="module")
+def motorcycle_small(motorcycle):
+    return [cv2.resize(g, (183, 123), interpolation=cv2.INTER_AREA) for g in motorcycle]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kw", [dict(), dict(paths=4, uniqueness_ratio=10, lr_max_diff=1)])
+def test_full_size_motorcycle_bit_exact(motorcycle, kw) -> None:
+    """Middlebury Motorcycle at 741x500 with 128 disparities, as the benchmark runs it."""
+    left, right = motorcycle
+    assert_same(left, right, SGMParams(num_disparities=128, **kw))
 
 
 @pytest.mark.parametrize("kw", [dict(paths=8), dict(paths=4, uniqueness_ratio=5, lr_max_diff=1),
