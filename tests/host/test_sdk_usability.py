@@ -1,4 +1,5 @@
-"""The SDK behaves like the ones users know: polling, callbacks, iteration, repr, options, presets."""
+"""The SDK behaves like the ones users know: polling, callbacks, iteration, repr, options, presets.
+Against every transport, or the camera given with --device."""
 from __future__ import annotations
 
 import json
@@ -14,9 +15,11 @@ from tests.support.device import SMALL
 
 
 @pytest.fixture
-def sim_cam():
-    cam = stereocam.open("sim://?seed=5", timeout=1.0)
-    cam.configure(**SMALL, fps=30)
+def device_cam(device_url):
+    from stereocam.protocol.params import defaults
+
+    cam = stereocam.open(device_url, timeout=1.0)
+    cam.configure(**{**defaults(), **SMALL, "fps": 30})
     yield cam
     cam.close()
 
@@ -28,22 +31,22 @@ def _wait_queued(cam, n: int = 1, timeout: float = 30.0) -> None:
         time.sleep(0.01)
 
 
-def test_get_frame_timeout_zero_polls(sim_cam):
-    sim_cam.start()
-    _wait_queued(sim_cam)
-    sim_cam.stop()
-    frame = sim_cam.get_frame(timeout=0)
+def test_get_frame_timeout_zero_polls(device_cam):
+    device_cam.start()
+    _wait_queued(device_cam)
+    device_cam.stop()
+    frame = device_cam.get_frame(timeout=0)
     assert isinstance(frame, stereocam.Frame)
-    while sim_cam.try_get_frame() is not None:
+    while device_cam.try_get_frame() is not None:
         pass
     t0 = time.monotonic()
     with pytest.raises(stereocam.CameraTimeoutError):
-        sim_cam.get_frame(timeout=0)
-    assert sim_cam.try_get_frame() is None
+        device_cam.get_frame(timeout=0)
+    assert device_cam.try_get_frame() is None
     assert time.monotonic() - t0 < 0.5
 
 
-def test_callbacks_run_off_the_reader_thread_and_report_errors(sim_cam, caplog):
+def test_callbacks_run_off_the_reader_thread_and_report_errors(device_cam, caplog):
     seen: list[tuple[int, str]] = []
     got = threading.Event()
 
@@ -54,83 +57,83 @@ def test_callbacks_run_off_the_reader_thread_and_report_errors(sim_cam, caplog):
     def broken(frame):
         raise ValueError(f"boom on {frame.sequence}")
 
-    sim_cam.on_frame(record)
-    sim_cam.on_frame(broken)
+    device_cam.on_frame(record)
+    device_cam.on_frame(broken)
     with caplog.at_level(logging.ERROR):
-        sim_cam.start()
+        device_cam.start()
         assert got.wait(30)
         deadline = time.monotonic() + 10
-        while sim_cam.callback_errors == 0 and time.monotonic() < deadline:
+        while device_cam.callback_errors == 0 and time.monotonic() < deadline:
             time.sleep(0.01)
-    assert seen and all(name != sim_cam.link._reader.name for _, name in seen)
-    assert sim_cam.callback_errors >= 1
+    assert seen and all(name != device_cam.link._reader.name for _, name in seen)
+    assert device_cam.callback_errors >= 1
     assert any("boom on" in r.getMessage() for r in caplog.records)
     with pytest.raises(stereocam.CallbackError) as info:
-        sim_cam.check_callbacks()
+        device_cam.check_callbacks()
     assert isinstance(info.value.__cause__, ValueError)
     with pytest.raises(stereocam.StereoCamError, match="callbacks"):
-        sim_cam.get_frame(timeout=0.1)
-    sim_cam.remove_callback(record)
-    sim_cam.remove_callback(broken)
-    _wait_queued(sim_cam, 3)  # with no callback left, frames stay for get_frame
-    assert sim_cam.get_frame(timeout=0).sequence > 0
+        device_cam.get_frame(timeout=0.1)
+    device_cam.remove_callback(record)
+    device_cam.remove_callback(broken)
+    _wait_queued(device_cam, 3)  # with no callback left, frames stay for get_frame
+    assert device_cam.get_frame(timeout=0).sequence > 0
 
 
-def test_iteration_ends_when_stopped(sim_cam):
-    sim_cam.start()
-    sim_cam.get_frame(timeout=30)
+def test_iteration_ends_when_stopped(device_cam):
+    device_cam.start()
+    device_cam.get_frame(timeout=30)
     frames = []
-    for frame in sim_cam:
+    for frame in device_cam:
         frames.append(frame)
         if len(frames) == 3:
-            threading.Thread(target=sim_cam.stop).start()
+            threading.Thread(target=device_cam.stop).start()
     assert len(frames) >= 3
 
 
-def test_iteration_raises_on_a_stall(sim_cam):
-    sim_cam.set_trigger_mode("software")
-    sim_cam.start()
+def test_iteration_raises_on_a_stall(device_cam):
+    device_cam.set_trigger_mode("software")
+    device_cam.start()
     t0 = time.monotonic()
     with pytest.raises(stereocam.StreamStalledError) as info:
-        for _ in sim_cam:
+        for _ in device_cam:
             pass
-    assert isinstance(info.value, TimeoutError) and time.monotonic() - t0 >= sim_cam.timeout * 0.9
+    assert isinstance(info.value, TimeoutError) and time.monotonic() - t0 >= device_cam.timeout * 0.9
 
 
-def test_iterating_a_stopped_camera_says_so(sim_cam):
+def test_iterating_a_stopped_camera_says_so(device_cam):
     with pytest.raises(stereocam.StereoCamError, match="start"):
-        next(iter(sim_cam))
+        next(iter(device_cam))
 
 
-def test_frame_repr_is_short(sim_cam):
-    sim_cam.start()
-    frame = sim_cam.get_frame(timeout=30)
+def test_frame_repr_is_short(device_cam):
+    device_cam.start()
+    frame = device_cam.get_frame(timeout=30)
     text = repr(frame)
     assert len(text) < 160 and "array" not in text
     assert f"sequence={frame.sequence}" in text and "320x240" in text and "left+right+disparity" in text
 
 
-def test_options_list_every_parameter_with_range_unit_default_description(sim_cam):
-    options = {p.name: p for p in sim_cam.options()}
+def test_options_list_every_parameter_with_range_unit_default_description(device_cam):
+    options = {p.name: p for p in device_cam.options()}
     assert set(options) == {p.name for p in PARAMS}
     assert all(p.description and p.lo <= p.default <= p.hi for p in options.values())
     assert options["exposure_us"].unit == "us" and options["fps"].hi == 120
 
 
-def test_presets_round_trip_and_refusals_change_nothing(sim_cam, tmp_path):
-    sim_cam.configure(exposure_us=1234, gain=50, block_size=21)
+def test_presets_round_trip_and_refusals_change_nothing(device_cam, tmp_path):
+    device_cam.configure(exposure_us=1234, gain=50, block_size=21)
     path = tmp_path / "indoor.json"
-    saved = sim_cam.save_preset(path)
+    saved = device_cam.save_preset(path)
     assert json.loads(path.read_text())["config"]["exposure_us"] == 1234
-    sim_cam.configure(exposure_us=9000, gain=0, block_size=5)
-    assert sim_cam.load_preset(path) == saved == sim_cam.config()
+    device_cam.configure(exposure_us=9000, gain=0, block_size=5)
+    assert device_cam.load_preset(path) == saved == device_cam.config()
 
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"format": "stereocam-preset/1", "config": {"exposure_us": 5, "gain": 10}}))
-    before = sim_cam.config()
+    before = device_cam.config()
     with pytest.raises(stereocam.DeviceError):
-        sim_cam.load_preset(bad)
-    assert sim_cam.config() == before
+        device_cam.load_preset(bad)
+    assert device_cam.config() == before
     (tmp_path / "junk.json").write_text("[1, 2]")
     with pytest.raises(stereocam.ConfigError, match="not a stereocam preset"):
-        sim_cam.load_preset(tmp_path / "junk.json")
+        device_cam.load_preset(tmp_path / "junk.json")
