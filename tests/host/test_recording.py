@@ -11,6 +11,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 import stereocam
+from stereocam.protocol.params import defaults
 from stereocam.protocol.rectification import stereo_rectify
 from stereocam.recording import Recorder, RecordingError, describe, schemas
 from stereocam.recording.reader import Recording
@@ -111,19 +112,25 @@ def test_recorder_drops_are_counted_and_stored(tmp_path, recorded):
         assert 0 < last.recorder_dropped <= stats.recorder_dropped
 
 
-def test_camera_record_and_tools(tmp_path, capsys):
+def test_camera_record_and_tools(tmp_path, capsys, device_url):
+    """Camera.record against every transport (or --device), read back by the recording tools."""
     path = tmp_path / "cam.mcap"
-    with stereocam.open("sim://?seed=4", timeout=3.0) as cam:
-        cam.configure(width=320, height=240, num_disparities=32, block_size=11)
+    with stereocam.open(device_url, timeout=3.0) as cam:
+        cam.configure(**{**defaults(), "width": 320, "height": 240, "num_disparities": 32, "block_size": 11})
+        serial, stored = cam.info().serial, cam.read_calibration()
         stats = cam.record(path, frames=4)
     assert stats.frames == 4 and stats.recorder_dropped == 0
     assert recording_tool.main(["info", str(path)]) == 0
     out = capsys.readouterr().out
-    assert "SIM00004" in out and "frames    4" in out and "stereo_msgs/msg/DisparityImage" in out
+    assert serial in out and "frames    4" in out and "stereo_msgs/msg/DisparityImage" in out
     assert recording_tool.main(["info", str(path), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["unit"]["serial"] == "SIM00004" and doc["frames"] == 4 and doc["drops"]["recorder_dropped"] == 0
-    assert doc["topics"]["/stereo/disparity"]["messages"] == 4 and doc["calibration"]["lens_model"] == "plumb_bob"
+    assert doc["unit"]["serial"] == serial and doc["frames"] == 4 and doc["drops"]["recorder_dropped"] == 0
+    assert doc["topics"]["/stereo/disparity"]["messages"] == 4
+    assert (doc["calibration"] is None) == (stored is None)
+    if stored is not None:
+        assert doc["calibration"]["lens_model"] == stored.calibration.lens_model
+        assert doc["calibration"]["id"] == f"{stored.calibration_id:08x}"
     assert recording_tool.main(["export", str(path), "--out", str(tmp_path / "x"), "--stop", "2"]) == 0
     names = sorted(p.name for p in (tmp_path / "x").iterdir())
     assert names[:5] == ["frame000000_disparity.npy", "frame000000_disparity.png", "frame000000_left.png",
