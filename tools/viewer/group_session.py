@@ -23,6 +23,7 @@ class GroupViewerSession:
 
     def __init__(self, group: stereocam.CameraGroup):
         self.group = group
+        self._models = {name: cam.info().model for name, cam in group.cameras.items()}  # read once
         self._cond = threading.Condition()
         self._set: MatchedSet | None = None
         self._jpegs: dict[tuple[int, str, str], bytes] = {}
@@ -87,7 +88,7 @@ class GroupViewerSession:
         st = self.group.stats
         errors = self.group.clock_errors()
         return {
-            "cameras": [{"name": name, "url": cam.url, "model": cam.info().model,
+            "cameras": [{"name": name, "url": cam.url, "model": self._models[name],
                          "clock_sigma_us": round(errors[name].sigma * 1e6, 1)}
                         for name, cam in self.group.cameras.items()],
             "sets": {"complete": st.complete, "incomplete": st.incomplete}, "missed": list(self.missed),
