@@ -12,13 +12,14 @@ import stereocam
 from stereocam.frame_sets import MatchedSet
 from stereocam.tools.pictures import colorize
 
+from .feed import Feed
 from .session import JPEG_QUALITY
 
 PLANES = ("left", "disparity")
 MISSED_KEEP = 20  # incomplete sets listed on the page (newest first)
 
 
-class GroupViewerSession:
+class GroupViewerSession(Feed):
     """Owns the thread that takes matched sets from an open ``CameraGroup``."""
 
     def __init__(self, group: stereocam.CameraGroup):
@@ -28,29 +29,20 @@ class GroupViewerSession:
         self._set: MatchedSet | None = None
         self._jpegs: dict[tuple[int, str, str], bytes] = {}
         self.missed: list[dict[str, Any]] = []  # newest first
-        self.error: str | None = None
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._take, name="stereocam-viewer-group", daemon=True)
-        self._thread.start()
+        self._start("stereocam-viewer-group")
 
-    def _take(self) -> None:
-        while not self._stop.is_set():
-            try:
-                s = self.group.get_set(timeout=0.2)
-            except stereocam.CameraTimeoutError:
-                continue
-            except stereocam.StereoCamError as exc:
-                self.error = str(exc)
-                self._stop.wait(0.5)
-                continue
-            with self._cond:
-                if not s.complete:
-                    self.missed.insert(0, {"trigger_id": s.trigger_id, "missing": list(s.missing)})
-                    del self.missed[MISSED_KEEP:]
-                if s.frames:
-                    self._set = s
-                    self._jpegs = {k: v for k, v in self._jpegs.items() if k[0] == s.trigger_id}
-                self._cond.notify_all()
+    def _fetch(self) -> MatchedSet:
+        return self.group.get_set(timeout=0.2)
+
+    def _take(self, s: MatchedSet) -> None:
+        with self._cond:
+            if not s.complete:
+                self.missed.insert(0, {"trigger_id": s.trigger_id, "missing": list(s.missing)})
+                del self.missed[MISSED_KEEP:]
+            if s.frames:
+                self._set = s
+                self._jpegs = {k: v for k, v in self._jpegs.items() if k[0] == s.trigger_id}
+            self._cond.notify_all()
 
     def newest(self, after: int = -1, wait: float = 1.0) -> MatchedSet | None:
         """The newest set with frames, waiting up to ``wait`` s for one after trigger ``after``."""
@@ -94,7 +86,3 @@ class GroupViewerSession:
             "sets": {"complete": st.complete, "incomplete": st.incomplete}, "missed": list(self.missed),
             "discarded": self.group.discarded, "error": self.error,
         }
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=2)

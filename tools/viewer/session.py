@@ -19,6 +19,8 @@ from stereocam.recording.session import counters_of
 from stereocam.tools.info import value_name
 from stereocam.tools.pictures import colorize, depth_ticks, disparity_range
 
+from .feed import Feed
+
 PLANES = ("left", "right", "disparity")
 JPEG_QUALITY = 85
 
@@ -29,7 +31,7 @@ def turbo_stops(n: int = 16) -> list[str]:
     return [f"rgb({r},{g},{b})" for b, g, r in lut[:, 0, :]]
 
 
-class ViewerSession:
+class ViewerSession(Feed):
     """Owns the grab thread; every method is safe to call from any HTTP handler thread."""
 
     def __init__(self, cam: stereocam.Camera, record_dir: Path | None = None):
@@ -42,34 +44,26 @@ class ViewerSession:
         self._jpegs: dict[tuple[int, str], bytes] = {}
         self._arrivals: collections.deque[float] = collections.deque(maxlen=60)
         self.skipped = 0  # frames replaced by a newer one before anybody looked: never a backlog
-        self.error: str | None = None
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._grab, name="stereocam-viewer-grab", daemon=True)
-        self._thread.start()
+        self.recording_error: str | None = None  # why the last recording ended early
+        self._start("stereocam-viewer-grab")
 
     # -- frames ---------------------------------------------------------------------------------
-    def _grab(self) -> None:
-        while not self._stop.is_set():
-            try:
-                frame = self.cam.get_frame(timeout=0.1)
-                self._record(frame)
-                while (newer := self.cam.try_get_frame()) is not None:  # only the newest is shown
-                    self._record(newer)
-                    frame, self.skipped = newer, self.skipped + 1
-            except stereocam.CameraTimeoutError:
-                continue
-            except stereocam.StereoCamError as exc:
-                self.error = str(exc)
-                self._stop.wait(0.5)
-                continue
-            self.error = None
-            with self._cond:
-                if self._frame is not None and (self._frame.sequence, "left") not in self._jpegs:
-                    self.skipped += 1
-                self._frame = frame
-                self._jpegs = {k: v for k, v in self._jpegs.items() if k[0] == frame.sequence}
-                self._arrivals.append(time.monotonic())
-                self._cond.notify_all()
+    def _fetch(self) -> stereocam.Frame:
+        frame = self.cam.get_frame(timeout=0.1)
+        self._record(frame)
+        while (newer := self.cam.try_get_frame()) is not None:  # only the newest is shown
+            self._record(newer)
+            frame, self.skipped = newer, self.skipped + 1
+        return frame
+
+    def _take(self, frame: stereocam.Frame) -> None:
+        with self._cond:
+            if self._frame is not None and (self._frame.sequence, "left") not in self._jpegs:
+                self.skipped += 1
+            self._frame = frame
+            self._jpegs = {k: v for k, v in self._jpegs.items() if k[0] == frame.sequence}
+            self._arrivals.append(time.monotonic())
+            self._cond.notify_all()
 
     # -- recording ------------------------------------------------------------------------------
     def _record(self, frame: stereocam.Frame) -> None:
@@ -81,7 +75,7 @@ class ViewerSession:
                 recorder.put(frame, counters_of(self.cam))
                 self._recorded += 1
             except RecordingError as exc:  # the disk failed: the recording ends, said so; the view goes on
-                self._recorder, self.error = None, f"recording stopped: {exc}"
+                self._recorder, self.recording_error = None, f"recording stopped: {exc}"
 
     def start_recording(self) -> dict[str, Any]:
         """Record every frame from now on to a new MCAP file in ``record_dir``; returns its state."""
@@ -92,7 +86,7 @@ class ViewerSession:
         path = self.record_dir / f"view_{info.serial}_{time.strftime('%Y%m%d-%H%M%S')}.mcap"
         recorder = Recorder(path, describe(self.cam))
         with self._cond:
-            self._recorder, self._recorded = recorder, 0
+            self._recorder, self._recorded, self.recording_error = recorder, 0, None
         return self.recording() or {}
 
     def stop_recording(self) -> dict[str, Any]:
@@ -184,13 +178,12 @@ class ViewerSession:
         return {
             "url": cam.url, "model": info.model, "serial": info.serial, "firmware": info.firmware_version,
             "streaming": cam.streaming, "fps": round(self.fps(), 1), "viewer_skipped": self.skipped,
-            "error": self.error, "recording": self.recording(), "host": cam.stats, "device": dict(status.counters) if status else {},
+            "error": self.error or self.recording_error, "recording": self.recording(), "host": cam.stats, "device": dict(status.counters) if status else {},
             "config": config, "config_names": {k: value_name(k, v) for k, v in config.items()},
             "options": [{**asdict(p), "value": config.get(p.name)} for p in cam.options() if p.name in config],
         }
 
     def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=2)
+        super().close()
         if self._recorder is not None:
             self.stop_recording()
