@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -70,7 +71,7 @@ class ScratchFlash:
         fcntl.flock(self._lock_fd, fcntl.LOCK_EX)
         self.folder = self.root / f"{os.getpid()}-{setup.name[len(SETUP_PREFIX):]}"
         setup.rename(self.folder)
-        self.path = self.folder / f"{name}.flash"
+        self.path = self.folder / (re.sub(r"[^A-Za-z0-9_.-]", "_", name)[:64] + ".flash")  # a serial names it
         # also at garbage collection and interpreter exit, as tempfile.TemporaryDirectory does
         self._remove = weakref.finalize(self, _remove, self.folder, self._lock_fd)
 

@@ -251,3 +251,20 @@ def test_view_command_with_several_urls_shows_a_group_and_puts_each_head_back():
     finally:
         for srv in servers:
             srv.stop()
+
+
+def test_a_device_chosen_serial_cannot_put_a_recording_outside_its_folder(tmp_path):
+    from stereocam.device_sim import SimulatedCamera
+
+    sim = SimulatedCamera(serial="../../escape/x", seed=9)
+    cam = stereocam.open(f"sim://?serial={sim.serial}", timeout=2.0)
+    session = ViewerSession(cam, tmp_path / "rec")
+    try:
+        (tmp_path / "rec").mkdir()
+        path = Path(session.start_recording()["path"])
+        assert path.parent == tmp_path / "rec" and "/" not in path.name and path.name.startswith("view_.._.._escape_x_")
+        session.stop_recording()
+    finally:
+        session.close()
+        cam.close()
+        sim.close()

@@ -4,6 +4,7 @@ every frame (the page shows the newest; the file misses none)."""
 from __future__ import annotations
 
 import collections
+import re
 import threading
 import time
 from dataclasses import asdict
@@ -82,8 +83,8 @@ class ViewerSession(Feed):
         with self._cond:
             if self._recorder is not None:
                 raise ValueError(f"already recording to {self._recorder.path}")
-        info = self.cam.info()
-        path = self.record_dir / f"view_{info.serial}_{time.strftime('%Y%m%d-%H%M%S')}.mcap"
+        serial = re.sub(r"[^A-Za-z0-9_.-]", "_", self.cam.info().serial)[:64]  # the device names it: no paths
+        path = self.record_dir / f"view_{serial}_{time.strftime('%Y%m%d-%H%M%S')}.mcap"
         recorder = Recorder(path, describe(self.cam))
         with self._cond:
             self._recorder, self._recorded, self.recording_error = recorder, 0, None
