@@ -56,8 +56,10 @@ def test_images_are_always_the_newest_frame(viewer):
     assert viewer.session.cam.stats["queue_overflow"] == 0
 
 
-def _post(url: str, doc: dict | None = None) -> tuple[int, dict]:
-    req = urllib.request.Request(url, data=json.dumps(doc or {}).encode(), method="POST")
+def _post(url: str, doc: dict | None = None, headers: dict | None = None, body: bytes | None = None
+          ) -> tuple[int, dict]:
+    req = urllib.request.Request(url, data=json.dumps(doc or {}).encode() if body is None else body, method="POST",
+                                 headers={"Content-Type": "application/json", **(headers or {})})
     try:
         with urllib.request.urlopen(req, timeout=30) as r:
             return r.status, json.loads(r.read())
@@ -79,6 +81,23 @@ def test_record_button_records_every_frame_while_the_page_shows_the_newest(viewe
         assert len(r) == rec["frames"] and r.device["serial"] == "SIM00006"
         sequences = [c.info.sequence for c in r.captures()]
     assert sequences == list(range(sequences[0], sequences[0] + len(sequences)))  # none skipped
+
+
+def test_actions_from_another_web_page_are_refused_and_change_nothing(viewer):
+    """A page on another origin, a form post (no preflight) or an oversized body cannot act."""
+    cam = viewer.session.cam
+    before = cam.config()
+    code, doc = _post(viewer.url + "api/config", {"gain": 90}, headers={"Origin": "http://evil.example"})
+    assert code == 403 and "evil.example" in doc["error"]
+    code, _ = _post(viewer.url + "api/config", body=b"gain=90",
+                    headers={"Content-Type": "application/x-www-form-urlencoded"})
+    assert code == 415
+    code, _ = _post(viewer.url + "api/stop", body=b"{" + b" " * (100 << 10) + b"}")  # over 64 KiB
+    assert code == 413
+    assert cam.config() == before and cam.streaming
+    host = viewer.url.split("//")[1].rstrip("/")
+    code, doc = _post(viewer.url + "api/config", {"gain": 90}, headers={"Origin": f"http://{host}"})
+    assert code == 200 and doc["config"]["gain"] == 90  # the viewer's own page
 
 
 def test_recording_into_a_folder_that_is_not_there_is_refused_with_the_reason(viewer):
@@ -146,12 +165,10 @@ def test_view_command_prints_its_address_first_and_restores_the_camera(tmp_path)
         try:
             url = proc.stdout.readline().strip()
             assert url.startswith("http://127.0.0.1:")
-            refused = urllib.request.Request(url + "api/config", data=json.dumps({"gain": 300}).encode(), method="POST")
-            with pytest.raises(urllib.error.HTTPError) as info:
-                urllib.request.urlopen(refused, timeout=30)
-            assert info.value.code == 409 and "gain=300" in json.loads(info.value.read())["reason"]
-            ok = urllib.request.Request(url + "api/config", data=json.dumps({"gain": 40}).encode(), method="POST")
-            assert json.loads(urllib.request.urlopen(ok, timeout=30).read())["config"]["gain"] == 40
+            code, doc = _post(url + "api/config", {"gain": 300})
+            assert code == 409 and "gain=300" in doc["reason"]
+            code, doc = _post(url + "api/config", {"gain": 40})
+            assert code == 200 and doc["config"]["gain"] == 40
         finally:
             proc.terminate()
             assert proc.wait(timeout=30) == 0, proc.stderr.read()

@@ -6,6 +6,7 @@ GET  /api/frame?after=SEQ   the newest frame's metadata (waits up to 1 s for one
 GET  /image/PLANE.jpg       the newest frame's left, right or colour-mapped disparity as JPEG
 GET  /api/point?x=&y=       disparity, depth and 3-D point under the cursor
 POST /api/config            {"name": value, ...}; a refusal answers 409 with the device's reason
+                            (every POST: JSON, same origin, at most MAX_BODY bytes, else 415/403/413)
 POST /api/start|stop|trigger
 POST /api/record/start|stop every frame to an MCAP file in the viewer's --record-dir (its path answered)
 GET  /snapshot/NAME         the newest frame as left.png, right.png, disparity.png (depth colour bar)
@@ -40,6 +41,7 @@ STATIC = {"/": ("index.html", "text/html; charset=utf-8"), "/viewer.js": ("viewe
           "/viewer.css": ("viewer.css", "text/css")}
 GROUP_STATIC = {"/": ("group.html", "text/html; charset=utf-8"), "/group.js": ("group.js", "text/javascript"),
                 "/viewer.css": ("viewer.css", "text/css")}
+MAX_BODY = 64 * 1024  # bytes of a POST body: a configuration is a few hundred
 SNAPSHOTS = {"left.png": "left", "right.png": "right", "disparity.png": "disparity_png", "points.ply": "ply"}
 _log = logging.getLogger(__name__)
 
@@ -157,8 +159,32 @@ class _Handler(BaseHTTPRequestHandler):
         self._send(body, ctype, headers={"Content-Disposition":
                                          f'attachment; filename="frame{frame.sequence:06d}_{name}"'})
 
+    def _refuse_action(self) -> bool:
+        """Actions change the camera: only the viewer's own page may ask. A request another web page
+        makes from the user's browser carries its Origin (or is not JSON, which needs a CORS
+        preflight this server never grants); a body over MAX_BODY is not read."""
+        origin = self.headers.get("Origin")
+        if origin is not None and origin != f"http://{self.headers.get('Host', '')}":
+            self._json({"error": f"actions from {origin} are refused"}, HTTPStatus.FORBIDDEN)
+        elif not self.headers.get("Content-Type", "").startswith("application/json"):
+            self._json({"error": "actions take a JSON body (Content-Type: application/json)"},
+                       HTTPStatus.UNSUPPORTED_MEDIA_TYPE)
+        elif not 0 <= int(self.headers.get("Content-Length", 0) or 0) <= MAX_BODY:
+            self._json({"error": f"body over {MAX_BODY} bytes"}, HTTPStatus.REQUEST_ENTITY_TOO_LARGE)
+        else:
+            return False
+        self.close_connection = True  # the body, if any, is not read
+        return True
+
     def do_POST(self) -> None:  # noqa: N802 - http.server's name
         session = self.server.session
+        try:
+            if self._refuse_action():
+                return
+        except ValueError:
+            self._json({"error": "bad Content-Length"}, HTTPStatus.BAD_REQUEST)
+            self.close_connection = True
+            return
         if isinstance(session, GroupViewerSession):
             self._json({"error": "a group is viewed, not configured, here"}, HTTPStatus.NOT_FOUND)
             return
