@@ -95,6 +95,14 @@ def test_actions_from_another_web_page_are_refused_and_change_nothing(viewer):
     code, _ = _post(viewer.url + "api/stop", body=b"{" + b" " * (100 << 10) + b"}")  # over 64 KiB
     assert code == 413
     assert cam.config() == before and cam.streaming
+    port = viewer.url.rstrip("/").rsplit(":", 1)[1]
+    code, _ = _post(viewer.url + "api/config", {"gain": 90}, headers={"Host": f"evil.example:{port}"})
+    assert code == 421  # DNS rebinding: another site's name pointed at this machine
+    req = urllib.request.Request(viewer.url + "image/left.jpg", headers={"Host": f"evil.example:{port}"})
+    with pytest.raises(urllib.error.HTTPError) as info:
+        urllib.request.urlopen(req, timeout=30)
+    assert info.value.code == 421  # nor may it read the images
+    assert cam.config() == before
     host = viewer.url.split("//")[1].rstrip("/")
     code, doc = _post(viewer.url + "api/config", {"gain": 90}, headers={"Origin": f"http://{host}"})
     assert code == 200 and doc["config"]["gain"] == 90  # the viewer's own page

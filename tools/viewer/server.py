@@ -83,7 +83,20 @@ class _Handler(BaseHTTPRequestHandler):
     def _json(self, doc: Any, status: int = 200) -> None:
         self._send(json.dumps(doc).encode(), "application/json", status)
 
+    def _foreign_host(self) -> bool:
+        """A request whose Host is not this server's address (DNS rebinding: another site's name
+        pointed at 127.0.0.1) is refused, so no other site can read the camera through the browser."""
+        host, port = self.server.server_address[:2]
+        names = {host, "localhost", "127.0.0.1", "[::1]"} if host in ("127.0.0.1", "::1", "localhost") else None
+        asked = self.headers.get("Host", "")
+        if names is None or asked in {f"{n}:{port}" for n in names}:
+            return False
+        self._json({"error": f"Host {asked!r} is not this viewer's address"}, HTTPStatus.MISDIRECTED_REQUEST)
+        return True
+
     def do_GET(self) -> None:  # noqa: N802 - http.server's name
+        if self._foreign_host():
+            return
         url = urlsplit(self.path)
         query = {k: v[0] for k, v in parse_qs(url.query).items()}
         session = self.server.session
@@ -179,7 +192,7 @@ class _Handler(BaseHTTPRequestHandler):
     def do_POST(self) -> None:  # noqa: N802 - http.server's name
         session = self.server.session
         try:
-            if self._refuse_action():
+            if self._foreign_host() or self._refuse_action():
                 return
         except ValueError:
             self._json({"error": "bad Content-Length"}, HTTPStatus.BAD_REQUEST)
