@@ -15,6 +15,7 @@ reads, streaming over every transport), so a host cannot tell a replay from the 
 """
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from dataclasses import dataclass
@@ -27,10 +28,12 @@ from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.params import Output, TriggerMode, defaults
-from stereocam.recording.reader import RecordedCapture, Recording
+from stereocam.recording.reader import DamagedRecordingError, RecordedCapture, Recording
 
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
 from .pipeline.stereo import params_from_config
+
+_log = logging.getLogger(__name__)
 
 Matcher = Callable[[dict, np.ndarray, np.ndarray], np.ndarray]
 
@@ -82,6 +85,7 @@ class ReplaySource:
         self._pending: RecordedCapture | None = None
         self._t0: tuple[float, int] | None = None  # (host monotonic, device µs) the pacing counts from
         self.sent = 0
+        self.damaged = 0  # captures skipped because the file could not be read there
 
     # -- the engine's side: what to capture next, and when -------------------------------------
     def restart(self) -> None:
@@ -96,11 +100,11 @@ class ReplaySource:
         with self._lock:
             if self._iter is None:
                 self._iter = self.recording.captures(self.start)
-            cap = next(self._iter, None)
+            cap = self._next()
             if cap is None and self.loop:
                 self._iter = self.recording.captures(self.start)
                 self._t0 = None
-                cap = next(self._iter, None)
+                cap = self._next()
             self._pending = cap
         if cap is None:
             return None
@@ -111,6 +115,17 @@ class ReplaySource:
         if due > now:
             time.sleep(due - now)
         return CaptureRequest(cap.info.sequence, cap.info.trigger_id, max(due, now), epoch)
+
+    def _next(self) -> RecordedCapture | None:
+        """The next readable capture: a damaged one is skipped (the host sees its sequence number
+        missing, a drop it counts) and logged; None at the end."""
+        while True:
+            try:
+                return next(self._iter, None)
+            except DamagedRecordingError as exc:
+                self.damaged += 1
+                _log.warning("replay: %s; skipped", exc)
+                self._iter = self.recording.captures(exc.frame + 1)
 
     # -- the firmware's side: the planes of that capture ---------------------------------------
     def capture(self, req: CaptureRequest, cfg: dict[str, int], match: Matcher) -> ReplayedCapture:

@@ -46,7 +46,23 @@ class RecordedCapture:
 
 
 def _plane(msg: Any, dtype: str) -> np.ndarray:
-    return np.frombuffer(bytes(msg.data), dtype).reshape(msg.height, msg.width)
+    data = bytes(msg.data)
+    if len(data) != msg.height * msg.width * np.dtype(dtype).itemsize:
+        raise ValueError(f"an image of {msg.width}x{msg.height} carries {len(data)} bytes")
+    return np.frombuffer(data, dtype).reshape(msg.height, msg.width)
+
+
+
+class DamagedRecordingError(RecordingError):
+    """A frame of the recording cannot be read (bad chunk CRC, undecodable message); ``frame`` is its
+    index: reading can go on from ``frame + 1``."""
+
+    def __init__(self, message: str, frame: int):
+        super().__init__(message)
+        self.frame = frame
+
+
+RECORD_SIZE_LIMIT = 1 << 30  # bytes of one MCAP record: a chunk header claiming more is damage, not data
 
 
 class Recording:
@@ -56,7 +72,9 @@ class Recording:
         self.path = Path(path)
         try:
             self._file = open(self.path, "rb")  # noqa: SIM115 - closed by close()
-            self._reader = SeekingReader(self._file, decoder_factories=[DecoderFactory()])
+            # every chunk's CRC is checked as it is read: a damaged frame is an error, never bad pixels
+            self._reader = SeekingReader(self._file, validate_crcs=True, decoder_factories=[DecoderFactory()],
+                                         record_size_limit=RECORD_SIZE_LIMIT)
             self.summary = self._reader.get_summary()
         except (OSError, McapError, ValueError, EOFError, struct.error) as exc:
             raise RecordingError(f"{self.path} is not a readable MCAP file: {exc}") from exc
@@ -68,6 +86,9 @@ class Recording:
         index = next((a for a in self._reader.iter_attachments() if a.name == FRAME_INDEX), None)
         if index is None:
             raise RecordingError(f"{self.path} has no frame index; run 'stereocam recording repair {self.path}'")
+        if len(index.data) % 8:
+            raise RecordingError(f"{self.path}: its frame index is damaged ({len(index.data)} bytes); "
+                                 f"run 'stereocam recording repair {self.path}'")
         self.log_times = np.frombuffer(index.data, "<i8")
 
     # -- the unit ----------------------------------------------------------------------------
@@ -128,16 +149,26 @@ class Recording:
         if start >= stop:
             return
         t0, t1 = int(self.log_times[start]), int(self.log_times[stop - 1])
+        messages = self._reader.iter_decoded_messages(starting_at=t0, ending_before=t1 + 1)
         parts: dict[str, Any] = {}
         index, current = start, None
-        for _, channel, message, decoded in self._reader.iter_decoded_messages(starting_at=t0, ending_before=t1 + 1):
-            if current is not None and message.log_time != current:
-                yield self._assemble(index, current, parts)
+        while True:
+            try:
+                item = next(messages, None)
+                ready = None
+                if current is not None and (item is None or item[2].log_time != current):
+                    ready = self._assemble(index, current, parts)
+            except Exception as exc:  # zstd, CDR, MCAP or shape errors of a damaged or hostile file
+                raise DamagedRecordingError(f"{self.path}: frame {index} cannot be read ({type(exc).__name__}: "
+                                            f"{exc}); the file is damaged", index) from exc
+            if ready is not None:
+                yield ready
                 index, parts = index + 1, {}
+            if item is None:
+                return
+            _, channel, message, decoded = item
             current = message.log_time
             parts[channel.topic] = decoded
-        if current is not None:
-            yield self._assemble(index, current, parts)
 
     def _assemble(self, index: int, log_time: int, parts: dict[str, Any]) -> RecordedCapture:
         left, right, disp = parts.get(schemas.LEFT), parts.get(schemas.RIGHT), parts.get(schemas.DISPARITY_TOPIC)

@@ -150,6 +150,41 @@ def test_bad_files_give_typed_errors(tmp_path):
         cam.record(tmp_path / "nodir" / "x.mcap", frames=1)
 
 
+def test_a_damaged_chunk_is_a_typed_error_naming_the_frame(tmp_path, recorded, capsys):
+    """Bytes flipped inside a compressed chunk (a bad disk, a hostile file): reading the frames in it
+    raises RecordingError naming the file and frame; the tools print it and exit 1, no traceback."""
+    path, frames, _ = recorded
+    bad = tmp_path / "bad.mcap"
+    data = bytearray(path.read_bytes())
+    with Recording(path) as rec:
+        chunk = max(rec.summary.chunk_indexes, key=lambda c: c.chunk_start_offset)  # the last frame's
+    middle = chunk.chunk_start_offset + chunk.chunk_length // 2
+    for i in range(middle, middle + 64):
+        data[i] ^= 0x5A
+    bad.write_bytes(bytes(data))
+    with Recording(bad) as rec:
+        assert rec.capture(0).info.sequence == frames[0].sequence  # the chunks before it still read
+        with pytest.raises(RecordingError, match=r"bad\.mcap: frame \d+ cannot be read"):
+            list(rec.captures())
+    from stereocam.tools import cli
+
+    assert cli.main(["recording", "export", str(bad), "--out", str(tmp_path / "x")]) == 1
+    err = capsys.readouterr().err
+    assert "cannot be read" in err and "Traceback" not in err
+    with stereocam.open(f"replay://{bad}?speed=fast", timeout=2.0) as cam:  # replayed as a device
+        cam.start()
+        got = []
+        with pytest.raises(stereocam.CameraTimeoutError):
+            while True:
+                got.append(cam.get_frame(timeout=3.0).sequence)
+        assert cam.status().counters["frames_sent"] == len(got)
+        cam.stop()
+        cam.start()  # the device went on: a new stream plays from the start again
+        assert cam.get_frame(timeout=5.0).sequence == frames[0].sequence
+    readable = [f.sequence for f in frames][:len(got)]
+    assert got == readable and 0 < len(got) < len(frames)  # the damaged frames skipped, never sent damaged
+
+
 @pytest.mark.parametrize("n", [0, 1, 3, 4, 7, 4096])
 def test_spliced_cdr_equals_the_library_encoding(n):
     rng = np.random.default_rng(n)
