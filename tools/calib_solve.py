@@ -156,8 +156,9 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board
                     progress: Callable[[Progress], None] | None = None, select: bool = True) -> CalibrationResult:
     """Calibrate a stereo head from raw image pairs of `board` (see the module docstring).
 
-    Raises BoardNotFoundError / TooFewViewsError when no solution can be computed, ValueError on
-    inconsistent images; a solution that fails the gate is returned with `failures` set.
+    A pair given as None (an image that could not be read) or whose sizes differ from each other or
+    from the first pair's is dropped with its reason. Raises BoardNotFoundError / TooFewViewsError
+    when no solution can be computed; a solution that fails the gate is returned with `failures` set.
     """
     selector = CoverageSelector(config.min_distance)
     views: list[ViewRecord] = []
@@ -166,11 +167,15 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board
     size: tuple[int, int] | None = None
     found_left = found_right = both = held = 0
     for index, (left, right) in enumerate(pairs):
-        left, right = gray(left), gray(right)
-        if left.shape != right.shape or (size is not None and left.shape[::-1] != size):
-            raise ValueError(f"pair {index}: image sizes differ ({left.shape}, {right.shape}, first {size})")
-        size = (left.shape[1], left.shape[0])
         label = labels[index] if labels is not None else f"pair {index}"
+        why = _unusable(left, right, size)
+        if why is not None:  # one bad file or odd size does not sink the set: dropped, named, said why
+            views.append(ViewRecord(index, label, "dropped", reason=why))
+            if progress is not None:
+                progress(Progress(views[-1], len(found) - held, held, selector.coverage()))
+            continue
+        left, right = gray(left), gray(right)
+        size = (left.shape[1], left.shape[0])
         dl, dr = detect_all(left, board), detect_all(right, board)
         found_left, found_right = found_left + bool(dl), found_right + bool(dr)
         view = ViewRecord(index, label, "no_board")
@@ -205,6 +210,18 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board
     order = (choose_detector(found, size),)
     kept = [PairPoints(i, label, *match_detections(dl, dr, board, order)) for i, label, dl, dr in found]
     return _solve(kept, views, size, selector.coverage(), sample, config)
+
+
+def _unusable(left: np.ndarray | None, right: np.ndarray | None, size: tuple[int, int] | None) -> str | None:
+    """Why a pair cannot be used (an image that could not be read, sizes that differ), or None."""
+    if left is None or right is None:
+        return f"cannot read the {'left' if left is None else 'right'} image"
+    (lh, lw), (rh, rw) = left.shape[:2], right.shape[:2]
+    if (lw, lh) != (rw, rh):
+        return f"left {lw}x{lh} and right {rw}x{rh} differ"
+    if size is not None and (lw, lh) != size:
+        return f"{lw}x{lh}, not the set's {size[0]}x{size[1]}"
+    return None
 
 
 def match_detections(dl: dict[str, Detection], dr: dict[str, Detection], board: BoardSpec | CharucoSpec,

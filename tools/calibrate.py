@@ -82,13 +82,10 @@ def find_pairs(directory: Path) -> list[tuple[int, Path, Path]]:
     return [(n, sides["left"][n], sides["right"][n]) for n in common]
 
 
-def _load(pairs: list[tuple[int, Path, Path]]) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+def _load(pairs: list[tuple[int, Path, Path]]) -> Iterator[tuple[np.ndarray | None, np.ndarray | None]]:
+    """The pairs' images; None for a file OpenCV cannot read (the pair is dropped, named)."""
     for _, left, right in pairs:
-        images = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in (left, right)]
-        for p, img in zip((left, right), images):
-            if img is None:
-                raise ValueError(f"cannot read image {p}")
-        yield images[0], images[1]
+        yield cv2.imread(str(left), cv2.IMREAD_GRAYSCALE), cv2.imread(str(right), cv2.IMREAD_GRAYSCALE)
 
 
 def _size(text: str) -> tuple[int, int]:

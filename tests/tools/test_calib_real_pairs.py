@@ -71,3 +71,25 @@ def test_the_same_images_give_the_same_solution_bit_for_bit():
     fits = [calibrate_mono("rational_polynomial", [grid] * len(corners), corners, (640, 480)) for _ in range(4)]
     assert all(np.array_equal(f.K, fits[0].K) and np.array_equal(f.D, fits[0].D) and f.rms == fits[0].rms
                for f in fits[1:])
+
+
+def test_an_unreadable_file_or_an_odd_size_drops_its_pair_not_the_set(tmp_path):
+    """A corrupt JPEG and a pair resized by mistake, among good pairs: both dropped, named and said
+    why; the rest calibrates and passes."""
+    import shutil
+
+    import cv2
+
+    images = tmp_path / "images"
+    shutil.copytree(PAIRS, images)
+    (images / "left03.jpg").write_bytes(b"\xff\xd8 not really a jpeg")
+    right = cv2.imread(str(images / "right07.jpg"), cv2.IMREAD_GRAYSCALE)
+    cv2.imwrite(str(images / "right07.jpg"), cv2.resize(right, (320, 240)))
+    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "--images", str(images), "--board",
+                        "9x6", "--square-size", "0.025", "--out", str(tmp_path / "out"), "-q"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    dropped = {d["pair"].split("|")[0]: d["reason"] for d in json.loads((tmp_path / "out" / "calibration.json")
+                                                                       .read_text())["dropped"]}
+    assert dropped["left03.jpg"] == "cannot read the left image"
+    assert dropped["left07.jpg"] == "left 640x480 and right 320x240 differ"
