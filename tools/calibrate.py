@@ -11,8 +11,10 @@ board; the tool sends only protocol parameters (SPEC §5). Against a simulator, 
 board (``python -m stereocam.device_sim --scene board`` or ``sim://?scene=board``); its board is 9x6
 inner corners of 30 mm, the device-mode default.
 
-DIR holds pairs named left<N>.<ext> / right<N>.<ext> (any text between the side and the number,
-e.g. left_003.png ↔ right3.png); they are paired by the integer N. Offline, every pair with the
+DIR holds the pairs as left01.png / right01.png, left_003.png ↔ right3.png, L01.png / R01.png,
+cam_left-7.jpg / cam_right-7.jpg, or in two folders (left/ right/, cam0/ cam1/, ...); they are
+paired by the number in the name (tools/calib_files.py). An unreadable image or a pair of another
+size is dropped with its reason. Offline, every pair with the
 board in both images is used except the outliers by their own residuals, which are listed with the
 reason; the lens model is chosen on held-out pairs unless --lens-model names one. The engine and
 the metric definitions are in tools/calib_solve.py and tools/calib_fit.py; boards in
@@ -56,30 +58,12 @@ from stereocam.tools.camera_info import stream_sizes
 from stereocam.tools.session import writable_dir
 from stereocam.tools.factory.db import FactoryDB, FactoryDBError, default_url
 from stereocam.tools.factory.record import make_attempt, now_utc
+from stereocam.tools.calib_files import find_pairs
 from stereocam.tools.calib_fit import OutlierRules
 from stereocam.tools.calib_lens import ALIASES
 from stereocam.tools.calib_solve import CalibrationError, CalibrationResult, SolveConfig, calibrate_pairs
 
 EXIT_OK, EXIT_USAGE, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_SAVE = 0, 2, 3, 4, 6
-_NAME = re.compile(r"^(left|right)\D*?(\d+)\.(png|jpe?g|bmp|pgm|ppm|tiff?)$", re.IGNORECASE)
-
-
-def find_pairs(directory: Path) -> list[tuple[int, Path, Path]]:
-    """(number, left path, right path) for every number that has both images, sorted by number."""
-    if not directory.is_dir():
-        raise ValueError(f"{directory} is not a directory")
-    sides: dict[str, dict[int, Path]] = {"left": {}, "right": {}}
-    for path in sorted(directory.iterdir()):
-        m = _NAME.match(path.name)
-        if m:
-            side, number = m.group(1).lower(), int(m.group(2))
-            if number in sides[side]:
-                raise ValueError(f"two {side} images with number {number}: {sides[side][number].name}, {path.name}")
-            sides[side][number] = path
-    common = sorted(set(sides["left"]) & set(sides["right"]))
-    if not common:
-        raise ValueError(f"no left<N>/right<N> image pairs in {directory}")
-    return [(n, sides["left"][n], sides["right"][n]) for n in common]
 
 
 def _load(pairs: list[tuple[int, Path, Path]]) -> Iterator[tuple[np.ndarray | None, np.ndarray | None]]:
@@ -109,7 +93,8 @@ def _parser() -> argparse.ArgumentParser:
                                  epilog="Exit codes: " + doc[doc.index("Exit status:") + len("Exit status:"):].strip(),
                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     ap.add_argument("url", nargs="?", help="camera to calibrate (device mode)")
-    ap.add_argument("--images", type=Path, help="folder of left<N>/right<N> images (offline mode)")
+    ap.add_argument("--images", type=Path,
+                    help="folder of left<N>/right<N> (or L<N>/R<N>) images, or of left/ and right/ folders (offline mode)")
     ap.add_argument("--board", default="9x6",
                     help="COLSxROWS inner corners of a chessboard, or charuco:COLSxROWS:SQUARE:MARKER:DICT "
                          "(squares; lengths in metres)")

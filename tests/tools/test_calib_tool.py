@@ -228,3 +228,18 @@ def test_offline_run_shows_pairs_done_of_total_even_when_quiet(tmp_path):
     assert "13/13" in loud.stderr and "13/13" in quiet.stderr  # pairs done of total
     assert "pair/s" in quiet.stderr or "s/pair" in quiet.stderr
     assert loud.stdout.count(" kept ") == 13 and " kept " not in quiet.stdout
+
+
+@pytest.mark.parametrize("left, right", [
+    ("L01.png", "R01.png"), ("img_L_7.png", "img_R_7.png"), ("imgL3.png", "imgR3.png"),
+    ("cam_left-0003.png", "cam_right-0003.png"), ("stereoLeft12.jpg", "stereoRight12.jpg"),
+    ("left/0005.png", "right/0005.png"), ("cam0/frame_0009.png", "cam1/frame_0009.png"),
+    ("L/a.png", "R/a.png"),
+])
+def test_real_sets_name_their_pairs_many_ways(tmp_path: Path, left: str, right: str) -> None:
+    for name in (left, right, "bright_01.png", "pair03.png", "frame5.png"):  # the last three name no side
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_bytes(b"")
+    pairs = calibrate.find_pairs(tmp_path)
+    assert [(l.relative_to(tmp_path).as_posix(), r.relative_to(tmp_path).as_posix()) for _, l, r in pairs] == [
+        (left, right)]
