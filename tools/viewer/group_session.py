@@ -79,10 +79,12 @@ class GroupViewerSession(Feed):
     def state(self) -> dict[str, Any]:
         st = self.group.stats
         errors = self.group.clock_errors()
+        with self._cond:
+            missed = list(self.missed)
         return {
             "cameras": [{"name": name, "url": cam.url, "model": self._models[name],
                          "clock_sigma_us": round(errors[name].sigma * 1e6, 1)}
                         for name, cam in self.group.cameras.items()],
-            "sets": {"complete": st.complete, "incomplete": st.incomplete}, "missed": list(self.missed),
+            "sets": {"complete": st.complete, "incomplete": st.incomplete}, "missed": missed,
             "discarded": self.group.discarded, "error": self.error,
         }
