@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from stereocam.protocol.calibration import StereoCalibration
-from stereocam.protocol.calibration_limits import CalibrationImplausible, check_rectifiable
+from stereocam.protocol.calibration_limits import check_rectifiable
 from stereocam.protocol.rectification import RectifiedGeometry, stereo_rectify
 from stereocam.tools.calib_lens import (
     LensSolveError, MonoFit, StereoFit, calibrate_mono, calibrate_stereo, project, rectify_map, solve_pose,
@@ -80,16 +80,12 @@ def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], sta
     st = calibrate_stereo(model, obj, [p.left for p in pairs], [p.right for p in pairs], size, fl, fr)
     try:
         calib = StereoCalibration(size, fl.K, fl.D, fr.K, fr.D, st.R, st.T, model)
-        geometry = stereo_rectify(calib)
-    except ValueError as exc:
+        # the rule a camera applies before it stores a calibration (SPEC §12.4 step 4): a usable
+        # rectification, and no folding — a fit can match every corner and still fold where none was seen
+        check_rectifiable(calib, rectify_map)
+    except ValueError as exc:  # CalibrationImplausible is one
         raise LensSolveError(f"{model}: {exc}") from exc
-    if not (np.all(np.isfinite(geometry.P2)) and geometry.focal_px > 0):
-        raise LensSolveError(f"{model}: the fitted lens does not invert over the whole image (no rectification)")
-    try:  # the rule a camera applies before it stores a calibration (SPEC §12.4 step 4): a fit can
-        check_rectifiable(calib, rectify_map)  # match every corner and still fold where none was seen
-    except CalibrationImplausible as exc:
-        raise LensSolveError(f"{model}: {exc}") from exc
-    return HeadFit(fl, fr, st, calib, geometry)
+    return HeadFit(fl, fr, st, calib, stereo_rectify(calib))
 
 
 def epipolar_dy(fit: HeadFit, left: np.ndarray, right: np.ndarray) -> np.ndarray:

@@ -20,8 +20,8 @@ import numpy as np
 
 from stereocam.protocol.calibration import N_DIST
 
-P = ParamSpec("P")
-R = TypeVar("R")
+_Args = ParamSpec("_Args")
+_Result = TypeVar("_Result")
 SOLVE = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
 UNDISTORT = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
 MODELS = ("plumb_bob", "rational_polynomial", "equidistant")  # simplest first: ties go to the earlier
@@ -34,12 +34,12 @@ def _fisheye_flag(name: str) -> int:
     return getattr(cv2.fisheye, name, None) or getattr(cv2, name)
 
 
-def _one_thread(solve: Callable[P, R]) -> Callable[P, R]:
+def _one_thread(solve: Callable[_Args, _Result]) -> Callable[_Args, _Result]:
     """Run an OpenCV solver on one thread: its parallel Jacobian sums change the last bits from run
     to run, and an ill-conditioned fit (a rational model on a few views) turns those bits into other
     outliers and other model scores. A factory tool gives the same answer for the same images."""
     @functools.wraps(solve)
-    def run(*args: P.args, **kwargs: P.kwargs) -> R:
+    def run(*args: _Args.args, **kwargs: _Args.kwargs) -> _Result:
         threads = cv2.getNumThreads()
         cv2.setNumThreads(1)
         try:
