@@ -85,7 +85,6 @@ class ReplaySource:
         self._pending: RecordedCapture | None = None
         self._t0: tuple[float, int] | None = None  # (host monotonic, device µs) the pacing counts from
         self.sent = 0
-        self.damaged = 0  # captures skipped because the file could not be read there
 
     # -- the engine's side: what to capture next, and when -------------------------------------
     def restart(self) -> None:
@@ -123,7 +122,6 @@ class ReplaySource:
             try:
                 return next(self._iter, None)
             except DamagedRecordingError as exc:
-                self.damaged += 1
                 _log.warning("replay: %s; skipped", exc)
                 self._iter = self.recording.captures(exc.frame + 1)
 

@@ -52,7 +52,6 @@ def _plane(msg: Any, dtype: str) -> np.ndarray:
     return np.frombuffer(data, dtype).reshape(msg.height, msg.width)
 
 
-
 class DamagedRecordingError(RecordingError):
     """A frame of the recording cannot be read (bad chunk CRC, undecodable message); ``frame`` is its
     index: reading can go on from ``frame + 1``."""
