@@ -5,6 +5,8 @@ in between; the midpoint is the estimate and half the round trip bounds its erro
 trips are worth far more than long ones (a reply queued behind a frame can take milliseconds). The
 map keeps samples spread over the last two minutes, the shorter round trip winning wherever two
 crowd together, and fits host = a + b·device through them weighted by 1/rtt² (offset and drift).
+The drift has a prior (a crystal's rate error is tens of ppm, SPEC §10): a slope is believed as far
+as the round trips measure it, so one burst answered late by a busy device cannot tilt the map.
 """
 from __future__ import annotations
 
@@ -13,12 +15,12 @@ import threading
 import time
 from dataclasses import dataclass
 
+from stereocam.protocol.messages import CLOCK_DRIFT_MAX, CLOCK_DRIFT_TYPICAL
 from .transports.base import Transport
 
 KEEP = 32
 WINDOW_US = 120_000_000  # older samples are forgotten: a crystal's drift wanders with temperature
-MIN_SPAN_US = 200_000  # below this span of device time only the offset is fitted
-MAX_DRIFT = 1e-3  # a crystal is within 1000 ppm
+DRIFT_PRIOR_SIGMA = 2 * CLOCK_DRIFT_TYPICAL  # the drift's prior: N(0, this²), room for a poorer crystal
 RTT_FLOOR = 20e-6  # no sample is trusted as more exact than this (s)
 
 
@@ -105,24 +107,27 @@ class ClockMap:
 
 
 def _fit(samples: list[SyncSample]) -> tuple[float, float, int, MapError]:
-    """Weighted least squares of host midpoint over device time, weights 1/rtt²; the slope only when
-    the samples span enough device time to show it, and never beyond what a crystal can do."""
+    """Least squares of host midpoint over device time with a Gaussian prior on the drift.
+
+    A midpoint is off by at most half its round trip, uniformly: variance rtt²/12. The slope is
+    the posterior mean: what the samples show, pulled toward zero drift by as much as they leave
+    it unmeasured (a short span or long trips), and never beyond what a device may do."""
     best = min(samples, key=lambda s: s.rtt)
     ref = best.device_us
     xs = [s.device_us - ref for s in samples]
     ys = [s.host_mid for s in samples]
-    ws = [1.0 / max(s.rtt, RTT_FLOOR) ** 2 for s in samples]
+    ws = [12.0 / max(s.rtt, RTT_FLOOR) ** 2 for s in samples]
     sw = sum(ws)
     mx = sum(w * x for w, x in zip(ws, xs)) / sw
-    span = max(xs) - min(xs)
-    b = 1e-6
-    if span >= MIN_SPAN_US:
-        sxx = sum(w * (x - mx) ** 2 for w, x in zip(ws, xs))
-        my = sum(w * y for w, y in zip(ws, ys)) / sw
-        b = sum(w * (x - mx) * (y - my) for w, x, y in zip(ws, xs, ys)) / sxx
-        b = min(max(b, 1e-6 * (1 - MAX_DRIFT)), 1e-6 * (1 + MAX_DRIFT))
-    a = sum(w * (y - b * x) for w, x, y in zip(ws, xs, ys)) / sw
+    my = sum(w * y for w, y in zip(ws, ys)) / sw
+    sxx = sum(w * (x - mx) ** 2 for w, x in zip(ws, xs))
+    sxy = sum(w * (x - mx) * (y - my) for w, x, y in zip(ws, xs, ys))
+    nominal, prior_w = 1e-6, 1.0 / (1e-6 * DRIFT_PRIOR_SIGMA) ** 2  # s per device µs, and its weight
+    b = (sxy + prior_w * nominal) / (sxx + prior_w)
+    b = min(max(b, nominal * (1 - CLOCK_DRIFT_MAX)), nominal * (1 + CLOCK_DRIFT_MAX))
+    a = my - b * mx
     resid = math.sqrt(sum(w * (y - a - b * x) ** 2 for w, x, y in zip(ws, xs, ys)) / sw)
+    span = max(xs) - min(xs)
     return a, b, ref, MapError(resid, best.rtt / 2, len(samples), span / 1e6)
 
 

@@ -209,6 +209,10 @@ class Status(Message):
         return cls(up, bool(streaming), mode, dict(zip(names, vals)))
 
 
+CLOCK_DRIFT_TYPICAL = 50e-6  # a reference crystal's rate error (SPEC §10): the host's prior on drift
+CLOCK_DRIFT_MAX = 1e-3  # the most a device clock may run fast or slow (SPEC §10); the host clamps here
+
+
 @dataclass(frozen=True)
 class Time(Message):
     TYPE: ClassVar[int] = MsgType.TIME

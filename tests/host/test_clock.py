@@ -89,3 +89,21 @@ def test_samples_older_than_the_window_are_forgotten():
     oldest = min(s.device_us for s in cm.samples)
     assert max(s.device_us for s in cm.samples) - oldest <= 120_000_000
     assert abs(cm.to_host(truth(300.0)) - 300.0) < 20e-6
+
+
+def test_one_burst_held_up_on_the_way_to_the_device_does_not_tilt_the_map():
+    """A busy device answers a whole burst late (each request waits behind a frame being matched,
+    so the device reads its clock just before replying): a slope fitted through that burst alone
+    would carry its milliseconds of bias to every later frame. A crystal's drift is known to be
+    small (SPEC §10); one poorly measured second may not outweigh that."""
+    truth = lambda host_s: int(host_s * (1 + 20e-6) * 1e6) + 9_000_000  # noqa: E731
+    cm = ClockMap()
+    for k in range(8):  # at connect: short trips
+        t0 = 100.0 + k * 1e-3
+        cm.add(SyncSample(t0, truth(t0 + 25e-6), t0 + 50e-6))
+    for j in range(3):  # one second later: every request waited ~5.6 ms on the device's side
+        t0 = 101.0 + j * 0.01
+        cm.add(SyncSample(t0, truth(t0 + 5.6e-3), t0 + 5.65e-3))
+    for host_s in (100.5, 101.0, 103.0):
+        assert abs(cm.to_host(truth(host_s)) - host_s) < 300e-6
+    assert abs(cm.drift) < 100e-6

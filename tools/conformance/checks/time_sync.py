@@ -11,7 +11,6 @@ from ..results import expect
 
 SPAN_S = 2.5
 SAMPLES = 26
-MAX_DRIFT = 1e-3  # the host clamps the fitted rate to 1 +- 1000 ppm (SPEC §10)
 ENDS = 6  # the best-rtt sample of the first and of the last few bound the rate
 
 
@@ -35,9 +34,9 @@ def time_sync(ctx: Context) -> str:
     dev_span = (last[1] - first[1]) / 1e6
     slowest = dev_span / (last[2] - first[0])  # the longest host interval the two readings allow
     fastest = dev_span / (last[0] - first[2])
-    expect(fastest >= 1 - MAX_DRIFT and slowest <= 1 + MAX_DRIFT,
+    expect(fastest >= 1 - m.CLOCK_DRIFT_MAX and slowest <= 1 + m.CLOCK_DRIFT_MAX,
            f"device clock rate between {(slowest - 1) * 1e6:+.0f} and {(fastest - 1) * 1e6:+.0f} ppm over "
-           f"{dev_span:.2f} s, outside +-{MAX_DRIFT * 1e6:.0f} ppm")
+           f"{dev_span:.2f} s, outside +-{m.CLOCK_DRIFT_MAX * 1e6:.0f} ppm")
     mid = (slowest + fastest) / 2
     return (f"{SAMPLES} samples over {dev_span:.2f} s: rate {(mid - 1) * 1e6:+.0f} ppm "
             f"(bounds {(slowest - 1) * 1e6:+.0f}..{(fastest - 1) * 1e6:+.0f})")
