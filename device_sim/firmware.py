@@ -46,7 +46,7 @@ from .replay import ReplayEngine, ReplaySource
 from .rig.scene import Scene
 from .rig.sensor import SensorRig
 from .scratch_flash import ScratchFlash
-from .trigger import Line, TriggerInput
+from .trigger import Line, TriggerInput, TriggerLine, TriggerOutput
 from .watchdog import WatchdogThread
 
 
@@ -107,9 +107,10 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         self.streaming = StreamingHandlers(self.config, self.engine, self.counters)
         self._boot(recovery=False)
         self.trigger_input = TriggerInput(seed, self.streaming.on_pulse)  # its own latency after an edge
-        self.trigger_line = trigger_line
-        if trigger_line is not None:
-            trigger_line.attach(self.trigger_input.on_pulse)
+        self.trigger_line = trigger_line if trigger_line is not None else TriggerLine()  # unwired: its own
+        self.trigger_line.attach(self.trigger_input.on_pulse)  # input still hears its own output
+        self.trigger_output = TriggerOutput(self.trigger_line, self.clock, lambda: self.config.snapshot()["fps"])
+        self.engine.on_streaming = self._drive_trigger_output
         self.pipeline.warm_up()
         self.watchdog = WatchdogThread(self.heartbeat.watchdog, name=f"watchdog-{self.serial}")
         registry.register(self)
@@ -126,7 +127,7 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         booted = BootStage(slots, states).boot(recovery)
         build = booted.image.build if booted.image else RECOVERY_BUILD
         self.firmware_version = self._source.firmware_version if self._source else build.version
-        self.config.reset(build.parameter_defaults)
+        self.config.reset(build.parameter_defaults, build.capabilities)
         if self._source:  # a replayed unit starts in the configuration it was recorded with
             self.config.apply({BY_NAME[k].pid: v for k, v in self._source.config.items() if k in BY_NAME}, False)
         self.update = UpdateService(slots, states, booted)
@@ -248,6 +249,13 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         """This unit's true calibration (full sensor resolution), as the calibration tool writes it."""
         return self._truth_cal
 
+    def _drive_trigger_output(self, streaming: bool) -> None:
+        """SPEC §5.1 ``trigger_output``: the unit pulses the line exactly while its stream runs."""
+        if streaming and self.config.snapshot().get("trigger_output") == 1:
+            self.trigger_output.drive()
+        else:
+            self.trigger_output.release()
+
     def status_counters(self) -> dict[str, int]:
         """The counters a STATUS reply carries."""
         return self.heartbeat.status_counters()
@@ -260,8 +268,7 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         self.watchdog.close()
         self.engine.close()
         self.pipeline.close()
-        if self.trigger_line is not None:
-            self.trigger_line.detach(self.trigger_input.on_pulse)
+        self.trigger_line.detach(self.trigger_input.on_pulse)
         self.link.close()
         if self._scratch is not None:
             self._scratch.cleanup()

@@ -4,7 +4,8 @@ A pulse carries its trigger id (the line's pulse number) and the host-monotonic 
 edge: on a real wire every head sees the edge at once, so however late a simulated head learns of
 it (another thread, another process), it exposes relative to that instant. Each head's trigger
 input adds its own latency (``TriggerInput``). ``TriggerMaster`` drives a line at a frame rate,
-timed by one unit's crystal. ``SharedTriggerLine`` (shared_line.py) is the same line across
+timed by one unit's crystal; ``TriggerOutput`` is a unit's own connector driving it (SPEC §5.1
+``trigger_output``). ``SharedTriggerLine`` (shared_line.py) is the same line across
 processes.
 """
 from __future__ import annotations
@@ -98,16 +99,24 @@ class TriggerInput:
 class TriggerMaster:
     """Pulses ``line`` at ``fps`` until closed, the period counted on ``clock`` (the master unit's
     crystal; None: the host's). Each pulse carries its scheduled instant, not the (later) moment
-    this thread got to send it."""
+    this thread got to send it. ``fps`` may be a function, read for every period (a unit's frame
+    rate is a live parameter)."""
 
-    def __init__(self, line: Line, fps: float, clock: DeviceClock | None = None):
-        if not fps > 0:
-            raise ValueError(f"trigger master fps must be > 0, got {fps}")
+    def __init__(self, line: Line, fps: float | Callable[[], float], clock: DeviceClock | None = None):
+        rate = fps if callable(fps) else (lambda: fps)
+        if not rate() > 0:
+            raise ValueError(f"trigger master fps must be > 0, got {rate()}")
         self.line = line
-        self.period = clock.host_period(1.0 / fps) if clock is not None else 1.0 / fps
+        self._rate = rate
+        self._clock = clock
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="trigger-master", daemon=True)
         self._thread.start()
+
+    @property
+    def period(self) -> float:
+        nominal = 1.0 / self._rate()
+        return self._clock.host_period(nominal) if self._clock is not None else nominal
 
     def _run(self) -> None:
         t = time.monotonic() + self.period
@@ -125,3 +134,33 @@ class TriggerMaster:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class TriggerOutput:
+    """A unit's trigger output (SPEC §5.1 ``trigger_output``): while its stream runs with the
+    output on, it is the line's master, pulsing at its ``fps`` timed by its own crystal. Its own
+    trigger input hears the line like every other head's, so it captures on its own pulses."""
+
+    def __init__(self, line: Line, clock: DeviceClock, fps: Callable[[], float]):
+        self.line = line
+        self._clock = clock
+        self._fps = fps
+        self._lock = threading.Lock()
+        self._master: TriggerMaster | None = None
+
+    @property
+    def driving(self) -> bool:
+        return self._master is not None
+
+    def drive(self) -> None:
+        """Start pulsing (a no-op while already pulsing)."""
+        with self._lock:
+            if self._master is None:
+                self._master = TriggerMaster(self.line, self._fps, self._clock)
+
+    def release(self) -> None:
+        """Stop pulsing: the line is left low."""
+        with self._lock:
+            master, self._master = self._master, None
+        if master is not None:
+            master.close()

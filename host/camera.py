@@ -231,8 +231,9 @@ class Camera:
         """The configuration ``configure(**params)`` would give, checked here against the
         protocol's rules (protocol/config_rules.py) without changing the device; ConfigRejected
         (a ConfigError naming the parameter, ``.param``, and the NACK code) if the device would
-        refuse it. The device stays the authority: ``configure`` still sends the request."""
-        return merge(self.config(), config_update(params), self._streaming)
+        refuse it (also a value needing a capability this device does not advertise). The device
+        stays the authority: ``configure`` still sends the request."""
+        return merge(self.config(), config_update(params), self._streaming, self._info.capabilities)
 
     def set_trigger_mode(self, mode: TriggerMode | str) -> None:
         if isinstance(mode, str):

@@ -1,12 +1,12 @@
 """``CameraGroup``: several cameras on one external trigger line, frames matched by trigger id.
 
 The group opens every camera, configures them alike (plus per-camera settings), sets
-``trigger_mode=external`` on all and starts them. It does not pick a master: whatever drives the
-trigger line does. On a real rig that is the unit wired as sync source or a signal generator;
-with simulators it is the one served with ``--trigger-line NAME --trigger-master FPS`` (``stereocam
-sim``), or a ``TriggerMaster`` on an in-process ``TriggerLine``. Every pulse carries the line's
-pulse number, which each head puts in its frames' ``trigger_id``; that is what the group matches
-on. Each frame's ``host_time`` is its own camera's device timestamp through that camera's clock
+``trigger_mode=external`` on all, makes one of them the trigger master (``trigger_output=1``: it
+pulses the line at its ``fps`` while streaming, SPEC §5.1; the others' output off) and starts them,
+the master last so that its first pulse finds every head streaming. ``master=None`` when something
+outside the group drives the line (a signal generator, a unit not in the group). Every pulse
+carries the line's pulse number, which each head puts in its frames' ``trigger_id``; that is what
+the group matches on. Each frame's ``host_time`` is its own camera's device timestamp through that camera's clock
 map, so the spread of a set measures the sync; ``clock_errors`` says how far each map is trusted.
 
     with stereocam.CameraGroup(["socket://10.0.0.2:5000", "socket://10.0.0.3:5000"],
@@ -24,6 +24,7 @@ import threading
 import time
 from typing import Iterator, Mapping, Sequence
 
+from stereocam.protocol import messages as m
 from stereocam.protocol.errors import CameraTimeoutError, ConfigError, StereoCamError
 from stereocam.protocol.params import TriggerMode
 
@@ -39,10 +40,12 @@ class CameraGroup:
     """Several cameras streaming together on one trigger line; iterate for ``MatchedSet``s."""
 
     def __init__(self, urls: Sequence[str], *, config: Mapping[str, int] | None = None,
-                 per_camera: Sequence[Mapping[str, int] | None] | None = None, deadline: float = 0.5,
-                 timeout: float = 1.0, settle: float = 1.0, **open_kwargs):
+                 per_camera: Sequence[Mapping[str, int] | None] | None = None, master: int | None = 0,
+                 deadline: float = 0.5, timeout: float = 1.0, settle: float = 1.0, **open_kwargs):
         """``config``: parameters for every camera; ``per_camera``: more for each (same order as
-        ``urls``). ``deadline``: seconds after a set's first frame before it is given up as
+        ``urls``). ``master``: index (in ``urls``) of the camera that drives the trigger line at its
+        ``fps``; it must advertise TRIGGER_OUTPUT. None: the line is driven from outside the group
+        (every camera's output is then switched off where it has one). ``deadline``: seconds after a set's first frame before it is given up as
         incomplete. ``timeout``: how long iteration waits for the next set. ``settle``: seconds
         of time-sync bursts before streaming, so every clock map knows its drift from the first
         set (without, the first seconds' sets are the loosest)."""
@@ -50,6 +53,10 @@ class CameraGroup:
             raise ConfigError("CameraGroup needs at least one camera URL")
         if per_camera is not None and len(per_camera) != len(urls):
             raise ConfigError(f"per_camera has {len(per_camera)} entries for {len(urls)} cameras")
+        if master is not None and not (isinstance(master, int) and 0 <= master < len(urls)):
+            raise ConfigError(f"master must be the index of one of the {len(urls)} cameras (0..{len(urls) - 1}) "
+                              f"or None, got {master!r}")
+        self.master = master
         self.urls = list(urls)
         self.timeout = timeout
         self._config = dict(config or {})
@@ -70,16 +77,26 @@ class CameraGroup:
     def open(self) -> "CameraGroup":
         """Open, configure and start every camera; closes what it opened if any step fails."""
         try:
-            for url, extra in zip(self.urls, self._per_camera):
+            for i, (url, extra) in enumerate(zip(self.urls, self._per_camera)):
                 cam = open_camera(url, self.timeout, **self._open_kwargs)
-                name = cam.info().serial
-                name = name if name not in self.cameras else f"{name}#{len(self.cameras)}"
+                info = cam.info()
+                name = info.serial if info.serial not in self.cameras else f"{info.serial}#{len(self.cameras)}"
                 self.cameras[name] = cam
-                cam.configure(**{**self._config, **(extra or {}), "trigger_mode": int(TriggerMode.EXTERNAL)})
+                values = {**self._config, **(extra or {}), "trigger_mode": int(TriggerMode.EXTERNAL)}
+                if info.capabilities & m.Capability.TRIGGER_OUTPUT:
+                    values["trigger_output"] = int(i == self.master)
+                elif i == self.master:
+                    raise ConfigError(f"camera {name} ({url}) cannot drive the trigger line (INFO lacks "
+                                      "TRIGGER_OUTPUT): choose another master=, or master=None when the line "
+                                      "is driven from outside the group")
+                cam.configure(**values)
             self._settle_clocks()
             self._matcher = SetMatcher(self.cameras, self._deadline)
-            for cam in self.cameras.values():
-                cam.start()
+            names = list(self.cameras)
+            if self.master is not None:  # the master last: its first pulse finds every head streaming
+                names.append(names.pop(self.master))
+            for name in names:
+                self.cameras[name].start()
         except BaseException:
             self.close()
             raise

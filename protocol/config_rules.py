@@ -10,6 +10,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 from .errors import ConfigError, ErrorCode
+from .messages import Capability
 from .params import BY_ID, BY_NAME, TriggerMode
 
 
@@ -27,16 +28,29 @@ class ConfigRejected(ConfigError):
         return BY_ID[self.param_id].name if self.param_id in BY_ID else f"param_{self.param_id}"
 
 
-def merge(current: Mapping[str, int], update: Mapping[int, int], streaming: bool) -> dict[str, int]:
+CAPABILITY_VALUES: dict[tuple[str, int], int] = {
+    ("rectify", 0): Capability.RAW_OUTPUT,
+    ("trigger_output", 1): Capability.TRIGGER_OUTPUT,
+}
+"""Values within the table that only a device advertising the capability accepts (SPEC §5.1);
+a device without it NACKs them OUT_OF_RANGE."""
+
+
+def merge(current: Mapping[str, int], update: Mapping[int, int], streaming: bool,
+          capabilities: int | None = None) -> dict[str, int]:
     """The whole configuration after ``update`` (wire id → value), or ConfigRejected for the first
-    failure in SPEC §4.3 order: unknown id, range/odd/step, non-live change while streaming, then
-    the cross-parameter rules of §5.2 on the merged result."""
+    failure in SPEC §4.3 order: unknown id, range/odd/step (and a value whose capability
+    ``capabilities`` lacks; None: not checked), non-live change while streaming, then the
+    cross-parameter rules of §5.2 on the merged result."""
     new = dict(current)
     for pid, value in update.items():
         p = BY_ID.get(pid)
         if p is None:
             raise ConfigRejected(ErrorCode.UNKNOWN_PARAM, pid, f"unknown parameter id {pid}")
         why = p.check(value)
+        needs = CAPABILITY_VALUES.get((p.name, value))
+        if not why and capabilities is not None and needs is not None and not capabilities & needs:
+            why = f"{p.name}={value} needs INFO capability {Capability.name_of(needs)}, which this device lacks"
         if why:
             raise ConfigRejected(ErrorCode.OUT_OF_RANGE, pid, why)
         if streaming and not p.live and value != new[p.name]:
@@ -109,6 +123,14 @@ CROSS_RULES: tuple[CrossRule, ...] = (
     CrossRule("sgm_disparity_range_vs_width", ("algorithm", "min_disparity", "num_disparities", "width"),
               ("num_disparities", "min_disparity", "width", "algorithm"),
               lambda c: _algorithm(c) == SEMI_GLOBAL and _sgm_no_valid_column(c), lambda c: _range_why(c, "")),
+    CrossRule("trigger_output_needs_external", ("trigger_output", "trigger_mode"), ("trigger_output", "trigger_mode"),
+              lambda c: c["trigger_output"] == 1 and c["trigger_mode"] != TriggerMode.EXTERNAL,
+              lambda c: "trigger_output=1 needs trigger_mode=external: the master captures on its own pulses "
+                        "like every head on the line"),
+    CrossRule("exposure_vs_output_period", ("trigger_output", "exposure_us", "fps"),
+              ("exposure_us", "fps", "trigger_output"),
+              lambda c: c["trigger_output"] == 1 and c["exposure_us"] > 1_000_000 // c["fps"],
+              lambda c: f"exposure_us={c['exposure_us']} longer than the trigger period at fps={c['fps']}"),
 )
 """SPEC §5.2, in the order a device checks them."""
 

@@ -82,6 +82,12 @@ class Capability:
     RAW_OUTPUT = 0x20  # since 1.1: `rectify` = 0 gives raw (unrectified) frames (SPEC §5.1, §8.2)
     FRAME_REPAIR = 0x40  # since 1.2: SET_FRAME_LINK and FRAME_RESEND (SPEC §13)
     FIRMWARE_UPDATE = 0x80  # since 1.2: UPDATE_* messages (SPEC §14)
+    TRIGGER_OUTPUT = 0x100  # since 1.2: `trigger_output` = 1 drives the trigger line (SPEC §5.1, §8.5)
+
+    @classmethod
+    def name_of(cls, bit: int) -> str:
+        """The bit's name (``bit<n>`` for one this protocol version does not define)."""
+        return next((k for k, v in vars(cls).items() if k.isupper() and v == bit), f"bit{bit.bit_length() - 1}")
 
 
 class UsbSpeed:

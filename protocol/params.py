@@ -77,6 +77,7 @@ PARAMS: tuple[Param, ...] = (
     Param(26, "sgm_paths", 8, 4, 8, step=4),  # 4 (horizontal + vertical) or 8 (+ diagonals)
     Param(27, "census_width", 9, 3, 9, odd=True, unit="px"),  # SGM census window
     Param(28, "census_height", 7, 1, 7, odd=True, unit="px"),
+    Param(29, "trigger_output", 0, 0, 1, live=False),  # 1: this unit drives the trigger line at fps (INFO TRIGGER_OUTPUT)
 )
 
 DESCRIPTIONS: dict[str, str] = {
@@ -107,6 +108,7 @@ DESCRIPTIONS: dict[str, str] = {
     "sgm_paths": "SGM aggregation paths: 4 or 8",
     "census_width": "SGM census window width (odd)",
     "census_height": "SGM census window height (odd)",
+    "trigger_output": "1: this unit is the trigger master, pulsing the line at fps while streaming (external mode)",
 }
 PARAMS = tuple(replace(p, description=DESCRIPTIONS.get(p.name, p.description)) for p in PARAMS)
 
@@ -118,6 +120,7 @@ VALUE_NAMES: dict[str, dict[int, str]] = {  # enumerated parameters: value -> na
     "pre_filter_type": {0: "xsobel", 1: "normalized"},
     "rectify": {0: "raw", 1: "rectified"},
     "algorithm": {0: "block_matching", 1: "sgm"},
+    "trigger_output": {0: "off", 1: "master"},
 }
 
 

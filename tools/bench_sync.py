@@ -25,7 +25,6 @@ import numpy as np
 import stereocam
 from stereocam.device_sim import SimulatedCamera, TriggerLine
 from stereocam.device_sim.process import ServedSimulator
-from stereocam.device_sim.trigger import TriggerMaster
 from stereocam.clock import MapError
 from stereocam.frame_sets import MatchedSet
 from stereocam.protocol.params import Output
@@ -43,9 +42,11 @@ class Run:
     map_errors: dict[str, MapError] = field(default_factory=dict)
 
 
-def capture(urls: list[str], seconds: float, deadline: float = 0.5) -> Run:
+def capture(urls: list[str], seconds: float, fps: int, deadline: float = 0.5) -> Run:
+    """The group makes the first head the trigger master (its ``trigger_output``) at ``fps``."""
     run = Run()
-    with stereocam.CameraGroup(urls, config=CONFIG, deadline=deadline, timeout=5.0) as group:
+    with stereocam.CameraGroup(urls, config={**CONFIG, "fps": fps}, master=0, deadline=deadline,
+                               timeout=5.0) as group:
         t0 = time.monotonic()
         while time.monotonic() - t0 < seconds:
             s: MatchedSet = group.get_set()
@@ -58,29 +59,26 @@ def capture(urls: list[str], seconds: float, deadline: float = 0.5) -> Run:
 
 
 @contextlib.contextmanager
-def inprocess_heads(fps: float) -> Iterator[tuple[list[str], Callable[[str, int], float | None]]]:
+def inprocess_heads() -> Iterator[tuple[list[str], Callable[[str, int], float | None]]]:
     line = TriggerLine()
     sims = {f"SYNC{s}": SimulatedCamera(serial=f"SYNC{s}", seed=s, trigger_line=line) for s in SEEDS}
-    master = TriggerMaster(line, fps, next(iter(sims.values())).clock)
     try:
         yield [f"sim://?serial={n}" for n in sims], lambda name, seq: sims[name].truth.exposure_instant(seq)
     finally:
-        master.close()
         for sim in sims.values():
             sim.close()
 
 
 @contextlib.contextmanager
-def served_heads(kind: str, fps: float) -> Iterator[tuple[list[str], Callable[[str, int], float | None]]]:
+def served_heads(kind: str) -> Iterator[tuple[list[str], Callable[[str, int], float | None]]]:
     """Each head its own process, on one machine-wide trigger line; truth read from their logs."""
     spec = "pty" if kind == "pty" else "tcp:127.0.0.1:0"
     line = f"bench-sync-{os.getpid()}-{kind}"
     with tempfile.TemporaryDirectory(prefix="stereocam-sync-") as tmp, contextlib.ExitStack() as stack:
         logs = {f"SIM{s:05d}": Path(tmp) / f"{s}.truth" for s in SEEDS}
         servers = []
-        for i, s in enumerate(SEEDS):
+        for s in SEEDS:
             extra = ["--trigger-line", line, "--truth-log", str(logs[f"SIM{s:05d}"])]
-            extra += ["--trigger-master", str(fps)] if i == 0 else []
             servers.append(stack.enter_context(ServedSimulator(spec, seed=s, extra=extra)))
         truth: dict[str, dict[int, float]] = {}
 
@@ -124,7 +122,7 @@ def report(kind: str, run: Run, truth: Callable[[str, int], float | None]) -> di
 def main(argv: list[str] | None = None) -> dict[str, dict[str, float]]:
     ap = argparse.ArgumentParser(prog="stereocam bench sync", description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=120.0, help="capture time per transport")
-    ap.add_argument("--fps", type=float, default=30.0)
+    ap.add_argument("--fps", type=int, default=30, help="the master head's frame rate (1..120)")
     ap.add_argument("--transports", default="inprocess,tcp,pty", help="comma-separated: inprocess, tcp, pty")
     args = ap.parse_args(argv)
     kinds = [k.strip() for k in args.transports.split(",") if k.strip()]
@@ -135,7 +133,7 @@ def main(argv: list[str] | None = None) -> dict[str, dict[str, float]]:
     print(f"  {'transport':<10} {'sets':>6} {'incmp':>5} {'p50':>7} {'p99':>7} {'max':>7} {'true p50':>8}")
     out = {}
     for kind in kinds:
-        heads = inprocess_heads(args.fps) if kind == "inprocess" else served_heads(kind, args.fps)
+        heads = inprocess_heads() if kind == "inprocess" else served_heads(kind)
         with heads as (urls, truth):  # a frame's truth is logged before the frame is sent
-            out[kind] = report(kind, capture(urls, args.seconds), truth)
+            out[kind] = report(kind, capture(urls, args.seconds, args.fps), truth)
     return out

@@ -10,11 +10,8 @@ import numpy as np
 from tqdm import tqdm
 
 from stereocam.camera import Camera
-from stereocam.tools import demo_group
 from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.ground_truth import GROUND_TRUTH_KEEP
-from stereocam.camera import Camera
-from stereocam.tools import demo_group
 from stereocam.device_sim.links.inprocess import InProcessTransport
 
 from . import demo_group

@@ -1,7 +1,7 @@
 """``stereocam demo --heads N``: N simulated heads on one trigger line, streamed as matched sets.
 
-The first head drives the line at the frame rate (timed by its own crystal); every head is a
-separate unit with its own clock. Prints each head's clock-map error estimate, the spread of the
+The group makes the first head the trigger master (``trigger_output``: it drives the line at the
+frame rate, timed by its own crystal); every head is a separate unit with its own clock. Prints each head's clock-map error estimate, the spread of the
 capture times within the sets, the sets that lacked a head's frame (which head, which trigger),
 and saves the last complete set's images to ./out/.
 """
@@ -14,7 +14,6 @@ import numpy as np
 
 import stereocam
 from stereocam.device_sim import SimulatedCamera, TriggerLine
-from stereocam.device_sim.trigger import TriggerMaster
 
 from .capture import save_frame
 
@@ -24,10 +23,10 @@ SHOW_MISSING = 10  # incomplete sets printed one by one; the rest are counted
 def run(heads: int, seconds: float, fps: int, seed: int, out: Path) -> int:
     line = TriggerLine()
     sims = [SimulatedCamera(serial=f"HEAD{i + 1}", seed=seed + i, trigger_line=line) for i in range(heads)]
-    master = TriggerMaster(line, fps, sims[0].clock)
     try:
-        config = dict(width=320, height=240, num_disparities=32, block_size=11)  # N heads share this machine
-        with stereocam.CameraGroup([f"sim://?serial={s.serial}" for s in sims], config=config, timeout=30.0) as group:
+        config = dict(width=320, height=240, num_disparities=32, block_size=11, fps=fps)  # N heads share this machine
+        with stereocam.CameraGroup([f"sim://?serial={s.serial}" for s in sims], config=config, master=0,
+                                   timeout=30.0) as group:
             print(f"{heads} heads on one trigger line at {fps} fps, {sims[0].serial} drives it: "
                   + ", ".join(f"{s.serial} drift {s.clock.drift * 1e6:+.1f} ppm" for s in sims))
             sets, last = [], None
@@ -42,7 +41,6 @@ def run(heads: int, seconds: float, fps: int, seed: int, out: Path) -> int:
             errors = group.clock_errors()
             stats = group.stats
     finally:
-        master.close()
         for sim in sims:
             sim.close()
     for name, e in errors.items():

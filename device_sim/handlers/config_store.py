@@ -14,12 +14,15 @@ class ConfigStore:
 
     def __init__(self) -> None:
         self._values = defaults()
+        self._capabilities: int | None = None
         self._lock = threading.Lock()
 
-    def reset(self, values: dict[str, int]) -> None:
-        """Boot: every parameter back to ``values`` (the booted build's defaults)."""
+    def reset(self, values: dict[str, int], capabilities: int | None = None) -> None:
+        """Boot: every parameter back to ``values`` (the booted build's defaults); values that need
+        a capability (SPEC §5.1) are refused unless ``capabilities`` (the build's) has it."""
         with self._lock:
             self._values = {**defaults(), **values}
+            self._capabilities = capabilities
 
     def snapshot(self) -> dict[str, int]:
         with self._lock:
@@ -33,6 +36,6 @@ class ConfigStore:
         """Apply ``update`` (wire id → value) atomically; a Refusal leaves the store as it was."""
         with self._lock:
             try:
-                self._values = merge(self._values, update, streaming)
+                self._values = merge(self._values, update, streaming, self._capabilities)
             except ConfigRejected as exc:
                 raise Refusal.from_config(exc) from exc

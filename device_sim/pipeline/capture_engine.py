@@ -43,6 +43,7 @@ class CaptureEngine:
         self.dropped = 0
         self.captured = 0
         self._thread: threading.Thread | None = None  # started by the first start()
+        self.on_streaming: Callable[[bool], None] = lambda streaming: None  # told after every start/stop
 
     @property
     def streaming(self) -> bool:
@@ -60,6 +61,7 @@ class CaptureEngine:
             self._streaming = True
             self.epoch += 1
             self._cond.notify_all()
+        self.on_streaming(True)
 
     def set_rate(self, fps: int) -> None:
         with self._cond:
@@ -71,12 +73,14 @@ class CaptureEngine:
             self.epoch += 1
             self._queue.clear()
             self._cond.notify_all()
+        self.on_streaming(False)
 
     def close(self) -> None:
         with self._cond:
             self._closed = True
             self._streaming = False
             self._cond.notify_all()
+        self.on_streaming(False)
         if self._thread is not None and threading.current_thread() is not self._thread:
             self._thread.join(timeout=5)
 

@@ -6,7 +6,6 @@ host that stops reading cannot block the device, and the next host gets none of 
 """
 from __future__ import annotations
 
-import os
 import socket
 import threading
 import time

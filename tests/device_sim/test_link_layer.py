@@ -5,7 +5,6 @@ from __future__ import annotations
 import ast
 import collections
 import dataclasses
-from pathlib import Path
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode

@@ -12,14 +12,18 @@ import pytest
 
 import stereocam
 from stereocam.device_sim import SimulatedCamera, TriggerLine
+from stereocam.device_sim.boot.factory import DEV_SIGNING_KEY
 from stereocam.device_sim.process import ServedSimulator
 from stereocam.frame_sets import MatchedSet, sync_problems
+from stereocam.protocol import messages as m
+from stereocam.protocol.firmware_image import build_image
+from tests.support.firmware import build
 
 pytestmark = pytest.mark.sim_only("checks capture times against the simulator's truth")
 
 SEEDS = (4, 14, 25)  # drifts of -46, +50, +45 ppm
 SMALL = dict(width=160, height=120, outputs=int(stereocam.Output.LEFT))
-PERIOD = 0.06  # the test's own pulses: slow enough for a loaded machine to keep every one
+PERIOD = 0.06  # the test's own pulses (it drives the line: master=None): slow enough for a loaded machine
 TRUTH_TOL = 1e-3  # capture time vs true exposure instant (the bench measures the real figure)
 
 
@@ -59,7 +63,7 @@ def group_urls(sims) -> list[str]:
 def test_three_heads_in_process_stream_matched_sets(heads):
     line, sims = heads
     by_name = {sim.serial: sim for sim in sims}
-    with stereocam.CameraGroup(group_urls(sims), config=SMALL, settle=0.5) as group:
+    with stereocam.CameraGroup(group_urls(sims), config=SMALL, master=None, settle=0.5) as group:
         pulse(line, 12)
         sets = collect(group, 12)
         assert set(group.clock_errors()) == set(by_name)
@@ -71,9 +75,45 @@ def test_three_heads_in_process_stream_matched_sets(heads):
         assert len({f.device_time_us for f in s.frames.values()}) == 3
 
 
+def test_the_group_makes_the_chosen_head_the_master_and_puts_the_line_down_at_close(heads):
+    line, sims = heads
+    by_name = {sim.serial: sim for sim in sims}
+    with stereocam.CameraGroup(group_urls(sims), config={**SMALL, "fps": 15}, master=1, settle=0.2) as group:
+        sets = collect(group, 8)
+        configs = {name: cam.config() for name, cam in group.cameras.items()}
+        assert [sim.trigger_output.driving for sim in sims] == [False, True, False]
+    assert [c["trigger_output"] for c in configs.values()] == [0, 1, 0]
+    assert all(c["trigger_mode"] == stereocam.TriggerMode.EXTERNAL for c in configs.values())
+    assert all(s.complete for s in sets) and [s.trigger_id for s in sets] == list(range(1, 9))  # the first pulse
+    check_against_truth(sets, lambda name, seq: by_name[name].truth.exposure_instant(seq))  # found all streaming
+    gaps = [b.frames[sims[1].serial].device_time_us - a.frames[sims[1].serial].device_time_us
+            for a, b in zip(sets, sets[1:])]
+    assert all(abs(g - 1e6 / 15) < 500 for g in gaps)  # at the master's rate, on its crystal
+    pulses = line.pulses
+    time.sleep(0.3)
+    assert line.pulses == pulses and not any(sim.trigger_output.driving for sim in sims)  # closed: line quiet
+
+
+def test_a_master_that_cannot_drive_the_line_or_is_not_in_the_group_is_refused(heads):
+    _, sims = heads
+    for master in (3, -1, "0"):
+        with pytest.raises(stereocam.ConfigError, match="master"):
+            stereocam.CameraGroup(group_urls(sims), master=master)
+    b = build("1.3.0")
+    with stereocam.open(group_urls(sims)[2], timeout=2.0) as cam:
+        cam.update_firmware(build_image(dataclasses.replace(b, capabilities=b.capabilities & ~m.Capability.TRIGGER_OUTPUT),
+                                        DEV_SIGNING_KEY, target="STOC-SIM"))
+    with pytest.raises(stereocam.ConfigError, match="cannot drive the trigger line") as refused:
+        stereocam.CameraGroup(group_urls(sims), config=SMALL, master=2, settle=0.1).open()
+    assert sims[2].serial in str(refused.value)
+    assert not any(sim.engine.streaming or sim.trigger_output.driving for sim in sims)  # nothing left running
+    with stereocam.CameraGroup(group_urls(sims), config={**SMALL, "fps": 15}, master=0, settle=0.1) as group:
+        assert group.get_set(timeout=20).complete  # a head without the output follows a master that has one
+
+
 def test_a_missed_frame_is_reported_by_camera_and_trigger_id(heads):
     line, sims = heads
-    with stereocam.CameraGroup(group_urls(sims), config=SMALL, settle=0.2, deadline=0.5) as group:
+    with stereocam.CameraGroup(group_urls(sims), config=SMALL, master=None, settle=0.2, deadline=0.5) as group:
         pulse(line, 3)
         sims[1].trigger_input.miss_next = 1  # this head misses the next edge
         pulse(line, 4)
@@ -90,7 +130,7 @@ def test_a_missed_frame_is_reported_by_camera_and_trigger_id(heads):
 def test_a_head_one_frame_behind_fails_the_sync_check(heads):
     line, sims = heads
     sims[2].trigger_input.delay_frames = 1  # exposes each pulse's capture on the next pulse
-    with stereocam.CameraGroup(group_urls(sims), config=SMALL, settle=0.2) as group:
+    with stereocam.CameraGroup(group_urls(sims), config=SMALL, master=None, settle=0.2) as group:
         pulse(line, 6)
         sets = [s for s in collect(group, 4) if s.complete]
     problems = sync_problems(sets, max_skew=TRUTH_TOL)
@@ -102,7 +142,7 @@ def test_a_head_one_frame_behind_fails_the_sync_check(heads):
 def test_identical_timestamps_across_separate_heads_fail_the_sync_check(heads):
     """The false-positive sync: stamps that agree exactly did not come from the heads' own clocks."""
     line, sims = heads
-    with stereocam.CameraGroup(group_urls(sims), config=SMALL, settle=0.2) as group:
+    with stereocam.CameraGroup(group_urls(sims), config=SMALL, master=None, settle=0.2) as group:
         pulse(line, 3)
         sets = collect(group, 3)
     assert sync_problems(sets, max_skew=TRUTH_TOL) == []
@@ -122,10 +162,11 @@ def test_three_heads_served_over_tcp_on_a_shared_line(tmp_path: Path):
     logs = {f"SIM{s:05d}": tmp_path / f"{s}.truth" for s in SEEDS}
     servers = []
     try:
-        for i, s in enumerate(SEEDS):
+        for s in SEEDS:
             extra = ["--trigger-line", line, "--truth-log", str(logs[f"SIM{s:05d}"])]
-            servers.append(ServedSimulator("tcp:127.0.0.1:0", seed=s, extra=extra + (["--trigger-master", "15"] if i == 0 else [])))
-        with stereocam.CameraGroup([srv.url for srv in servers], config=SMALL, settle=0.5, timeout=5.0) as group:
+            servers.append(ServedSimulator("tcp:127.0.0.1:0", seed=s, extra=extra))
+        with stereocam.CameraGroup([srv.url for srv in servers], config={**SMALL, "fps": 15}, master=0, settle=0.5,
+                                   timeout=5.0) as group:  # the first head drives the line at 15 fps
             sets = collect(group, 30)
     finally:
         for srv in servers:

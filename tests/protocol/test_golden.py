@@ -27,7 +27,6 @@ import json
 import struct
 import sys
 import zlib
-from pathlib import Path
 
 import pytest
 

@@ -17,7 +17,7 @@ from typing import Callable
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import FLAG_RESEND, Decoder, Packet, encode_frame
-from stereocam.protocol.params import BY_ID, Param
+from stereocam.protocol.params import BY_ID, BY_NAME, Param
 
 Rewrite = Callable[[Packet], Packet]
 REQUEST_MAX = m.MAX_CALIB_CHUNK + 64  # the largest request a host sends
@@ -44,6 +44,19 @@ def clamp_into_range(p: Packet) -> Packet:
     fixed = {pid: _nearest_legal(BY_ID[pid], v) if pid in BY_ID and BY_ID[pid].check(v) else v
              for pid, v in values.items()}
     return Packet(p.msg_type, p.request_id, p.flags, m.SetConfig(fixed).pack())
+
+
+def dead_trigger_output(p: Packet) -> Packet:
+    """SET_CONFIG reaches the device with ``trigger_output`` forced to 0: a unit that advertises
+    the output and answers CONFIG_APPLIED but never drives its line."""
+    if p.msg_type != m.MsgType.SET_CONFIG:
+        return p
+    try:
+        values = m.SetConfig.unpack(p.payload).values
+    except struct.error:
+        return p
+    pid = BY_NAME["trigger_output"].pid
+    return Packet(p.msg_type, p.request_id, p.flags, m.SetConfig({**values, **({pid: 0} if pid in values else {})}).pack())
 
 
 def _nearest_legal(prm: Param, v: int) -> int:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.support.paths import DATA, REPO, SHARED_DATA
+from tests.support.paths import REPO, SHARED_DATA
 
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.tools.bench_calib_real import SETS as BENCH_SETS

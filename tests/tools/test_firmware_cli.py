@@ -11,7 +11,6 @@ from pathlib import Path
 
 import pytest
 
-import stereocam.device_sim.usb as simusb
 from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.handlers.device_info import FACTORY_BUILD
 from stereocam.device_sim.process import ServedSimulator

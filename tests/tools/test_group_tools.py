@@ -37,7 +37,12 @@ def test_bench_sync_through_the_command_tree_takes_its_seconds(capsys):
     assert "2 s per transport" in out and "inprocess" in out
 
 
-def test_trigger_master_needs_a_line():
-    r = subprocess.run([sys.executable, "-m", "stereocam.device_sim", "--serve", "tcp:127.0.0.1:0",
-                        "--trigger-master", "30"], capture_output=True, text=True, timeout=60)
-    assert r.returncode != 0 and "--trigger-line" in r.stderr
+@pytest.mark.parametrize("args, named", [
+    (["--trigger-line", "../etc"], "--trigger-line"),
+    (["--vendor-key", "/nonexistent/key.pem"], "No such file"),
+    (["--vendor-key", __file__], "not a PEM private key"),
+])
+def test_a_served_unit_refuses_bad_arguments_with_a_message_and_exit_2(args, named):
+    r = subprocess.run([sys.executable, "-m", "stereocam.device_sim", "--serve", "tcp:127.0.0.1:0", *args],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and named in r.stderr and "Traceback" not in r.stderr

@@ -186,17 +186,15 @@ def test_view_command_prints_its_address_first_and_restores_the_camera(tmp_path)
 
 @pytest.fixture
 def group_viewer():
-    """Three in-process heads on one trigger line driven by the first one's crystal, viewed as a group."""
+    """Three in-process heads on one trigger line driven by the first one (the group's master), viewed as a group."""
     from stereocam.device_sim import SimulatedCamera, TriggerLine
-    from stereocam.device_sim.trigger import TriggerMaster
     from stereocam.tools.viewer.group_session import GroupViewerSession
 
     line = TriggerLine()
     sims = [SimulatedCamera(serial=f"VIEW{i}", seed=30 + i, trigger_line=line) for i in range(3)]
     group = stereocam.CameraGroup([f"sim://?serial={s.serial}" for s in sims], settle=0.3, timeout=5.0,
-                                  config=dict(width=160, height=120, num_disparities=16, block_size=9))
+                                  config=dict(width=160, height=120, num_disparities=16, block_size=9, fps=10))
     group.open()
-    master = TriggerMaster(line, 10, sims[0].clock)
     server = ViewerServer(GroupViewerSession(group))
     thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.1}, daemon=True)
     thread.start()
@@ -204,7 +202,6 @@ def group_viewer():
     server.shutdown()
     server.server_close()
     server.session.close()
-    master.close()
     group.close()
     for s in sims:
         s.close()
@@ -256,12 +253,10 @@ def test_view_command_with_several_urls_shows_a_group_and_puts_each_head_back():
     from stereocam.device_sim.process import ServedSimulator
 
     line = f"view-{os.getpid()}"
-    servers = [ServedSimulator("tcp:127.0.0.1:0", seed=40 + i,
-                               extra=["--trigger-line", line] + (["--trigger-master", "10"] if i == 0 else []))
-               for i in range(2)]
+    servers = [ServedSimulator("tcp:127.0.0.1:0", seed=40 + i, extra=["--trigger-line", line]) for i in range(2)]
     try:
         proc = subprocess.Popen([sys.executable, "-m", "stereocam.tools.cli", "view", *(s.url for s in servers),
-                                 "--no-browser"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                 "--no-browser", "--master", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
             url = proc.stdout.readline().strip()
             assert url.startswith("http://127.0.0.1:"), proc.stderr.read()
@@ -272,7 +267,8 @@ def test_view_command_with_several_urls_shows_a_group_and_puts_each_head_back():
             assert proc.wait(timeout=30) == 0, proc.stderr.read()
         for srv in servers:
             with stereocam.open(srv.url, timeout=2.0) as cam:
-                assert cam.config()["trigger_mode"] == 0  # free run again, as found
+                config = cam.config()
+                assert config["trigger_mode"] == 0 and config["trigger_output"] == 0  # as found
     finally:
         for srv in servers:
             srv.stop()

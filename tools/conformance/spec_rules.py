@@ -4,7 +4,6 @@ configuration in which every parameter's limits are legal."""
 from __future__ import annotations
 
 from stereocam.protocol import config_rules
-from stereocam.protocol import messages as m
 from stereocam.protocol.config_rules import ConfigRejected, cross_check
 from stereocam.protocol.params import BY_NAME, Param, TriggerMode, defaults
 
@@ -35,8 +34,13 @@ def effective_hi(p: Param, max_width: int, max_height: int) -> int:
 
 def optional_values(capabilities: int) -> set[tuple[str, int]]:
     """Values within the table that a device may refuse OUT_OF_RANGE because it does not advertise
-    the capability behind them (SPEC §5.1: rectify=0 needs RAW_OUTPUT)."""
-    return set() if capabilities & m.Capability.RAW_OUTPUT else {("rectify", 0)}
+    the capability behind them (SPEC §5.1: rectify=0 needs RAW_OUTPUT, trigger_output=1 TRIGGER_OUTPUT)."""
+    return {value for value, needs in config_rules.CAPABILITY_VALUES.items() if not capabilities & needs}
+
+
+def capabilities_read(names: tuple[str, ...]) -> list[int]:
+    """The capabilities behind values of these parameters (a rule over them needs them to be probed)."""
+    return sorted({needs for (name, _), needs in config_rules.CAPABILITY_VALUES.items() if name in names})
 
 
 def limit_probes(p: Param, hi: int) -> tuple[list[int], list[tuple[int, str]]]:

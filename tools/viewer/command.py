@@ -32,31 +32,44 @@ def _interrupt(signum: int, frame: object) -> None:  # noqa: ARG001
 @click.option("--keep-config", is_flag=True, help="Leave the configuration changed in the viewer on the camera.")
 @click.option("--record-dir", type=click.Path(file_okay=False, writable=True, path_type=Path), default=".",
               show_default=True, help="Folder for the recordings started with the page's Record button.")
+@click.option("--master", default="0", show_default=True, metavar="INDEX|none",
+              help="With several URLs: which camera (0 = the first) drives the trigger line; 'none' when "
+                   "a generator or a unit outside the group drives it.")
 def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_config: bool,
-            record_dir: Path) -> int:
+            record_dir: Path, master: str) -> int:
     """Live viewer: left, right and disparity (colour bar in metres), depth and 3-D point under the
     cursor, frame rate, drops, link and device counters, the configuration with the device's ranges,
     trigger, start/stop, snapshots (PNG, PLY), recording to MCAP. With several URLs: a camera group on
-    one external trigger line (a head or a trigger generator drives it), shown as matched sets with
+    one external trigger line (the first camera drives it, see --master), shown as matched sets with
     the spread of their capture times, each head's clock-map error and the sets a head missed. The
     first line printed is the viewer's address. Runs until Ctrl-C; then each camera's configuration
     is put back as found unless --keep-config."""
     if len(urls) > 1:
-        return _view_group(list(urls), port, host, no_browser, keep_config)
+        return _view_group(list(urls), port, host, no_browser, keep_config, _master_index(master, len(urls)))
     with stereocam.open(urls[0], timeout=2.0) as cam, \
             (contextlib.nullcontext() if keep_config else preserved_configuration(cam)):
         _serve(ViewerSession(cam, record_dir), host, port, no_browser, cam.start)
     return 0
 
 
-def _view_group(urls: list[str], port: int, host: str, no_browser: bool, keep_config: bool) -> int:
+def _master_index(text: str, cameras: int) -> int | None:
+    if text.strip().lower() == "none":
+        return None
+    if not text.strip().isdigit() or int(text) >= cameras:
+        raise click.BadParameter(f"expected 0..{cameras - 1} (a camera's place among the URLs) or 'none', got {text!r}",
+                                 param_hint="'--master'")
+    return int(text)
+
+
+def _view_group(urls: list[str], port: int, host: str, no_browser: bool, keep_config: bool,
+                master: int | None) -> int:
     found = {}
     if not keep_config:
         for url in urls:
             with stereocam.open(url, timeout=2.0) as cam:
                 found[url] = cam.config()
     try:
-        with stereocam.CameraGroup(urls, timeout=5.0) as group:
+        with stereocam.CameraGroup(urls, master=master, timeout=5.0) as group:
             _serve(GroupViewerSession(group), host, port, no_browser, lambda: None)
     finally:
         for url, config in found.items():  # each head as found (the group put it on external trigger)

@@ -13,7 +13,7 @@ from typing import Callable
 
 import pytest
 
-from stereocam.device_sim.calibration.flash import NorFlash, PowerLossError
+from stereocam.device_sim.calibration.flash import PowerLossError
 from stereocam.protocol.firmware_image import verify_image
 from stereocam.device_sim.boot.factory import DEV_SIGNING_KEY
 from stereocam.protocol.update_messages import BootMode

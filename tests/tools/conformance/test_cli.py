@@ -21,8 +21,8 @@ from stereocam.protocol.framing import Packet
 from stereocam.protocol.params import BY_ID
 from stereocam.tools.conformance import cli
 from stereocam.tools.conformance.checks.config import UNUSED_PARAM_ID
-from tests.support.broken_devices import (RewritingProxy, clamp_into_range, forget_resend, stale_slot_report,
-                                          unchanged, without_capabilities)
+from tests.support.broken_devices import (RewritingProxy, clamp_into_range, dead_trigger_output, forget_resend,
+                                          stale_slot_report, unchanged, without_capabilities)
 
 # Checks the reference simulator fails today, and why. The suite is right about them; the
 # simulator is fixed elsewhere. Remove an entry when its fix lands: the tests then demand a PASS.
@@ -165,6 +165,16 @@ def test_fails_against_a_device_that_accepts_out_of_range_values(tcp_sim):
     assert all(name.startswith("config.") for name in failed), failed  # nothing else is affected
     fps_line = next(ln for ln in lines if ln.split()[1:2] == ["config.limits.fps"])
     assert "fps=0 (below the range) accepted, expected NACK OUT_OF_RANGE" in fps_line
+
+
+@BUILT_HERE
+def test_fails_against_a_device_whose_trigger_output_never_pulses(tcp_sim):
+    with RewritingProxy(tcp_sim.url, dead_trigger_output) as proxy:
+        rc, out = _run_cli([proxy.url, "--json", "-k", r"^trigger\."])
+    report = json.loads(out)
+    assert rc == 1 and _failures(report) == {"trigger.output"}, out
+    detail = next(c["detail"] for c in report["checks"] if c["name"] == "trigger.output")
+    assert "0 captures" in detail and "trigger master" in detail
 
 
 @BUILT_HERE

@@ -35,6 +35,19 @@ CASES: dict[str, list[Case]] = {
                                  ({"trigger_mode": TriggerMode.SOFTWARE}, {"exposure_us": 500_000}),
                                  ({"trigger_mode": TriggerMode.SOFTWARE, "exposure_us": 500_000},
                                   {"trigger_mode": TriggerMode.FREE_RUN})],
+    "trigger_output_needs_external": [({}, {"trigger_output": 1}),
+                                      ({"trigger_mode": TriggerMode.SOFTWARE}, {"trigger_output": 1}),
+                                      ({"trigger_mode": TriggerMode.EXTERNAL}, {"trigger_output": 1}),
+                                      ({"trigger_mode": TriggerMode.EXTERNAL, "trigger_output": 1},
+                                       {"trigger_mode": TriggerMode.FREE_RUN})],
+    "exposure_vs_output_period": [({"trigger_mode": TriggerMode.EXTERNAL, "exposure_us": 100_000},
+                                   {"trigger_output": 1}),
+                                  ({"trigger_mode": TriggerMode.EXTERNAL, "trigger_output": 1},
+                                   {"exposure_us": 70_000}),
+                                  ({"trigger_mode": TriggerMode.EXTERNAL, "trigger_output": 1, "exposure_us": 50_000},
+                                   {"fps": 30}),
+                                  ({"trigger_mode": TriggerMode.EXTERNAL, "trigger_output": 1},
+                                   {"exposure_us": 60_000})],
 }
 
 
@@ -47,6 +60,8 @@ def cross_rules(ctx: Context) -> Iterator[tuple[str, CheckFn]]:
 def _rule_check(rule: str) -> CheckFn:
     def run(ctx: Context) -> str:
         ctx.require_params(*spec_rules.CROSS_RULES[rule])
+        for capability in spec_rules.capabilities_read(spec_rules.CROSS_RULES[rule]):
+            ctx.require(capability)
         refused = accepted = 0
         for setup, probe in CASES[rule]:
             ctx.reset()

@@ -43,7 +43,7 @@ def capabilities(ctx: Context) -> str:
         expect(ctx.info.protocol_version >= (1, 1), "CALIBRATION advertised by a protocol 1.0 device")
     if "rectify" in ctx.params:
         expect(ctx.info.protocol_version >= (1, 1), "rectify (a 1.1 parameter) on a protocol 1.0 device")
-    for bit in (m.Capability.FRAME_REPAIR, m.Capability.FIRMWARE_UPDATE):
+    for bit in (m.Capability.FRAME_REPAIR, m.Capability.FIRMWARE_UPDATE, m.Capability.TRIGGER_OUTPUT):
         expect(not caps & bit or ctx.info.protocol_version >= (1, 2),
                f"{CAPABILITY_NAMES[bit]} (a 1.2 capability) advertised by a protocol "
                f"{ctx.info.protocol_version[0]}.{ctx.info.protocol_version[1]} device")
