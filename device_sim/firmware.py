@@ -8,6 +8,7 @@ the simulator's own controls (scene, ground truth), which never travel on the wi
 from __future__ import annotations
 
 import collections
+import logging
 import threading
 from functools import partial
 from pathlib import Path
@@ -40,6 +41,7 @@ from .handlers.streaming import StreamingHandlers
 from .handlers.update import UpdateHandlers
 from .link_layer.device_link import DeviceLink, HangUp, Sink
 from .link_layer.dispatcher import Dispatcher
+from .link_layer.refusal import Refusal
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
 from .pipeline.capture_pipeline import CapturePipeline
 from .replay import ReplayEngine, ReplaySource
@@ -48,6 +50,8 @@ from .rig.sensor import SensorRig
 from .scratch_flash import ScratchFlash
 from .trigger import Line, TriggerInput, TriggerLine, TriggerOutput
 from .watchdog import WatchdogThread
+
+_log = logging.getLogger(__name__)
 
 
 class SimulatedCamera:
@@ -129,7 +133,7 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         self.firmware_version = self._source.firmware_version if self._source else build.version
         self.config.reset(build.parameter_defaults, build.capabilities)
         if self._source:  # a replayed unit starts in the configuration it was recorded with
-            self.config.apply({BY_NAME[k].pid: v for k, v in self._source.config.items() if k in BY_NAME}, False)
+            self._apply_recorded_config(self._source.boot_config())
         self.update = UpdateService(slots, states, booted)
         identity = Identity(self.model, self.serial, self.firmware_version, build.protocol_minor, build.capabilities)
         groups: list[dict] = [InfoHandler(identity, self.calibration, lambda: self.usb_speed).handlers(),
@@ -248,6 +252,18 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
     def true_calibration(self) -> StereoCalibration:
         """This unit's true calibration (full sensor resolution), as the calibration tool writes it."""
         return self._truth_cal
+
+    def _apply_recorded_config(self, recorded: dict[str, int]) -> None:
+        """All of it at once; if the rules refuse the whole (a file from another firmware), each
+        parameter alone, keeping the boot default of any still refused."""
+        try:
+            self.config.apply({BY_NAME[k].pid: v for k, v in recorded.items()}, False)
+        except Refusal:
+            for name, value in recorded.items():
+                try:
+                    self.config.apply({BY_NAME[name].pid: value}, False)
+                except Refusal as exc:
+                    _log.warning("replay of %s: recorded %s=%d not applied: %s", self.serial, name, value, exc)
 
     def _drive_trigger_output(self, streaming: bool) -> None:
         """SPEC §5.1 ``trigger_output``: the unit pulses the line exactly while its stream runs."""

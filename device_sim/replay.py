@@ -5,7 +5,8 @@
 firmware around it is the same one that serves every simulator (INFO, configuration, calibration
 reads, streaming over every transport), so a host cannot tell a replay from the camera:
 
-* identity: the recorded model, serial and firmware version; the recorded configuration at boot;
+* identity: the recorded model, serial and firmware version; the recorded configuration at boot
+  (in free run whatever triggered the recorded unit: the recording paces the replay);
   the recorded calibration in flash (same body, so the same calibration id in every frame);
 * timing: ``realtime`` plays captures at their recorded device-time spacing, else as fast as the
   host reads (the link's back-pressure paces it); ``loop`` starts over at the end, else the stream
@@ -27,7 +28,7 @@ import numpy as np
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.errors import ConfigError
-from stereocam.protocol.params import Output, TriggerMode, defaults
+from stereocam.protocol.params import BY_NAME, Output, TriggerMode, defaults
 from stereocam.recording.reader import DamagedRecordingError, RecordedCapture, Recording
 
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
@@ -85,6 +86,13 @@ class ReplaySource:
         self._pending: RecordedCapture | None = None
         self._t0: tuple[float, int] | None = None  # (host monotonic, device µs) the pacing counts from
         self.sent = 0
+
+    def boot_config(self) -> dict[str, int]:
+        """The recorded configuration a replayed unit boots with, less how the recorded unit was
+        triggered: a replay is paced by its recording (free run, no trigger output); every frame
+        still carries its recorded trigger id."""
+        paced = {"trigger_mode": int(TriggerMode.FREE_RUN), "trigger_output": 0}
+        return {k: paced.get(k, v) for k, v in self.config.items() if k in BY_NAME}
 
     # -- the engine's side: what to capture next, and when -------------------------------------
     def restart(self) -> None:

@@ -52,6 +52,26 @@ def test_replay_url_is_the_recorded_unit(recording):
         assert frames[0].geometry.calibration_id == calibration.calibration_id and cam.geometry_mismatches == 0
 
 
+def test_a_recording_of_a_triggered_head_replays_at_its_recorded_pace_with_its_trigger_ids(tmp_path):
+    """A head recorded on an external trigger (here its own: the trigger master) replays in free
+    run: the recording paces it, each frame keeps the trigger id it was captured on."""
+    path = tmp_path / "head.mcap"
+    with stereocam.open("sim://?seed=8", timeout=3.0) as cam:
+        cam.configure(width=160, height=120, num_disparities=16, block_size=9, fps=20,
+                      trigger_mode=int(stereocam.TriggerMode.EXTERNAL), trigger_output=1)
+        cam.record(path, frames=5)
+    with Recording(path) as rec:
+        caps = list(rec.captures())
+        assert rec.config["trigger_mode"] == stereocam.TriggerMode.EXTERNAL
+    with stereocam.open(f"replay://{path}?speed=fast", timeout=3.0) as cam:
+        config = cam.config()
+        assert (config["trigger_mode"], config["trigger_output"], config["width"]) == (0, 0, 160)
+        cam.start()
+        frames = [cam.get_frame(timeout=10.0) for _ in range(5)]
+    _same(frames, caps)
+    assert [f.trigger_id for f in frames] == [c.info.trigger_id for c in caps] and frames[0].trigger_id > 0
+
+
 def test_start_index_and_loop(recording):
     path, caps, _ = recording
     with stereocam.open(f"replay://{path}?speed=fast&start={N - 2}&loop=1", timeout=3.0) as cam:
