@@ -1,7 +1,8 @@
 """One capture, start to finish, in two overlapping stages: the capture engine's thread exposes
 both sensors (``produce``) and hands the raw pair to the delivery thread, which rectifies with the
-calibration in force, matches and sends the capture as messages (protocol/segmentation.py) while
-the next exposure is rendered. Per-stage times (ms) accumulate in ``profile``."""
+calibration in force and sends the capture as messages (protocol/segmentation.py) while the next
+exposure is rendered, matching once the images are on the wire (the link carries them while the
+disparity is computed). Per-stage times (ms) accumulate in ``profile``."""
 from __future__ import annotations
 
 import collections
@@ -13,7 +14,7 @@ import numpy as np
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.params import Output
-from stereocam.protocol.segmentation import capture_messages, plane_bytes
+from stereocam.protocol.segmentation import PlaneSource, capture_messages
 
 from ..clock import DeviceClock
 from ..ground_truth import Exposure, TruthLog
@@ -140,22 +141,42 @@ class CapturePipeline:
             self._truth.remember(Exposure(req.sequence, req.time, t, view, self._rig.left_rays, np.eye(3), 0.0, 0.0))
             flags = 0
         t0 = self.profile.add("rectify", t0)
-        disp = self._stereo.disparity(cfg, left, right) if Output.DISPARITY in outputs else None
-        t0 = self.profile.add("match", t0)
         begin = m.FrameBegin(
             req.sequence & 0xFFFFFFFF, req.trigger_id & 0xFFFFFFFF, self._clock.at(req.time), cfg["exposure_us"],
             cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
             cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, calib_id, focal, cx, cy, baseline)
-        self._send_all(req, begin, {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: disp}, t0)
 
-    def _send_all(self, req: CaptureRequest, begin: m.FrameBegin, images: dict[Output, np.ndarray | None],
+        def match() -> np.ndarray:  # runs once the images are on their way: the link carries them meanwhile
+            return self._stereo.disparity(cfg, left, right)
+
+        self._send_all(req, begin, {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: match}, t0)
+
+    def _send_all(self, req: CaptureRequest, begin: m.FrameBegin, images: dict[Output, PlaneSource | None],
                   t0: float) -> None:
-        """Frame and send one capture (``t0``: when its send stage began, for the profile)."""
-        raw = plane_bytes(begin, images, copy=True)  # kept unchanged for FRAME_RESEND
-        self._repair.remember(req.sequence, {int(p): v for p, v in raw.items()})
-        for msg in capture_messages(begin, raw, self._repair.chunk):
+        """Frame and send one capture (``t0``: when its send stage began, for the profile); a plane
+        given as a function is computed when its turn comes."""
+        kept: dict[int, memoryview] = {}  # each plane's bytes, unchanged, for FRAME_RESEND
+        self._repair.remember(req.sequence, kept)
+        matching = 0.0
+
+        def computed(source: PlaneSource | None) -> PlaneSource | None:
+            if not callable(source):
+                return source
+
+            def run() -> np.ndarray:
+                nonlocal matching
+                t = time.perf_counter()
+                image = source()
+                matching += self.profile.add("match", t) - t
+                return image
+            return run
+
+        def keep(plane: Output, data: memoryview) -> None:
+            kept[int(plane)] = memoryview(bytes(data))
+
+        for msg in capture_messages(begin, {p: computed(v) for p, v in images.items()}, self._repair.chunk, keep):
             if not self._send(req, m.encode(msg)):
                 return  # the link went, or the stream was stopped: cut off at a message boundary
-        self.profile.add("send", t0)
+        self.profile.add("send", t0 + matching)
         self.profile.frames += 1
         self._counters["frames_sent"] += 1
