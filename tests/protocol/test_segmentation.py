@@ -58,6 +58,30 @@ def test_segmented_capture_reassembles_byte_for_byte(chunk: int, planes: Output)
             assert got is None
 
 
+def test_a_plane_given_as_a_function_is_computed_when_its_turn_comes() -> None:
+    """A device sends its images and matches meanwhile: the disparity function runs only after
+    FRAME_BEGIN and every left and right chunk were taken, and the bytes are those it returned."""
+    imgs = images(2)
+    taken: list[str] = []
+
+    def disparity() -> np.ndarray:
+        taken.append("computed")
+        return imgs[Output.DISPARITY]
+
+    seen: dict[Output, bytes] = {}
+    stream = capture_messages(begin(Output.LEFT | Output.RIGHT | Output.DISPARITY),
+                              {**imgs, Output.DISPARITY: disparity}, 1000, lambda p, d: seen.__setitem__(p, bytes(d)))
+    msgs = []
+    for x in stream:
+        msgs.append(x)
+        taken.append(type(x).__name__ if not isinstance(x, m.FrameData) else Output(x.plane).name)
+    first = taken.index("computed")
+    assert set(taken[:first]) == {"FrameBegin", "LEFT", "RIGHT"} and taken.count("computed") == 1
+    assert set(taken[first + 1:]) == {"DISPARITY", "FrameEnd"}
+    assert seen[Output.DISPARITY] == imgs[Output.DISPARITY].tobytes() and list(seen) == list(PLANE_ORDER)
+    assert msgs == list(capture_messages(begin(Output.LEFT | Output.RIGHT | Output.DISPARITY), imgs, 1000))
+
+
 def test_a_chunk_lost_on_the_way_is_missing_data() -> None:
     msgs = list(capture_messages(begin(Output.LEFT | Output.RIGHT), images(1), 1024))
     asm = assembler(deliver_incomplete=True)
