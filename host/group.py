@@ -20,6 +20,7 @@ map, so the spread of a set measures the sync; ``clock_errors`` says how far eac
 from __future__ import annotations
 
 import collections
+import numbers
 import threading
 import time
 from typing import Iterator, Mapping, Sequence
@@ -53,10 +54,11 @@ class CameraGroup:
             raise ConfigError("CameraGroup needs at least one camera URL")
         if per_camera is not None and len(per_camera) != len(urls):
             raise ConfigError(f"per_camera has {len(per_camera)} entries for {len(urls)} cameras")
-        if master is not None and not (isinstance(master, int) and 0 <= master < len(urls)):
+        if master is not None and (isinstance(master, bool) or not isinstance(master, numbers.Integral)
+                                   or not 0 <= master < len(urls)):
             raise ConfigError(f"master must be the index of one of the {len(urls)} cameras (0..{len(urls) - 1}) "
                               f"or None, got {master!r}")
-        self.master = master
+        self.master = None if master is None else int(master)
         self.urls = list(urls)
         self.timeout = timeout
         self._config = dict(config or {})

@@ -96,7 +96,7 @@ def test_the_group_makes_the_chosen_head_the_master_and_puts_the_line_down_at_cl
 
 def test_a_master_that_cannot_drive_the_line_or_is_not_in_the_group_is_refused(heads):
     _, sims = heads
-    for master in (3, -1, "0"):
+    for master in (3, -1, "0", True, 0.0):
         with pytest.raises(stereocam.ConfigError, match="master"):
             stereocam.CameraGroup(group_urls(sims), master=master)
     b = build("1.3.0")
