@@ -9,7 +9,7 @@ from importlib.metadata import version as _version
 
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.errors import (CallbackError, CameraTimeoutError, ConfigError, DeviceError,
-                                      DisconnectedError, ErrorCode, LinkFailedError, ProtocolError,
+                                      DisconnectedError, ErrorCode, LinkFailedError, MissingPlaneError, ProtocolError,
                                       StereoCamError, StreamStalledError, StreamStoppedError, TransportError,
                                       VerificationError, VersionMismatchError)
 from stereocam.protocol.params import Output, TriggerMode
@@ -32,5 +32,5 @@ __all__ = [
     "DisparityFormat", "StereoGeometry", "StereoCalibration", "StoredCalibration", "TriggerMode", "Output",
     "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError",
     "ErrorCode", "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError", "CameraTimeoutError",
-    "VerificationError", "StreamStalledError", "CallbackError",
+    "VerificationError", "StreamStalledError", "CallbackError", "MissingPlaneError",
 ]

@@ -4,20 +4,40 @@ from __future__ import annotations
 import math
 import numbers
 
+import numpy as np
+
 from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.params import BY_NAME
 
 INT32 = (-(1 << 31), (1 << 31) - 1)  # every configuration value is an int32 on the wire (SPEC §5)
 
 
-def timeout_arg(value: object, name: str = "timeout") -> float:
-    """``value`` as float seconds: a finite, non-negative real number (bool refused), else ConfigError."""
+LONGEST_WAIT = 1e9  # s (31 years): longer waits are cut to this (the OS's timed waits end near 2.9e11 s)
+
+
+def timeout_arg(value: object, name: str = "timeout", minimum: float = 0.0) -> float:
+    """``value`` as float seconds: a finite real number of at least ``minimum`` (bool refused), else
+    ConfigError; a wait longer than 31 years is cut to that."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ConfigError(f"{name} must be a number of seconds, got {value!r}")
     seconds = float(value)
-    if not math.isfinite(seconds) or seconds < 0:
-        raise ConfigError(f"{name} must be finite and non-negative, got {value!r}")
-    return seconds
+    if not math.isfinite(seconds) or seconds < minimum:
+        raise ConfigError(f"{name} must be finite and at least {minimum:g} s, got {value!r}")
+    return min(seconds, LONGEST_WAIT)
+
+
+def count_arg(value: object, name: str, minimum: int = 0) -> int:
+    """``value`` as an int of at least ``minimum`` (numpy integers too; bool and floats refused)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
+        raise ConfigError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def flag_arg(value: object, name: str) -> bool:
+    """``value`` as a bool: True or False (numpy's too), nothing else."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ConfigError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
 
 
 def int32_arg(value: object, name: str) -> int:

@@ -20,7 +20,7 @@ from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, Param, TriggerMode
 from stereocam.protocol.rectification import stereo_rectify
 
 from . import calibration_io, firmware_update, presets
-from .arguments import config_update, timeout_arg
+from .arguments import config_update, count_arg, flag_arg, timeout_arg
 from .device_types import DeviceInfo, DeviceStatus, config_names
 from .calibration_io import StoredCalibration
 from .callbacks import FrameCallback, FrameCallbacks
@@ -33,6 +33,8 @@ from .transports import Transport, open_transport, reopen_url
 SYNC_SAMPLES = 8
 SYNC_PERIOD = 1.0  # seconds between background time-sync bursts (the map needs them to follow drift)
 SYNC_BURST = 3  # round trips per burst: one of them usually finds the link free of frame data
+MIN_HEARTBEAT_INTERVAL = 0.01  # s: a faster heartbeat would only load the link
+OPEN_OPTIONS = frozenset({"retries", "heartbeat_interval", "queue_depth", "deliver_incomplete", "auto_reconnect"})
 _log = logging.getLogger(__name__)
 
 
@@ -45,12 +47,17 @@ class Camera:
         """``auto_reconnect``: when the link drops, ``get_frame`` (and iteration) call ``reconnect``
         within their own timeout instead of raising DisconnectedError at once."""
         self.url = transport.url
-        self.auto_reconnect = auto_reconnect
-        self.timeout = timeout_arg(timeout)
-        heartbeat_interval = timeout_arg(heartbeat_interval, "heartbeat_interval")
-        self._retries = retries
-        self.clock = ClockMap()
-        self.assembler = FrameAssembler(self.clock, queue_depth, deliver_incomplete)
+        try:
+            self.auto_reconnect = flag_arg(auto_reconnect, "auto_reconnect")
+            self.timeout = timeout_arg(timeout)
+            heartbeat_interval = timeout_arg(heartbeat_interval, "heartbeat_interval", MIN_HEARTBEAT_INTERVAL)
+            self._retries = count_arg(retries, "retries")
+            self.clock = ClockMap()
+            self.assembler = FrameAssembler(self.clock, count_arg(queue_depth, "queue_depth", 1),
+                                            flag_arg(deliver_incomplete, "deliver_incomplete"))
+        except ConfigError:
+            transport.close()
+            raise
         self._closed = threading.Event()
         self._last_sync = 0.0
         self._applied: dict[str, int] = {}  # every parameter this Camera set, for reconnect
@@ -103,6 +110,8 @@ class Camera:
         Camera set, and resume streaming if it was streaming. Retries with exponential backoff
         until ``timeout``; DisconnectedError if the unit does not come back in time."""
         timeout, backoff = timeout_arg(timeout), timeout_arg(backoff, "backoff")
+        if self._closed.is_set():
+            raise TransportError(f"{self.url}: camera closed; open it again with stereocam.open")
         serial = self._info.serial
         url = reopen_url(self.url, serial)
         deadline = time.monotonic() + timeout
@@ -144,7 +153,7 @@ class Camera:
 
     def sync_clock(self, samples: int = 1) -> None:
         """Take ``samples`` time-sync round trips into the device→host clock map."""
-        for _ in range(samples):
+        for _ in range(count_arg(samples, "samples", 1)):
             t0 = time.monotonic()
             r = self.request(m.TimeSync())
             t1 = time.monotonic()
@@ -211,7 +220,9 @@ class Camera:
     def update_firmware(self, image: bytes, progress: firmware_update.Progress | None = None,
                         replace: bool = False) -> firmware_update.UpdateResult:
         """Install a signed image; returns once the unit runs it and it is confirmed (host/firmware_update.py)."""
-        return firmware_update.update(self, image, progress=progress, replace=replace)
+        if not isinstance(image, (bytes, bytearray, memoryview)):
+            raise ConfigError(f"a firmware image is bytes (the signed file's contents), got {type(image).__name__}")
+        return firmware_update.update(self, bytes(image), progress=progress, replace=replace)
 
     def config(self) -> dict[str, int]:
         r = self.request(m.GetConfig())
@@ -236,11 +247,16 @@ class Camera:
         return merge(self.config(), config_update(params), self._streaming, self._info.capabilities)
 
     def set_trigger_mode(self, mode: TriggerMode | str) -> None:
+        """``mode``: a TriggerMode, its name ("free_run", "software", "external") or its number."""
         if isinstance(mode, str):
             try:
                 mode = TriggerMode[mode.upper().replace("-", "_")]
             except KeyError as exc:
                 raise ConfigError(f"unknown trigger mode {mode!r}; known: free_run, software, external") from exc
+        if isinstance(mode, int) and not isinstance(mode, (bool, TriggerMode)) and mode in set(TriggerMode):
+            mode = TriggerMode(mode)
+        if not isinstance(mode, TriggerMode):
+            raise ConfigError(f"trigger mode must be a TriggerMode, its name or its number, got {mode!r}")
         self.configure(trigger_mode=int(mode))
 
     def trigger(self) -> int:
@@ -320,6 +336,10 @@ class Camera:
         While any callback is registered frames go to the callbacks, not to ``get_frame``. A callback
         that raises is logged and counted (``callback_errors``); ``check_callbacks()`` re-raises it.
         Returns ``fn``, so it also works as a decorator."""
+        if not callable(fn):
+            raise ConfigError(f"a frame callback must be callable, got {fn!r}")
+        if self._closed.is_set():
+            raise TransportError(f"{self.url}: camera closed")
         if self._callbacks is None:
             self._callbacks = FrameCallbacks(self._next_frame)
         self._callbacks.add(fn)
@@ -438,6 +458,11 @@ def _fields(obj: LinkStats | AssemblyStats) -> dict[str, int]:
 
 
 def open(url: str, timeout: float = 1.0, **kwargs) -> Camera:  # noqa: A001 - mirrors serial_for_url
-    """Open the camera at ``url`` (sim://, usb://, socket://host:port, a device path, ...)."""
+    """Open the camera at ``url`` (sim://, usb://, socket://host:port, a device path, ...); the
+    keyword arguments are ``Camera``'s (retries, heartbeat_interval, queue_depth, ...)."""
     timeout = timeout_arg(timeout)
+    unknown = sorted(set(kwargs) - OPEN_OPTIONS)
+    if unknown:
+        raise ConfigError(f"unknown option{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
+                          f"known: timeout, {', '.join(sorted(OPEN_OPTIONS))}")
     return Camera(open_transport(url, timeout), timeout=timeout, **kwargs)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.errors import MissingPlaneError
 
 
 class FrameStatus(enum.Enum):
@@ -74,7 +75,7 @@ class Frame:
     def disparity_px(self) -> np.ndarray:
         """Disparity in pixels, float32, NaN where invalid."""
         if self.disparity is None:
-            raise ValueError("this frame carries no disparity (raw frame of an uncalibrated unit or "
+            raise MissingPlaneError("this frame carries no disparity (raw frame of an uncalibrated unit or "
                              "rectify=0, or the outputs config excludes it)")
         d = self.disparity.astype(np.float32) / self.disparity_format.subpixel
         d[self.disparity == self.disparity_format.invalid] = np.nan

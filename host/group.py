@@ -29,6 +29,7 @@ from stereocam.protocol import messages as m
 from stereocam.protocol.errors import CameraTimeoutError, ConfigError, StereoCamError
 from stereocam.protocol.params import TriggerMode
 
+from .arguments import timeout_arg
 from .camera import SYNC_BURST, Camera, open as open_camera
 from .clock import MapError
 from .frame_sets import MatchedSet, SetMatcher, SetStats
@@ -50,8 +51,13 @@ class CameraGroup:
         incomplete. ``timeout``: how long iteration waits for the next set. ``settle``: seconds
         of time-sync bursts before streaming, so every clock map knows its drift from the first
         set (without, the first seconds' sets are the loosest)."""
-        if not urls:
-            raise ConfigError("CameraGroup needs at least one camera URL")
+        if isinstance(urls, (str, bytes)) or not isinstance(urls, Sequence) or not urls:
+            raise ConfigError(f"CameraGroup needs a list of camera URLs, got {urls!r}")
+        if config is not None and not isinstance(config, Mapping):
+            raise ConfigError(f"config must be a mapping of parameter names to values, got {config!r}")
+        if per_camera is not None and (isinstance(per_camera, (str, bytes)) or not isinstance(per_camera, Sequence)
+                                       or any(c is not None and not isinstance(c, Mapping) for c in per_camera)):
+            raise ConfigError(f"per_camera must be a list of mappings (or None), one per camera, got {per_camera!r}")
         if per_camera is not None and len(per_camera) != len(urls):
             raise ConfigError(f"per_camera has {len(per_camera)} entries for {len(urls)} cameras")
         if master is not None and (isinstance(master, bool) or not isinstance(master, numbers.Integral)
@@ -60,11 +66,12 @@ class CameraGroup:
                               f"or None, got {master!r}")
         self.master = None if master is None else int(master)
         self.urls = list(urls)
-        self.timeout = timeout
+        self.timeout = timeout_arg(timeout)
         self._config = dict(config or {})
         self._per_camera = list(per_camera or [None] * len(urls))
-        self._deadline = deadline
-        self._settle = settle
+        self._deadline = timeout_arg(deadline, "deadline")
+        self._settle = timeout_arg(settle, "settle")
+        self._opened = False
         self._open_kwargs = open_kwargs
         self.cameras: dict[str, Camera] = {}
         self._cond = threading.Condition()
@@ -77,7 +84,12 @@ class CameraGroup:
 
     # -- lifetime -------------------------------------------------------------------------------
     def open(self) -> "CameraGroup":
-        """Open, configure and start every camera; closes what it opened if any step fails."""
+        """Open, configure and start every camera; closes what it opened if any step fails. Once:
+        a group that was opened (or closed) is not opened again (make a new one)."""
+        if self._opened or self._closed.is_set():
+            raise StereoCamError("this CameraGroup was already opened; a closed group is not reopened: "
+                                 "make a new CameraGroup")
+        self._opened = True
         try:
             for i, (url, extra) in enumerate(zip(self.urls, self._per_camera)):
                 cam = open_camera(url, self.timeout, **self._open_kwargs)
@@ -150,7 +162,7 @@ class CameraGroup:
         """The next set, in trigger-id order: complete, or with ``missing`` naming the cameras
         whose frame for that trigger did not come within the deadline. CameraTimeoutError if
         none within ``timeout``; the error of a camera whose link died."""
-        timeout = self.timeout if timeout is None else timeout
+        timeout = self.timeout if timeout is None else timeout_arg(timeout)
         deadline = time.monotonic() + timeout
         with self._cond:
             while True:

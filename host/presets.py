@@ -13,14 +13,17 @@ PRESET_FORMAT = "stereocam-preset/1"
 def write_preset(path: str | os.PathLike, config: dict[str, int], model: str = "") -> None:
     """``{"format": ..., "model": ..., "config": {name: value}}``, indented, one file."""
     doc = {"format": PRESET_FORMAT, "model": model, "config": config}
-    Path(path).write_text(json.dumps(doc, indent=2) + "\n")
+    try:
+        Path(path).write_text(json.dumps(doc, indent=2) + "\n")
+    except (OSError, TypeError) as exc:
+        raise ConfigError(f"cannot write preset {path!r}: {exc}") from exc
 
 
 def read_preset(path: str | os.PathLike) -> dict[str, int]:
     """The configuration a preset file holds; ConfigError if it is unreadable or not a preset."""
     try:
         doc = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, TypeError) as exc:
         raise ConfigError(f"cannot read preset {path}: {exc}") from exc
     if not isinstance(doc, dict) or doc.get("format") != PRESET_FORMAT or not isinstance(doc.get("config"), dict):
         raise ConfigError(f"{path} is not a stereocam preset (expected format {PRESET_FORMAT!r})")

@@ -79,5 +79,10 @@ class StreamStalledError(CameraTimeoutError):
     """Streaming, but no frame came within the deadline (iteration raises this instead of ending)."""
 
 
+class MissingPlaneError(StereoCamError, ValueError):
+    """A frame lacks the plane an operation needs (depth without a disparity plane: outputs
+    excluded it, or the frame is raw); also a ValueError."""
+
+
 class CallbackError(StereoCamError):
     """A frame callback raised; the callback's own exception is the ``__cause__``."""

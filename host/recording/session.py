@@ -8,8 +8,11 @@ from typing import TYPE_CHECKING, Callable
 
 from stereocam.protocol.errors import CameraTimeoutError, ConfigError
 
+from ..arguments import count_arg, timeout_arg
 from .convert import LinkCounters
 from .recorder import Recorder, RecorderStats, UnitDescription
+
+RECORDER_OPTIONS = frozenset({"queue_bytes", "level", "threads", "chunk_bytes"})  # what record() passes on
 
 if TYPE_CHECKING:
     from stereocam.camera import Camera
@@ -56,6 +59,15 @@ def record(camera: "Camera", path: str | Path, *, frames: int | None = None, sec
     stream stops); starts streaming if it was not, and stops it again then."""
     if frames is None and seconds is None:
         raise ConfigError("record needs a limit: frames or seconds")
+    frames = None if frames is None else count_arg(frames, "frames", 1)
+    seconds = None if seconds is None else timeout_arg(seconds, "seconds")
+    if seconds == 0:
+        raise ConfigError("seconds must be more than 0")
+    if not isinstance(path, (str, Path)):
+        raise ConfigError(f"record needs a file path, got {path!r}")
+    unknown = sorted(set(recorder_options) - RECORDER_OPTIONS)
+    if unknown:
+        raise ConfigError(f"unknown recorder option {', '.join(unknown)}; known: {', '.join(sorted(RECORDER_OPTIONS))}")
     started_here = not camera._streaming
     recorder = Recorder(path, describe(camera), **recorder_options)
     t0 = time.monotonic()

@@ -106,3 +106,85 @@ def test_write_calibration_needs_a_calibration(cam, calibration):
 def test_write_calibration_target_is_checked(cam):
     with pytest.raises(stereocam.ConfigError, match="target"):
         cam.write_calibration(cam.read_calibration().calibration, target="bogus")
+
+
+@pytest.mark.parametrize("option, value", [
+    ("heartbeat_interval", 0), ("heartbeat_interval", -1), ("queue_depth", 0), ("queue_depth", "x"),
+    ("queue_depth", 1.5), ("retries", -1), ("retries", "x"), ("deliver_incomplete", "yes"),
+    ("auto_reconnect", "no"), ("bogus", 1),
+])
+def test_open_options_are_checked_before_anything_runs(option, value):
+    with pytest.raises(stereocam.ConfigError, match=option):
+        stereocam.open("sim://?seed=5", **{option: value})
+
+
+def test_a_wait_longer_than_the_os_allows_is_cut_not_an_overflow():
+    with stereocam.open("sim://?seed=6", timeout=1e10) as camera:
+        assert camera.timeout == pytest.approx(1e9) and camera.info().serial == "SIM00006"
+
+
+def test_a_closed_camera_stays_closed(tmp_path):
+    camera = stereocam.open("sim://?seed=7")
+    camera.close()
+    with pytest.raises(stereocam.TransportError, match="closed"):
+        camera.reconnect(timeout=1)
+    with pytest.raises(stereocam.TransportError, match="closed"):
+        camera.on_frame(print)
+    with stereocam.open("sim://?seed=7") as again:  # the unit itself was let go
+        assert again.info().serial == "SIM00007"
+
+
+@pytest.mark.parametrize("call, args", [
+    ("on_frame", (None,)), ("on_frame", (5,)), ("set_trigger_mode", (None,)), ("set_trigger_mode", (True,)),
+    ("set_trigger_mode", (1.0,)), ("update_firmware", (None,)), ("update_firmware", ("x" * 200,)),
+    ("sync_clock", (0,)), ("sync_clock", ("x",)),
+])
+def test_wrong_kinds_of_argument_are_config_errors_and_change_nothing(cam, call, args):
+    before = cam.config()
+    with pytest.raises(stereocam.ConfigError):
+        getattr(cam, call)(*args)
+    assert cam.config() == before
+
+
+@pytest.mark.parametrize("limits", [dict(frames=0), dict(frames=-1), dict(frames="x"), dict(seconds=math.nan),
+                                    dict(seconds=-1), dict(seconds=0), dict(frames=1, bogus=1)])
+def test_record_limits_are_checked_before_a_file_is_made(cam, tmp_path, limits):
+    with pytest.raises(stereocam.ConfigError):
+        cam.record(tmp_path / "r.mcap", **limits)
+    with pytest.raises(stereocam.ConfigError, match="path"):
+        cam.record(None, frames=1)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_save_preset_where_it_cannot_be_written_is_a_config_error(cam, tmp_path):
+    for where in (tmp_path, tmp_path / "missing" / "p.json"):
+        with pytest.raises(stereocam.ConfigError, match="cannot write preset"):
+            cam.save_preset(where)
+
+
+@pytest.mark.parametrize("points, grey, named", [
+    (np.zeros((5, 2)), None, "points"), ("abc", None, "points"), (None, None, "points"),
+    (np.zeros((5, 3)), np.zeros(4), "grey"), (np.zeros((2, 3)), [300.0, -1.0], "grey"),
+])
+def test_write_ply_names_the_bad_argument(tmp_path, points, grey, named):
+    with pytest.raises(stereocam.ConfigError, match=named):
+        stereocam.write_ply(tmp_path / "x.ply", points, grey)
+    assert not (tmp_path / "x.ply").exists()
+
+
+def test_write_ply_to_a_place_that_cannot_be_written(tmp_path):
+    for where in (tmp_path, tmp_path / "missing" / "x.ply", None):
+        with pytest.raises(stereocam.ConfigError):
+            stereocam.write_ply(where, np.zeros((2, 3)))
+    assert stereocam.write_ply(tmp_path / "ok.ply", np.zeros((2, 3)), [0, 255]) == 2
+
+
+def test_depth_of_a_frame_without_disparity_is_a_typed_error():
+    with stereocam.open("sim://?seed=8") as camera:
+        camera.configure(width=160, height=120, outputs=int(stereocam.Output.LEFT))
+        camera.start()
+        frame = camera.get_frame(timeout=20)
+    for method in (frame.depth, frame.points, frame.disparity_px):
+        with pytest.raises(stereocam.MissingPlaneError, match="no disparity"):
+            method()
+    assert issubclass(stereocam.MissingPlaneError, ValueError)
