@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import logging
-import math
 import os
 import queue
 import threading
@@ -17,7 +16,6 @@ from stereocam.protocol.framing import VERSION_MAJOR
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.config_rules import merge
 from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, Param, TriggerMode
-from stereocam.protocol.rectification import stereo_rectify
 
 from . import calibration_io, firmware_update, presets
 from .arguments import config_update, count_arg, flag_arg, timeout_arg
@@ -26,7 +24,8 @@ from .calibration_io import StoredCalibration
 from .callbacks import FrameCallback, FrameCallbacks
 from .clock import ArrivalStamp, ClockMap, SyncSample
 from .frame_repair import RepairWorker
-from .frames import AssemblyStats, Frame, FrameAssembler, StereoGeometry
+from .frame_geometry import FrameGeometry
+from .frames import AssemblyStats, Frame, FrameAssembler
 from .link import Link, LinkStats
 from .transports import Transport, open_transport, reopen_url
 
@@ -61,8 +60,7 @@ class Camera:
         self._closed = threading.Event()
         self._last_sync = 0.0
         self._applied: dict[str, int] = {}  # every parameter this Camera set, for reconnect
-        self._geometries: dict[tuple[int, int, int], tuple[StereoCalibration, StereoGeometry]] = {}
-        self.geometry_mismatches = 0  # frames whose carried geometry disagreed with the stored calibration
+        self._geometry = FrameGeometry(self.read_calibration)
         self._streaming = False  # what the user asked for
         self._stream_lock = threading.Lock()  # orders user start/stop against a watchdog restart
         self._stream_epoch = 0  # bumped by every user start/stop: an older STATUS is not acted on
@@ -360,28 +358,16 @@ class Camera:
             self._callbacks.check()
 
     def _with_stored_calibration(self, frame: Frame) -> Frame:
-        """Give a rectified frame the geometry derived on this host from the calibration read
-        from the device (cached per calibration id and size), cross-checked against the geometry
-        the device put in the frame; a device without calibration storage keeps its own."""
-        cid = frame.geometry.calibration_id
-        if not frame.rectified or not cid or not self._info.capabilities & m.Capability.CALIBRATION:
+        """A device with calibration storage: the frame's geometry as this host derives it from the
+        stored calibration (frame_geometry.py); otherwise the device's own."""
+        if not self._info.capabilities & m.Capability.CALIBRATION:
             return frame
-        key = (cid, frame.width, frame.height)
-        if key not in self._geometries:
-            stored = self.read_calibration()
-            if stored is None or stored.calibration_id != cid:  # changed since this frame was taken
-                return frame
-            cal = stored.calibration.scaled(frame.width, frame.height)
-            g = stereo_rectify(cal)
-            self._geometries[key] = (cal, StereoGeometry(g.focal_px, g.cx, g.cy, g.baseline_m, cid))
-        cal, geometry = self._geometries[key]
-        carried = frame.geometry
-        if not (math.isclose(carried.focal_px, geometry.focal_px, rel_tol=1e-5)
-                and math.isclose(carried.baseline_m, geometry.baseline_m, rel_tol=1e-5)
-                and abs(carried.cx - geometry.cx) < 1e-3 and abs(carried.cy - geometry.cy) < 1e-3):
-            self.geometry_mismatches += 1
-        frame.geometry, frame.calibration = geometry, cal
-        return frame
+        return self._geometry.apply(frame)
+
+    @property
+    def geometry_mismatches(self) -> int:
+        """Frames whose carried geometry disagreed with the one derived from the stored calibration."""
+        return self._geometry.mismatches
 
     def record(self, path: str, *, frames: int | None = None, seconds: float | None = None, **options):
         """Record to an MCAP file (ROS 2 profile) until ``frames`` or ``seconds``; see stereocam.recording."""
