@@ -6,8 +6,9 @@ pulses the line at its ``fps`` while streaming, SPEC §5.1; the others' output o
 the master last so that its first pulse finds every head streaming. ``master=None`` when something
 outside the group drives the line (a signal generator, a unit not in the group). Every pulse
 carries the line's pulse number, which each head puts in its frames' ``trigger_id``; that is what
-the group matches on. Each frame's ``host_time`` is its own camera's device timestamp through that camera's clock
-map, so the spread of a set measures the sync; ``clock_errors`` says how far each map is trusted.
+the group matches on. Each frame's ``host_time`` is its own camera's device timestamp through that
+camera's clock map, so the spread of a set measures the sync; ``clock_errors`` says how far each
+map is trusted.
 
     with stereocam.CameraGroup(["socket://10.0.0.2:5000", "socket://10.0.0.3:5000"],
                                config={"fps": 30}, deadline=0.5) as group:
@@ -47,10 +48,11 @@ class CameraGroup:
         """``config``: parameters for every camera; ``per_camera``: more for each (same order as
         ``urls``). ``master``: index (in ``urls``) of the camera that drives the trigger line at its
         ``fps``; it must advertise TRIGGER_OUTPUT. None: the line is driven from outside the group
-        (every camera's output is then switched off where it has one). ``deadline``: seconds after a set's first frame before it is given up as
-        incomplete. ``timeout``: how long iteration waits for the next set. ``settle``: seconds
-        of time-sync bursts before streaming, so every clock map knows its drift from the first
-        set (without, the first seconds' sets are the loosest)."""
+        (every camera's output is then switched off where it has one). ``deadline``: seconds after
+        a set's first frame before it is given up as incomplete. ``timeout``: how long iteration
+        waits for the next set. ``settle``: seconds of time-sync bursts before streaming, so every
+        clock map knows its drift from the first set (without, the first seconds' sets are the
+        loosest)."""
         if isinstance(urls, (str, bytes)) or not isinstance(urls, Sequence) or not urls:
             raise ConfigError(f"CameraGroup needs a list of camera URLs, got {urls!r}")
         if config is not None and not isinstance(config, Mapping):
