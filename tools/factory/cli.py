@@ -14,6 +14,7 @@ import csv
 import json
 import sys
 from collections import defaultdict
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -101,8 +102,15 @@ def main(argv: list[str] | None = None) -> int:
     rep.add_argument("--csv", type=Path, default=None, help="also write every attempt to this CSV file")
     rep.add_argument("--json", action="store_true", help="print one JSON object: yield and metrics per day and station")
     args = ap.parse_args(argv)
+    if args.since is not None:
+        try:
+            datetime.fromisoformat(args.since)
+        except ValueError:
+            print(f"stereocam factory: error: --since {args.since!r} is not an ISO date or time (e.g. 2026-11-01)",
+                  file=sys.stderr)
+            return 2
     try:
-        with FactoryDB(args.db) as db:
+        with FactoryDB(args.db, create=False) as db:
             attempts = db.attempts(args.since)
     except FactoryDBError as exc:
         print(f"stereocam factory: error: {exc}", file=sys.stderr)

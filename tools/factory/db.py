@@ -1,6 +1,7 @@
 """The factory database: one row per calibration attempt, SQLite or PostgreSQL, versioned schema.
 
-URL: a file path or ``sqlite:///PATH`` → SQLite (the file is created); ``postgresql://...`` →
+URL: a file path or ``sqlite:///PATH`` → SQLite (created by a station, never by a report);
+``postgresql://...`` →
 PostgreSQL through psycopg (a line of stations shares one record). The default is
 $STEREOCAM_FACTORY_DB, else ~/.local/share/stereocam/factory.sqlite.
 
@@ -83,17 +84,30 @@ def default_url() -> str:
 class FactoryDB:
     """An open factory database (use as a context manager)."""
 
-    def __init__(self, url: str | None = None) -> None:
+    def __init__(self, url: str | None = None, create: bool = True) -> None:
+        """``create``: a station recording attempts makes the database (file, folder, tables) where
+        it is missing; a reader (report, export) does not: a mistyped path is an error, and a file
+        that is not a factory database is left as it was."""
         self.url = url or default_url()
+        scheme = self.url.split("://", 1)[0] if "://" in self.url else ""
+        if scheme not in ("", "sqlite", "postgresql", "postgres"):
+            raise FactoryDBError(f"factory database {self.url}: unknown scheme {scheme!r} "
+                                 "(a file path, sqlite:///PATH or postgresql://...)")
         try:
-            if self.url.startswith(("postgresql://", "postgres://")):
+            if scheme.startswith("postgres"):
                 import psycopg
 
                 self.dialect, self._conn = "postgresql", psycopg.connect(self.url)
             else:
                 path = Path(self.url.removeprefix("sqlite:///").removeprefix("sqlite://"))
-                path.parent.mkdir(parents=True, exist_ok=True)
+                if create:
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                elif not path.is_file():
+                    raise FactoryDBError(f"no factory database at {path} (a report never creates one)")
                 self.dialect, self._conn = "sqlite", sqlite3.connect(path)
+            if not create and self.version() == 0:
+                self._conn.close()
+                raise FactoryDBError(f"{self.url} is not a factory database (no schema_version table); left as it was")
             self._migrate()
         except FactoryDBError:
             raise

@@ -120,3 +120,25 @@ def test_newer_schema_and_unusable_db_are_refused_before_anything(tmp_path: Path
     (tmp_path / "file").write_text("x")
     assert _run(str(tmp_path / "db.sqlite"), tmp_path / "file" / "sub") == calibrate.EXIT_USAGE
     assert "cannot write into directory" in capsys.readouterr().err
+
+
+def test_a_report_never_creates_or_changes_a_database(tmp_path: Path, capsys) -> None:
+    """A mistyped --db is an error, not an empty record; another program's SQLite file is left as
+    it was; an unknown scheme or a --since that is not a date is refused."""
+    missing = tmp_path / "nodir" / "f.sqlite"
+    other = tmp_path / "other.sqlite"
+    con = sqlite3.connect(other)
+    con.execute("CREATE TABLE notes (t TEXT)")
+    con.commit()
+    con.close()
+    before = other.read_bytes()
+    for db, named in ((str(missing), "no factory database"), (f"sqlite:///{missing}", "no factory database"),
+                      (str(other), "not a factory database"), ("mysql://x/y", "unknown scheme")):
+        assert factory_cli.main(["report", "--db", db]) == 2
+        assert named in capsys.readouterr().err
+    assert not missing.parent.exists() and other.read_bytes() == before and not (tmp_path / "mysql:").exists()
+    with FactoryDB(str(tmp_path / "real.sqlite")):
+        pass
+    assert factory_cli.main(["report", "--db", str(tmp_path / "real.sqlite"), "--since", "garbage"]) == 2
+    assert "not an ISO date" in capsys.readouterr().err
+    assert factory_cli.main(["report", "--db", str(tmp_path / "real.sqlite"), "--since", "2026-11-01"]) == 0
