@@ -44,9 +44,9 @@ def writable_dir(path: Path, keep: bool = True) -> Path:
     return path
 
 
-def output_dir(path: Path) -> Path:
-    """``writable_dir`` before any camera is touched, as a usage error (exit 2) if it fails."""
+def output_dir(path: Path, option: str = "--out") -> Path:
+    """``writable_dir`` before any camera is touched, as a usage error (exit 2) naming ``option``."""
     try:
         return writable_dir(path)
     except OSError as exc:
-        raise click.BadParameter(exc.strerror or str(exc), param_hint="'--out'") from exc
+        raise click.BadParameter(exc.strerror or str(exc), param_hint=f"'{option}'") from exc

@@ -164,6 +164,14 @@ def test_viewer_page_in_a_headless_browser(viewer, tmp_path):
         browser.close()
 
 
+def test_a_record_dir_that_cannot_be_written_stops_the_viewer_at_once():
+    """Checked by a write when the viewer starts, not when Record is pressed minutes later."""
+    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "view", "sim://?seed=9", "--no-browser",
+                        "--record-dir", "/proc/stereocam-nope"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "--record-dir" in r.stderr and "cannot write into directory" in r.stderr
+    assert "Traceback" not in r.stderr and not r.stdout
+
+
 def test_view_command_prints_its_address_first_and_restores_the_camera(tmp_path):
     from stereocam.device_sim.process import ServedSimulator
 

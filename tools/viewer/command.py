@@ -11,7 +11,7 @@ from typing import Callable
 import click
 
 import stereocam
-from stereocam.tools.session import preserved_configuration
+from stereocam.tools.session import output_dir, preserved_configuration
 
 from .group_session import GroupViewerSession
 from .server import ViewerServer
@@ -46,6 +46,7 @@ def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_
     is put back as found unless --keep-config."""
     if len(urls) > 1:
         return _view_group(list(urls), port, host, no_browser, keep_config, _master_index(master, len(urls)))
+    output_dir(record_dir, "--record-dir")  # made and written into now, not when Record is pressed
     with stereocam.open(urls[0], timeout=2.0) as cam, \
             (contextlib.nullcontext() if keep_config else preserved_configuration(cam)):
         _serve(ViewerSession(cam, record_dir), host, port, no_browser, cam.start)
