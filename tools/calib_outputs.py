@@ -27,7 +27,8 @@ def _bar(value: float, width: int = 10) -> str:
 def progress_line(p: Progress) -> str:
     """One pair: its fate, the kept/held-out counts and the coverage bars."""
     bars = " ".join(f"{name} [{_bar(c)}]" for name, c in zip(PARAM_NAMES, p.coverage))
-    return f"{p.view.label:<24} {p.view.status:<9} kept {p.kept:>2} held-out {p.held_out:>2}  {bars}"
+    line = f"{p.view.label:<24} {p.view.status:<9} kept {p.kept:>2} held-out {p.held_out:>2}  {bars}"
+    return line + (f"  ({p.view.reason})" if p.view.status == "dropped" and p.view.reason else "")
 
 
 class PairProgress:

@@ -59,6 +59,10 @@ class BoardNotFoundError(CalibrationError):
     """No pair showed the board in both images."""
 
 
+class UnusableImagesError(CalibrationError, ValueError):
+    """No pair of the set could be used at all: every image unreadable, or no two of one size."""
+
+
 class TooFewViewsError(CalibrationError):
     """Not enough distinct views (or held-out views) to solve and measure."""
 
@@ -198,6 +202,9 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board
             progress(Progress(view, len(found) - held, held, selector.coverage()))
         if select and len(found) - held >= config.max_views and held >= config.min_holdout:
             break
+    if views and all(v.status == "dropped" for v in views):
+        reasons = "; ".join(f"{v.label}: {v.reason}" for v in views[:3]) + ("; ..." if len(views) > 3 else "")
+        raise UnusableImagesError(f"none of the {len(views)} pairs could be used ({reasons})")
     if both == 0:
         raise BoardNotFoundError(
             f"the {describe(board)} board was not found in both images of any of the "

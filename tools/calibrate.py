@@ -61,7 +61,8 @@ from stereocam.tools.factory.record import make_attempt, now_utc
 from stereocam.tools.calib_files import find_pairs
 from stereocam.tools.calib_fit import OutlierRules
 from stereocam.tools.calib_lens import ALIASES
-from stereocam.tools.calib_solve import CalibrationError, CalibrationResult, SolveConfig, calibrate_pairs
+from stereocam.tools.calib_solve import (CalibrationError, CalibrationResult, SolveConfig, UnusableImagesError,
+                                        calibrate_pairs)
 
 EXIT_OK, EXIT_USAGE, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_SAVE = 0, 2, 3, 4, 6
 
@@ -212,6 +213,9 @@ def _offline(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, start
         labels = [f"{l.name}|{r.name}" for _, l, r in pairs]
         with PairProgress(len(pairs), args.quiet) as progress:
             result = calibrate_pairs(_load(pairs), args.board, config, labels, progress, select=False)
+    except UnusableImagesError as exc:  # unreadable images: exit 2, as the help says
+        _record(db, args, serial, started, None, EXIT_USAGE, str(exc), None)
+        return _fail(EXIT_USAGE, f"{exc} (nothing written)")
     except CalibrationError as exc:
         _record(db, args, serial, started, None, EXIT_NO_SOLUTION, str(exc), None)
         return _fail(EXIT_NO_SOLUTION, f"{exc} (nothing written)")

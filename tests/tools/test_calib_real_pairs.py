@@ -73,6 +73,20 @@ def test_the_same_images_give_the_same_solution_bit_for_bit():
                for f in fits[1:])
 
 
+def test_a_set_with_no_readable_pair_is_a_usage_error_naming_the_files(tmp_path):
+    """Files that are not images at all: exit 2 (the help's "unreadable images"), each pair named
+    with its reason, not "the board was not found"."""
+    for i in range(3):
+        for side in ("left", "right"):
+            (tmp_path / f"{side}{i}.png").write_text("hi")
+    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "--images", str(tmp_path), "--board",
+                        "9x6", "--square-size", "0.025", "--out", str(tmp_path / "out"), "--db",
+                        str(tmp_path / "f.sqlite")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "none of the 3 pairs could be used" in r.stderr, r.stderr
+    assert "left0.png|right0.png: cannot read the left image" in r.stderr and "board was not found" not in r.stderr
+    assert "(cannot read the left image)" in r.stdout  # the pair's line says why it was dropped
+
+
 def test_an_unreadable_file_or_an_odd_size_drops_its_pair_not_the_set(tmp_path):
     """A corrupt JPEG and a pair resized by mistake, among good pairs: both dropped, named and said
     why; the rest calibrates and passes."""
