@@ -13,6 +13,7 @@ the device, as a full USB or TCP buffer would).
 from __future__ import annotations
 
 import threading
+import weakref
 from urllib.parse import parse_qs, urlsplit
 
 from stereocam.protocol.errors import ConfigError, DisconnectedError, TransportError
@@ -66,6 +67,7 @@ class InProcessTransport(Transport):
         self.sim = sim
         self.url = url
         self._owns = owns
+        self._went_down = False
         self._fifo = ByteFifo()
         self._closed = False
         self._unsubscribe = sim.on_power(self._on_power)
@@ -78,6 +80,7 @@ class InProcessTransport(Transport):
     def _on_power(self, event: str) -> None:
         """The unit went down (reboot, power cut): this link is gone; the host reconnects by serial."""
         if event == "down":
+            self._went_down = True
             self._unsubscribe()
             self._fifo.close()
 
@@ -101,11 +104,14 @@ class InProcessTransport(Transport):
         self._unsubscribe()
         if not dropped:
             self.sim.detach()
-        if self._owns and not (dropped and self.sim.attached):
+        if self._owns and self._went_down:  # rebooting (an update, a power cycle): the unit lives on, and
+            _handed_over.add(self.sim)      # the next link to it (the host reconnecting) takes it over
+        elif self._owns and not (dropped and self.sim.attached):
             self.sim.close()
 
 
 SEED_MAX = (1 << 32) - 1
+_handed_over: "weakref.WeakSet[object]" = weakref.WeakSet()  # units whose owning link closed while they rebooted
 
 
 def open_transport(url: str, timeout: float) -> InProcessTransport:
@@ -127,7 +133,9 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
     if live is not None:  # the unit with that serial is alive here: open it, never a second one
         if scene is not None:
             live.scene = scene
-        return InProcessTransport(live, url, owns=False)
+        owns = live in _handed_over  # a unit a closed link owned when it rebooted: this link owns it now
+        _handed_over.discard(live)
+        return InProcessTransport(live, url, owns=owns)
     if serial is not None and "seed" not in query:
         held = [s.serial for s in registry.live_simulators()]
         state = "held by another link" if serial in held else "not found"
