@@ -32,31 +32,29 @@ def forget_resend(p: Packet) -> Packet:
     return Packet(p.msg_type, p.request_id, p.flags & ~FLAG_RESEND, p.payload)
 
 
-def clamp_into_range(p: Packet) -> Packet:
-    """Move every out-of-range SET_CONFIG value onto the nearest legal one: the device appears to
-    accept values outside the table."""
+def _rewrite_config(p: Packet, change: Callable[[dict[int, int]], dict[int, int]]) -> Packet:
+    """A SET_CONFIG with its values passed through ``change``; every other packet as it was."""
     if p.msg_type != m.MsgType.SET_CONFIG:
         return p
     try:
         values = m.SetConfig.unpack(p.payload).values
-    except struct.error:
+    except struct.error:  # the malformed lists the suite sends on purpose
         return p
-    fixed = {pid: _nearest_legal(BY_ID[pid], v) if pid in BY_ID and BY_ID[pid].check(v) else v
-             for pid, v in values.items()}
-    return Packet(p.msg_type, p.request_id, p.flags, m.SetConfig(fixed).pack())
+    return Packet(p.msg_type, p.request_id, p.flags, m.SetConfig(change(values)).pack())
+
+
+def clamp_into_range(p: Packet) -> Packet:
+    """Move every out-of-range SET_CONFIG value onto the nearest legal one: the device appears to
+    accept values outside the table."""
+    return _rewrite_config(p, lambda values: {
+        pid: _nearest_legal(BY_ID[pid], v) if pid in BY_ID and BY_ID[pid].check(v) else v for pid, v in values.items()})
 
 
 def dead_trigger_output(p: Packet) -> Packet:
     """SET_CONFIG reaches the device with ``trigger_output`` forced to 0: a unit that advertises
     the output and answers CONFIG_APPLIED but never drives its line."""
-    if p.msg_type != m.MsgType.SET_CONFIG:
-        return p
-    try:
-        values = m.SetConfig.unpack(p.payload).values
-    except struct.error:
-        return p
     pid = BY_NAME["trigger_output"].pid
-    return Packet(p.msg_type, p.request_id, p.flags, m.SetConfig({**values, **({pid: 0} if pid in values else {})}).pack())
+    return _rewrite_config(p, lambda values: {**values, **({pid: 0} if pid in values else {})})
 
 
 def _nearest_legal(prm: Param, v: int) -> int:
