@@ -25,6 +25,8 @@ from __future__ import annotations
 import enum
 import hashlib
 import json
+import math
+import re
 import struct
 from dataclasses import dataclass, field
 
@@ -33,6 +35,7 @@ from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
 from .errors import StereoCamError
+from .params import BY_NAME
 
 MAGIC = b"SCFW"
 HEADER_VERSION = 1
@@ -41,6 +44,12 @@ SIGNATURE_LEN = 64
 _HEADER = struct.Struct("<4sHHIIBBH16sB3x8s32s")
 HEADER_LEN = _HEADER.size
 _BUILD_LEN = struct.Struct("<I")
+TARGET_LEN = 16  # bytes of the header's load target field
+U32_MAX = 2**32 - 1  # the header's security counter and INFO.capabilities are u32
+U8_MAX = 255  # INFO carries the protocol minor version as one byte
+INT32_MIN, INT32_MAX = -2**31, 2**31 - 1  # every parameter is an int32 on the wire
+VERSION_MAX_BYTES = 255  # INFO and SLOT_INFO carry the version as a u8-length UTF-8 string
+_VERSION = re.compile(r"([0-9]+)\.([0-9]+)\.([0-9]+)(\+.*)?", re.DOTALL)
 
 
 class ImageFault(enum.IntEnum):
@@ -80,22 +89,69 @@ class FirmwareBuild:
 
     @classmethod
     def from_json(cls, data: bytes) -> "FirmwareBuild":
+        """The build a JSON object describes; ImageError (MALFORMED, naming the field) for anything a
+        unit could not report or apply: a non-integer or out-of-range number, a bad version string."""
         try:
             d = json.loads(data)
-            build = cls(str(d["version"]), int(d["protocol_minor"]), int(d["capabilities"]),
-                        {str(k): int(v) for k, v in d.get("parameter_defaults", {}).items()})
-        except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        except (ValueError, TypeError) as exc:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
             raise ImageError(ImageFault.MALFORMED, f"not a firmware build: {exc}") from exc
-        parse_version(build.version)
+        if not isinstance(d, dict):
+            raise ImageError(ImageFault.MALFORMED, f"not a firmware build: a JSON object is needed, not "
+                                                   f"{type(d).__name__}")
+        missing = [k for k in ("version", "protocol_minor", "capabilities") if k not in d]
+        if missing:
+            raise ImageError(ImageFault.MALFORMED, f"not a firmware build: missing {', '.join(missing)}")
+        defaults = d.get("parameter_defaults", {})
+        if not isinstance(defaults, dict):
+            raise ImageError(ImageFault.MALFORMED, "parameter_defaults must be a JSON object of name: integer")
+        build = cls(d["version"], d["protocol_minor"], d["capabilities"], dict(defaults))
+        build.check()
         return build
+
+    def check(self) -> None:
+        """ImageError (MALFORMED, naming the field) unless every field fits what a unit reports and applies."""
+        if not isinstance(self.version, str):
+            raise ImageError(ImageFault.MALFORMED, f"version must be a string, not {_shown(self.version)}")
+        parse_version(self.version)
+        _check_int("protocol_minor", self.protocol_minor, 0, U8_MAX)
+        _check_int("capabilities", self.capabilities, 0, U32_MAX)
+        for name, value in self.parameter_defaults.items():
+            what = f"parameter default {name!r}"
+            _check_int(what, value, INT32_MIN, INT32_MAX)
+            if name in BY_NAME and (why := BY_NAME[name].check(value)) is not None:
+                raise ImageError(ImageFault.MALFORMED, f"{what}: {why}")
+
+
+def _shown(value: object) -> str:
+    """A value for an error message, cut short (a hostile build may hold anything)."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _check_int(field_name: str, value: object, lo: int, hi: int) -> None:
+    """ImageError (MALFORMED) unless ``value`` is an integer (not a bool, not a float) in lo..hi."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        kind = "not a finite number" if isinstance(value, float) and not math.isfinite(value) else \
+            type(value).__name__
+        raise ImageError(ImageFault.MALFORMED, f"{field_name} must be an integer in {lo}..{hi}, got "
+                                               f"{_shown(value)} ({kind})")
+    if not lo <= value <= hi:
+        raise ImageError(ImageFault.MALFORMED, f"{field_name} must be in {lo}..{hi}, got {_shown(value)}")
 
 
 def parse_version(text: str) -> tuple[int, int, int]:
-    """"1.2.3" → (1, 2, 3); ImageError for anything else."""
+    """"1.2.3" (or "1.2.3+BUILD") → (1, 2, 3); ImageError (MALFORMED) for anything else."""
+    match = _VERSION.fullmatch(text) if isinstance(text, str) else None
+    if match is None:
+        raise ImageError(ImageFault.MALFORMED, f"version {_shown(text)} is not MAJOR.MINOR.PATCH")
     try:
-        major, minor, patch = (int(p) for p in text.split("+")[0].split("."))
-    except ValueError as exc:
-        raise ImageError(ImageFault.MALFORMED, f"version {text!r} is not MAJOR.MINOR.PATCH") from exc
+        encoded = text.encode("utf-8")
+    except UnicodeEncodeError as exc:  # a lone surrogate from a JSON "\udxxx" escape
+        raise ImageError(ImageFault.MALFORMED, f"version {_shown(text)} is not valid UTF-8 text") from exc
+    if len(encoded) > VERSION_MAX_BYTES:
+        raise ImageError(ImageFault.MALFORMED, f"version {_shown(text)} is longer than {VERSION_MAX_BYTES} bytes "
+                                               "(what INFO carries)")
+    major, minor, patch = (int(g) for g in match.groups()[:3])
     if not (0 <= major < 256 and 0 <= minor < 256 and 0 <= patch < 65536):
         raise ImageError(ImageFault.MALFORMED, f"version {text!r} out of range")
     return major, minor, patch
@@ -129,14 +185,27 @@ class FirmwareImage:
 def build_image(build: FirmwareBuild, key: Ed25519PrivateKey | None, *, target: str,
                 security_counter: int | None = None, code: bytes = b"") -> bytes:
     """The image bytes; ``key`` None gives an unsigned image (for tests of the refusal)."""
+    counter = auto_security_counter(build.version) if security_counter is None else security_counter
+    _check_int("security counter", counter, 0, U32_MAX)
+    check_target(target)
     body = build.to_json()
     payload = _BUILD_LEN.pack(len(body)) + body + code
-    counter = auto_security_counter(build.version) if security_counter is None else security_counter
     kid = key_id(key.public_key()) if key is not None else bytes(8)
     header = _HEADER.pack(MAGIC, HEADER_VERSION, HEADER_LEN, len(payload), counter, *parse_version(build.version),
-                          target.encode()[:16], HASH_SHA256, kid, hashlib.sha256(payload).digest())
+                          target.encode("ascii"), HASH_SHA256, kid, hashlib.sha256(payload).digest())
     signed = header + payload
     return signed + key.sign(signed) if key is not None else signed
+
+
+def check_target(target: str) -> None:
+    """ImageError (MALFORMED) unless ``target`` fits the header's load target field whole: 1 to
+    TARGET_LEN printable ASCII characters (a unit compares it with its model, byte for byte)."""
+    if not isinstance(target, str) or not target or not all(" " <= c <= "~" for c in target):
+        raise ImageError(ImageFault.MALFORMED, f"target {_shown(target)} must be 1 to {TARGET_LEN} printable "
+                                               "ASCII characters (the image header's target field)")
+    if len(target) > TARGET_LEN:
+        raise ImageError(ImageFault.MALFORMED, f"target {_shown(target)} is {len(target)} characters; the image "
+                                               f"header's target field holds at most {TARGET_LEN}")
 
 
 def parse_header(data: bytes) -> tuple[int, int, tuple[int, int, int], str, bytes, bytes]:

@@ -1,16 +1,22 @@
 """``stereocam firmware keygen|sign|update|status``: signed firmware images and field updates.
 
-    stereocam firmware keygen --out KEY                  (KEY: Ed25519 private key, KEY.pub: its public half)
+    stereocam firmware keygen --out KEY [--force]        (KEY: Ed25519 private key, KEY.pub: its public half;
+                                                          an existing KEY or KEY.pub is kept unless --force)
     stereocam firmware sign --key KEY --version V --out IMAGE BUILD.json [--security-counter N] [--code BIN]
+                            [--target MODEL]
     stereocam firmware update URL IMAGE [--replace]      (progress bar; success only once the unit runs it)
     stereocam firmware status URL                        (both slots: version, state, hash, confirmed)
 """
 from __future__ import annotations
 
-from stereocam.tools.exit_codes import EXIT_CODES
+from stereocam.tools.exit_codes import EXIT_CODES, EXIT_USAGE
 
 import argparse
+import dataclasses
 import json
+import os
+import sys
+import tempfile
 from pathlib import Path
 
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
@@ -20,19 +26,76 @@ from rich.table import Table
 
 import stereocam
 from stereocam.protocol.errors import ConfigError
-from stereocam.protocol.firmware_image import (FirmwareBuild, build_image, inspect_image, load_private_key,
-                                               private_key_pem, public_key_pem)
+from stereocam.protocol.firmware_image import (TARGET_LEN, U32_MAX, FirmwareBuild, ImageError, build_image,
+                                               check_target, inspect_image, load_private_key, private_key_pem,
+                                               public_key_pem)
 from stereocam.protocol.params import BY_NAME
 
 DEFAULT_TARGET = "STOC-SIM"
 
 
+def _fail(command: str, message: str) -> int:
+    """Say what is wrong with the input on stderr; the usage exit code."""
+    print(f"stereocam firmware {command}: error: {message}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def _write_new(path: Path, data: bytes, mode: int) -> None:
+    """Create ``path`` with ``mode`` from the start (O_EXCL: FileExistsError if it exists) and write ``data``;
+    a partly written file is removed."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+    except BaseException:
+        path.unlink(missing_ok=True)
+        raise
+
+
+def _replace(path: Path, data: bytes, mode: int) -> None:
+    """Write ``data`` to a new file (``mode`` from the start) beside ``path``, then rename it over ``path``:
+    the old file stays whole until the new one is."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        os.fchmod(fd, mode)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 def keygen(args: argparse.Namespace) -> int:
-    key = Ed25519PrivateKey.generate()
-    args.out.write_bytes(private_key_pem(key))
-    args.out.chmod(0o600)
+    """A new Ed25519 key pair: KEY (0600 from creation) and KEY.pub; an existing KEY or KEY.pub is never
+    overwritten unless --force (then each is replaced whole, atomically)."""
     pub = args.out.with_name(args.out.name + ".pub")
-    pub.write_bytes(public_key_pem(key.public_key()))
+    if not args.force:
+        existing = [str(p) for p in (args.out, pub) if os.path.lexists(p)]
+        if existing:
+            return _fail("keygen", f"{' and '.join(existing)} already exist{'s' if len(existing) == 1 else ''}; "
+                                   "refusing to overwrite a signing key (it cannot be recovered). Choose another "
+                                   "--out, or pass --force to replace it")
+    key = Ed25519PrivateKey.generate()
+    try:
+        if args.force:
+            _replace(args.out, private_key_pem(key), 0o600)
+            _replace(pub, public_key_pem(key.public_key()), 0o644)
+        else:
+            _write_new(args.out, private_key_pem(key), 0o600)
+            try:
+                _write_new(pub, public_key_pem(key.public_key()), 0o644)
+            except BaseException:
+                args.out.unlink(missing_ok=True)  # ours, just made: no key without its public half
+                raise
+    except FileExistsError as exc:
+        return _fail("keygen", f"{exc.filename} already exists (created meanwhile); nothing was written")
+    except OSError as exc:
+        return _fail("keygen", f"cannot write {exc.filename or args.out}: {exc.strerror or exc}")
     print(f"wrote {args.out} (private, keep it secret) and {pub}")
     return 0
 
@@ -44,17 +107,41 @@ def _read(path: Path, what: str) -> bytes:
         raise ConfigError(f"cannot read the {what} {path}: {exc}") from exc
 
 
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and os.path.samefile(a, b))
+    except OSError:
+        return False
+
+
 def sign(args: argparse.Namespace) -> int:
-    key = load_private_key(_read(args.key, "key"))
-    build = FirmwareBuild.from_json(_read(args.build, "build"))
-    build = FirmwareBuild(args.version, build.protocol_minor, build.capabilities, build.parameter_defaults)
-    for name, value in build.parameter_defaults.items():
-        if name not in BY_NAME or BY_NAME[name].check(value) is not None:
-            raise ConfigError(f"parameter default {name}={value}: "
-                              f"{BY_NAME[name].check(value) if name in BY_NAME else 'no such parameter'}")
-    code = _read(args.code, "code") if args.code else b""
-    image = build_image(build, key, target=args.target, security_counter=args.security_counter, code=code)
-    args.out.write_bytes(image)
+    """A signed image of BUILD.json; a bad build, key, version, counter or target: a message and exit 2."""
+    if args.security_counter is not None and not 0 <= args.security_counter <= U32_MAX:
+        return _fail("sign", f"--security-counter {args.security_counter} is outside 0..{U32_MAX} "
+                             "(the image header holds it as an unsigned 32-bit number)")
+    try:
+        check_target(args.target)
+    except ImageError as exc:
+        return _fail("sign", f"--target: {exc}")
+    inputs = {"--key": args.key, "BUILD": args.build, **({"--code": args.code} if args.code else {})}
+    for flag, path in inputs.items():
+        if _same_file(args.out, path):
+            return _fail("sign", f"--out {args.out} is the {flag} file; refusing to overwrite it")
+    try:
+        key = load_private_key(_read(args.key, "key"))
+        build = dataclasses.replace(FirmwareBuild.from_json(_read(args.build, "build")), version=args.version)
+        build.check()  # --version, as the build's own version was
+        for name in build.parameter_defaults:
+            if name not in BY_NAME:
+                raise ConfigError(f"parameter default {name!r}: no such parameter")
+        code = _read(args.code, "code") if args.code else b""
+        image = build_image(build, key, target=args.target, security_counter=args.security_counter, code=code)
+    except (ImageError, ConfigError) as exc:
+        return _fail("sign", str(exc))
+    try:
+        _replace(args.out, image, 0o644)
+    except OSError as exc:
+        return _fail("sign", f"cannot write {args.out}: {exc.strerror or exc}")
     print(f"wrote {args.out}: {len(image)} bytes, version {build.version}, target {args.target}")
     return 0
 
@@ -105,6 +192,8 @@ def main(argv: list[str] | None = None) -> int:
     sub = ap.add_subparsers(dest="command", required=True)
     p = sub.add_parser("keygen", help="make an Ed25519 signing key pair")
     p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing KEY and KEY.pub (the old private key is lost for good)")
     p.set_defaults(run=keygen)
     p = sub.add_parser("sign", help="build a signed image from a firmware build (JSON)")
     p.add_argument("--key", type=Path, required=True)
@@ -112,7 +201,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--security-counter", type=int, default=None,
                    help="default: the version as a number; a rollback image sets one >= the unit's")
-    p.add_argument("--target", default=DEFAULT_TARGET, help="model the image is for")
+    p.add_argument("--target", default=DEFAULT_TARGET,
+                   help=f"model the image is for (printable ASCII, at most {TARGET_LEN} characters)")
     p.add_argument("--code", type=Path, default=None, help="the firmware's code (opaque bytes)")
     p.add_argument("build", type=Path)
     p.set_defaults(run=sign)

@@ -117,3 +117,122 @@ def test_a_host_killed_mid_transfer_then_a_resumed_update(signed):
         resumed = int(r.stdout.split("resumed at byte ")[1].split()[0].rstrip("("))
         assert size // 3 <= resumed < size
         assert "1.1.0 -> 1.2.0 in slot B, confirmed" in r.stdout
+
+
+def test_keygen_never_overwrites_a_signing_key_unless_forced(tmp_path: Path, capsys) -> None:
+    key = tmp_path / "vendor.pem"
+    assert cli.main(["firmware", "keygen", "--out", str(key)]) == 0
+    original, original_pub = key.read_bytes(), (tmp_path / "vendor.pem.pub").read_bytes()
+    capsys.readouterr()
+    assert cli.main(["firmware", "keygen", "--out", str(key)]) == 2
+    err = capsys.readouterr().err
+    assert "already exist" in err and "--force" in err and "Traceback" not in err
+    assert key.read_bytes() == original and (tmp_path / "vendor.pem.pub").read_bytes() == original_pub
+    (tmp_path / "lone.pem.pub").write_bytes(original_pub)  # a public half alone is kept too
+    assert cli.main(["firmware", "keygen", "--out", str(tmp_path / "lone.pem")]) == 2
+    assert not (tmp_path / "lone.pem").exists() and (tmp_path / "lone.pem.pub").read_bytes() == original_pub
+    assert cli.main(["firmware", "keygen", "--out", str(key), "--force"]) == 0
+    assert key.read_bytes() != original and key.stat().st_mode & 0o777 == 0o600
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lone.pem.pub", "vendor.pem", "vendor.pem.pub"]
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_keygen_creates_the_private_key_0600_from_the_start(tmp_path: Path, monkeypatch, force: bool) -> None:
+    """With a permissive umask and no later chmod, the key is still never readable by others."""
+    key = tmp_path / "vendor.pem"
+    if force:
+        key.write_bytes(b"old key")
+        key.chmod(0o644)
+    monkeypatch.setattr(Path, "chmod", lambda self, mode, **kw: None)
+    monkeypatch.setattr(os, "chmod", lambda *a, **kw: None)
+    old_umask = os.umask(0)
+    try:
+        assert cli.main(["firmware", "keygen", "--out", str(key), *(["--force"] if force else [])]) == 0
+    finally:
+        os.umask(old_umask)
+    assert key.stat().st_mode & 0o777 == 0o600 and key.read_bytes().startswith(b"-----BEGIN PRIVATE KEY")
+
+
+def _sign(tmp_path: Path, build: dict | str, *extra: str) -> tuple[int, Path]:
+    key = tmp_path / "vendor.pem"
+    if not key.exists():
+        assert cli.main(["firmware", "keygen", "--out", str(key)]) == 0
+    path = tmp_path / "build.json"
+    path.write_text(json.dumps(build) if isinstance(build, dict) else build)
+    out = tmp_path / "out.img"
+    out.unlink(missing_ok=True)
+    return cli.main(["firmware", "sign", "--key", str(key), "--version", "1.2.0", "--out", str(out), *extra,
+                     str(path)]), out
+
+
+FACTORY = json.loads(FACTORY_BUILD.to_json())
+
+
+@pytest.mark.parametrize("build, words", [
+    ({**FACTORY, "protocol_minor": 99999999999}, "protocol_minor"),
+    ({**FACTORY, "capabilities": -5}, "capabilities"),
+    ({**FACTORY, "capabilities": 2**32}, "capabilities"),
+    ({**FACTORY, "parameter_defaults": {"fps": 1000}}, "fps"),
+    ({**FACTORY, "parameter_defaults": {"fps": 2**40}}, "fps"),
+    ({**FACTORY, "parameter_defaults": {"no_such": 1}}, "no such parameter"),
+    (json.dumps(FACTORY).replace(f'"capabilities": {FACTORY["capabilities"]}', '"capabilities": 1e400'),
+     "capabilities"),
+    (json.dumps({**FACTORY, "parameter_defaults": {"fps": 0}}).replace('"fps": 0', '"fps": 1e400'), "fps"),
+    ("{not json", "not a firmware build")])
+def test_sign_refuses_a_build_a_unit_could_not_run(tmp_path: Path, capsys, build, words: str) -> None:
+    rc, out = _sign(tmp_path, build)
+    err = capsys.readouterr().err
+    assert rc == 2 and words in err and "Traceback" not in err
+    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+@pytest.mark.parametrize("extra, words", [
+    (("--security-counter", "-1"), "0..4294967295"), (("--security-counter", "99999999999999"), "0..4294967295"),
+    (("--target", "ABCDEFGHIJKLMNOPQ"), "at most 16"), (("--target", "ABCDEFGHIJKLMNOé"), "16 printable ASCII"),
+    (("--version", "1.2"), "MAJOR.MINOR.PATCH")])
+def test_sign_refuses_header_fields_the_image_cannot_hold(tmp_path: Path, capsys, extra, words: str) -> None:
+    rc, out = _sign(tmp_path, FACTORY, *extra)
+    err = capsys.readouterr().err
+    assert rc == 2 and words in err and "Traceback" not in err and not out.exists()
+
+
+def test_sign_accepts_header_fields_at_their_limits(tmp_path: Path, capsys) -> None:
+    from stereocam.protocol.firmware_image import inspect_image
+
+    rc, out = _sign(tmp_path, FACTORY, "--security-counter", str(2**32 - 1), "--target", "ABCDEFGHIJKLMNOP")
+    assert rc == 0, capsys.readouterr().err
+    img = inspect_image(out.read_bytes())
+    assert (img.security_counter, img.target, img.build.version) == (2**32 - 1, "ABCDEFGHIJKLMNOP", "1.2.0")
+
+
+def test_sign_never_writes_over_its_own_key(tmp_path: Path, capsys) -> None:
+    key = tmp_path / "vendor.pem"
+    assert cli.main(["firmware", "keygen", "--out", str(key)]) == 0
+    original = key.read_bytes()
+    (tmp_path / "build.json").write_text(json.dumps(FACTORY))
+    rc = cli.main(["firmware", "sign", "--key", str(key), "--version", "1.2.0", "--out", str(key),
+                   str(tmp_path / "build.json")])
+    assert rc == 2 and "--key" in capsys.readouterr().err and key.read_bytes() == original
+
+
+def test_a_unit_refuses_an_out_of_range_build_and_keeps_answering(tmp_path: Path) -> None:
+    """An image from a signer that did not check: the unit refuses it, and GET_INFO still works."""
+    import dataclasses
+
+    import stereocam
+    from stereocam import firmware_update as fw
+    from stereocam.device_sim.boot.factory import DEV_SIGNING_KEY
+    from stereocam.protocol.firmware_image import ImageFault, build_image
+
+    bad = build_image(dataclasses.replace(FACTORY_BUILD, version="1.2.0", protocol_minor=99999999999),
+                      DEV_SIGNING_KEY, target="STOC-SIM")
+    sim = SimulatedCamera(serial="FW-BAD-BUILD", seed=7)
+    cam = stereocam.open("sim://?serial=FW-BAD-BUILD", timeout=2.0)
+    try:
+        with pytest.raises(fw.ImageRefusedError) as refused:
+            fw.transfer(cam.request, bad)
+        assert refused.value.fault == ImageFault.MALFORMED and "protocol_minor" in str(refused.value)
+        assert cam.info().firmware_version == "1.1.0"
+    finally:
+        cam.close()
+        sim.close()
