@@ -36,6 +36,7 @@ from .pipeline.stereo import params_from_config
 
 _log = logging.getLogger(__name__)
 
+IDENTITY = ("model", "serial", "firmware_version")  # what a replayed unit needs of the recorded INFO
 Matcher = Callable[[dict, np.ndarray, np.ndarray], np.ndarray]
 
 
@@ -70,22 +71,34 @@ class ReplaySource:
 
     def __init__(self, path: str | Path, *, realtime: bool = True, loop: bool = False, start: int = 0):
         self.recording = Recording(path)
-        if not len(self.recording):
-            raise ConfigError(f"{path} holds no captures to replay")
-        if not 0 <= start < len(self.recording):
-            raise ConfigError(f"start frame {start} outside a recording of {len(self.recording)} frames")
-        d = self.recording.device
-        self.model, self.serial, self.firmware_version = d["model"], d["serial"], d["firmware_version"]
-        self.config = self.recording.config
-        stored = self.recording.calibration
-        self.calibration: StereoCalibration | None = stored.calibration if stored else None
+        try:
+            self._open(path, start)
+        except BaseException:
+            self.recording.close()
+            raise
         self.realtime, self.loop, self.start = realtime, loop, start
-        self.clock = ReplayClock(self.recording.capture(start).info.device_time_us)
         self._lock = threading.Lock()
         self._iter: Iterator[RecordedCapture] | None = None
         self._pending: RecordedCapture | None = None
         self._t0: tuple[float, int] | None = None  # (host monotonic, device µs) the pacing counts from
         self.sent = 0
+
+    def _open(self, path: str | Path, start: int) -> None:
+        """The recorded unit (identity, configuration, calibration) and the clock at frame ``start``."""
+        if not len(self.recording):
+            raise ConfigError(f"{path} holds no captures to replay")
+        if not 0 <= start < len(self.recording):
+            raise ConfigError(f"start frame {start} outside a recording of {len(self.recording)} frames")
+        d = self.recording.device
+        missing = [k for k in IDENTITY if k not in d]
+        if missing:
+            raise DamagedRecordingError(f"{path}: metadata stereocam.device has no {', '.join(missing)}: the "
+                                        f"recorded unit cannot be replayed")
+        self.model, self.serial, self.firmware_version = (d[k] for k in IDENTITY)
+        self.config = self.recording.config
+        stored = self.recording.calibration
+        self.calibration: StereoCalibration | None = stored.calibration if stored else None
+        self.clock = ReplayClock(self.recording.capture(start).info.device_time_us)
 
     def boot_config(self) -> dict[str, int]:
         """The recorded configuration a replayed unit boots with, less how the recorded unit was

@@ -6,15 +6,17 @@ Extra ``--set name=value`` options configure the camera first (``--set width=128
 """
 from __future__ import annotations
 
-from stereocam.tools.exit_codes import EXIT_CODES
+from stereocam.tools.exit_codes import EXIT_CODES, EXIT_USAGE
 
 import argparse
+import os
 import sys
 
 from tqdm import tqdm
 
 import stereocam
 from stereocam.protocol.errors import ConfigError
+from stereocam.recording.mcapwriter import check_level
 
 
 def _setting(text: str) -> tuple[str, int]:
@@ -23,6 +25,11 @@ def _setting(text: str) -> tuple[str, int]:
         return name, int(value)
     except ValueError:
         raise argparse.ArgumentTypeError(f"--set takes name=integer, got {text!r}") from None
+
+
+def _usage(text: str) -> int:
+    print(f"stereocam record: error: {text}", file=sys.stderr)
+    return EXIT_USAGE
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -40,6 +47,13 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if (args.frames is not None and args.frames <= 0) or (args.seconds is not None and args.seconds <= 0):
         raise ConfigError("--frames and --seconds must be positive")
+    try:  # before the camera is opened: nothing starts on arguments that cannot work
+        check_level(args.level)
+    except ConfigError as exc:
+        return _usage(f"--level: {exc}")
+    if os.path.lexists(args.out):
+        return _usage(f"--out {args.out} already exists: a recording never replaces a file; remove it or give "
+                      f"another path")
 
     bar = tqdm(total=args.frames or args.seconds, unit=" frames" if args.frames else " s", file=sys.stderr,
                disable=args.quiet, bar_format="{l_bar}{bar}| {n:.%df}/{total:.%df}{unit} [{elapsed}<{remaining}{postfix}]"

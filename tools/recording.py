@@ -6,10 +6,11 @@ export  per frame: left/right PNG, disparity .npy (int16, disparity*16) and colo
 """
 from __future__ import annotations
 
-from stereocam.tools.exit_codes import EXIT_CODES
+from stereocam.tools.exit_codes import EXIT_CODES, EXIT_USAGE
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from stereocam.recording.reader import Recording
@@ -23,21 +24,27 @@ DROP_KEYS = ("link_lost", "link_incomplete", "host_queue_overflow", "device_drop
 def describe_file(path: Path) -> dict:
     """What ``recording info`` shows, as plain data."""
     with Recording(path) as rec:
-        s, cal = rec.metadata.get("stereocam.summary", {}), rec.calibration
+        s, cal = rec.summary_counts, rec.calibration
+        repaired = bool(rec.metadata.get("stereocam.summary", {}).get("repaired"))
         return {
             "file": str(path), "megabytes": round(path.stat().st_size / 1e6, 3),
             "chunks": len(rec.summary.chunk_indexes), "unit": dict(rec.device), "frames": len(rec),
             "duration_s": round(rec.duration_s, 6),
             "fps": round((len(rec) - 1) / rec.duration_s, 3) if rec.duration_s else None,
-            "drops": {k: int(s[k]) for k in DROP_KEYS if k in s}, "repaired": bool(s.get("repaired")),
+            "drops": {k: s[k] for k in DROP_KEYS if k in s}, "repaired": repaired,
             "config": rec.config,
             "calibration": None if cal is None else {
                 "source": cal.source, "generation": cal.generation, "id": f"{cal.calibration_id:08x}",
                 "image_size": list(cal.calibration.image_size), "fx_px": float(cal.calibration.K_left[0, 0]),
                 "baseline_mm": float(cal.calibration.baseline_m * 1000), "lens_model": cal.calibration.lens_model},
-            "topics": {ch.topic: {"messages": rec.topics[ch.topic], "schema": rec.summary.schemas[ch.schema_id].name}
+            "topics": {ch.topic: {"messages": rec.topics[ch.topic], "schema": _schema_name(rec, ch.schema_id)}
                        for ch in rec.summary.channels.values()},
         }
+
+
+def _schema_name(rec: Recording, schema_id: int) -> str:
+    schema = rec.summary.schemas.get(schema_id)
+    return schema.name if schema is not None else f"(no schema {schema_id})"
 
 
 def info(path: Path, as_json: bool = False) -> None:
@@ -94,10 +101,12 @@ def main(argv: list[str] | None = None) -> int:
         info(args.file, args.json)
     elif args.what == "repair":
         r = repair(args.file, args.out)
-        state = "was complete" if r.was_complete else "was cut short"
-        print(f"{args.out or args.file}: {r.frames} frames kept ({state}; a trailing partial capture dropped: "
-              f"{r.dropped_partial}); {r.bytes_before} -> {r.bytes_after} bytes")
+        print(f"{args.out or args.file}: {r.line()}")
     else:
+        if args.start < 0 or args.stop is not None and args.stop < 0:
+            print("stereocam recording: error: --start and --stop are frame numbers from 0 (not negative), got "
+                  f"--start {args.start}" + ("" if args.stop is None else f" --stop {args.stop}"), file=sys.stderr)
+            return EXIT_USAGE
         n = export(args.file, args.out, args.start, args.stop)
         print(f"{n} frames exported to {args.out}")
     return 0

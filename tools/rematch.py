@@ -11,10 +11,11 @@ uses a running Dask scheduler (its workers need stereocam installed and must see
 """
 from __future__ import annotations
 
-from stereocam.tools.exit_codes import EXIT_CODES
+from stereocam.tools.exit_codes import EXIT_CODES, EXIT_USAGE
 
 import argparse
 import logging
+import sys
 import time
 from pathlib import Path
 
@@ -26,6 +27,31 @@ from stereocam.tools import rematch_tasks as tasks
 from stereocam.tools.record import _setting
 
 RETRIES = 3
+
+
+def check_scheduler(address: str) -> str:
+    """``address`` if it reads as a Dask scheduler address (tcp://HOST:PORT and the like), else ConfigError."""
+    from distributed.comm import registry
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, where = parse_address(address)
+        if scheme not in registry.backends:
+            raise ValueError(f"unknown protocol {scheme!r} (known: {', '.join(sorted(registry.backends))})")
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            host, port = parse_host_port(where)
+            if not host or not 0 < port < 65536:
+                raise ValueError("needs a host and a port from 1 to 65535")
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"scheduler {address!r} is not an address like tcp://HOST:PORT: {exc}") from exc
+    return address
+
+
+def check_workers(workers: object) -> int:
+    """``workers`` if it is a number of worker processes (an integer >= 1), else ConfigError."""
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ConfigError(f"workers (local worker processes) must be at least 1, got {workers!r}")
+    return workers
 
 
 def _client(scheduler: str | None, workers: int):
@@ -43,6 +69,9 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
             scheduler: str | None = None, workers: int = 2, chunks_per_task: int = 1, client=None) -> dict:
     """Re-match ``recordings`` into ``out`` with ``algorithm`` ("bm" or "sgm"; None: the recorded
     one) and the recorded settings changed by ``overrides``; returns frames, seconds and the outputs."""
+    check_workers(workers)
+    if scheduler is not None:
+        check_scheduler(scheduler)
     if algorithm is not None:
         if algorithm not in tasks.ALGORITHMS:
             raise ConfigError(f"unknown algorithm {algorithm!r}; known: {', '.join(tasks.ALGORITHMS)}")
@@ -107,6 +136,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2, help="local worker processes (without --scheduler)")
     ap.add_argument("--chunks-per-task", type=int, default=1, help="file chunks per task")
     args = ap.parse_args(argv)
+    try:  # before any file is read or cluster started: 0 workers would wait for ever
+        check_workers(args.workers)
+        if args.scheduler is not None:
+            check_scheduler(args.scheduler)
+    except ConfigError as exc:
+        print(f"stereocam rematch: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     if any(p.resolve().parent == args.out.resolve() for p in args.recordings):
         raise ConfigError("--out must not be the folder of the input recordings (outputs keep their names)")
     r = rematch(args.recordings, args.out, dict(args.set), algorithm=args.algorithm, scheduler=args.scheduler,

@@ -4,8 +4,8 @@
 writer underneath (frames in, file out, on its own thread). Topics and message types: ``schemas``.
 """
 from .convert import LinkCounters
-from .recorder import Recorder, RecorderStats, RecordingError, UnitDescription
+from .recorder import DamagedRecordingError, Recorder, RecorderStats, RecordingError, UnitDescription
 from .session import Progress, describe, record
 
-__all__ = ["record", "describe", "Recorder", "RecorderStats", "RecordingError", "UnitDescription", "LinkCounters",
-           "Progress"]
+__all__ = ["record", "describe", "Recorder", "RecorderStats", "RecordingError", "DamagedRecordingError",
+           "UnitDescription", "LinkCounters", "Progress"]

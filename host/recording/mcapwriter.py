@@ -28,9 +28,12 @@ from mcap.records import (Attachment, AttachmentIndex, Channel, Chunk, ChunkInde
                           MessageIndex, Metadata, MetadataIndex, Schema, Statistics, SummaryOffset)
 from mcap.well_known import Profile
 
+from stereocam.protocol.errors import ConfigError
+
 MAGIC = b"\x89MCAP0\r\n"
 DEFAULT_CHUNK_BYTES = 4 << 20
 DEFAULT_LEVEL = 1
+MIN_LEVEL, MAX_LEVEL = -(1 << 17), zstandard.MAX_COMPRESSION_LEVEL  # zstd's ZSTD_minCLevel() .. ZSTD_maxCLevel()
 
 
 Buffers = Sequence[Union[bytes, memoryview]]
@@ -49,6 +52,13 @@ class _OpenChunk:
     messages: int = 0
 
 
+def check_level(level: object) -> int:
+    """``level`` if it is a zstd compression level (an integer from zstd's fastest to 22), else ConfigError."""
+    if isinstance(level, bool) or not isinstance(level, int) or not MIN_LEVEL <= level <= MAX_LEVEL:
+        raise ConfigError(f"zstd level must be an integer from {MIN_LEVEL} to {MAX_LEVEL}, got {level!r}")
+    return level
+
+
 def _compress(pieces: Buffers, level: int) -> tuple[bytes, int]:
     """zstd frame and CRC-32 of the concatenated ``pieces`` (zstd and zlib release the GIL). One
     join, then zstd in one shot: faster than streaming the pieces through a compressor object."""
@@ -60,8 +70,11 @@ class ChunkedWriter:
     """Write an MCAP file: ``register_schema``/``register_channel``, ``add_message``, ``finish``."""
 
     def __init__(self, path: str | Path, *, profile: str = Profile.ROS2, library: str = "stereocam",
-                 chunk_bytes: int = DEFAULT_CHUNK_BYTES, level: int = DEFAULT_LEVEL, threads: int = 2):
-        self._out: BinaryIO = open(path, "wb")  # noqa: SIM115 - closed by finish()
+                 chunk_bytes: int = DEFAULT_CHUNK_BYTES, level: int = DEFAULT_LEVEL, threads: int = 2,
+                 exclusive: bool = False):
+        """``exclusive``: never replace a file (FileExistsError if ``path`` exists)."""
+        check_level(level)  # before the file is touched: a bad level would otherwise fail at the first chunk
+        self._out: BinaryIO = open(path, "xb" if exclusive else "wb")  # noqa: SIM115 - closed by finish()
         self._pos = 0
         self._chunk_bytes = chunk_bytes
         self._level = level

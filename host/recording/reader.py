@@ -6,23 +6,28 @@ chunk is read. Messages are decoded by the ``mcap`` reader and ``mcap-ros2-suppo
 """
 from __future__ import annotations
 
-import struct
+import os
+import stat
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, BinaryIO, Iterator
 
 import numpy as np
-from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap_ros2.decoder import DecoderFactory
 
 from stereocam.calibration_io import StoredCalibration
 from stereocam.frames import DisparityFormat, Frame, FrameStatus, StereoGeometry
-from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.errors import ConfigError
 
+from . import metadata as meta
 from . import schemas
 from .convert import disparity_from_float
-from .recorder import FRAME_INDEX, RecordingError, UnitDescription
+from .mcapwriter import MAGIC
+from .recorder import FRAME_INDEX, DamagedRecordingError, RecordingError, UnitDescription
+
+__all__ = ["Recording", "RecordedCapture", "DamagedRecordingError", "RecordingError", "open_regular"]
 
 
 @dataclass
@@ -52,16 +57,24 @@ def _plane(msg: Any, dtype: str) -> np.ndarray:
     return np.frombuffer(data, dtype).reshape(msg.height, msg.width)
 
 
-class DamagedRecordingError(RecordingError):
-    """A frame of the recording cannot be read (bad chunk CRC, undecodable message); ``frame`` is its
-    index: reading can go on from ``frame + 1``."""
-
-    def __init__(self, message: str, frame: int):
-        super().__init__(message)
-        self.frame = frame
-
-
 RECORD_SIZE_LIMIT = 1 << 30  # bytes of one MCAP record: a chunk header claiming more is damage, not data
+
+
+def open_regular(path: Path) -> BinaryIO:
+    """``path`` opened for reading, if it is a regular file (a FIFO or a device would block or never end)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))  # a FIFO must not block the open
+    except OSError as exc:
+        raise RecordingError(f"cannot read {path}: {exc.strerror or exc}") from exc
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise RecordingError(f"{path} is not a regular file (a FIFO, a device or a folder): a recording is "
+                                 f"an .mcap file")
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
 
 
 class Recording:
@@ -69,44 +82,72 @@ class Recording:
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
+        self._file = open_regular(self.path)
         try:
-            self._file = open(self.path, "rb")  # noqa: SIM115 - closed by close()
+            self._open()
+        except BaseException:
+            self._file.close()
+            raise
+
+    def _open(self) -> None:
+        """The summary, metadata and frame index; RecordingError for a file that lacks them."""
+        path, repair = self.path, f"run 'stereocam recording repair {self.path}'"
+        try:
+            head = self._file.read(len(MAGIC))
+            self._file.seek(0)
+        except OSError as exc:
+            raise RecordingError(f"cannot read {path}: {exc.strerror or exc}") from exc
+        if head != MAGIC:
+            raise RecordingError(f"{path} is not an MCAP file (it does not start with MCAP's magic bytes)")
+        try:
             # every chunk's CRC is checked as it is read: a damaged frame is an error, never bad pixels
             self._reader = SeekingReader(self._file, validate_crcs=True, decoder_factories=[DecoderFactory()],
                                          record_size_limit=RECORD_SIZE_LIMIT)
             self.summary = self._reader.get_summary()
-        except (OSError, McapError, ValueError, EOFError, struct.error) as exc:
-            raise RecordingError(f"{self.path} is not a readable MCAP file: {exc}") from exc
-        if self.summary is None or not self.summary.chunk_indexes and self.summary.statistics.message_count:
-            self.close()
-            raise RecordingError(f"{self.path} has no summary or index (was the recorder killed?); run "
-                                 f"'stereocam recording repair {self.path}'")
-        self.metadata = {m.name: dict(m.metadata) for m in self._reader.iter_metadata()}
-        index = next((a for a in self._reader.iter_attachments() if a.name == FRAME_INDEX), None)
+        except Exception as exc:  # noqa: BLE001 - whatever a cut-off or damaged end makes the reader raise
+            raise RecordingError(f"{path} is truncated or damaged: an MCAP file without a valid summary and footer "
+                                 f"at its end (was the recorder killed?); {repair}") from exc
+        if self.summary is None or self.summary.statistics is None \
+                or not self.summary.chunk_indexes and self.summary.statistics.message_count:
+            raise RecordingError(f"{path} has no summary or index (was the recorder killed?); {repair}")
+        try:
+            self.metadata = {m.name: dict(m.metadata) for m in self._reader.iter_metadata()}
+            index = next((a for a in self._reader.iter_attachments() if a.name == FRAME_INDEX), None)
+        except Exception as exc:  # noqa: BLE001 - offsets or records of a damaged summary
+            raise DamagedRecordingError(f"{path}: its metadata or attachments cannot be read ({type(exc).__name__}: "
+                                        f"{exc}); {repair}") from exc
         if index is None:
-            raise RecordingError(f"{self.path} has no frame index; run 'stereocam recording repair {self.path}'")
+            raise RecordingError(f"{path} has no frame index; {repair}")
         if len(index.data) % 8:
-            raise RecordingError(f"{self.path}: its frame index is damaged ({len(index.data)} bytes); "
-                                 f"run 'stereocam recording repair {self.path}'")
+            raise DamagedRecordingError(f"{path}: its frame index is damaged ({len(index.data)} bytes); {repair}")
         self.log_times = np.frombuffer(index.data, "<i8")
+        if np.any(np.diff(self.log_times) <= 0):
+            raise DamagedRecordingError(f"{path}: its frame index is damaged (times not increasing); {repair}")
+        counts = self.summary.statistics.channel_message_counts
+        captures = sum(counts.get(cid, 0) for cid, ch in self.summary.channels.items() if ch.topic == schemas.CAPTURE)
+        if captures != len(self.log_times):
+            raise DamagedRecordingError(f"{path}: its frame index lists {len(self.log_times)} frames but the file "
+                                        f"holds {captures} captures; the file is damaged; {repair}")
 
-    # -- the unit ----------------------------------------------------------------------------
+    # -- the unit: each value checked when asked for (a damaged one is a DamagedRecordingError --
+    # naming its field, and fails only what needs it: the frames still read) ---------------------
     @property
     def device(self) -> dict[str, str]:
-        return self.metadata.get("stereocam.device", {})
+        """The unit's INFO as recorded (model, serial, firmware_version, ...; empty if not recorded)."""
+        return dict(self.metadata.get(meta.DEVICE, {}))
 
     @property
     def config(self) -> dict[str, int]:
-        return {k: int(v) for k, v in self.metadata.get("stereocam.config", {}).items()}
+        return meta.config(self.path, self.metadata)
+
+    @cached_property
+    def calibration(self) -> StoredCalibration | None:
+        return meta.calibration(self.path, self.metadata)
 
     @property
-    def calibration(self) -> StoredCalibration | None:
-        c = self.metadata.get("stereocam.calibration")
-        if c is None:
-            return None
-        body = bytes.fromhex(c["body_hex"])
-        return StoredCalibration(StereoCalibration.from_bytes(body), body, c["source"], int(c["generation"]),
-                                 int(c["calibration_id"]))
+    def summary_counts(self) -> dict[str, int]:
+        """The recorder's final figures: frames, camera_bytes and the drop counters, those the file has."""
+        return meta.summary_counts(self.path, self.metadata)
 
     @property
     def unit(self) -> UnitDescription:
@@ -115,7 +156,7 @@ class Recording:
     @property
     def clock_offset_ns(self) -> int:
         """Host wall clock minus monotonic clock while recording (stamps = host time + this)."""
-        return int(self.metadata.get("stereocam.recording", {}).get("clock_offset_ns", 0))
+        return meta.clock_offset_ns(self.path, self.metadata)
 
     def chunk_frame_starts(self) -> list[int]:
         """For each chunk in file order, the first frame whose stamp is at or after its start."""
@@ -140,38 +181,55 @@ class Recording:
         """Capture ``index`` (from 0; negative counts from the end), reading only its chunk."""
         if not -len(self) <= index < len(self):
             raise IndexError(f"frame {index} outside a recording of {len(self)} frames")
-        return next(self.captures(index % len(self), index % len(self) + 1))
+        for cap in self.captures(index % len(self), index % len(self) + 1):
+            return cap
+        raise DamagedRecordingError(f"{self.path}: frame {index % len(self)} cannot be read; the file is damaged",
+                                    index % len(self))  # not reached: captures() raises for a missing frame
 
     def captures(self, start: int = 0, stop: int | None = None) -> Iterator[RecordedCapture]:
-        """Captures ``start`` .. ``stop - 1`` in order; the chunks before ``start`` are not read."""
+        """Captures ``start`` .. ``stop - 1`` in order (both from 0, not negative); the chunks before
+        ``start`` are not read. A frame of the index that cannot be read is a DamagedRecordingError."""
+        if start < 0 or stop is not None and stop < 0:
+            raise ConfigError(f"frames are numbered from 0: start {start}, stop {stop} (negative)")
         stop = len(self) if stop is None else min(stop, len(self))
+        return self._captures(start, stop)
+
+    def _captures(self, start: int, stop: int) -> Iterator[RecordedCapture]:
         if start >= stop:
             return
         t0, t1 = int(self.log_times[start]), int(self.log_times[stop - 1])
         messages = self._reader.iter_decoded_messages(starting_at=t0, ending_before=t1 + 1)
         parts: dict[str, Any] = {}
         index, current = start, None
-        while True:
+        while index < stop:
             try:
                 item = next(messages, None)
                 ready = None
                 if current is not None and (item is None or item[2].log_time != current):
                     ready = self._assemble(index, current, parts)
             except Exception as exc:  # zstd, CDR, MCAP or shape errors of a damaged or hostile file
-                raise DamagedRecordingError(f"{self.path}: frame {index} cannot be read ({type(exc).__name__}: "
-                                            f"{exc}); the file is damaged", index) from exc
+                raise self._damaged(index, f"{type(exc).__name__}: {exc}") from exc
             if ready is not None:
                 yield ready
                 index, parts = index + 1, {}
             if item is None:
-                return
+                break
             _, channel, message, decoded = item
             current = message.log_time
             parts[channel.topic] = decoded
+        if index < stop:
+            raise self._damaged(index, "the frame index lists it, the file holds no messages for it")
+
+    def _damaged(self, index: int, why: str) -> DamagedRecordingError:
+        return DamagedRecordingError(f"{self.path}: frame {index} cannot be read ({why}); the file is damaged", index)
 
     def _assemble(self, index: int, log_time: int, parts: dict[str, Any]) -> RecordedCapture:
+        if log_time != self.log_times[index]:
+            raise ValueError(f"messages stamped {log_time} where the frame index says {int(self.log_times[index])}")
+        if parts.get(schemas.CAPTURE) is None:
+            raise ValueError(f"no {schemas.CAPTURE} message")
         left, right, disp = parts.get(schemas.LEFT), parts.get(schemas.RIGHT), parts.get(schemas.DISPARITY_TOPIC)
-        return RecordedCapture(index, log_time, parts.get(schemas.CAPTURE),
+        return RecordedCapture(index, log_time, parts[schemas.CAPTURE],
                                _plane(left, "u1") if left else None, _plane(right, "u1") if right else None,
                                disparity_from_float(_plane(disp.image, "<f4")) if disp else None)
 

@@ -29,7 +29,20 @@ FRAME_INDEX_TYPE = "application/x-stereocam-frame-index-int64le"
 
 
 class RecordingError(StereoCamError):
-    """The recording could not be written (disk full, file not writable, ...)."""
+    """The recording could not be written (disk full, file not writable, ...) or read."""
+
+
+class DamagedRecordingError(RecordingError):
+    """Part of a recording cannot be read (bad chunk CRC, undecodable message, a metadata value that
+    is not what it should be); ``frame`` is the index of the frame that cannot be read, if it is one
+    (reading can go on from ``frame + 1``), else None."""
+
+    def __init__(self, message: str, frame: int | None = None):
+        super().__init__(message)
+        self.frame = frame
+
+    def __reduce__(self):  # pickled whole (a Dask worker's error reaches the client with its frame)
+        return type(self), (str(self), self.frame)
 
 
 @dataclass(frozen=True)
@@ -63,9 +76,13 @@ class Recorder:
         """``clock_offset_ns``: host wall clock minus monotonic clock for the stamps (default: now;
         re-writing a recording passes the original's so every stamp stays the same)."""
         self.path = Path(path)
-        try:
+        try:  # never over an existing file (a failed recording must not cost the one it replaced);
+            # written in place, not renamed at the end: a killed recorder leaves a file to repair
             self._writer = ChunkedWriter(self.path, library=f"stereocam {stereocam.__version__}", level=level,
-                                         threads=threads, chunk_bytes=chunk_bytes)
+                                         threads=threads, chunk_bytes=chunk_bytes, exclusive=True)
+        except FileExistsError as exc:
+            raise RecordingError(f"{self.path} already exists: a recording never replaces a file; remove it "
+                                 f"or give another path") from exc
         except OSError as exc:
             raise RecordingError(f"cannot write {self.path}: {exc}") from exc
         self.unit = unit

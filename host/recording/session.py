@@ -1,6 +1,7 @@
 """Record a live camera: read what the file says about the unit, stream, hand frames to a Recorder."""
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -10,7 +11,8 @@ from stereocam.protocol.errors import CameraTimeoutError, ConfigError
 
 from ..arguments import count_arg, timeout_arg
 from .convert import LinkCounters
-from .recorder import Recorder, RecorderStats, UnitDescription
+from .mcapwriter import check_level
+from .recorder import Recorder, RecorderStats, RecordingError, UnitDescription
 
 RECORDER_OPTIONS = frozenset({"queue_bytes", "level", "threads", "chunk_bytes"})  # what record() passes on
 
@@ -68,6 +70,11 @@ def record(camera: "Camera", path: str | Path, *, frames: int | None = None, sec
     unknown = sorted(set(recorder_options) - RECORDER_OPTIONS)
     if unknown:
         raise ConfigError(f"unknown recorder option {', '.join(unknown)}; known: {', '.join(sorted(RECORDER_OPTIONS))}")
+    if "level" in recorder_options:
+        check_level(recorder_options["level"])
+    if os.path.lexists(path):  # the Recorder refuses too (exclusive create); said here before the camera is asked
+        raise RecordingError(f"{path} already exists: a recording never replaces a file; remove it or give "
+                             f"another path")
     started_here = not camera._streaming
     recorder = Recorder(path, describe(camera), **recorder_options)
     t0 = time.monotonic()

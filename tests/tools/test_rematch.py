@@ -92,3 +92,22 @@ def test_bad_arguments(source, tmp_path):
     with pytest.raises(stereocam.ConfigError):
         rematch([source], tmp_path, {}, algorithm="census")  # no such matcher
     assert cli.main(["rematch", str(source), "--out", str(source.parent)]) == 1
+
+
+@pytest.mark.parametrize("args, what", [(["--workers", "0"], "workers"), (["--workers", "-1"], "workers"),
+                                        (["--scheduler", "notaurl"], "notaurl"),
+                                        (["--scheduler", "tcp://host:port"], "tcp://host:port"),
+                                        (["--scheduler", "ftp://host:21"], "ftp")])
+def test_bad_workers_and_scheduler_are_usage_errors_not_hangs(source, tmp_path, capsys, args, what):
+    """No workers waited for ever; a malformed address gave a traceback. Both are refused at once."""
+    done: dict = {}
+    run = threading.Thread(target=lambda: done.update(rc=cli.main(["rematch", str(source), "--out",
+                                                                   str(tmp_path / "out"), *args])), daemon=True)
+    run.start()
+    run.join(timeout=60)
+    assert not run.is_alive() and done["rc"] == 2
+    err = capsys.readouterr().err
+    assert what in err and "Traceback" not in err and not (tmp_path / "out").exists()
+    with pytest.raises(stereocam.ConfigError, match=what):
+        rematch([source], tmp_path / "out", {}, **({"workers": int(args[1])} if args[0] == "--workers"
+                                                  else {"scheduler": args[1]}))

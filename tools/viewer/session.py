@@ -4,6 +4,7 @@ every frame (the page shows the newest; the file misses none)."""
 from __future__ import annotations
 
 import collections
+import itertools
 import re
 import threading
 import time
@@ -84,7 +85,12 @@ class ViewerSession(Feed):
             if self._recorder is not None:
                 raise ValueError(f"already recording to {self._recorder.path}")
         serial = re.sub(r"[^A-Za-z0-9_.-]", "_", self.cam.info().serial)[:64]  # the device names it: no paths
-        path = self.record_dir / f"view_{serial}_{time.strftime('%Y%m%d-%H%M%S')}.mcap"
+        stem = f"view_{serial}_{time.strftime('%Y%m%d-%H%M%S')}"
+        path = self.record_dir / f"{stem}.mcap"
+        for n in itertools.count(2):  # two recordings in one second: never over the first
+            if not path.exists():
+                break
+            path = self.record_dir / f"{stem}-{n}.mcap"
         recorder = Recorder(path, describe(self.cam))
         with self._cond:
             self._recorder, self._recorded, self.recording_error = recorder, 0, None
