@@ -2,30 +2,12 @@
 from __future__ import annotations
 
 import math
-import threading
 
 import numpy as np
 import pytest
 
 import stereocam
-
-
-def _returns_within(seconds: float, fn, *args, **kwargs):
-    """Run ``fn`` in a thread; fail the test if it has not returned in time (a hang, not an error)."""
-    box: dict[str, object] = {}
-
-    def run() -> None:
-        try:
-            box["value"] = fn(*args, **kwargs)
-        except BaseException as exc:  # noqa: BLE001 - handed back to the test
-            box["error"] = exc
-    t = threading.Thread(target=run, daemon=True)
-    t.start()
-    t.join(seconds)
-    assert not t.is_alive(), f"{fn.__name__}{args}{kwargs} did not return within {seconds} s"
-    if "error" in box:
-        raise box["error"]  # type: ignore[misc]
-    return box.get("value")
+from tests.support.hangs import returns_within
 
 
 @pytest.fixture(scope="module")
@@ -38,13 +20,13 @@ def cam():
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -1, -0.5, "x", None.__class__, True])
 def test_get_frame_timeout_must_be_a_finite_non_negative_number(cam, bad):
     with pytest.raises(stereocam.ConfigError, match="timeout") as err:
-        _returns_within(5, cam.get_frame, timeout=bad)
+        returns_within(5, cam.get_frame, timeout=bad)
     assert isinstance(err.value, ValueError)
 
 
 def test_get_frame_zero_timeout_polls(cam):
     with pytest.raises(stereocam.CameraTimeoutError):
-        _returns_within(5, cam.get_frame, timeout=0)
+        returns_within(5, cam.get_frame, timeout=0)
 
 
 @pytest.mark.parametrize("call", ["open", "request", "reconnect"])
@@ -55,7 +37,7 @@ def test_other_timeouts_are_checked_too(cam, call):
            "request": lambda: cam.request(m.GetInfo(), timeout=-1),
            "reconnect": lambda: cam.reconnect(timeout=math.inf)}
     with pytest.raises(stereocam.ConfigError, match="timeout"):
-        _returns_within(5, fns[call])
+        returns_within(5, fns[call])
     assert cam.link.alive
 
 
@@ -83,7 +65,7 @@ def test_configure_refuses_non_integers_naming_the_parameter(cam, value):
 ])
 def test_malformed_urls_get_a_typed_error_naming_the_problem(url, problem):
     with pytest.raises(stereocam.ConfigError, match=problem):
-        _returns_within(30, stereocam.open, url, timeout=0.5)
+        returns_within(30, stereocam.open, url, timeout=0.5)
 
 
 def test_a_url_pyserial_chokes_on_stays_in_the_error_tree():

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import pickle
-import threading
 from pathlib import Path
 from typing import Callable
 
@@ -19,6 +18,7 @@ from stereocam.recording.reader import DamagedRecordingError, Recording
 from stereocam.recording.recorder import FRAME_INDEX
 from stereocam.recording.repair import repair
 from stereocam.tools import cli
+from tests.support.hangs import returns_within
 
 N = 5
 
@@ -47,25 +47,6 @@ def _run(argv: list[str], capsys) -> tuple[int, str]:
     err = capsys.readouterr().err
     assert "Traceback" not in err
     return rc, err
-
-
-def _within(seconds: float, call: Callable[[], object]) -> object:
-    """``call()``'s result, or a failure if it hangs (a FIFO opened for reading blocks for ever)."""
-    result: dict = {}
-
-    def run() -> None:
-        try:
-            result["value"] = call()
-        except BaseException as exc:  # noqa: BLE001 - handed to the test
-            result["error"] = exc
-
-    t = threading.Thread(target=run, daemon=True)
-    t.start()
-    t.join(seconds)
-    assert not t.is_alive(), f"still running after {seconds} s"
-    if "error" in result:
-        raise result["error"]
-    return result["value"]
 
 
 # -- 1. repair keeps every good chunk, and the original -------------------------------------------
@@ -297,10 +278,10 @@ def test_a_fifo_is_refused_not_waited_on(tmp_path, capsys):
     fifo = tmp_path / "x.mcap"
     os.mkfifo(fifo)
     with pytest.raises(RecordingError, match="not a regular file"):
-        _within(20, lambda: Recording(fifo))
+        returns_within(20, lambda: Recording(fifo))
     with pytest.raises(RecordingError, match="not a regular file"):
-        _within(20, lambda: repair(fifo))
-    rc, err = _within(20, lambda: _run(["recording", "info", str(fifo)], capsys))
+        returns_within(20, lambda: repair(fifo))
+    rc, err = returns_within(20, lambda: _run(["recording", "info", str(fifo)], capsys))
     assert rc == 1 and "not a regular file" in err
     with pytest.raises(RecordingError, match="not a regular file"):
         Recording(tmp_path)  # a folder
