@@ -114,9 +114,9 @@ class ReplaySource:
         with self._lock:
             self._iter, self._t0 = None, None
 
-    def next_request(self, epoch: int) -> CaptureRequest | None:
-        """The next capture as a request (recorded sequence and trigger id), once it is due; None at
-        the end of a recording played once."""
+    def next_request(self, epoch: int, paced: bool = True) -> CaptureRequest | None:
+        """The next capture as a request (recorded sequence and trigger id), once it is due (at once
+        unless ``paced``: a trigger asked for it); None at the end of a recording played once."""
         with self._lock:
             if self._iter is None:
                 self._iter = self.recording.captures(self.start)
@@ -131,7 +131,7 @@ class ReplaySource:
         now = time.monotonic()
         if self._t0 is None:
             self._t0 = (now, cap.info.device_time_us)
-        due = self._t0[0] + (cap.info.device_time_us - self._t0[1]) / 1e6 if self.realtime else now
+        due = self._t0[0] + (cap.info.device_time_us - self._t0[1]) / 1e6 if self.realtime and paced else now
         if due > now:
             time.sleep(due - now)
         return CaptureRequest(cap.info.sequence, cap.info.trigger_id, max(due, now), epoch)
@@ -151,8 +151,11 @@ class ReplaySource:
         """The capture ``req`` stands for, as ``cfg`` asks for it: the recorded disparity when the
         matching configuration is the recorded one, else the recorded images matched again."""
         cap = self._pending
-        assert cap is not None and cap.info.sequence == req.sequence
+        assert cap is not None
         i = cap.info
+        ids = (i.sequence, i.trigger_id, i.device_time_us)
+        if (req.sequence, req.trigger_id) != ids[:2]:  # taken on a trigger: its numbers, the replay's time
+            ids = (req.sequence, req.trigger_id, self.clock.at(req.time))
         wanted = Output(cfg["outputs"]) & Output(i.planes | (Output.DISPARITY if i.rectified else 0))
         planes = {Output.LEFT: cap.left, Output.RIGHT: cap.right}
         same = params_from_config(cfg) == params_from_config({**defaults(), **self.config})  # the recorded matching
@@ -166,7 +169,7 @@ class ReplaySource:
             fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)
         planes = {p: a for p, a in planes.items() if p in wanted and a is not None}
         outputs = sum(int(p) for p in planes)
-        begin = m.FrameBegin(i.sequence, i.trigger_id, i.device_time_us, i.exposure_us, i.gain, i.width, i.height,
+        begin = m.FrameBegin(*ids, i.exposure_us, i.gain, i.width, i.height,
                              outputs, m.FRAME_RECTIFIED if i.rectified else 0, m.DISPARITY_S16_Q4, *fmt,
                              i.calibration_id, i.focal_px, i.cx, i.cy, i.baseline_m)
         self.sent += 1
@@ -178,7 +181,8 @@ class ReplaySource:
 
 class ReplayEngine(CaptureEngine):
     """The capture engine of a replay: free-run exposures come from the recording (its sequence
-    numbers, at its pace or as fast as the link takes them) instead of a frame-rate timer."""
+    numbers, at its pace or as fast as the link takes them) instead of a frame-rate timer; each
+    software trigger (or pulse) takes the next recorded capture at once, numbered as TRIGGERED said."""
 
     def __init__(self, source: ReplaySource, produce):
         super().__init__(produce)
@@ -192,12 +196,16 @@ class ReplayEngine(CaptureEngine):
         with self._cond:
             if self._closed:
                 return None
-            if not self._streaming or self._mode != TriggerMode.FREE_RUN:
+            if not self._streaming or (self._mode != TriggerMode.FREE_RUN and not self._queue):
                 self._cond.wait(0.05)
                 return None
             epoch = self.epoch
-        req = self.source.next_request(epoch)
-        if req is None:  # played once to the end: the stream stays started and sends nothing more
+            trigger = self._queue.popleft() if self._mode != TriggerMode.FREE_RUN else None
+        recorded = self.source.next_request(epoch, paced=trigger is None)
+        if recorded is None:  # played once to the end: the stream stays started and sends nothing more
             with self._cond:  # (were it stopped, a host would rightly restart it: SPEC §9)
                 self._cond.wait(0.05)
-        return req
+            return None
+        with self._cond:  # numbers go on rising across streams and modes (SPEC §8.4)
+            self.sequence = max(self.sequence, recorded.sequence)
+        return trigger or recorded

@@ -72,6 +72,30 @@ def test_a_recording_of_a_triggered_head_replays_at_its_recorded_pace_with_its_t
     assert [f.trigger_id for f in frames] == [c.info.trigger_id for c in caps] and frames[0].trigger_id > 0
 
 
+def test_a_software_trigger_takes_the_next_recorded_capture_numbered_as_triggered(recording, tmp_path):
+    """`stereocam capture replay://FILE` software-triggers: each TRIGGER gets the next recorded
+    capture at once, its planes as recorded, its ids those TRIGGERED gave, its time the replay's."""
+    path, caps, _ = recording
+    with stereocam.open(f"replay://{path}", timeout=3.0) as cam:
+        cam.set_trigger_mode("software")
+        cam.start()
+        got = []
+        for _ in range(3):
+            tid = cam.trigger()
+            f = cam.get_frame(timeout=10.0)
+            assert f.trigger_id == tid
+            got.append(f)
+    assert [f.left.tobytes() for f in got] == [c.left.tobytes() for c in caps[:3]]
+    assert [f.disparity.tobytes() for f in got] == [c.disparity.tobytes() for c in caps[:3]]
+    seqs, times = [f.sequence for f in got], [f.device_time_us for f in got]
+    assert seqs == sorted(set(seqs)) and times == sorted(set(times))
+    out = tmp_path / "shots"
+    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "capture", f"replay://{path}", "--count", "2",
+                        "--out", str(out)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert len(list(out.glob("*left*.png"))) == 2
+
+
 def test_start_index_and_loop(recording):
     path, caps, _ = recording
     with stereocam.open(f"replay://{path}?speed=fast&start={N - 2}&loop=1", timeout=3.0) as cam:
