@@ -40,34 +40,28 @@ def _fail(command: str, message: str) -> int:
     return EXIT_USAGE
 
 
-def _write_new(path: Path, data: bytes, mode: int) -> None:
-    """Create ``path`` with ``mode`` from the start (O_EXCL: FileExistsError if it exists) and write ``data``;
-    a partly written file is removed."""
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
+def _write_whole(path: Path, data: bytes, mode: int, replace: bool = True) -> None:
+    """Write ``data`` to a new file beside ``path`` (``mode`` from creation, synced), then put it in
+    place in one step: renamed over ``path`` (the old file stays whole until the new one is), or,
+    with ``replace=False``, linked to ``path`` (FileExistsError if something is there already)."""
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-    except BaseException:
-        path.unlink(missing_ok=True)
-        raise
-
-
-def _replace(path: Path, data: bytes, mode: int) -> None:
-    """Write ``data`` to a new file (``mode`` from the start) beside ``path``, then rename it over ``path``:
-    the old file stays whole until the new one is."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise type(exc)(exc.errno, exc.strerror, str(path)) from exc
     try:
         os.fchmod(fd, mode)
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
+        if replace:
+            os.replace(tmp, path)
+        else:
+            os.link(tmp, path)
+    except OSError as exc:  # named by the file asked for, not the temporary one
+        raise type(exc)(exc.errno, exc.strerror, str(path)) from exc
+    finally:
         Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def keygen(args: argparse.Namespace) -> int:
@@ -83,12 +77,12 @@ def keygen(args: argparse.Namespace) -> int:
     key = Ed25519PrivateKey.generate()
     try:
         if args.force:
-            _replace(args.out, private_key_pem(key), 0o600)
-            _replace(pub, public_key_pem(key.public_key()), 0o644)
+            _write_whole(args.out, private_key_pem(key), 0o600)
+            _write_whole(pub, public_key_pem(key.public_key()), 0o644)
         else:
-            _write_new(args.out, private_key_pem(key), 0o600)
+            _write_whole(args.out, private_key_pem(key), 0o600, replace=False)
             try:
-                _write_new(pub, public_key_pem(key.public_key()), 0o644)
+                _write_whole(pub, public_key_pem(key.public_key()), 0o644, replace=False)
             except BaseException:
                 args.out.unlink(missing_ok=True)  # ours, just made: no key without its public half
                 raise
@@ -139,7 +133,7 @@ def sign(args: argparse.Namespace) -> int:
     except (ImageError, ConfigError) as exc:
         return _fail("sign", str(exc))
     try:
-        _replace(args.out, image, 0o644)
+        _write_whole(args.out, image, 0o644)
     except OSError as exc:
         return _fail("sign", f"cannot write {args.out}: {exc.strerror or exc}")
     print(f"wrote {args.out}: {len(image)} bytes, version {build.version}, target {args.target}")
