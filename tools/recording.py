@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from stereocam.recording.reader import Recording
+from stereocam.recording.recorder import SUMMARY
 from stereocam.recording.repair import repair
 from stereocam.tools.capture import save_frame
 
@@ -25,7 +26,7 @@ def describe_file(path: Path) -> dict:
     """What ``recording info`` shows, as plain data."""
     with Recording(path) as rec:
         s, cal = rec.summary_counts, rec.calibration
-        repaired = bool(rec.metadata.get("stereocam.summary", {}).get("repaired"))
+        repaired = bool(rec.metadata.get(SUMMARY, {}).get("repaired"))
         return {
             "file": str(path), "megabytes": round(path.stat().st_size / 1e6, 3),
             "chunks": len(rec.summary.chunk_indexes), "unit": dict(rec.device), "frames": len(rec),

@@ -23,7 +23,7 @@ from stereocam.frames import DisparityFormat
 from stereocam.recording import LinkCounters, Recorder
 from stereocam.recording.mcapwriter import ChunkedWriter
 from stereocam.recording.reader import Recording
-from stereocam.recording.recorder import FRAME_INDEX, FRAME_INDEX_TYPE
+from stereocam.recording.recorder import FRAME_INDEX, FRAME_INDEX_TYPE, SUMMARY
 
 ALGORITHMS = {"bm": BLOCK_MATCHING, "sgm": SEMI_GLOBAL}  # --algorithm -> the ``algorithm`` parameter
 
@@ -109,7 +109,7 @@ def join(source: str, parts: list[str], out: str, provenance: dict[str, str]) ->
                     chans = {cid: writer.register_channel(c.topic, c.message_encoding, ids[c.schema_id], c.metadata)
                              for cid, c in s.channels.items()}
                     for meta in reader.iter_metadata():
-                        if meta.name != "stereocam.summary":
+                        if meta.name != SUMMARY:
                             writer.add_metadata(meta.name, dict(meta.metadata))
                     writer.add_metadata("stereocam.rematch", {**provenance, "source": source})
                 if any(chans.get(cid) != cid or writer.channels[cid].topic != c.topic for cid, c in s.channels.items()):
@@ -117,13 +117,13 @@ def join(source: str, parts: list[str], out: str, provenance: dict[str, str]) ->
                 f.seek(0)
                 _copy_chunks(StreamReader(f, emit_chunks=True).records, writer)
                 times += [np.frombuffer(a.data, "<i8") for a in reader.iter_attachments() if a.name == FRAME_INDEX]
-                last = next((dict(m.metadata) for m in reader.iter_metadata() if m.name == "stereocam.summary"), {})
+                last = next((dict(m.metadata) for m in reader.iter_metadata() if m.name == SUMMARY), {})
                 camera_bytes = int(summary.get("camera_bytes", 0)) + int(last.get("camera_bytes", 0))
                 summary = {**last, "camera_bytes": str(camera_bytes)}
         assert writer is not None, "no parts to join"
         writer.flush()
         index = np.concatenate(times) if times else np.zeros(0, "<i8")
-        writer.add_metadata("stereocam.summary", {**summary, "frames": str(len(index))})
+        writer.add_metadata(SUMMARY, {**summary, "frames": str(len(index))})
         writer.add_attachment(FRAME_INDEX, FRAME_INDEX_TYPE, index.astype("<i8").tobytes())
         writer.finish()
         os.replace(tmp, target)

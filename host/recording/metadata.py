@@ -9,10 +9,8 @@ from stereocam.calibration_io import StoredCalibration
 from stereocam.protocol.calibration import StereoCalibration
 
 from .convert import LinkCounters
-from .recorder import DamagedRecordingError
+from .recorder import CALIBRATION, CONFIG, DEVICE, RECORDING, SUMMARY, DamagedRecordingError  # noqa: F401 (DEVICE: for readers)
 
-DEVICE, CONFIG, CALIBRATION, RECORDING, SUMMARY = ("stereocam.device", "stereocam.config", "stereocam.calibration",
-                                                   "stereocam.recording", "stereocam.summary")
 SUMMARY_COUNTS = ("frames", "camera_bytes", *LinkCounters.__dataclass_fields__)  # the summary's integer fields
 Metadata = dict[str, dict[str, str]]
 

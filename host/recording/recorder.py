@@ -26,6 +26,9 @@ from .mcapwriter import DEFAULT_CHUNK_BYTES, DEFAULT_LEVEL, ChunkedWriter
 DEFAULT_QUEUE_BYTES = 512 << 20
 FRAME_INDEX = "stereocam/frame_index"  # attachment: int64 log time (ns) of every capture, in order
 FRAME_INDEX_TYPE = "application/x-stereocam-frame-index-int64le"
+DEVICE, CONFIG, CALIBRATION, RECORDING, SUMMARY = ("stereocam.device", "stereocam.config", "stereocam.calibration",
+                                                   "stereocam.recording", "stereocam.summary")
+"""The metadata records of a recording: the unit, its configuration and calibration, the recording, its summary."""
 
 
 class RecordingError(StereoCamError):
@@ -110,14 +113,14 @@ class Recorder:
 
     def _write_unit(self, unit: UnitDescription) -> None:
         w = self._writer
-        w.add_metadata("stereocam.device", unit.info)
-        w.add_metadata("stereocam.config", {k: str(v) for k, v in unit.config.items()})
+        w.add_metadata(DEVICE, unit.info)
+        w.add_metadata(CONFIG, {k: str(v) for k, v in unit.config.items()})
         cal = unit.calibration
         if cal is not None:
-            w.add_metadata("stereocam.calibration", {
+            w.add_metadata(CALIBRATION, {
                 "body_hex": cal.body.hex(), "source": cal.source, "generation": str(cal.generation),
                 "calibration_id": str(cal.calibration_id)})
-        w.add_metadata("stereocam.recording", {
+        w.add_metadata(RECORDING, {
             "clock_offset_ns": str(self.clock_offset_ns), "sdk_version": stereocam.__version__,
             "stamps": "header stamps and log times: the capture's device time mapped to the host's monotonic "
                       "clock, plus clock_offset_ns (host wall clock at the start of the recording)",
@@ -227,7 +230,7 @@ class Recorder:
         self._writer.flush()
         self._writer.add_attachment(FRAME_INDEX, FRAME_INDEX_TYPE, np.asarray(self._log_times, "<i8").tobytes())
         st = self.stats
-        self._writer.add_metadata("stereocam.summary", {
+        self._writer.add_metadata(SUMMARY, {
             "frames": str(st.frames), "camera_bytes": str(st.camera_bytes),
             **{k: str(v) for k, v in asdict(st.counters).items()},
             "recorder_dropped": str(self._upstream_dropped + st.recorder_dropped)})

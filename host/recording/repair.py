@@ -23,7 +23,7 @@ from stereocam.protocol.params import Output
 from . import schemas
 from .mcapwriter import ChunkedWriter
 from .reader import open_regular
-from .recorder import FRAME_INDEX, FRAME_INDEX_TYPE, RecordingError
+from .recorder import FRAME_INDEX, FRAME_INDEX_TYPE, SUMMARY, RecordingError
 from .scan import Scan
 
 _PLANES = int(Output.LEFT | Output.RIGHT | Output.DISPARITY)
@@ -101,7 +101,7 @@ class _Rewrite:
                 self.flush_group()
             self.group.append(record)
         elif isinstance(record, Metadata):
-            if record.name == "stereocam.summary":
+            if record.name == SUMMARY:
                 self.summary_meta = dict(record.metadata)
             else:
                 self.other_meta.append(record)
@@ -145,7 +145,7 @@ class _Rewrite:
         summary = self.summary_meta
         if summary is None:  # the recorder never got to write it: the last capture's counters
             summary = {k: str(getattr(self.last_info, k)) for k in _COUNTERS} if self.last_info is not None else {}
-        w.add_metadata("stereocam.summary", {**summary, "frames": str(len(self.log_times)), "repaired": "true"})
+        w.add_metadata(SUMMARY, {**summary, "frames": str(len(self.log_times)), "repaired": "true"})
         w.add_attachment(FRAME_INDEX, FRAME_INDEX_TYPE, np.asarray(self.log_times, "<i8").tobytes())
         w.finish()
 
