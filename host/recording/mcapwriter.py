@@ -31,6 +31,7 @@ from mcap.well_known import Profile
 from stereocam.protocol.errors import ConfigError
 
 MAGIC = b"\x89MCAP0\r\n"
+RECORD_SIZE_LIMIT = 1 << 30  # bytes of one MCAP record: a record claiming more is damage, not data
 DEFAULT_CHUNK_BYTES = 4 << 20
 DEFAULT_LEVEL = 1
 MIN_LEVEL, MAX_LEVEL = -(1 << 17), zstandard.MAX_COMPRESSION_LEVEL  # zstd's ZSTD_minCLevel() .. ZSTD_maxCLevel()

@@ -24,7 +24,7 @@ from stereocam.protocol.errors import ConfigError
 from . import metadata as meta
 from . import schemas
 from .convert import disparity_from_float
-from .mcapwriter import MAGIC
+from .mcapwriter import MAGIC, RECORD_SIZE_LIMIT
 from .recorder import FRAME_INDEX, DamagedRecordingError, RecordingError, UnitDescription
 
 __all__ = ["Recording", "RecordedCapture", "DamagedRecordingError", "RecordingError", "open_regular"]
@@ -57,7 +57,6 @@ def _plane(msg: Any, dtype: str) -> np.ndarray:
     return np.frombuffer(data, dtype).reshape(msg.height, msg.width)
 
 
-RECORD_SIZE_LIMIT = 1 << 30  # bytes of one MCAP record: a chunk header claiming more is damage, not data
 
 
 def open_regular(path: Path) -> BinaryIO:

@@ -18,9 +18,8 @@ from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, Footer, Header, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import get_chunk_data_stream
 
-from .mcapwriter import MAGIC
+from .mcapwriter import MAGIC, RECORD_SIZE_LIMIT
 
-RECORD_SIZE_LIMIT = 1 << 30  # bytes of one MCAP record: a record claiming more is damage, not data
 _KNOWN = frozenset(int(op) for op in Opcode)
 _HEAD = struct.Struct("<BQ")  # opcode, record length
 # the records a repair copies; the rest (indexes, statistics, summary offsets, data end) it writes anew
