@@ -7,9 +7,8 @@ import numbers
 import numpy as np
 
 from stereocam.protocol.errors import ConfigError
-from stereocam.protocol.params import BY_NAME
+from stereocam.protocol.params import BY_NAME, INT32_MAX, INT32_MIN
 
-INT32 = (-(1 << 31), (1 << 31) - 1)  # every configuration value is an int32 on the wire (SPEC §5)
 
 
 LONGEST_WAIT = 1e9  # s (31 years): longer waits are cut to this (the OS's timed waits end near 2.9e11 s)
@@ -50,8 +49,8 @@ def int32_arg(value: object, name: str) -> int:
         number = int(value)
     else:
         raise ConfigError(f"{name} must be an integer, got {value!r}")
-    if not INT32[0] <= number <= INT32[1]:
-        raise ConfigError(f"{name}={number} does not fit the protocol's int32 ({INT32[0]}..{INT32[1]})")
+    if not INT32_MIN <= number <= INT32_MAX:
+        raise ConfigError(f"{name}={number} does not fit the protocol's int32 ({INT32_MIN}..{INT32_MAX})")
     return number
 
 

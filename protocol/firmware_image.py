@@ -35,7 +35,7 @@ from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
 from .errors import StereoCamError
-from .params import BY_NAME
+from .params import BY_NAME, INT32_MAX, INT32_MIN
 
 MAGIC = b"SCFW"
 HEADER_VERSION = 1
@@ -47,7 +47,6 @@ _BUILD_LEN = struct.Struct("<I")
 TARGET_LEN = 16  # bytes of the header's load target field
 U32_MAX = 2**32 - 1  # the header's security counter and INFO.capabilities are u32
 U8_MAX = 255  # INFO carries the protocol minor version as one byte
-INT32_MIN, INT32_MAX = -2**31, 2**31 - 1  # every parameter is an int32 on the wire
 VERSION_MAX_BYTES = 255  # INFO and SLOT_INFO carry the version as a u8-length UTF-8 string
 _VERSION = re.compile(r"([0-9]+)\.([0-9]+)\.([0-9]+)(\+.*)?", re.DOTALL)
 

@@ -1,19 +1,12 @@
-"""Where the boot stage keeps things on the unit's NOR flash, next to the calibration records.
-
-    sectors 0..3          calibration records (calibration/store.py; 0..1 write-protected)
-    sectors 4, 5          boot state records (boot_state.py), two copies written in turn
-    slot A, slot B        the rest of the chip split in two equal image slots
-    security register     the trusted firmware-signing key, locked at the factory (trust.py)
-"""
+"""Where the boot stage keeps its records and image slots on the unit's NOR flash (map: flash_map.py)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 from ..calibration.flash import NorFlash
+from ..flash_map import BOOT_STATE_SECTOR, FIRST_SLOT_SECTOR, FLASH_SIZE
 
-FLASH_SIZE = 8 << 20  # a W25Q64-class part: two slots of ~4 MiB
-BOOT_STATE_SECTOR = 4
-FIRST_SLOT_SECTOR = 6
+__all__ = ["FLASH_SIZE", "SLOT_NAMES", "FlashLayout"]
 SLOT_NAMES = ("A", "B")
 
 

@@ -1,8 +1,7 @@
 """Power-loss-safe calibration record store on NOR flash.
 
-Layout (sector = flash.sector_size, 4 KiB by default):
-  sector 0, 1   factory region: slots F0, F1   (write-protected once locked)
-  sector 2, 3   user region:    slots U0, U1
+Layout (sector = flash.sector_size, 4 KiB by default; the sectors: ../flash_map.py):
+  factory region: slots F0, F1 (write-protected once locked); user region: slots U0, U1
 
 Record, at offset 0 of a slot, all little-endian:
   offset      size  field
@@ -35,6 +34,7 @@ from typing import Literal
 
 from stereocam.protocol.errors import StereoCamError
 
+from ..flash_map import CALIBRATION_REGION_SECTOR, CALIBRATION_SECTORS
 from .flash import NorFlash
 
 MAGIC = 0x4C414353
@@ -44,7 +44,6 @@ _CRC = struct.Struct("<I")
 _MAX_GENERATION = 0xFFFFFFFF
 
 Region = Literal["factory", "user"]
-_REGION_SECTOR = {"factory": 0, "user": 2}
 
 
 class StoreError(StereoCamError):
@@ -69,13 +68,13 @@ class CalibrationStore:
     """Factory and user calibration records on `flash` (see the module docstring)."""
 
     def __init__(self, flash: NorFlash) -> None:
-        if flash.size < 4 * flash.sector_size:
-            raise StoreError(f"the store needs 4 sectors, the flash has {flash.size // flash.sector_size}")
+        if flash.size < CALIBRATION_SECTORS * flash.sector_size:
+            raise StoreError(f"the store needs {CALIBRATION_SECTORS} sectors, the flash has {flash.size // flash.sector_size}")
         self.flash = flash
         self.capacity = flash.sector_size - _HEADER.size - _CRC.size
 
     def _slot_addr(self, region: Region, slot: int) -> int:
-        return (_REGION_SECTOR[region] + slot) * self.flash.sector_size
+        return (CALIBRATION_REGION_SECTOR[region] + slot) * self.flash.sector_size
 
     def _load(self, region: Region, slot: int) -> StoredRecord | None:
         addr = self._slot_addr(region, slot)

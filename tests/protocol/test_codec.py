@@ -26,7 +26,7 @@ from stereocam.protocol.framing import (
     DecoderStats, Packet, encode_frame, header_crc,
 )
 from stereocam.protocol.messages import UnknownMessageError, decode_packet
-from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, Param, defaults
+from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, VALUE_NAMES, Param, defaults
 
 FAST = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 FUZZ = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -951,6 +951,17 @@ def test_param_ids_and_names_are_unique_and_sane() -> None:
     assert BY_ID[10].name == "min_disparity" and BY_NAME["width"].pid == 1
     assert all(BY_ID[p.pid] is p and BY_NAME[p.name] is p for p in PARAMS)
     assert all(-(1 << 31) <= p.lo <= p.default <= p.hi < (1 << 31) for p in PARAMS)
+
+
+def test_each_row_carries_its_description_and_value_names() -> None:
+    """One seat per fact: the row is the parameter; names of enumerated values live in it."""
+    assert all(p.description for p in PARAMS)
+    for p in PARAMS:
+        if p.values:  # an enumeration names exactly the values its range allows
+            assert sorted(p.values) == list(range(p.lo, p.hi + 1)), p.name
+            assert VALUE_NAMES[p.name] is p.values
+    assert set(VALUE_NAMES) == {"trigger_mode", "pre_filter_type", "rectify", "algorithm", "trigger_output"}
+    assert VALUE_NAMES["trigger_mode"] == {0: "free_run", 1: "software", 2: "external"}
 
 
 def test_defaults_pass_their_own_check() -> None:

@@ -5,9 +5,8 @@ from __future__ import annotations
 
 from stereocam.protocol import config_rules
 from stereocam.protocol.config_rules import ConfigRejected, cross_check
-from stereocam.protocol.params import BY_NAME, Param, TriggerMode, defaults
+from stereocam.protocol.params import BY_NAME, INT32_MAX, INT32_MIN, Param, TriggerMode, defaults
 
-INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
 
 
 CROSS_RULES: dict[str, tuple[str, ...]] = {r.name: r.names for r in config_rules.CROSS_RULES}
