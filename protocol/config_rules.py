@@ -102,7 +102,7 @@ def _range_why(c: Mapping[str, int], window: str) -> str:
             f"{c['width']} where a disparity can be valid")
 
 
-# What each matching engine needs of the frame (device_sim/matching: block matching with OpenCV
+# What each matching engine needs of the frame (stereocam/stereo: block matching with OpenCV
 # StereoBM semantics, SGM): a rule for one engine applies only while ``algorithm`` selects it, and
 # an engine with new needs adds its rows here, so host check and device keep one table.
 CROSS_RULES: tuple[CrossRule, ...] = (

@@ -77,7 +77,7 @@ def cold_jit_seconds() -> float:
     import os
     import subprocess
     import tempfile
-    code = ("import time; t0 = time.perf_counter(); from device_sim.matching import warm_up; "
+    code = ("import time; t0 = time.perf_counter(); from stereocam.stereo import warm_up; "
             "warm_up(); print(time.perf_counter() - t0)")
     root = Path(__file__).resolve().parent.parent
     with tempfile.TemporaryDirectory() as tmp:
@@ -94,9 +94,9 @@ def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
     running sums alone; 'wta+subpixel+lr' is the SAD stage minus that."""
     from dataclasses import replace
 
-    from stereocam.device_sim.matching import Matcher
-    from stereocam.device_sim.matching.postfilter import filter_speckles
-    from stereocam.device_sim.matching.prefilter import prefilter_pair
+    from stereocam.stereo import Matcher
+    from stereocam.stereo.postfilter import filter_speckles
+    from stereocam.stereo.prefilter import prefilter_pair
     p = m.params
     disp = m.match(left, right)
     out = {"prefilter": _median_ms(lambda: prefilter_pair(
@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
 
     cached = _cache_present()
     t0 = time.perf_counter()
-    from stereocam.device_sim.matching import Matcher, MatchParams, warm_up
+    from stereocam.stereo import Matcher, MatchParams, warm_up
     t_import = time.perf_counter() - t0
     cv2.setNumThreads(args.threads)
     numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))

@@ -17,7 +17,7 @@ from stereocam.tools.rematch import _client, rematch
 
 
 def _warm(_: int = 0) -> None:
-    from stereocam.device_sim.matching import sgm_warm_up, warm_up
+    from stereocam.stereo import sgm_warm_up, warm_up
 
     warm_up()
     sgm_warm_up()

@@ -16,7 +16,7 @@ from mcap.reader import make_reader
 from mcap.records import Chunk, MessageIndex
 from mcap.stream_reader import StreamReader
 
-from stereocam.device_sim.matching import Matcher, SGMMatcher
+from stereocam.stereo import Matcher, SGMMatcher
 from stereocam.device_sim.pipeline.stereo import BLOCK_MATCHING, SEMI_GLOBAL, matcher_for, params_from_config
 from stereocam.protocol.params import defaults
 from stereocam.frames import DisparityFormat

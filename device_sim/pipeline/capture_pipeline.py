@@ -21,7 +21,7 @@ from ..ground_truth import Exposure, TruthLog
 from ..handlers.calibration import CalibrationService
 from ..handlers.config_store import ConfigStore
 from ..handlers.frame_repair import FrameRepair
-from ..matching import warm_up as matching_warm_up
+from stereocam.stereo import warm_up as matching_warm_up
 from ..rig.scene import Scene
 from ..rig.sensor import Geometry, SensorRig
 from ..replay import ReplaySource

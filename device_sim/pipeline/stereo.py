@@ -5,7 +5,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ..matching import Matcher, MatchParams, SGMMatcher, SGMParams
+from stereocam.stereo import Matcher, MatchParams, SGMMatcher, SGMParams
 
 BLOCK_MATCHING, SEMI_GLOBAL = 0, 1  # values of the ``algorithm`` parameter
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stereocam.device_sim.matching import Matcher, SGMMatcher, SGMParams
+from stereocam.stereo import Matcher, SGMMatcher, SGMParams
 from stereocam.device_sim.pipeline.stereo import params_from_config
 
 

@@ -1,7 +1,7 @@
 """Device matching core: StereoBM block matching, bit-exact with cv2.StereoBM (OpenCV 4.x/5.x),
 and semi-global matching (census, 4 or 8 paths), bit-exact with tests/sgm_reference.py.
 
-    from stereocam.device_sim.matching import MatchParams, SGMParams, match, Matcher, SGMMatcher
+    from stereocam.stereo import MatchParams, SGMParams, match, Matcher, SGMMatcher
     disp = match(left, right, MatchParams(num_disparities=64, block_size=9))  # int16, d * 16
     disp = match(left, right, SGMParams(num_disparities=128))  # semi-global matching
     m = Matcher(left.shape, params); disp = m.match(left, right)  # keeps scratch per frame

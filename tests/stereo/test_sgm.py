@@ -8,7 +8,7 @@ import pytest
 
 cv2 = pytest.importorskip("cv2")
 
-from stereocam.device_sim.matching import (  # noqa: E402
+from stereocam.stereo import (  # noqa: E402
     MatchParams, SGMMatcher, SGMParams, match, sgm_geometry)
 
 from tests.support import sgm_reference as ref  # noqa: E402
