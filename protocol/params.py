@@ -15,6 +15,13 @@ class TriggerMode(enum.IntEnum):
     EXTERNAL = 2
 
 
+class Algorithm(enum.IntEnum):
+    """Values of the ``algorithm`` parameter: the matching engine a configuration selects (SPEC §5.1)."""
+
+    BLOCK_MATCHING = 0  # StereoBM semantics
+    SEMI_GLOBAL = 1  # census + semi-global matching
+
+
 class Output(enum.IntFlag):
     """Planes a frame can carry; also the plane ids of FRAME_DATA."""
 
@@ -70,7 +77,7 @@ PARAMS: tuple[Param, ...] = (
     # id 20 is retired (a simulator control in drafts of 1.1); never reused
     Param(21, "rectify", 1, 0, 1),  # 1: rectified images + disparity; 0: raw images (INFO RAW_OUTPUT)
     # matching algorithm and the semi-global matcher's own parameters (SGM also uses 8, 10, 15..18)
-    Param(22, "algorithm", 0, 0, 1),  # 0 block matching (StereoBM), 1 semi-global matching
+    Param(22, "algorithm", Algorithm.BLOCK_MATCHING, min(Algorithm), max(Algorithm)),
     Param(23, "sgm_p1", 15, 0, 255),  # SGM penalty for a 1 px disparity step along a path
     Param(24, "sgm_p2", 128, 0, 193),  # SGM penalty for larger steps (census bits + p2 <= 255)
     Param(25, "sgm_p2_adapt", 32, 0, 255),  # > 0: p2 / (1 + |dI| / this), not below p1; 0 off
@@ -119,7 +126,7 @@ VALUE_NAMES: dict[str, dict[int, str]] = {  # enumerated parameters: value -> na
     "trigger_mode": {int(t): t.name.lower() for t in TriggerMode},
     "pre_filter_type": {0: "xsobel", 1: "normalized"},
     "rectify": {0: "raw", 1: "rectified"},
-    "algorithm": {0: "block_matching", 1: "sgm"},
+    "algorithm": {Algorithm.BLOCK_MATCHING: "block_matching", Algorithm.SEMI_GLOBAL: "sgm"},
     "trigger_output": {0: "off", 1: "master"},
 }
 

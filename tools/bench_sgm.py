@@ -194,9 +194,9 @@ def main(args) -> int:
 
     cv2.setNumThreads(args.threads)
     numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
-    from stereocam.stereo import sgm_warm_up
+    from stereocam.stereo.engines import engine_named
     t0 = time.perf_counter()
-    sgm_warm_up()
+    engine_named("sgm").warm_up()
     print(f"threads={args.threads} (cv2 {cv2.__version__}, numba {numba.__version__}); "
           f"repeat={args.repeat}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus;"
           f" SGM JIT warm-up {time.perf_counter() - t0:.2f} s")

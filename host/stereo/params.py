@@ -1,20 +1,26 @@
 """Block-matching parameters and the frame geometry they imply.
 
-The checks mirror ``StereoBMImpl::compute`` in OpenCV (modules/stereo/src/stereobm.cpp); the
-geometry mirrors ``findStereoCorrespondenceBM`` and ``getValidDisparityROI``.
+The limits are the protocol's parameter table and SPEC §5.2 rules (which mirror
+``StereoBMImpl::compute`` in OpenCV, modules/stereo/src/stereobm.cpp); the geometry mirrors
+``findStereoCorrespondenceBM`` and ``getValidDisparityROI``.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-PREFILTER_TYPES = ("xsobel", "normalized")
-DISP_SHIFT = 4  # output is disparity * 16
+from stereocam.protocol.frame_messages import invalid_disparity
+from stereocam.protocol.params import Algorithm
 
+from .config_map import ConfigField, ValueName, check_params, check_rule
 
-def _check_int(name: str, value: object) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ValueError(f"{name} must be an int, got {value!r}")
-    return value
+BM_CONFIG: tuple[ConfigField, ...] = (
+    ConfigField("num_disparities"), ConfigField("block_size"), ConfigField("min_disparity"),
+    ConfigField("pre_filter_type", transform=ValueName("pre_filter_type")),
+    ConfigField("pre_filter_size"), ConfigField("pre_filter_cap"), ConfigField("texture_threshold"),
+    ConfigField("uniqueness_ratio"), ConfigField("speckle_window_size"), ConfigField("speckle_range"),
+    ConfigField("disp12_max_diff"),
+)
+"""Device configuration key -> MatchParams field; the limits are the protocol's."""
 
 
 @dataclass(frozen=True)
@@ -37,45 +43,13 @@ class MatchParams:
         self.validate()
 
     def validate(self) -> None:
-        """Raise ValueError naming the first invalid parameter."""
-        for name in ("num_disparities", "block_size", "min_disparity", "pre_filter_size",
-                     "pre_filter_cap", "texture_threshold", "uniqueness_ratio",
-                     "speckle_window_size", "speckle_range", "disp12_max_diff"):
-            _check_int(name, getattr(self, name))
-        if self.pre_filter_type not in PREFILTER_TYPES:
-            raise ValueError(f"pre_filter_type must be one of {PREFILTER_TYPES}, "
-                             f"got {self.pre_filter_type!r}")
-        ps = self.pre_filter_size
-        if ps < 5 or ps > 255 or ps % 2 == 0:
-            raise ValueError(f"pre_filter_size must be odd and within 5..255, got {ps}")
-        if not 1 <= self.pre_filter_cap <= 63:
-            raise ValueError(f"pre_filter_cap must be within 1..63, got {self.pre_filter_cap}")
-        bs = self.block_size
-        if bs < 5 or bs > 255 or bs % 2 == 0:
-            raise ValueError(f"block_size must be odd and within 5..255, got {bs}")
-        nd = self.num_disparities
-        if nd <= 0 or nd % 16 != 0:
-            raise ValueError(f"num_disparities must be positive and divisible by 16, got {nd}")
-        if self.texture_threshold < 0:
-            raise ValueError(f"texture_threshold must be non-negative, "
-                             f"got {self.texture_threshold}")
-        if self.uniqueness_ratio < 0:
-            raise ValueError(f"uniqueness_ratio must be non-negative, got {self.uniqueness_ratio}")
-        if self.speckle_window_size < 0:
-            raise ValueError(f"speckle_window_size must be non-negative, "
-                             f"got {self.speckle_window_size}")
-        if self.speckle_range < 0:
-            raise ValueError(f"speckle_range must be non-negative, got {self.speckle_range}")
-        # |min_disparity| and the disparity range must keep (d * 16) inside int16.
-        lo, hi = (self.min_disparity - 1) * 16, (self.min_disparity + nd) * 16
-        if lo < -32768 or hi > 32767:
-            raise ValueError(f"min_disparity {self.min_disparity} with num_disparities {nd} "
-                             "does not fit the int16 output")
+        """ConfigError (a ValueError) naming the first parameter the protocol's table refuses."""
+        check_params(self, BM_CONFIG)
 
     @property
     def invalid_value(self) -> int:
         """Value written for pixels without a disparity: (min_disparity - 1) * 16."""
-        return (self.min_disparity - 1) << DISP_SHIFT
+        return invalid_disparity(self.min_disparity)
 
     @property
     def use_speckle(self) -> bool:
@@ -105,20 +79,18 @@ class Geometry:
 
 
 def geometry(height: int, width: int, p: MatchParams) -> Geometry:
-    """Derive the computed/valid ranges; ValueError when no valid pixel can exist."""
+    """Derive the computed/valid ranges; ConfigError (the protocol's SPEC §5.2 rules) when no valid
+    pixel can exist."""
     nd, md, r = p.num_disparities, p.min_disparity, p.block_size // 2
-    if p.block_size >= min(width, height):
-        raise ValueError(f"block_size {p.block_size} must be smaller than the image width "
-                         f"and height ({width}x{height})")
+    frame = {"width": width, "height": height, "algorithm": Algorithm.BLOCK_MATCHING,
+             "block_size": p.block_size, "min_disparity": md, "num_disparities": nd}
+    check_rule("block_size_vs_image", frame)
+    check_rule("disparity_range_vs_width", frame)
     lofs = max(nd - 1 + md, 0)
     rofs = -min(nd - 1 + md, 0)
     width1 = width - rofs - nd + 1
     max_d = md + nd - 1
     roi_x0, roi_x1 = max(0, max_d) + r, width - r
     roi_y0, roi_y1 = r, height - r
-    if lofs >= width or rofs >= width or width1 < 1 or roi_x1 <= roi_x0:
-        raise ValueError(
-            f"image width {width} is too small for num_disparities {nd}, min_disparity {md} "
-            f"and block_size {p.block_size}: no column can hold a valid disparity")
     return Geometry(height, width, lofs, rofs, width1, roi_x0, roi_x1, roi_y0, roi_y1,
                     max(md + nd, 0), width + min(md, 0))

@@ -12,7 +12,7 @@ import pytest
 
 import stereocam
 from stereocam.stereo import Matcher
-from stereocam.device_sim.pipeline.stereo import params_from_config
+from stereocam.stereo.engines import params_from_config
 from stereocam.recording.reader import Recording
 from stereocam.tools.bench_record import synthetic_recording
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from stereocam.stereo import Matcher, SGMMatcher, SGMParams
-from stereocam.device_sim.pipeline.stereo import params_from_config
+from stereocam.stereo.engines import params_from_config
 
 
 def _one_frame(cam):

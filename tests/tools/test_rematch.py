@@ -15,7 +15,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 import stereocam
-from stereocam.device_sim.pipeline.stereo import matcher_for
+from stereocam.stereo.engines import matcher_for
 from stereocam.recording.reader import Recording
 from stereocam.tools import cli
 from stereocam.tools.rematch import rematch
