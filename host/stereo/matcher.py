@@ -91,9 +91,9 @@ class Matcher:
         cfg = np.zeros(_sad.C_LEN, np.int64)
         cfg[[_sad.C_R, _sad.C_CAP, _sad.C_ND, _sad.C_MIND, _sad.C_TEX, _sad.C_URATIO,
              _sad.C_MAXDIFF, _sad.C_LOFS, _sad.C_WIDTH1, _sad.C_ROIX0, _sad.C_ROIX1,
-             _sad.C_LRX0, _sad.C_LRX1]] = [
+             _sad.C_LRX0, _sad.C_LRX1, _sad.C_INV]] = [
             r, p.pre_filter_cap, nd, p.min_disparity, p.texture_threshold, p.uniqueness_ratio,
-            p.disp12_max_diff, g.lofs, g.width1, g.roi_x0, g.roi_x1, g.lr_x0, g.lr_x1]
+            p.disp12_max_diff, g.lofs, g.width1, g.roi_x0, g.roi_x1, g.lr_x0, g.lr_x1, p.invalid_value]
         self.cfg = cfg
         if p.use_speckle:
             self.labels = np.empty((h, w), np.int32)
