@@ -70,7 +70,7 @@ def _median_ms(fn, repeat: int) -> float:
 
 
 def _cache_present() -> bool:
-    d = Path(__file__).resolve().parent.parent / "device_sim" / "matching" / "__pycache__"
+    d = Path(engines.__file__).resolve().parent / "__pycache__"
     return d.is_dir() and any(d.glob("*.nbi"))
 
 

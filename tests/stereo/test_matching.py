@@ -1,4 +1,4 @@
-"""Differential tests: device_sim.matching vs cv2.StereoBM (the oracle), zero differing pixels."""
+"""Differential tests: stereocam.stereo block matching vs cv2.StereoBM (the oracle), zero differing pixels."""
 from __future__ import annotations
 
 import itertools
