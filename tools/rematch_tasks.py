@@ -51,9 +51,9 @@ def rematch_range(path: str, start: int, stop: int, overrides: dict[str, int], p
     tmp = _atomic(out)
     with Recording(path) as rec:
         cfg = matching_config(rec.config, overrides)
-        params = params_from_config(cfg)
-        fmt = DisparityFormat(DISPARITY_SUBPIXEL, params.min_disparity, params.num_disparities,
-                              invalid_disparity(params.min_disparity))
+        params_from_config(cfg)  # a configuration no engine takes fails before any file is written
+        fmt = DisparityFormat(DISPARITY_SUBPIXEL, cfg["min_disparity"], cfg["num_disparities"],
+                              invalid_disparity(cfg["min_disparity"]))
         matcher: StereoMatcher | None = None
         unit = replace(rec.unit, config=cfg)
         try:
