@@ -28,11 +28,12 @@ import numpy as np
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.errors import ConfigError
+from stereocam.protocol.frame_messages import DISPARITY_SUBPIXEL, invalid_disparity
 from stereocam.protocol.params import BY_NAME, Output, TriggerMode, defaults
 from stereocam.recording.reader import DamagedRecordingError, RecordedCapture, Recording
+from stereocam.stereo.engines import params_from_config
 
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
-from .pipeline.stereo import params_from_config
 
 _log = logging.getLogger(__name__)
 
@@ -164,7 +165,7 @@ class ReplaySource:
             fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)
         elif Output.DISPARITY in wanted:
             planes[Output.DISPARITY] = match(cfg, cap.left, cap.right)
-            fmt = (16, cfg["min_disparity"], cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16)
+            fmt = (DISPARITY_SUBPIXEL, cfg["min_disparity"], cfg["num_disparities"], invalid_disparity(cfg["min_disparity"]))
         else:
             fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)
         planes = {p: a for p, a in planes.items() if p in wanted and a is not None}

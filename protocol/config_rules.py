@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from .errors import ConfigError, ErrorCode
 from .messages import Capability
-from .params import BY_ID, BY_NAME, TriggerMode
+from .params import BY_ID, BY_NAME, Algorithm, TriggerMode
 
 
 class ConfigRejected(ConfigError):
@@ -71,12 +71,9 @@ class CrossRule:
     why: Callable[[Mapping[str, int]], str]
 
 
-BLOCK_MATCHING, SEMI_GLOBAL = 0, 1  # values of the ``algorithm`` parameter (SPEC §5.1)
-
-
 def _algorithm(c: Mapping[str, int]) -> int:
     """The matcher the configuration selects (a device without ``algorithm`` does block matching)."""
-    return c.get("algorithm", BLOCK_MATCHING)
+    return c.get("algorithm", Algorithm.BLOCK_MATCHING)
 
 
 def _largest_disparity(c: Mapping[str, int]) -> int:
@@ -102,12 +99,12 @@ def _range_why(c: Mapping[str, int], window: str) -> str:
             f"{c['width']} where a disparity can be valid")
 
 
-# What each matching engine needs of the frame (device_sim/matching: block matching with OpenCV
+# What each matching engine needs of the frame (stereocam/stereo: block matching with OpenCV
 # StereoBM semantics, SGM): a rule for one engine applies only while ``algorithm`` selects it, and
 # an engine with new needs adds its rows here, so host check and device keep one table.
 CROSS_RULES: tuple[CrossRule, ...] = (
     CrossRule("block_size_vs_image", ("block_size", "width", "height"), ("block_size", "width", "height", "algorithm"),
-              lambda c: _algorithm(c) == BLOCK_MATCHING and c["block_size"] >= min(c["width"], c["height"]),
+              lambda c: _algorithm(c) == Algorithm.BLOCK_MATCHING and c["block_size"] >= min(c["width"], c["height"]),
               lambda c: f"block_size={c['block_size']} larger than the image {c['width']}x{c['height']} allows"),
     CrossRule("pre_filter_size_vs_image", ("pre_filter_size", "width", "height"),
               ("pre_filter_size", "width", "height"),
@@ -115,14 +112,14 @@ CROSS_RULES: tuple[CrossRule, ...] = (
               lambda c: f"pre_filter_size={c['pre_filter_size']} larger than the image {c['width']}x{c['height']}"),
     CrossRule("disparity_range_vs_width", ("min_disparity", "num_disparities", "block_size", "width"),
               ("num_disparities", "min_disparity", "width", "block_size", "algorithm"),
-              lambda c: _algorithm(c) == BLOCK_MATCHING and _bm_no_valid_column(c),
+              lambda c: _algorithm(c) == Algorithm.BLOCK_MATCHING and _bm_no_valid_column(c),
               lambda c: _range_why(c, f" with block_size={c['block_size']}")),
     CrossRule("exposure_vs_frame_period", ("trigger_mode", "exposure_us", "fps"), ("exposure_us", "fps"),
               lambda c: c["trigger_mode"] == TriggerMode.FREE_RUN and c["exposure_us"] > 1_000_000 // c["fps"],
               lambda c: f"exposure_us={c['exposure_us']} longer than the frame period at fps={c['fps']}"),
     CrossRule("sgm_disparity_range_vs_width", ("algorithm", "min_disparity", "num_disparities", "width"),
               ("num_disparities", "min_disparity", "width", "algorithm"),
-              lambda c: _algorithm(c) == SEMI_GLOBAL and _sgm_no_valid_column(c), lambda c: _range_why(c, "")),
+              lambda c: _algorithm(c) == Algorithm.SEMI_GLOBAL and _sgm_no_valid_column(c), lambda c: _range_why(c, "")),
     CrossRule("trigger_output_needs_external", ("trigger_output", "trigger_mode"), ("trigger_output", "trigger_mode"),
               lambda c: c["trigger_output"] == 1 and c["trigger_mode"] != TriggerMode.EXTERNAL,
               lambda c: "trigger_output=1 needs trigger_mode=external: the master captures on its own pulses "

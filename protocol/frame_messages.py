@@ -9,6 +9,13 @@ from .message_base import Message, MsgType
 
 
 DISPARITY_S16_Q4 = 1  # int16 little-endian, value = disparity * subpixel
+DISPARITY_SUBPIXEL = 16  # the subpixel factor of DISPARITY_S16_Q4 (4 fraction bits)
+
+
+def invalid_disparity(min_disparity: int) -> int:
+    """The code a DISPARITY_S16_Q4 plane holds where no disparity was found: one step below the
+    search range, (min_disparity - 1) * 16 (SPEC §4.9)."""
+    return (min_disparity - 1) * DISPARITY_SUBPIXEL
 FRAME_RECTIFIED = 0x01  # frame flags
 
 

@@ -16,6 +16,13 @@ class TriggerMode(enum.IntEnum):
     EXTERNAL = 2
 
 
+class Algorithm(enum.IntEnum):
+    """Values of the ``algorithm`` parameter: the matching engine a configuration selects (SPEC §5.1)."""
+
+    BLOCK_MATCHING = 0  # StereoBM semantics
+    SEMI_GLOBAL = 1  # census + semi-global matching
+
+
 class Output(enum.IntFlag):
     """Planes a frame can carry; also the plane ids of FRAME_DATA."""
 
@@ -87,7 +94,8 @@ PARAMS: tuple[Param, ...] = (
     Param(21, "rectify", 1, 0, 1, values={0: "raw", 1: "rectified"},
           description="1 rectified images + disparity, 0 raw images without disparity (INFO RAW_OUTPUT)"),
     # matching algorithm and the semi-global matcher's own parameters (SGM also uses 8, 10, 15..18)
-    Param(22, "algorithm", 0, 0, 1, values={0: "block_matching", 1: "sgm"},
+    Param(22, "algorithm", Algorithm.BLOCK_MATCHING, min(Algorithm), max(Algorithm),
+          values={Algorithm.BLOCK_MATCHING: "block_matching", Algorithm.SEMI_GLOBAL: "sgm"},
           description="0 block matching, 1 semi-global matching (census + SGM)"),
     Param(23, "sgm_p1", 15, 0, 255, description="SGM penalty for a 1 px disparity step along a path"),
     Param(24, "sgm_p2", 128, 0, 193,  # census bits + p2 <= 255

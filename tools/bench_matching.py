@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from stereocam.protocol.params import BY_NAME
+from stereocam.stereo import engines
 from stereocam.tools.stereobm_oracle import opencv_stereobm
 
 
@@ -68,7 +70,7 @@ def _median_ms(fn, repeat: int) -> float:
 
 
 def _cache_present() -> bool:
-    d = Path(__file__).resolve().parent.parent / "device_sim" / "matching" / "__pycache__"
+    d = Path(engines.__file__).resolve().parent / "__pycache__"
     return d.is_dir() and any(d.glob("*.nbi"))
 
 
@@ -77,7 +79,7 @@ def cold_jit_seconds() -> float:
     import os
     import subprocess
     import tempfile
-    code = ("import time; t0 = time.perf_counter(); from device_sim.matching import warm_up; "
+    code = ("import time; t0 = time.perf_counter(); from stereocam.stereo.engines import warm_up; "
             "warm_up(); print(time.perf_counter() - t0)")
     root = Path(__file__).resolve().parent.parent
     with tempfile.TemporaryDirectory() as tmp:
@@ -94,16 +96,16 @@ def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
     running sums alone; 'wta+subpixel+lr' is the SAD stage minus that."""
     from dataclasses import replace
 
-    from stereocam.device_sim.matching import Matcher
-    from stereocam.device_sim.matching.postfilter import filter_speckles
-    from stereocam.device_sim.matching.prefilter import prefilter_pair
+    from stereocam.stereo import Matcher
+    from stereocam.stereo.postfilter import filter_speckles
+    from stereocam.stereo.prefilter import prefilter_pair
     p = m.params
     disp = m.match(left, right)
     out = {"prefilter": _median_ms(lambda: prefilter_pair(
         left, right, m.pl, m.pr, p.pre_filter_type, p.pre_filter_size, p.pre_filter_cap,
         m.pf_vsum), repeat)}
     stage = _median_ms(lambda: m.run_sad(disp), repeat)
-    mc = Matcher(left.shape, replace(p, texture_threshold=2**30, disp12_max_diff=-1))
+    mc = Matcher(left.shape, replace(p, texture_threshold=BY_NAME["texture_threshold"].hi, disp12_max_diff=-1))
     mc.match(left, right)
     out["cost volume"] = _median_ms(lambda: mc.run_sad(disp), repeat)
     out["wta+subpixel+lr"] = stage - out["cost volume"]
@@ -124,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--profile", action="store_true", help="per-stage timings of the core")
     ap.add_argument("--cold-jit", action="store_true",
                     help="also time a from-scratch compile (subprocess, empty numba cache)")
-    ap.add_argument("--algorithm", choices=["bm", "sgm"], default="bm",
+    ap.add_argument("--algorithm", choices=engines.names(), default="bm",
                     help="bm: the block matcher vs cv2.StereoBM; sgm: our SGM vs every "
                          "cv2.StereoSGBM mode and StereoBM (tools/bench_sgm.py)")
     args = ap.parse_args(argv)
@@ -137,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
 
     cached = _cache_present()
     t0 = time.perf_counter()
-    from stereocam.device_sim.matching import Matcher, MatchParams, warm_up
+    from stereocam.stereo import Matcher, MatchParams
     t_import = time.perf_counter() - t0
     cv2.setNumThreads(args.threads)
     numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
@@ -151,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"(Motorcycle skipped: {exc})")
     cases = [(64, 9)] if args.quick else [(64, 9), (64, 15), (128, 9), (128, 15)]
 
-    t_jit = warm_up() + t_import  # compiles, or loads numba's disk cache of, every kernel
+    t_jit = engines.warm_up() + t_import  # compiles, or loads numba's disk cache of, every kernel
 
     import os
     print(f"threads={args.threads} (cv2 {cv2.__version__}, numba {numba.__version__}, "

@@ -17,10 +17,9 @@ from stereocam.tools.rematch import _client, rematch
 
 
 def _warm(_: int = 0) -> None:
-    from stereocam.device_sim.matching import sgm_warm_up, warm_up
+    from stereocam.stereo.engines import warm_up
 
     warm_up()
-    sgm_warm_up()
 
 
 RUNS = (("bm", {"block_size": 21}, "block matching, block_size 15 -> 21"), ("sgm", {}, "SGM, 8 paths"))

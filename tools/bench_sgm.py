@@ -34,7 +34,7 @@ def methods(nd: int, variants: dict[str, dict]) -> list[Method]:
     uniqueness 10, speckle 100 / 2, as in REFERENCE.md section 5) and cv2.StereoBM 9x9."""
     import cv2
 
-    from stereocam.device_sim.matching import SGMMatcher, SGMParams
+    from stereocam.stereo import SGMMatcher, SGMParams
 
     out = []
     for label, kw in variants.items():
@@ -134,8 +134,8 @@ def run(scenes, nd: int, repeat: int, variants: dict[str, dict]) -> None:
 def profile(left: np.ndarray, right: np.ndarray, nd: int, repeat: int, variants) -> None:
     """Per-stage median ms of our SGM (stages as the matcher runs them; CPU ms on one thread,
     process time, where marked: robust to a busy machine)."""
-    from stereocam.device_sim.matching import SGMMatcher, SGMParams
-    from stereocam.device_sim.matching.postfilter import filter_speckles
+    from stereocam.stereo import SGMMatcher, SGMParams
+    from stereocam.stereo.postfilter import filter_speckles
 
     from .sgm_profile import cpu_ms, stage_ms
 
@@ -170,7 +170,7 @@ def cpu_table(scenes, nd: int, repeat: int, variants: dict[str, dict]) -> None:
     count), ours per variant vs cv2 SGBM_3WAY, per scene."""
     import cv2
 
-    from stereocam.device_sim.matching import SGMMatcher, SGMParams
+    from stereocam.stereo import SGMMatcher, SGMParams
 
     from .sgm_profile import cpu_ms
 
@@ -194,9 +194,9 @@ def main(args) -> int:
 
     cv2.setNumThreads(args.threads)
     numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
-    from stereocam.device_sim.matching import sgm_warm_up
+    from stereocam.stereo.engines import engine_named
     t0 = time.perf_counter()
-    sgm_warm_up()
+    engine_named("sgm").warm_up()
     print(f"threads={args.threads} (cv2 {cv2.__version__}, numba {numba.__version__}); "
           f"repeat={args.repeat}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus;"
           f" SGM JIT warm-up {time.perf_counter() - t0:.2f} s")

@@ -17,10 +17,9 @@ from typing import Iterator, Sequence
 import numpy as np
 from tqdm import tqdm
 
-from stereocam.device_sim.pipeline.stereo import BLOCK_MATCHING, SEMI_GLOBAL
+from stereocam.stereo import engines
 
 KINDS = ("sim", "pty", "tcp", "usb-high", "usb-super")
-ALGORITHMS = {"bm": BLOCK_MATCHING, "sgm": SEMI_GLOBAL}  # names of the device's ``algorithm`` values
 CORES = 2
 
 
@@ -68,7 +67,7 @@ def stream(kind: str, algorithm: str, seconds: float) -> Run:
     import stereocam
 
     settings = dict(width=640, height=480, fps=60, num_disparities=64, block_size=15,
-                    algorithm=ALGORITHMS[algorithm])
+                    algorithm=engines.engine_named(algorithm).algorithm)
     with _device(kind) as (url, sim), stereocam.open(url, timeout=3.0) as cam:
         cam.configure(**settings)
         cam.start()
@@ -119,7 +118,7 @@ def report(runs: list[Run], algorithm: str) -> None:
 def main(argv: Sequence[str] | None = None, seconds: float = 5.0) -> dict[str, float]:
     parser = argparse.ArgumentParser(prog="stereocam bench transport", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--algorithm", choices=list(ALGORITHMS), action="append",
+    parser.add_argument("--algorithm", choices=engines.names(), action="append",
                         help="matching engine on the device (repeatable; default bm)")
     parser.add_argument("--transport", choices=KINDS, action="append", dest="kinds",
                         help="transport to measure (repeatable; default all)")

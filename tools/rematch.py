@@ -19,10 +19,10 @@ import sys
 import time
 from pathlib import Path
 
-from stereocam.device_sim.pipeline.stereo import params_from_config
 from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.params import BY_NAME
 from stereocam.recording.reader import Recording
+from stereocam.stereo import engines
 from stereocam.tools import rematch_tasks as tasks
 from stereocam.tools.record import _setting
 
@@ -73,9 +73,7 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
     if scheduler is not None:
         check_scheduler(scheduler)
     if algorithm is not None:
-        if algorithm not in tasks.ALGORITHMS:
-            raise ConfigError(f"unknown algorithm {algorithm!r}; known: {', '.join(tasks.ALGORITHMS)}")
-        overrides = {**overrides, "algorithm": tasks.ALGORITHMS[algorithm]}
+        overrides = {**overrides, "algorithm": engines.engine_named(algorithm).algorithm}
     unknown = set(overrides) - set(BY_NAME)
     if unknown:
         raise ConfigError(f"unknown parameter(s) {sorted(unknown)}")
@@ -87,10 +85,10 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
         with Recording(path) as rec:  # a bad file or a bad combination fails here, before any work
             cfg = tasks.matching_config(rec.config, overrides)
             try:
-                params_from_config(cfg)
+                used[path] = engines.selected(cfg).name
+                engines.params_from_config(cfg)
             except ValueError as exc:
                 raise ConfigError(f"{path}: {exc}") from exc
-        used[path] = next(k for k, v in tasks.ALGORITHMS.items() if v == cfg["algorithm"])
     out.mkdir(parents=True, exist_ok=True)
     own, cluster = (None, None) if client is not None else _client(scheduler, workers)
     client = client or own
@@ -128,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
                                  epilog=EXIT_CODES)
     ap.add_argument("recordings", nargs="+", type=Path)
     ap.add_argument("--out", type=Path, required=True, help="folder for the re-matched recordings")
-    ap.add_argument("--algorithm", choices=sorted(tasks.ALGORITHMS), default=None,
+    ap.add_argument("--algorithm", choices=engines.names(), default=None,
                     help="matcher: bm (block matching) or sgm (semi-global); default: the recorded one")
     ap.add_argument("--set", type=_setting, action="append", default=[], metavar="NAME=VALUE",
                     help="matching parameter to change from the recorded configuration (repeatable)")

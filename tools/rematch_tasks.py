@@ -16,17 +16,14 @@ from mcap.reader import make_reader
 from mcap.records import Chunk, MessageIndex
 from mcap.stream_reader import StreamReader
 
-from stereocam.device_sim.matching import Matcher, SGMMatcher
-from stereocam.device_sim.pipeline.stereo import BLOCK_MATCHING, SEMI_GLOBAL, matcher_for, params_from_config
+from stereocam.protocol.frame_messages import DISPARITY_SUBPIXEL, invalid_disparity
 from stereocam.protocol.params import defaults
 from stereocam.frames import DisparityFormat
 from stereocam.recording import LinkCounters, Recorder
 from stereocam.recording.mcapwriter import ChunkedWriter
 from stereocam.recording.reader import Recording
+from stereocam.stereo.engines import StereoMatcher, matcher_for, params_from_config
 from stereocam.recording.recorder import FRAME_INDEX, FRAME_INDEX_TYPE, SUMMARY
-
-ALGORITHMS = {"bm": BLOCK_MATCHING, "sgm": SEMI_GLOBAL}  # --algorithm -> the ``algorithm`` parameter
-
 
 def matching_config(recorded: dict[str, int], overrides: dict[str, int]) -> dict[str, int]:
     """The configuration to match under: the recorded one changed by ``overrides``; parameters the
@@ -54,9 +51,10 @@ def rematch_range(path: str, start: int, stop: int, overrides: dict[str, int], p
     tmp = _atomic(out)
     with Recording(path) as rec:
         cfg = matching_config(rec.config, overrides)
-        params = params_from_config(cfg)
-        fmt = DisparityFormat(16, params.min_disparity, params.num_disparities, params.invalid_value)
-        matcher: Matcher | SGMMatcher | None = None
+        params_from_config(cfg)  # a configuration no engine takes fails before any file is written
+        fmt = DisparityFormat(DISPARITY_SUBPIXEL, cfg["min_disparity"], cfg["num_disparities"],
+                              invalid_disparity(cfg["min_disparity"]))
+        matcher: StereoMatcher | None = None
         unit = replace(rec.unit, config=cfg)
         try:
             with Recorder(tmp, unit, clock_offset_ns=rec.clock_offset_ns) as writer:

@@ -9,7 +9,7 @@ import time
 import numba as nb
 import numpy as np
 
-from stereocam.device_sim.matching import sgm as _sgm
+from stereocam.stereo import sgm as _sgm
 
 
 @nb.njit(cache=True)

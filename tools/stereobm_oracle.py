@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import cv2
 
-from stereocam.device_sim.matching import MatchParams
+from stereocam.stereo import MatchParams
 
 
 def opencv_stereobm(p: MatchParams):

@@ -13,15 +13,16 @@ from typing import Callable
 import numpy as np
 
 from stereocam.protocol import messages as m
+from stereocam.protocol.frame_messages import DISPARITY_SUBPIXEL, invalid_disparity
 from stereocam.protocol.params import Output
 from stereocam.protocol.segmentation import PlaneSource, capture_messages
+from stereocam.stereo.engines import warm_up as matching_warm_up
 
 from ..clock import DeviceClock
 from ..ground_truth import Exposure, TruthLog
 from ..handlers.calibration import CalibrationService
 from ..handlers.config_store import ConfigStore
 from ..handlers.frame_repair import FrameRepair
-from ..matching import warm_up as matching_warm_up
 from ..rig.scene import Scene
 from ..rig.sensor import Geometry, SensorRig
 from ..replay import ReplaySource
@@ -143,8 +144,8 @@ class CapturePipeline:
         t0 = self.profile.add("rectify", t0)
         begin = m.FrameBegin(
             req.sequence & 0xFFFFFFFF, req.trigger_id & 0xFFFFFFFF, self._clock.at(req.time), cfg["exposure_us"],
-            cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, 16, cfg["min_disparity"],
-            cfg["num_disparities"], (cfg["min_disparity"] - 1) * 16, calib_id, focal, cx, cy, baseline)
+            cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, DISPARITY_SUBPIXEL, cfg["min_disparity"],
+            cfg["num_disparities"], invalid_disparity(cfg["min_disparity"]), calib_id, focal, cx, cy, baseline)
 
         def match() -> np.ndarray:  # runs once the images are on their way: the link carries them meanwhile
             return self._stereo.disparity(cfg, left, right)

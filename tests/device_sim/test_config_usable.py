@@ -8,7 +8,7 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from stereocam.device_sim.pipeline.stereo import matcher_for
+from stereocam.stereo.engines import matcher_for
 from stereocam.protocol.config_rules import ConfigRejected, merge
 from stereocam.protocol.params import BY_NAME, defaults
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import stereocam
-from stereocam.device_sim.matching import Matcher
-from stereocam.device_sim.pipeline.stereo import params_from_config
+from stereocam.stereo import Matcher
+from stereocam.stereo.engines import params_from_config
 from stereocam.recording.reader import Recording
 from stereocam.tools.bench_record import synthetic_recording
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from stereocam.device_sim.matching.sgm_params import SGMParams, sgm_geometry
+from stereocam.stereo.sgm_params import SGMParams, sgm_geometry
 
 PATHS4 = [(0, 1), (0, -1), (1, 0), (-1, 0)]
 PATHS8 = PATHS4 + [(1, 1), (1, -1), (-1, 1), (-1, -1)]

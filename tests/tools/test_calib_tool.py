@@ -9,7 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from stereocam.device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
+from stereocam.calibration_board import BoardSpec
+from stereocam.device_sim.calibration.board import StereoBoardRenderer, board_poses
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.device_sim.calibration.truth import true_calibration
 from stereocam.tools import calibrate

@@ -15,7 +15,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 import stereocam
-from stereocam.device_sim.pipeline.stereo import matcher_for
+from stereocam.stereo.engines import engine_named, matcher_for
 from stereocam.recording.reader import Recording
 from stereocam.tools import cli
 from stereocam.tools.rematch import rematch
@@ -36,7 +36,7 @@ def _check(source, out, block_size, algorithm="bm"):
     with Recording(source) as a, Recording(out) as b:
         assert len(b) == len(a) == N and np.array_equal(a.log_times, b.log_times)
         assert b.config["block_size"] == block_size and b.metadata["stereocam.rematch"]["algorithm"] == algorithm
-        assert b.config["algorithm"] == {"bm": 0, "sgm": 1}[algorithm]
+        assert b.config["algorithm"] == engine_named(algorithm).algorithm
         assert b.device == a.device and b.calibration.body == a.calibration.body
         matcher = matcher_for(b.config, (240, 320))  # the matching core, as the board would run it
         for ca, cb in zip(a.captures(), b.captures(), strict=True):

@@ -6,7 +6,7 @@ from typing import Iterator
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode
-from stereocam.protocol.params import TriggerMode
+from stereocam.protocol.params import Algorithm, TriggerMode
 
 from .. import spec_rules
 from ..context import Context
@@ -27,10 +27,12 @@ CASES: dict[str, list[Case]] = {
     "disparity_range_vs_width": [({}, {"min_disparity": 300}), ({}, {"min_disparity": -320}),
                                  ({}, {"num_disparities": 256, "min_disparity": 64}),
                                  ({"num_disparities": 128}, {"width": 128}), ({}, {"min_disparity": -100})],
-    "sgm_disparity_range_vs_width": [({"algorithm": 1}, {"min_disparity": 256, "num_disparities": 80}),
-                                     ({"algorithm": 1}, {"min_disparity": 200, "num_disparities": 32}),
-                                     ({"algorithm": 1, "min_disparity": 250, "num_disparities": 64}, {"algorithm": 0}),
-                                     ({"algorithm": 1}, {"min_disparity": -256, "num_disparities": 256})],
+    "sgm_disparity_range_vs_width": [
+        ({"algorithm": Algorithm.SEMI_GLOBAL}, {"min_disparity": 256, "num_disparities": 80}),
+        ({"algorithm": Algorithm.SEMI_GLOBAL}, {"min_disparity": 200, "num_disparities": 32}),
+        ({"algorithm": Algorithm.SEMI_GLOBAL, "min_disparity": 250, "num_disparities": 64},
+         {"algorithm": Algorithm.BLOCK_MATCHING}),
+        ({"algorithm": Algorithm.SEMI_GLOBAL}, {"min_disparity": -256, "num_disparities": 256})],
     "exposure_vs_frame_period": [({}, {"exposure_us": 70_000}), ({"exposure_us": 50_000}, {"fps": 30}),
                                  ({"trigger_mode": TriggerMode.SOFTWARE}, {"exposure_us": 500_000}),
                                  ({"trigger_mode": TriggerMode.SOFTWARE, "exposure_us": 500_000},

@@ -45,8 +45,8 @@ class SGMMatcher:
         self.crr = np.empty((h, w), np.uint64)
         cfg = np.zeros(_sgm.C_LEN, np.int64)
         cfg[[_sgm.C_ND, _sgm.C_MIND, _sgm.C_P1, _sgm.C_URATIO, _sgm.C_LRDIFF, _sgm.C_X0,
-             _sgm.C_COLS, _sgm.C_PATHS]] = [
-            nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths]
+             _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV]] = [
+            nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths, p.invalid_value]
         self.cfg = cfg
         self.p2tab = np.full(256, p.p2, np.int64)  # effective P2 per intensity step |dI|
         if p.p2_adapt > 0:

@@ -1,4 +1,4 @@
-"""Differential tests: device_sim.matching vs cv2.StereoBM (the oracle), zero differing pixels."""
+"""Differential tests: stereocam.stereo block matching vs cv2.StereoBM (the oracle), zero differing pixels."""
 from __future__ import annotations
 
 import itertools
@@ -9,7 +9,7 @@ import pytest
 
 cv2 = pytest.importorskip("cv2")
 
-from stereocam.device_sim.matching import Matcher, MatchParams, match  # noqa: E402
+from stereocam.stereo import Matcher, MatchParams, match  # noqa: E402
 from stereocam.tools.stereobm_oracle import opencv_stereobm as cv_stereo_bm  # noqa: E402
 
 
@@ -225,9 +225,9 @@ def test_bad_images() -> None:
         match(img.tolist(), img, p)
     with pytest.raises(ValueError, match="block_size"):  # window larger than the image
         match(img[:9], img[:9], p)
-    with pytest.raises(ValueError, match="too small"):  # disparity range wider than the image
+    with pytest.raises(ValueError, match="leaves no column"):  # disparity range wider than the image
         match(img[:, :20], img[:, :20], p)
-    with pytest.raises(ValueError, match="too small"):
+    with pytest.raises(ValueError, match="leaves no column"):
         match(img[:, :24], img[:, :24], MatchParams(num_disparities=16, block_size=9,
                                                     min_disparity=10))
     with pytest.raises(ValueError, match="shape"):
@@ -244,7 +244,7 @@ def test_opencv_rejects_what_we_reject() -> None:
     p = MatchParams(num_disparities=16, block_size=9)
     out = cv_stereo_bm(p).compute(img, img)
     assert np.all(out == p.invalid_value)
-    with pytest.raises(ValueError, match="too small"):
+    with pytest.raises(ValueError, match="leaves no column"):
         match(img, img, p)
     with pytest.raises(cv2.error):
         cv_stereo_bm(p).compute(img[:9], img[:9])

@@ -24,7 +24,7 @@ _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 # layout of the int64 configuration vector passed to match_rows
 (C_R, C_CAP, C_ND, C_MIND, C_TEX, C_URATIO, C_MAXDIFF, C_LOFS, C_WIDTH1, C_ROIX0, C_ROIX1,
- C_LRX0, C_LRX1, C_LEN) = range(14)
+ C_LRX0, C_LRX1, C_INV, C_LEN) = range(15)  # C_INV: the invalid code, params.invalid_value
 
 
 @nb.njit(**_JIT)
@@ -122,7 +122,7 @@ def _finish_row(cfg: np.ndarray, big, pix: np.ndarray, drow: np.ndarray,
     """Pass B (vectorised over x): uniqueness verdict, subpixel offset, output values."""
     nd, min_disp, uratio = cfg[C_ND], cfg[C_MIND], cfg[C_URATIO]
     lofs, width1 = cfg[C_LOFS], cfg[C_WIDTH1]
-    inv = (min_disp - 1) * 16
+    inv = cfg[C_INV]
     top = np.int64(big)
     base = (nd - 1 + min_disp) * 256 + 15
     for x in range(width1):
@@ -187,7 +187,7 @@ def match_rows(pl: np.ndarray, pr: np.ndarray, disp: np.ndarray, bounds: np.ndar
     h, w = disp.shape
     r, nd, maxdiff = cfg[C_R], cfg[C_ND], cfg[C_MAXDIFF]
     roi_x0, roi_x1 = cfg[C_ROIX0], cfg[C_ROIX1]
-    inv = (cfg[C_MIND] - 1) * 16
+    inv = cfg[C_INV]
     spill = cfg[C_LOFS] + cfg[C_WIDTH1]
     for s in nb.prange(bounds.shape[0] - 1):
         t = nb.get_thread_id()

@@ -8,7 +8,7 @@ import pytest
 
 cv2 = pytest.importorskip("cv2")
 
-from stereocam.device_sim.matching import (  # noqa: E402
+from stereocam.stereo import (  # noqa: E402
     MatchParams, SGMMatcher, SGMParams, match, sgm_geometry)
 
 from tests.support import sgm_reference as ref  # noqa: E402
@@ -168,17 +168,18 @@ def test_thread_count_and_reuse_do_not_change_output() -> None:
 
 
 @pytest.mark.parametrize("kw, msg", [
-    (dict(num_disparities=24), "divisible by 16"),
+    (dict(num_disparities=24), "multiple of 16"),
     (dict(census_width=8), "census window"),
     (dict(census_width=11, census_height=7), "census window"),
     (dict(paths=6), "paths"),
-    (dict(p1=256), "p1 <= 255"),
-    (dict(p2=-1), "p2 >= 0"),
-    (dict(p2=194), "too large"),
+    (dict(p1=256), "p1: sgm_p1=256 outside 0..255"),
+    (dict(p2=-1), "p2 -1 out of range"),
+    (dict(p2=194), "p2 194 out of range"),
+    (dict(census_width=3, census_height=1, p2=254), "p2 254 out of range"),
     (dict(uniqueness_ratio=-1), "uniqueness_ratio"),
     (dict(speckle_range=-1), "speckle_range"),
     (dict(p1=1.5), "must be an int"),
-    (dict(min_disparity=-2100), "int16"),
+    (dict(min_disparity=-2100), "min_disparity=-2100 outside"),
 ])
 def test_bad_params(kw, msg) -> None:
     with pytest.raises(ValueError, match=msg):
@@ -187,7 +188,7 @@ def test_bad_params(kw, msg) -> None:
 
 def test_bad_inputs() -> None:
     img = np.zeros((20, 40), np.uint8)
-    with pytest.raises(ValueError, match="too small"):
+    with pytest.raises(ValueError, match="leaves no column of width 40"):
         SGMMatcher(img.shape, SGMParams(num_disparities=48))
     m = SGMMatcher(img.shape, SGMParams(num_disparities=16))
     with pytest.raises(ValueError, match="differs"):

@@ -26,7 +26,7 @@ from .simd import wta_all
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 # layout of the int64 configuration vector passed to sgm_rows
-(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_LEN) = range(9)
+(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_LEN) = range(10)  # C_INV: params.invalid_value
 
 
 @nb.njit(**_JIT)
@@ -93,7 +93,7 @@ def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray,
     check and subpixel into the output row."""
     nd, md, uratio, lrdiff = cfg[C_ND], cfg[C_MIND], cfg[C_URATIO], cfg[C_LRDIFF]
     x0, cols = cfg[C_X0], cfg[C_COLS]
-    inv = np.int16((md - 1) * 16)
+    inv = np.int16(cfg[C_INV])
     for i in range(rmin.shape[0]):
         rmin[i] = 32767
     for x in range(cols):

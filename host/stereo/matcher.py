@@ -10,7 +10,6 @@ from . import sad as _sad
 from .params import Geometry, MatchParams, geometry
 from .postfilter import filter_speckles
 from .prefilter import prefilter_pair
-from .sgm_params import SGMParams
 
 STRIPES_PER_THREAD = 4  # handed out dynamically: a preempted thread delays one short stripe
 
@@ -92,9 +91,9 @@ class Matcher:
         cfg = np.zeros(_sad.C_LEN, np.int64)
         cfg[[_sad.C_R, _sad.C_CAP, _sad.C_ND, _sad.C_MIND, _sad.C_TEX, _sad.C_URATIO,
              _sad.C_MAXDIFF, _sad.C_LOFS, _sad.C_WIDTH1, _sad.C_ROIX0, _sad.C_ROIX1,
-             _sad.C_LRX0, _sad.C_LRX1]] = [
+             _sad.C_LRX0, _sad.C_LRX1, _sad.C_INV]] = [
             r, p.pre_filter_cap, nd, p.min_disparity, p.texture_threshold, p.uniqueness_ratio,
-            p.disp12_max_diff, g.lofs, g.width1, g.roi_x0, g.roi_x1, g.lr_x0, g.lr_x1]
+            p.disp12_max_diff, g.lofs, g.width1, g.roi_x0, g.roi_x1, g.lr_x0, g.lr_x1, p.invalid_value]
         self.cfg = cfg
         if p.use_speckle:
             self.labels = np.empty((h, w), np.int32)
@@ -155,43 +154,11 @@ class Matcher:
             nb.set_parallel_chunksize(chunk)
 
 
-_cache: dict[tuple, object] = {}
-_cache_lock = threading.Lock()
-
-
-def match(left: np.ndarray, right: np.ndarray,
-          params: MatchParams | SGMParams = MatchParams()) -> np.ndarray:
-    """Match a rectified grey pair with a cached matcher for (shape, params): block matching
-    for MatchParams, semi-global matching for SGMParams."""
-    from .sgm_matcher import SGMMatcher
-    check_pair(left, right)
-    if isinstance(params, MatchParams):
-        cls = Matcher
-    elif isinstance(params, SGMParams):
-        cls = SGMMatcher
-    else:
-        raise ValueError(f"params must be MatchParams or SGMParams, got {type(params).__name__}")
-    key = (left.shape, params)
-    with _cache_lock:
-        m = _cache.get(key)
-        if m is None:
-            if len(_cache) >= 8:
-                _cache.pop(next(iter(_cache)))
-            m = _cache[key] = cls(left.shape, params)
-    return m.match(left, right)
-
-
-def warm_up() -> float:
-    """Compile (or load from numba's disk cache) every kernel, block matching and SGM; returns
-    the seconds spent."""
-    import time
-    t0 = time.perf_counter()
+def bm_warm_up() -> None:
+    """Compile (or load from numba's disk cache) the block-matching kernels."""
     rng = np.random.default_rng(0)
     img = rng.integers(0, 256, (40, 96), dtype=np.uint8)
     for kw in (dict(num_disparities=16, block_size=9, disp12_max_diff=1,
                     speckle_window_size=10, speckle_range=16),
                dict(num_disparities=16, block_size=25, pre_filter_type="normalized")):
         Matcher(img.shape, MatchParams(**kw)).match(img, np.roll(img, -3, axis=1))
-    from .sgm_matcher import sgm_warm_up
-    sgm_warm_up()
-    return time.perf_counter() - t0

@@ -8,10 +8,26 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .params import DISP_SHIFT, _check_int
+from stereocam.protocol.errors import ConfigError
+from stereocam.protocol.frame_messages import invalid_disparity
+from stereocam.protocol.params import Algorithm
 
-PATH_COUNTS = (4, 8)
+from .config_map import ConfigField, check_params, check_rule
+
 PATH_COST_LIMIT = 255  # path costs L <= census bits + p2 are held in uint8
+CENSUS_BITS = 64  # census codes are uint64
+
+SGM_CONFIG: tuple[ConfigField, ...] = (
+    ConfigField("num_disparities"), ConfigField("min_disparity"),
+    ConfigField("census_width", protocol_limits=False), ConfigField("census_height", protocol_limits=False),
+    ConfigField("sgm_paths", "paths"), ConfigField("sgm_p1", "p1"),
+    ConfigField("sgm_p2", "p2", protocol_limits=False), ConfigField("sgm_p2_adapt", "p2_adapt", protocol_limits=False),
+    ConfigField("uniqueness_ratio"), ConfigField("disp12_max_diff", "lr_max_diff"),
+    ConfigField("speckle_window_size"), ConfigField("speckle_range"),
+)
+"""Device configuration key -> SGMParams field. The census window and p2 have the engine's own
+(wider) limits: any census window of up to 64 comparisons, p2 up to what uint8 path costs hold;
+the protocol's ranges lie within them."""
 
 
 @dataclass(frozen=True)
@@ -36,33 +52,18 @@ class SGMParams:
         self.validate()
 
     def validate(self) -> None:
-        """Raise ValueError naming the first invalid parameter."""
-        for name in ("num_disparities", "min_disparity", "census_width", "census_height",
-                     "paths", "p1", "p2", "p2_adapt", "uniqueness_ratio", "lr_max_diff",
-                     "speckle_window_size", "speckle_range"):
-            _check_int(name, getattr(self, name))
-        nd = self.num_disparities
-        if nd <= 0 or nd % 16 != 0:
-            raise ValueError(f"num_disparities must be positive and divisible by 16, got {nd}")
+        """ConfigError (a ValueError) naming the first invalid parameter: the protocol's limits, then
+        the engine's own for the census window and p2."""
+        check_params(self, SGM_CONFIG)
         cw, ch = self.census_width, self.census_height
-        if cw < 1 or ch < 1 or cw % 2 == 0 or ch % 2 == 0 or not 2 <= cw * ch <= 65:
-            raise ValueError(f"census window must be odd by odd with 1..64 comparisons, "
-                             f"got {cw}x{ch}")
-        if self.paths not in PATH_COUNTS:
-            raise ValueError(f"paths must be one of {PATH_COUNTS}, got {self.paths}")
-        if not 0 <= self.p1 <= PATH_COST_LIMIT or self.p2 < 0:
-            raise ValueError(f"penalties must satisfy 0 <= p1 <= {PATH_COST_LIMIT} and "
-                             f"p2 >= 0, got p1={self.p1} p2={self.p2}")
-        if self.max_cost + self.p2 > PATH_COST_LIMIT:
-            raise ValueError(f"p2 {self.p2} too large: census bits {self.max_cost} + p2 must "
-                             f"not exceed {PATH_COST_LIMIT}")
-        for name in ("p2_adapt", "uniqueness_ratio", "speckle_window_size", "speckle_range"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be non-negative, got {getattr(self, name)}")
-        lo, hi = (self.min_disparity - 1) * 16, (self.min_disparity + nd) * 16
-        if lo < -32768 or hi > 32767:
-            raise ValueError(f"min_disparity {self.min_disparity} with num_disparities {nd} "
-                             "does not fit the int16 output")
+        if cw < 1 or ch < 1 or cw % 2 == 0 or ch % 2 == 0 or not 2 <= cw * ch <= CENSUS_BITS + 1:
+            raise ConfigError(f"census window must be odd by odd with 1..{CENSUS_BITS} comparisons, "
+                              f"got {cw}x{ch}")
+        if self.p2 < 0 or self.max_cost + self.p2 > PATH_COST_LIMIT:
+            raise ConfigError(f"p2 {self.p2} out of range: 0 <= p2 and census bits {self.max_cost} + p2 "
+                              f"<= {PATH_COST_LIMIT}")
+        if self.p2_adapt < 0:
+            raise ConfigError(f"p2_adapt must be non-negative, got {self.p2_adapt}")
 
     @property
     def max_cost(self) -> int:
@@ -72,7 +73,7 @@ class SGMParams:
     @property
     def invalid_value(self) -> int:
         """Value written for pixels without a disparity: (min_disparity - 1) * 16."""
-        return (self.min_disparity - 1) << DISP_SHIFT
+        return invalid_disparity(self.min_disparity)
 
     @property
     def use_speckle(self) -> bool:
@@ -95,11 +96,11 @@ class SGMGeometry:
 
 
 def sgm_geometry(height: int, width: int, p: SGMParams) -> SGMGeometry:
-    """The matched column range; ValueError when the image cannot hold one."""
+    """The matched column range; ConfigError (the protocol's SPEC §5.2 rule) when the image cannot hold one."""
+    if height < 1:
+        raise ConfigError(f"image {width}x{height} has no rows")
+    check_rule("sgm_disparity_range_vs_width", {"width": width, "algorithm": Algorithm.SEMI_GLOBAL,
+                                                "min_disparity": p.min_disparity, "num_disparities": p.num_disparities})
     x0 = max(p.min_disparity + p.num_disparities - 1, 0)
     x1 = min(width, width + p.min_disparity)
-    if height < 1 or x1 - x0 < 1:
-        raise ValueError(f"image {width}x{height} is too small for num_disparities "
-                         f"{p.num_disparities} and min_disparity {p.min_disparity}: "
-                         "no column can hold a valid disparity")
     return SGMGeometry(height, width, x0, x1)
