@@ -26,7 +26,7 @@ def device_cam(device_url):
 
 def _wait_queued(cam, n: int = 1, timeout: float = 30.0) -> None:
     deadline = time.monotonic() + timeout
-    while cam.assembler.frames.qsize() < n:
+    while len(cam.frames) < n:
         assert time.monotonic() < deadline, "no frame queued"
         time.sleep(0.01)
 
