@@ -76,17 +76,17 @@ class Camera:
         except BaseException:
             self.connection.close()
             raise
+        self.connection.start_heartbeat()
 
     def _dispatch(self, frame: Frame) -> None:
         """Every assembled frame, with its geometry, to every listener (on the reader thread: no I/O)."""
-        if self.connection.info.capabilities & m.Capability.CALIBRATION:
-            frame = self._geometry.apply(frame)
-        self._dispatcher.dispatch(frame)
+        self._dispatcher.dispatch(self._geometry.apply(frame))
 
     def _resolve_geometry(self) -> None:
-        """Read the calibration in force, for the geometry of the frames from now on."""
-        if self.connection.info.capabilities & m.Capability.CALIBRATION:
-            self._geometry.resolve(self.read_calibration())
+        """Read the calibration in force (a device that stores one), for the geometry of the frames
+        from now on; without calibration storage frames keep the device's own geometry."""
+        calibrated = self.connection.info.capabilities & m.Capability.CALIBRATION
+        self._geometry.resolve(self.read_calibration() if calibrated else None)
 
     def reconnect(self, timeout: float = 10.0, backoff: float = 0.1) -> None:
         """After a disconnect: find the same unit again (by serial), re-apply every parameter this
@@ -154,8 +154,7 @@ class Camera:
     # -- API --------------------------------------------------------------------------------
     def info(self) -> DeviceInfo:
         """Identity and state, read now (the calibration id changes when a calibration is written)."""
-        self.connection.info = self.connection.fetch_info()
-        return self.connection.info
+        return self.connection.refresh_info()
 
     def read_calibration(self, source: str = "active") -> StoredCalibration | None:
         """The calibration stored on the device (``active``, ``factory`` or ``user``), or None."""

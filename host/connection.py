@@ -86,6 +86,9 @@ class Connection:
                 self._repairer.close()
             raise
         self._heartbeat = threading.Thread(target=self._heartbeat_loop, name="stereocam-heartbeat", daemon=True)
+
+    def start_heartbeat(self) -> None:
+        """Begin the periodic STATUS (to ``on_status``) and clock-sync bursts, once the owner is ready."""
         self._heartbeat.start()
 
     def _connect(self, transport: Transport) -> None:
@@ -134,6 +137,11 @@ class Connection:
             raise VersionMismatchError(f"device speaks protocol {r.protocol_version[0]}.{r.protocol_version[1]}, "
                                        f"this host speaks {VERSION_MAJOR}.x")
         return DeviceInfo.from_message(r)
+
+    def refresh_info(self) -> DeviceInfo:
+        """Read INFO again (the calibration id changes when a calibration is written) and keep it."""
+        self.info = self.fetch_info()
+        return self.info
 
     def status(self) -> DeviceStatus:
         r = self.request(m.Heartbeat())
@@ -218,7 +226,8 @@ class Connection:
                 self.request(m.Stop(), timeout=0.5)
             except StereoCamError:
                 pass
-        self._heartbeat.join(timeout=2)
+        if self._heartbeat.is_alive():
+            self._heartbeat.join(timeout=2)
         self.link.close()  # first: a resend request in flight then fails at once
         if self._repairer is not None:
             self._repairer.close()
