@@ -24,10 +24,9 @@ from .device_types import DeviceInfo, DeviceStatus, config_names
 from .dispatch import DropPolicy, FrameDispatcher, FrameQueue, Listener
 from .frame_geometry import FrameGeometry
 from .frames import Frame
-from .link import Link
 from .transports import Transport, open_transport
 
-__all__ = ["Camera", "Counters", "DeviceInfo", "DeviceStatus", "DropPolicy", "FrameQueue", "open"]
+__all__ = ["Camera", "Counters", "DeviceInfo", "DeviceStatus", "open"]
 
 OPEN_OPTIONS = frozenset({"retries", "heartbeat_interval", "queue_depth", "deliver_incomplete", "auto_reconnect"})
 _log = logging.getLogger(__name__)
@@ -38,7 +37,7 @@ class Camera:
 
     The user API over a Connection (link, heartbeat, clock map, reconnect, frame repair) and a
     FrameDispatcher that hands every frame to each listener: the ``get_frame`` queue (or the
-    ``on_frame`` callbacks), and any added with ``listen`` or ``add_listener`` (a recorder, a viewer)."""
+    ``on_frame`` callbacks), and any added with ``add_listener`` (a recorder, a viewer)."""
 
     def __init__(self, transport: Transport, *, timeout: float = 1.0, retries: int = 2,
                  heartbeat_interval: float = 0.5, queue_depth: int = 8, deliver_incomplete: bool = False,
@@ -105,11 +104,6 @@ class Camera:
     def request(self, msg: m.Message, timeout: float | None = None) -> m.Message:
         """Send one protocol message and return the device's reply (protocol/messages.py)."""
         return self.connection.request(msg, timeout)
-
-    @property
-    def link(self) -> Link:
-        """The current link (a new one after ``reconnect``)."""
-        return self.connection.link
 
     @property
     def alive(self) -> bool:
@@ -291,15 +285,9 @@ class Camera:
         """The get_frame queue: ``len`` is how many frames wait, ``dropped`` how many it discarded."""
         return self._frames
 
-    def listen(self, name: str, maxsize: int = 8, policy: DropPolicy = DropPolicy.DROP_OLDEST) -> FrameQueue:
-        """A new queue that gets every frame from now on, besides get_frame's (dispatch.py); take
-        frames with its ``get``, and ``remove_listener`` it when done."""
-        listener = FrameQueue(name, maxsize, policy)
-        self.add_listener(listener)
-        return listener
-
     def add_listener(self, listener: Listener) -> None:
-        """Hand every frame from now on to ``listener.put`` too (which must not block)."""
+        """Hand every frame from now on to ``listener.put`` too, which must not block: a FrameQueue
+        (dispatch.py, its own size and drop policy), a RecordingListener, ... (python-can's Notifier)."""
         if not callable(getattr(listener, "put", None)):
             raise ConfigError(f"a frame listener has a put(frame) method, got {listener!r}")
         self._dispatcher.add(listener)

@@ -96,7 +96,7 @@ def test_a_camera_survives_a_huge_frame_begin_and_keeps_streaming():
         t.set_manipulator(read=_inject_once(m.encode(_begin(65535, 65535, 7, sequence=999))))
         cam.start()
         frame = cam.get_frame(timeout=10)
-        assert frame.width == 320 and cam.link.alive
+        assert frame.width == 320 and cam.alive
         assert cam.stats["bad_leaders"] == 1
     finally:
         cam.close()
@@ -169,14 +169,14 @@ def test_auto_reconnect_rides_through_a_failed_event_path():
         cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=10)
         cam.start()
         cam.get_frame(timeout=10)
-        broken = cam.link
+        broken = cam.connection.link
 
         def explode(msg: m.Message) -> None:
             raise RuntimeError("bug in a frame listener")
         broken._on_event = explode  # this link's event path fails at the next frame message
         frame = cam.get_frame(timeout=15)  # LinkFailedError is a DisconnectedError: reconnect, resume
         assert isinstance(broken.error, stereocam.LinkFailedError) and not broken.alive
-        assert cam.link is not broken and cam.link.alive and frame.width == 320
+        assert cam.connection.link is not broken and cam.alive and frame.width == 320
     finally:
         cam.close()
 

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 import stereocam
-from stereocam.dispatch import DropPolicy
+from stereocam.dispatch import DropPolicy, FrameQueue
 from stereocam.recording import Recorder, RecordingListener, describe
 from stereocam.tools.info import value_name
 from stereocam.tools.pictures import colorize, depth_ticks, disparity_range
@@ -40,7 +40,8 @@ class ViewerSession(Feed):
         self.cam = cam
         self.record_dir = Path.cwd() if record_dir is None else Path(record_dir)
         self._recording: RecordingListener | None = None
-        self._slot = cam.listen("viewer", policy=DropPolicy.KEEP_NEWEST)
+        self._slot = FrameQueue("viewer", policy=DropPolicy.KEEP_NEWEST)
+        cam.add_listener(self._slot)
         self._cond = threading.Condition()
         self._frame: stereocam.Frame | None = None
         self._jpegs: dict[tuple[int, str], bytes] = {}
