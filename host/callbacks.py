@@ -1,4 +1,5 @@
-"""Frame callbacks (``Camera.on_frame``): run on a thread of their own, never on the link's reader.
+"""Frame callbacks (``Camera.on_frame``): a dispatcher listener whose own thread calls them, never
+the link's reader; its queue drops the oldest frame when the callbacks fall behind.
 
 A callback that raises is logged, counted and kept: ``FrameCallbacks.check()`` re-raises the first
 such error as a CallbackError (its cause is the callback's exception). Nothing is swallowed.
@@ -9,19 +10,20 @@ import logging
 import threading
 from typing import Callable
 
-from stereocam.protocol.errors import CallbackError, StereoCamError
+from stereocam.protocol.errors import CallbackError
 
-from .frames import Frame
+from .dispatch import DropPolicy, FrameQueue
+from .frame_types import Frame
 
 FrameCallback = Callable[[Frame], object]
 _log = logging.getLogger(__name__)
 
 
 class FrameCallbacks:
-    """Takes frames from ``next_frame(timeout) -> Frame | None`` and hands each to every callback."""
+    """A listener (``put``) that queues up to ``depth`` frames and hands each to every callback."""
 
-    def __init__(self, next_frame: Callable[[float], Frame | None], name: str = "stereocam-callbacks"):
-        self._next_frame = next_frame
+    def __init__(self, depth: int, name: str = "stereocam-callbacks"):
+        self.queue = FrameQueue(name, depth, DropPolicy.DROP_OLDEST)
         self._callbacks: list[FrameCallback] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -46,19 +48,16 @@ class FrameCallbacks:
         with self._lock:
             return len(self._callbacks)
 
+    def put(self, frame: Frame) -> None:
+        self.queue.put(frame)
+
     def _run(self) -> None:
         while not self._stop.is_set():
-            with self._lock:  # take a frame only while somebody wants it: none is lost to get_frame
-                callbacks = list(self._callbacks)
-                try:
-                    frame = self._next_frame(0.1) if callbacks else None
-                except StereoCamError as exc:  # the link died: nothing more will come
-                    _log.warning("frame callbacks stopped: %s", exc)
-                    return
+            frame = self.queue.get(0.1)
             if frame is None:
-                if not callbacks:
-                    self._stop.wait(0.05)
                 continue
+            with self._lock:
+                callbacks = list(self._callbacks)
             for fn in callbacks:
                 try:
                     fn(frame)

@@ -3,42 +3,41 @@ from __future__ import annotations
 
 import logging
 import os
-import queue
 import threading
 import time
+from dataclasses import replace
 from typing import Iterator
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError,
-                                      StreamStalledError, StreamStoppedError, TransportError,
-                                      VersionMismatchError)
-from stereocam.protocol.framing import VERSION_MAJOR
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.config_rules import merge
+from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError,
+                                      StreamStalledError, StreamStoppedError, TransportError)
 from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, Param, TriggerMode
 
 from . import calibration_io, firmware_update, presets
 from .arguments import config_update, count_arg, flag_arg, timeout_arg
-from .device_types import DeviceInfo, DeviceStatus, config_names
 from .calibration_io import StoredCalibration
 from .callbacks import FrameCallback, FrameCallbacks
-from .clock import ArrivalStamp, ClockMap, SyncSample
-from .frame_repair import RepairWorker
+from .connection import MIN_HEARTBEAT_INTERVAL, Connection, Counters
+from .device_types import DeviceInfo, DeviceStatus, config_names
+from .dispatch import DropPolicy, FrameDispatcher, FrameQueue, Listener
 from .frame_geometry import FrameGeometry
-from .frames import AssemblyStats, Frame, FrameAssembler
-from .link import Link, LinkStats
-from .transports import Transport, open_transport, reopen_url
+from .frames import Frame
+from .transports import Transport, open_transport
 
-SYNC_SAMPLES = 8
-SYNC_PERIOD = 1.0  # seconds between background time-sync bursts (the map needs them to follow drift)
-SYNC_BURST = 3  # round trips per burst: one of them usually finds the link free of frame data
-MIN_HEARTBEAT_INTERVAL = 0.01  # s: a faster heartbeat would only load the link
+__all__ = ["Camera", "Counters", "DeviceInfo", "DeviceStatus", "open"]
+
 OPEN_OPTIONS = frozenset({"retries", "heartbeat_interval", "queue_depth", "deliver_incomplete", "auto_reconnect"})
 _log = logging.getLogger(__name__)
 
 
 class Camera:
-    """One connected camera. Use ``stereocam.open(url)``; close it (or use ``with``) when done."""
+    """One connected camera. Use ``stereocam.open(url)``; close it (or use ``with``) when done.
+
+    The user API over a Connection (link, heartbeat, clock map, reconnect, frame repair) and a
+    FrameDispatcher that hands every frame to each listener: the ``get_frame`` queue (or the
+    ``on_frame`` callbacks), and any added with ``add_listener`` (a recorder, a viewer)."""
 
     def __init__(self, transport: Transport, *, timeout: float = 1.0, retries: int = 2,
                  heartbeat_interval: float = 0.5, queue_depth: int = 8, deliver_incomplete: bool = False,
@@ -49,87 +48,53 @@ class Camera:
         try:
             self.auto_reconnect = flag_arg(auto_reconnect, "auto_reconnect")
             self.timeout = timeout_arg(timeout)
+            retries = count_arg(retries, "retries")
+            self._queue_depth = count_arg(queue_depth, "queue_depth", 1)
+            deliver_incomplete = flag_arg(deliver_incomplete, "deliver_incomplete")
             heartbeat_interval = timeout_arg(heartbeat_interval, "heartbeat_interval", MIN_HEARTBEAT_INTERVAL)
-            self._retries = count_arg(retries, "retries")
-            self.clock = ClockMap()
-            self.assembler = FrameAssembler(self.clock, count_arg(queue_depth, "queue_depth", 1),
-                                            flag_arg(deliver_incomplete, "deliver_incomplete"))
         except ConfigError:
             transport.close()
             raise
-        self._closed = threading.Event()
-        self._last_sync = 0.0
         self._applied: dict[str, int] = {}  # every parameter this Camera set, for reconnect
-        self._geometry = FrameGeometry(self.read_calibration)
+        self._geometry = FrameGeometry()
+        self._dispatcher = FrameDispatcher()
+        self._frames = FrameQueue("get_frame", self._queue_depth, DropPolicy.DROP_OLDEST)
+        self._dispatcher.add(self._frames)
+        self._callbacks: FrameCallbacks | None = None
         self._streaming = False  # what the user asked for
         self._stream_lock = threading.Lock()  # orders user start/stop against a watchdog restart
-        self._stream_epoch = 0  # bumped by every user start/stop: an older STATUS is not acted on
+        self._stream_changed = 0.0  # when the user last started or stopped: an older STATUS is not acted on
         self._stream_error: StreamStoppedError | None = None
-        self.stream_restarts = 0  # streams the device stopped (watchdog) that the host restarted
-        self.last_status: DeviceStatus | None = None
-        self._callbacks: FrameCallbacks | None = None
-        self._repairer = RepairWorker(lambda msg: self.link.request(msg, min(self.timeout, 0.5), 2),
-                                      self.assembler.on_resent,
-                                      lambda exc: self.link.fail(exc))
+        self._restarts = 0
+        self.connection = Connection(transport, self._dispatch, self._on_status, timeout=self.timeout,
+                                     retries=retries, heartbeat_interval=heartbeat_interval,
+                                     deliver_incomplete=deliver_incomplete)
+        self.clock = self.connection.clock
         try:
-            self._connect(transport)
+            self._resolve_geometry()
         except BaseException:
-            self._repairer.close()
+            self.connection.close()
             raise
-        self._heartbeat_interval = heartbeat_interval
-        self._heartbeat = threading.Thread(target=self._heartbeat_loop, name="stereocam-heartbeat", daemon=True)
-        self._heartbeat.start()
+        self.connection.start_heartbeat()
 
-    def _connect(self, transport: Transport) -> None:
-        """Bring up a link on ``transport``: identify, stop any stale stream, map the clock."""
-        self._arrivals = ArrivalStamp(transport)
-        self.link = Link(self._arrivals, timeout=self.timeout, retries=self._retries, on_event=self.assembler.on_message)
-        try:
-            self._info = self._fetch_info()
-            self.assembler.set_limits(self._info.max_width, self._info.max_height)
-            self._set_up_repair(transport)
-            self.request(m.Stop())  # a known state: no stale stream from a previous session
-            self.clock.reset()  # the unit may have rebooted: its clock starts over
-            self.sync_clock(SYNC_SAMPLES)
-        except BaseException:
-            self.link.close()
-            raise
+    def _dispatch(self, frame: Frame) -> None:
+        """Every assembled frame, with its geometry, to every listener (on the reader thread: no I/O)."""
+        self._dispatcher.dispatch(self._geometry.apply(frame))
 
-    def _set_up_repair(self, transport: Transport) -> None:
-        """Protocol 1.2 (SPEC §13): ask for this transport's chunk size and let the assembler request
-        resends of damaged parts; with an older device frames travel and drop as in 1.1."""
-        self.assembler.repair = None
-        if self._info.capabilities & m.Capability.FRAME_REPAIR:
-            self.request(m.SetFrameLink(transport.frame_chunk or 0))
-            self.assembler.repair = self._repairer.submit
+    def _resolve_geometry(self) -> None:
+        """Read the calibration in force (a device that stores one), for the geometry of the frames
+        from now on; without calibration storage frames keep the device's own geometry."""
+        calibrated = self.connection.info.capabilities & m.Capability.CALIBRATION
+        self._geometry.resolve(self.read_calibration() if calibrated else None)
 
     def reconnect(self, timeout: float = 10.0, backoff: float = 0.1) -> None:
         """After a disconnect: find the same unit again (by serial), re-apply every parameter this
         Camera set, and resume streaming if it was streaming. Retries with exponential backoff
         until ``timeout``; DisconnectedError if the unit does not come back in time."""
-        timeout, backoff = timeout_arg(timeout), timeout_arg(backoff, "backoff")
-        if self._closed.is_set():
-            raise TransportError(f"{self.url}: camera closed; open it again with stereocam.open")
-        serial = self._info.serial
-        url = reopen_url(self.url, serial)
-        deadline = time.monotonic() + timeout
-        _log.warning("%s: link lost (%s); reconnecting to serial %s via %s", self.url, self.link.error, serial, url)
-        self.link.close()
-        while True:
-            try:
-                self._connect(open_transport(url, self.timeout))
-                if self._info.serial != serial:
-                    self.link.close()
-                    raise TransportError(f"{url} is serial {self._info.serial}, not {serial}")
-                break
-            except StereoCamError as exc:
-                if time.monotonic() + backoff > deadline:
-                    raise DisconnectedError(f"camera {serial} did not come back within {timeout:.3g} s: {exc}") \
-                        from exc
-                time.sleep(backoff)
-                backoff = min(backoff * 2, 1.0)
-        _log.warning("%s: reconnected to serial %s; re-applying %d parameters%s", self.url, serial,
+        self.connection.reconnect(timeout, backoff)
+        _log.warning("%s: reconnected to serial %s; re-applying %d parameters%s", self.url, self.connection.info.serial,
                      len(self._applied), ", resuming the stream" if self._streaming else "")
+        self._resolve_geometry()
         if self._applied:
             self.request(m.SetConfig({BY_NAME[k].pid: v for k, v in self._applied.items()}))
         if self._streaming:
@@ -137,67 +102,53 @@ class Camera:
 
     # -- plumbing ---------------------------------------------------------------------------
     def request(self, msg: m.Message, timeout: float | None = None) -> m.Message:
-        return self.link.request(msg, timeout)
+        """Send one protocol message and return the device's reply (protocol/messages.py)."""
+        return self.connection.request(msg, timeout)
 
-    def _fetch_info(self) -> DeviceInfo:
-        r = self.request(m.GetInfo())
-        assert isinstance(r, m.Info)
-        if r.protocol_version[0] != VERSION_MAJOR:
-            raise VersionMismatchError(f"device speaks protocol {r.protocol_version[0]}.{r.protocol_version[1]}, "
-                                       f"this host speaks {VERSION_MAJOR}.x")
-        return DeviceInfo(r.model, r.serial, r.firmware_version, r.protocol_version, r.capabilities,
-                          r.sensor_width, r.sensor_height, r.max_payload, r.calibration_id, r.max_width,
-                          r.max_height)
+    @property
+    def alive(self) -> bool:
+        """Whether the link to the unit is up."""
+        return self.connection.alive
+
+    @property
+    def last_status(self) -> DeviceStatus | None:
+        """The STATUS of the latest heartbeat (None before the first)."""
+        return self.connection.last_status
+
+    @property
+    def stream_restarts(self) -> int:
+        """Streams the device stopped (watchdog) that the host restarted."""
+        return self._restarts
 
     def sync_clock(self, samples: int = 1) -> None:
         """Take ``samples`` time-sync round trips into the device→host clock map."""
-        for _ in range(count_arg(samples, "samples", 1)):
-            t0 = time.monotonic()
-            r = self.request(m.TimeSync())
-            t1 = time.monotonic()
-            t1 = self._arrivals.last if t0 < self._arrivals.last < t1 else t1  # when the reply came in
-            assert isinstance(r, m.Time)
-            self.clock.add(SyncSample(t0, r.device_time_us, t1))
-        self._last_sync = time.monotonic()
+        self.connection.sync_clock(samples)
 
-    def _heartbeat_loop(self) -> None:
-        while not self._closed.wait(self._heartbeat_interval):
-            try:
-                epoch = self._stream_epoch
-                self.last_status = self.status()
-                if not self.last_status.streaming:
-                    self._restart_stopped_stream(epoch)
-                if time.monotonic() - self._last_sync > SYNC_PERIOD:
-                    self.sync_clock(SYNC_BURST)
-            except StereoCamError:
-                pass  # a dead link shows in the user's next call; reconnect() brings a new one
-            except Exception as exc:  # noqa: BLE001 - a bug here ends the link visibly, not silently
-                self.link.fail(exc)
-
-    def _restart_stopped_stream(self, epoch: int) -> None:
+    def _on_status(self, status: DeviceStatus, asked_at: float) -> None:
         """The rule for a stream the device stopped on its own (SPEC §9): the host sends START once
         for each STATUS that shows it stopped while the user wants it streaming, and counts it in
         ``stream_restarts``. If that START is refused or unanswered on a live link, ``get_frame``
         raises StreamStoppedError until the user calls ``start`` (or ``stop``) again."""
+        if status.streaming:
+            return
         with self._stream_lock:
-            if (not self._streaming or self._stream_error is not None or epoch != self._stream_epoch
-                    or self._closed.is_set()):
+            if (not self._streaming or self._stream_error is not None or asked_at < self._stream_changed
+                    or self.connection.closed):
                 return
             try:
                 self.request(m.Start())
             except StereoCamError as exc:
-                if self.link.alive:  # a dead link is reconnect()'s business, which restarts the stream
+                if self.alive:  # a dead link is reconnect()'s business, which restarts the stream
                     err = StreamStoppedError(f"{self.url} stopped streaming on its own and did not restart: {exc}")
                     err.__cause__ = exc
                     self._stream_error = err
                 return
-            self.stream_restarts += 1
+            self._restarts += 1
 
     # -- API --------------------------------------------------------------------------------
     def info(self) -> DeviceInfo:
         """Identity and state, read now (the calibration id changes when a calibration is written)."""
-        self._info = self._fetch_info()
-        return self._info
+        return self.connection.refresh_info()
 
     def read_calibration(self, source: str = "active") -> StoredCalibration | None:
         """The calibration stored on the device (``active``, ``factory`` or ``user``), or None."""
@@ -206,10 +157,14 @@ class Camera:
     def write_calibration(self, calibration: StereoCalibration, target: str = "user") -> StoredCalibration:
         """Write, commit, read back and compare; raises VerificationError if the device holds
         anything else, DeviceError if it refused (its previous calibration stays in force)."""
-        return calibration_io.write_calibration(self.request, calibration, target)
+        stored = calibration_io.write_calibration(self.request, calibration, target)
+        self._resolve_geometry()
+        return stored
 
     def restore_factory_calibration(self) -> StoredCalibration | None:
-        return calibration_io.restore_factory(self.request)
+        stored = calibration_io.restore_factory(self.request)
+        self._resolve_geometry()
+        return stored
 
     def firmware_status(self) -> firmware_update.FirmwareStatus:
         """Both image slots (version, state, hash read back by the unit) and what runs."""
@@ -242,7 +197,7 @@ class Camera:
         (a ConfigError naming the parameter, ``.param``, and the NACK code) if the device would
         refuse it (also a value needing a capability this device does not advertise). The device
         stays the authority: ``configure`` still sends the request."""
-        return merge(self.config(), config_update(params), self._streaming, self._info.capabilities)
+        return merge(self.config(), config_update(params), self._streaming, self.connection.info.capabilities)
 
     def set_trigger_mode(self, mode: TriggerMode | str) -> None:
         """``mode``: a TriggerMode, its name ("free_run", "software", "external") or its number."""
@@ -266,15 +221,16 @@ class Camera:
     def start(self) -> None:
         """Start streaming; frames still queued from an earlier stream are discarded."""
         with self._stream_lock:
-            self._stream_epoch += 1
-            self.assembler.reset()
+            self._stream_changed = time.monotonic()
+            self.connection.assembler.reset()
+            self._frames.clear()
             self.request(m.Start())
             self._streaming = True
             self._stream_error = None
 
     def stop(self) -> None:
         with self._stream_lock:
-            self._stream_epoch += 1
+            self._stream_changed = time.monotonic()
             self.request(m.Stop())
             self._streaming = False
             self._stream_error = None
@@ -285,9 +241,8 @@ class Camera:
         return self._streaming
 
     def status(self) -> DeviceStatus:
-        r = self.request(m.Heartbeat())
-        assert isinstance(r, m.Status)
-        return DeviceStatus(r.uptime_us, r.streaming, TriggerMode(r.trigger_mode), r.counters)
+        """The device's state, asked for now (HEARTBEAT)."""
+        return self.connection.status()
 
     def get_frame(self, timeout: float | None = None) -> Frame:
         """The next complete frame; CameraTimeoutError (a TimeoutError) if none within ``timeout``
@@ -308,26 +263,37 @@ class Camera:
         return self._next_frame(0.0)
 
     def _next_frame(self, timeout: float) -> Frame | None:
-        """The next frame within ``timeout`` (a queued one first, even at 0), else None."""
+        """The next frame of the get_frame queue within ``timeout`` (a queued one first, even at 0),
+        else None. No request goes to the device (a reconnect with ``auto_reconnect`` aside)."""
         deadline = time.monotonic() + timeout
         while True:
             if self._stream_error is not None:
                 raise self._stream_error
             try:
-                self.link.check_alive()
+                self.connection.check_alive()
             except DisconnectedError:
-                if not self.auto_reconnect or self._closed.is_set():
+                if not self.auto_reconnect or self.connection.closed:
                     raise
                 self.reconnect(timeout=max(deadline - time.monotonic(), 0.0))
             left = deadline - time.monotonic()
-            try:
-                frame = self.assembler.frames.get(timeout=min(left, 0.1)) if left > 0 else \
-                    self.assembler.frames.get_nowait()
-            except queue.Empty:
-                if left <= 0:
-                    return None
-                continue
-            return self._with_stored_calibration(frame)
+            frame = self._frames.get(min(left, 0.1) if left > 0 else 0.0)
+            if frame is not None or left <= 0:
+                return frame
+
+    @property
+    def frames(self) -> FrameQueue:
+        """The get_frame queue: ``len`` is how many frames wait, ``dropped`` how many it discarded."""
+        return self._frames
+
+    def add_listener(self, listener: Listener) -> None:
+        """Hand every frame from now on to ``listener.put`` too, which must not block: a FrameQueue
+        (dispatch.py, its own size and drop policy), a RecordingListener, ... (python-can's Notifier)."""
+        if not callable(getattr(listener, "put", None)):
+            raise ConfigError(f"a frame listener has a put(frame) method, got {listener!r}")
+        self._dispatcher.add(listener)
+
+    def remove_listener(self, listener: Listener) -> None:
+        self._dispatcher.remove(listener)
 
     def on_frame(self, fn: FrameCallback) -> FrameCallback:
         """Call ``fn(frame)`` for every frame, on a thread of this Camera's (not the link's reader).
@@ -336,16 +302,22 @@ class Camera:
         Returns ``fn``, so it also works as a decorator."""
         if not callable(fn):
             raise ConfigError(f"a frame callback must be callable, got {fn!r}")
-        if self._closed.is_set():
+        if self.connection.closed:
             raise TransportError(f"{self.url}: camera closed")
         if self._callbacks is None:
-            self._callbacks = FrameCallbacks(self._next_frame)
+            self._callbacks = FrameCallbacks(self._queue_depth)
         self._callbacks.add(fn)
+        self._dispatcher.remove(self._frames)
+        self._dispatcher.add(self._callbacks)
         return fn
 
     def remove_callback(self, fn: FrameCallback) -> None:
         if self._callbacks is None or not self._callbacks.remove(fn):
             raise ConfigError(f"{fn!r} is not a registered frame callback")
+        if not len(self._callbacks):  # frames go to get_frame again
+            self._dispatcher.remove(self._callbacks)
+            self._callbacks.queue.clear()
+            self._dispatcher.add(self._frames)
 
     @property
     def callback_errors(self) -> int:
@@ -356,13 +328,6 @@ class Camera:
         """Raise CallbackError (from the callback's exception) if a frame callback has raised."""
         if self._callbacks is not None:
             self._callbacks.check()
-
-    def _with_stored_calibration(self, frame: Frame) -> Frame:
-        """A device with calibration storage: the frame's geometry as this host derives it from the
-        stored calibration (frame_geometry.py); otherwise the device's own."""
-        if not self._info.capabilities & m.Capability.CALIBRATION:
-            return frame
-        return self._geometry.apply(frame)
 
     @property
     def geometry_mismatches(self) -> int:
@@ -384,7 +349,7 @@ class Camera:
         while True:
             deadline = time.monotonic() + self.timeout
             while (frame := self._next_frame(min(0.1, max(deadline - time.monotonic(), 0.0)))) is None:
-                if not self._streaming or self._closed.is_set():
+                if not self._streaming or self.connection.closed:
                     return
                 if time.monotonic() >= deadline:
                     raise StreamStalledError(f"{self.url} is streaming but sent no frame for {self.timeout:.3g} s "
@@ -400,7 +365,7 @@ class Camera:
     def save_preset(self, path: str | os.PathLike) -> dict[str, int]:
         """Write the whole current configuration to ``path`` as JSON; returns it."""
         config = self.config()
-        presets.write_preset(path, config, self._info.model)
+        presets.write_preset(path, config, self.connection.info.model)
         return config
 
     def load_preset(self, path: str | os.PathLike) -> dict[str, int]:
@@ -408,39 +373,28 @@ class Camera:
         returns the new configuration. ConfigError for a file that is not a preset."""
         return self.configure(**presets.read_preset(path))
 
+    def counters(self) -> Counters:
+        """Host-side counters (link, decoder, frame assembly, delivery), one consistent snapshot."""
+        return replace(self.connection.counters(), queue_overflow=self._frames.dropped,
+                       stream_restarts=self._restarts)
+
     @property
     def stats(self) -> dict[str, int]:
-        """Host-side counters: decoder, link and frame assembly."""
-        out = self.link.decoder.stats.as_dict()
-        out.update(_fields(self.link.stats))
-        out.update(_fields(self.assembler.stats))
-        out["frames_dropped"] = self.assembler.stats.dropped
-        return out
+        """``counters()`` by name, flat."""
+        return self.counters().as_dict()
 
     def close(self) -> None:
-        if self._closed.is_set():
+        if self.connection.closed:
             return
-        self._closed.set()
         if self._callbacks is not None:
             self._callbacks.close()
-        if self.link.alive:
-            try:
-                self.request(m.Stop(), timeout=0.5)
-            except StereoCamError:
-                pass
-        self._heartbeat.join(timeout=2)
-        self.link.close()  # first: a resend request in flight then fails at once
-        self._repairer.close()
+        self.connection.close()
 
     def __enter__(self) -> "Camera":
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _fields(obj: LinkStats | AssemblyStats) -> dict[str, int]:
-    return {k: getattr(obj, k) for k in obj.__dataclass_fields__}
 
 
 def open(url: str, timeout: float = 1.0, **kwargs) -> Camera:  # noqa: A001 - mirrors serial_for_url

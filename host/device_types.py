@@ -1,24 +1,20 @@
 """What a camera reports about itself: identity (INFO), state (STATUS), configuration by name."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
+from stereocam.protocol import messages as m
 from stereocam.protocol.params import BY_ID, TriggerMode
 
 
 @dataclass(frozen=True)
-class DeviceInfo:
-    model: str
-    serial: str
-    firmware_version: str
-    protocol_version: tuple[int, int]
-    capabilities: int
-    sensor_width: int
-    sensor_height: int
-    max_payload: int
-    calibration_id: int  # the calibration in force when this was read; 0 = uncalibrated
-    max_width: int = 0  # largest frame width the device may send (INFO)
-    max_height: int = 0
+class DeviceInfo(m.Info):
+    """The device's INFO reply as the SDK hands it out: every field of the message (protocol/messages.py),
+    ``calibration_id`` being the calibration in force when it was read (0 = uncalibrated)."""
+
+    @classmethod
+    def from_message(cls, info: m.Info) -> "DeviceInfo":
+        return cls(**{f.name: getattr(info, f.name) for f in fields(info)})
 
 
 @dataclass(frozen=True)

@@ -141,7 +141,7 @@ def update(cam, image: bytes, *, progress: Progress | None = None, replace: bool
 def await_reboot(cam, timeout: float) -> None:
     """Wait for the link to drop (the unit resets), then reconnect to the same serial."""
     deadline = time.monotonic() + timeout
-    while cam.link.alive:
+    while cam.alive:
         if time.monotonic() > deadline:
             raise FirmwareUpdateError(f"{cam.url} did not reboot within {timeout:.3g} s of UPDATE_ACTIVATE")
         time.sleep(0.01)

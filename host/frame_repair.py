@@ -45,7 +45,8 @@ class Coverage:
 
 class RepairWorker:
     """Sends FRAME_RESEND requests from a few threads and reports each outcome (the reply, or None
-    when it failed) to ``on_result``; a bug there ends the link via ``on_error``."""
+    when it failed) to ``on_result``; a bug there ends the link via ``on_error``. The threads start
+    with the first request: a link that never loses a byte never runs them."""
 
     def __init__(self, request: Callable[[m.Message], m.Message],
                  on_result: Callable[[int, m.FrameResent | None], None], on_error: Callable[[BaseException], None]):
@@ -53,12 +54,17 @@ class RepairWorker:
         self._on_result = on_result
         self._on_error = on_error
         self._jobs: queue.SimpleQueue[tuple[int, Ranges] | None] = queue.SimpleQueue()
-        self._threads = [threading.Thread(target=self._run, name="stereocam-repair", daemon=True)
-                         for _ in range(REPAIR_THREADS)]
-        for t in self._threads:
-            t.start()
+        self._lock = threading.Lock()
+        self._threads: list[threading.Thread] = []
+        self._closed = False
 
     def submit(self, sequence: int, ranges: Ranges) -> None:
+        with self._lock:
+            if not self._threads and not self._closed:
+                self._threads = [threading.Thread(target=self._run, name="stereocam-repair", daemon=True)
+                                 for _ in range(REPAIR_THREADS)]
+                for t in self._threads:
+                    t.start()
         self._jobs.put((sequence, ranges))
 
     def _run(self) -> None:
@@ -75,6 +81,8 @@ class RepairWorker:
                 return
 
     def close(self) -> None:
+        with self._lock:
+            self._closed = True
         for _ in self._threads:
             self._jobs.put(None)
         for t in self._threads:

@@ -9,10 +9,9 @@ from __future__ import annotations
 
 import bisect
 import logging
-import queue
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -21,6 +20,7 @@ from stereocam.protocol import messages as m
 from stereocam.protocol.params import Output
 from stereocam.protocol.segmentation import PLANE_DTYPE, PLANE_ORDER, plane_size, planes_of
 
+from .clock import ClockMap
 from .frame_repair import MAX_REPAIRING, MAX_ROUNDS, REPAIR_WINDOW, Coverage, Ranges
 from .frame_types import DisparityFormat, Frame, FrameStatus, StereoGeometry
 
@@ -36,15 +36,13 @@ class AssemblyStats:
     orphan_chunks: int = 0  # chunks of a capture whose leader was lost
     bad_leaders: int = 0  # FRAME_BEGINs claiming sizes beyond the INFO limits: dropped, nothing allocated
     lost: int = 0  # sequence numbers never seen (dropped on the device or on the link)
-    queue_overflow: int = 0  # delivered frames discarded because the user did not keep up
     repair_requests: int = 0  # FRAME_RESEND requests sent (protocol 1.2)
     repaired: int = 0  # captures delivered complete thanks to resent parts
 
     @property
     def dropped(self) -> int:
-        """Captures the user did not get whole (delivered flawed ones included)."""
-        return (self.incomplete + self.size_mismatch + self.device_errors + self.lost + self.queue_overflow
-                + self.bad_leaders)
+        """Captures not assembled whole (delivered flawed ones included)."""
+        return self.incomplete + self.size_mismatch + self.device_errors + self.lost + self.bad_leaders
 
 
 _ALL_PLANES = sum(int(p) for p in PLANE_ORDER)
@@ -62,16 +60,17 @@ class _Building:
 
 
 class FrameAssembler:
-    """Consumes frame messages in order; puts Frames on a bounded queue (oldest dropped).
+    """Consumes frame messages in order; hands each Frame to ``deliver`` (which must not block:
+    it runs on the link's reader thread or a repair worker).
 
     Flawed captures are counted by reason and dropped, or, with ``deliver_incomplete``, delivered
     with their ``status`` set (as GigE/USB3 Vision SDKs hand out buffers marked incomplete).
     """
 
-    def __init__(self, clock_map, depth: int = 8, deliver_incomplete: bool = False):
+    def __init__(self, clock_map: ClockMap, deliver: Callable[[Frame], None], deliver_incomplete: bool = False):
         self.deliver_incomplete = deliver_incomplete
-        self.frames: queue.Queue[Frame] = queue.Queue(maxsize=depth)
-        self.stats = AssemblyStats()
+        self._deliver_to = deliver
+        self.stats = AssemblyStats()  # written under the lock; read a consistent copy with snapshot()
         self._clock_map = clock_map
         self._cur: _Building | None = None
         self._last_seq: int | None = None
@@ -86,19 +85,19 @@ class FrameAssembler:
         """What the device said in INFO; a FRAME_BEGIN beyond it (or before it is known) is dropped."""
         self._limits = (max_width, max_height)
 
+    def snapshot(self) -> AssemblyStats:
+        """A copy of the counters, taken while no message is being assembled."""
+        with self._lock:
+            return replace(self.stats)
+
     def reset(self) -> None:
-        """Before a new stream: forget the last sequence (a gap across start is no loss), a capture
-        cut off by the stop, and the frames still queued."""
+        """Before a new stream: forget the last sequence (a gap across start is no loss) and a
+        capture cut off by the stop."""
         with self._lock:
             self._last_seq = None
             self._cur = None
             self._repairing.clear()
             self._held.clear()
-        while True:
-            try:
-                self.frames.get_nowait()
-            except queue.Empty:
-                return
 
     def on_message(self, msg: m.Message) -> None:
         with self._lock:
@@ -235,14 +234,4 @@ class FrameAssembler:
 
     def _enqueue(self, frame: Frame) -> None:
         self.stats.frames += frame.status is FrameStatus.COMPLETE
-        while True:
-            try:
-                self.frames.put_nowait(frame)
-                return
-            except queue.Full:
-                try:
-                    old = self.frames.get_nowait()
-                    self.stats.queue_overflow += 1
-                    _log.debug("frame %d discarded: the user did not take it before the queue filled", old.sequence)
-                except queue.Empty:
-                    pass
+        self._deliver_to(frame)

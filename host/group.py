@@ -31,7 +31,8 @@ from stereocam.protocol.errors import CameraTimeoutError, ConfigError, StereoCam
 from stereocam.protocol.params import TriggerMode
 
 from .arguments import timeout_arg
-from .camera import SYNC_BURST, Camera, open as open_camera
+from .camera import Camera, open as open_camera
+from .connection import SYNC_BURST
 from .clock import MapError
 from .frame_sets import MatchedSet, SetMatcher, SetStats
 

@@ -25,13 +25,31 @@ _log = logging.getLogger(__name__)
 READ_CHUNK = 1 << 20
 
 
-@dataclass
+@dataclass(frozen=True)
 class LinkStats:
+    """A snapshot of a link's counters (``Link.stats``)."""
+
     requests: int = 0
     retries: int = 0
     timeouts: int = 0
     stray_replies: int = 0  # replies nobody waited for (late answers to timed-out requests, stale ones)
     undecodable: int = 0  # packets with a valid CRC but an unknown type or malformed payload
+
+
+class _LinkCounters:
+    """The link's counters, incremented from any thread (user, heartbeat, repair, reader) under one lock."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._values = dict.fromkeys(LinkStats.__dataclass_fields__, 0)
+
+    def add(self, name: str, n: int = 1) -> None:
+        with self._lock:
+            self._values[name] += n
+
+    def snapshot(self) -> LinkStats:
+        with self._lock:
+            return LinkStats(**self._values)
 
 
 @dataclass
@@ -58,7 +76,7 @@ class Link:
         self.timeout = timeout_arg(timeout)
         self.retries = retries
         self.decoder = Decoder(message_timeout=HOST_MESSAGE_TIMEOUT)
-        self.stats = LinkStats()
+        self._counters = _LinkCounters()
         self._on_event = on_event
         self._lock = threading.Lock()
         self._write_lock = threading.Lock()
@@ -69,6 +87,11 @@ class Link:
         self._reader = threading.Thread(target=self._read_loop, name="stereocam-link", daemon=True)
         self._reader.start()
 
+    @property
+    def stats(self) -> LinkStats:
+        """The counters so far, read consistently (several threads increment them)."""
+        return self._counters.snapshot()
+
     # -- requests -------------------------------------------------------------------------------
     def _allocate_id(self) -> int:
         with self._lock:
@@ -77,7 +100,7 @@ class Link:
             return rid
 
     def _retry(self, msg: m.Message, rid: int, attempt: int, retries: int, why: str) -> None:
-        self.stats.retries += 1
+        self._counters.add("retries")
         _log.info("%s (request id %d): %s; resending (try %d of %d)", type(msg).__name__, rid, why, attempt + 2,
                   retries + 1)
 
@@ -90,7 +113,7 @@ class Link:
         pending = _Pending(m.reply_type(msg.TYPE))
         with self._lock:
             self._pending[rid] = pending
-        self.stats.requests += 1
+        self._counters.add("requests")
         try:
             for attempt in range(retries + 1):
                 try:
@@ -105,7 +128,7 @@ class Link:
                 if attempt < retries:
                     self._retry(msg, rid, attempt, retries, f"no reply in {timeout:.3g} s")
             else:
-                self.stats.timeouts += 1
+                self._counters.add("timeouts")
                 raise CameraTimeoutError(f"no reply to {type(msg).__name__} (request id {rid}) after "
                                          f"{retries + 1} tries of {timeout:.3g} s")
         finally:
@@ -169,7 +192,7 @@ class Link:
             msg: m.Message | None = m.decode_packet(packet)
             bad = None
         except ProtocolError as exc:
-            self.stats.undecodable += 1
+            self._counters.add("undecodable")
             msg, bad = None, exc
         if packet.msg_type & m.REPLY_BIT:
             with self._lock:
@@ -177,7 +200,7 @@ class Link:
             if pending is None or pending.event.is_set() or not _answers(pending, packet.msg_type, msg):
                 # nobody waits for it, or it answers another request that had this id (a late reply
                 # from before a timeout, or one left in a pty by an earlier session): not this one's
-                self.stats.stray_replies += 1
+                self._counters.add("stray_replies")
                 return
             if bad is not None:  # the answer came but cannot be read: fail now, do not wait
                 pending.error = bad

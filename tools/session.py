@@ -19,7 +19,7 @@ def preserved_configuration(cam: stereocam.Camera) -> Iterator[dict[str, int]]:
     try:
         yield found
     finally:
-        if cam.link.alive:
+        if cam.alive:
             cam.stop()
             changed = {k: v for k, v in cam.config().items() if found.get(k) != v}
             if changed:

@@ -5,7 +5,7 @@ writer underneath (frames in, file out, on its own thread). Topics and message t
 """
 from .convert import LinkCounters
 from .recorder import DamagedRecordingError, Recorder, RecorderStats, RecordingError, UnitDescription
-from .session import Progress, describe, record
+from .session import Progress, RecordingListener, describe, record
 
 __all__ = ["record", "describe", "Recorder", "RecorderStats", "RecordingError", "DamagedRecordingError",
-           "UnitDescription", "LinkCounters", "Progress"]
+           "UnitDescription", "LinkCounters", "Progress", "RecordingListener"]

@@ -1,15 +1,19 @@
-"""Record a live camera: read what the file says about the unit, stream, hand frames to a Recorder."""
+"""Record a live camera: read what the file says about the unit, stream, and hand every frame to a
+Recorder as a listener of the camera's frame dispatcher (no grab loop: ``get_frame`` gets the same
+frames at the same time)."""
 from __future__ import annotations
 
 import os
+import threading
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
-from stereocam.protocol.errors import CameraTimeoutError, ConfigError
+from stereocam.protocol.errors import ConfigError
 
 from ..arguments import count_arg, timeout_arg
+from ..frame_types import Frame
 from .convert import LinkCounters
 from .mcapwriter import check_level
 from .recorder import Recorder, RecorderStats, RecordingError, UnitDescription
@@ -20,6 +24,7 @@ if TYPE_CHECKING:
     from stereocam.camera import Camera
 
 PROGRESS_PERIOD = 0.5  # seconds between progress reports
+WAIT_STEP = 0.02  # seconds between looks at the limits while frames go to the recorder
 
 
 @dataclass(frozen=True)
@@ -48,11 +53,41 @@ def describe(camera: "Camera") -> UnitDescription:
 
 
 def counters_of(camera: "Camera") -> LinkCounters:
-    """The camera's and the link's drop counters so far (the recorder adds its own)."""
-    st = camera.assembler.stats
+    """The camera's and the link's drop counters so far (the recorder adds its own). A recorder
+    listens to the dispatcher directly, so no host queue stands between them (host_queue_overflow 0)."""
+    st = camera.counters().assembly
     status = camera.last_status
-    return LinkCounters(st.lost, st.incomplete + st.size_mismatch + st.device_errors, st.queue_overflow,
-                        status.counters.get("frames_dropped", 0) if status else 0)
+    return LinkCounters(link_lost=st.lost, link_incomplete=st.incomplete + st.size_mismatch + st.device_errors,
+                        device_dropped=status.counters.get("frames_dropped", 0) if status else 0)
+
+
+class RecordingListener:
+    """A frame listener that hands each frame to a Recorder (whose bounded queue drops the newest
+    frame when the disk falls behind, counted as recorder_dropped), up to ``frames`` of them.
+    ``done`` is set at the limit or when writing failed (``error``)."""
+
+    def __init__(self, camera: "Camera", recorder: Recorder, frames: int | None = None):
+        self.camera = camera
+        self.recorder = recorder
+        self.limit = frames
+        self.frames = 0  # frames offered to the recorder
+        self.last_frame_at = time.monotonic()
+        self.error: RecordingError | None = None
+        self.done = threading.Event()
+
+    def put(self, frame: Frame) -> None:
+        if self.done.is_set():
+            return
+        try:
+            self.recorder.put(frame, counters_of(self.camera))
+        except RecordingError as exc:  # the disk failed: the recording ends, the camera goes on
+            self.error = exc
+            self.done.set()
+            return
+        self.frames += 1
+        self.last_frame_at = time.monotonic()
+        if self.limit is not None and self.frames >= self.limit:
+            self.done.set()
 
 
 def record(camera: "Camera", path: str | Path, *, frames: int | None = None, seconds: float | None = None,
@@ -75,31 +110,34 @@ def record(camera: "Camera", path: str | Path, *, frames: int | None = None, sec
     if os.path.lexists(path):  # the Recorder refuses too (exclusive create); said here before the camera is asked
         raise RecordingError(f"{path} already exists: a recording never replaces a file; remove it or give "
                              f"another path")
-    started_here = not camera._streaming
+    started_here = not camera.streaming
     recorder = Recorder(path, describe(camera), **recorder_options)
+    listener = RecordingListener(camera, recorder, frames)
+    stall = max(camera.timeout, 2.0)  # streaming but no frame for this long: the recording ends
+    camera.add_listener(listener)
     t0 = time.monotonic()
     next_report = t0 + PROGRESS_PERIOD
-    n = 0
     try:
         if started_here:
             camera.start()
-        while (frames is None or n < frames) and (seconds is None or time.monotonic() - t0 < seconds):
-            try:
-                frame = camera.get_frame(timeout=max(camera.timeout, 2.0))
-            except CameraTimeoutError:
-                break
-            n += 1
-            recorder.put(frame, counters_of(camera))
+        listener.last_frame_at = time.monotonic()
+        while not listener.done.wait(WAIT_STEP):
             now = time.monotonic()
+            if (seconds is not None and now - t0 >= seconds) or now - listener.last_frame_at > stall:
+                break
+            camera.connection.check_alive()
             if progress is not None and now >= next_report:
                 next_report = now + PROGRESS_PERIOD
-                progress(_progress(recorder, n, now - t0))
+                progress(_progress(recorder, listener.frames, now - t0))
     finally:
-        if started_here and camera.link.alive:
+        camera.remove_listener(listener)
+        if started_here and camera.alive:
             camera.stop()
         stats = recorder.close()
+    if listener.error is not None:
+        raise listener.error
     if progress is not None:
-        progress(_progress(recorder, n, time.monotonic() - t0))
+        progress(_progress(recorder, listener.frames, time.monotonic() - t0))
     return stats
 
 

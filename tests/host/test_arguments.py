@@ -38,7 +38,7 @@ def test_other_timeouts_are_checked_too(cam, call):
            "reconnect": lambda: cam.reconnect(timeout=math.inf)}
     with pytest.raises(stereocam.ConfigError, match="timeout"):
         returns_within(5, fns[call])
-    assert cam.link.alive
+    assert cam.alive
 
 
 @pytest.mark.parametrize("value", [2**31, -2**31 - 1, 10**20])

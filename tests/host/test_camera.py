@@ -106,9 +106,9 @@ def test_free_run_streaming_and_clock_mapping(cam):
 
 def test_garbage_between_commands_is_survived(cam):
     before = cam.status().counters
-    cam.link.transport.write(b"\x00\xffSTOC garbage STO" + bytes(range(256)) + b"STOC\x01\x00\x14")
+    cam.connection.link.transport.write(b"\x00\xffSTOC garbage STO" + bytes(range(256)) + b"STOC\x01\x00\x14")
     good = encode_frame(m.MsgType.GET_INFO, 1, b"")
-    cam.link.transport.write(good[:-1] + bytes([good[-1] ^ 0xFF]))  # bad payload CRC
+    cam.connection.link.transport.write(good[:-1] + bytes([good[-1] ^ 0xFF]))  # bad payload CRC
     assert cam.info().serial
     assert cam.configure(fps=11)["fps"] == 11
     after = cam.status().counters
@@ -121,7 +121,7 @@ def test_oversize_length_is_not_trusted(cam):
     import struct
 
     head = struct.pack("<4sBBBBHHIH", b"STOC", 1, 0, 20, 0, m.MsgType.GET_INFO, 9, 50 << 20, 0)
-    cam.link.transport.write(head + struct.pack("<H", binascii.crc_hqx(head, 0xFFFF)))
+    cam.connection.link.transport.write(head + struct.pack("<H", binascii.crc_hqx(head, 0xFFFF)))
     assert cam.config()["width"] == 320  # answered at once: the 50 MiB length was not waited for
     assert cam.status().counters["rx_oversize"] >= 1
 

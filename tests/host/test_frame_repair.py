@@ -127,8 +127,8 @@ def stream_through_noise(rate: float, frames: int, seed: int = 53, v1_1: bool = 
         link.set_manipulator(read=lambda b: b, write=lambda b: b)
         cam.stop()
         time.sleep(0.5)
-        while not cam.assembler.frames.empty():
-            got.append(cam.assembler.frames.get())
+        while (frame := cam.try_get_frame()) is not None:
+            got.append(frame)
         sent = sorted(rec.sent)[:frames]  # the first ``frames`` captures the device sent
         seqs = set(sent)
         ok = sum(1 for f in got if f.sequence in seqs and rec.intact(f))

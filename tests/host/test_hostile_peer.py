@@ -60,26 +60,29 @@ def test_an_exception_in_the_event_path_ends_the_link_with_a_typed_error():
 @pytest.mark.parametrize("width,height,planes", [(65535, 65535, 7), (1281, 480, 1), (640, 961, 1), (0, 480, 1),
                                                  (640, 480, 0x80)])
 def test_frame_begin_beyond_the_negotiated_limits_is_dropped_not_allocated(width, height, planes):
-    asm = FrameAssembler(ClockMap())
+    delivered: list = []
+    asm = FrameAssembler(ClockMap(), delivered.append)
     asm.set_limits(max_width=1280, max_height=960)
     asm.on_message(_begin(width, height, planes))
     asm.on_message(m.FrameData(1, 1, 0, b"\x00" * 16))
     asm.on_message(m.FrameEnd(1, m.FRAME_OK, width * height, 0, 0))
     assert asm.stats.bad_leaders == 1
-    assert asm._cur is None and asm.frames.empty()
+    assert asm._cur is None and not delivered
 
 
 def test_frame_data_outside_its_plane_marks_the_capture_bad():
-    asm = FrameAssembler(ClockMap())
+    delivered: list = []
+    asm = FrameAssembler(ClockMap(), delivered.append)
     asm.set_limits(max_width=1280, max_height=960)
     asm.on_message(_begin(16, 8, 1))
     asm.on_message(m.FrameData(1, 1, 0xFFFFFFF0, b"\x01" * 32))
     asm.on_message(m.FrameEnd(1, m.FRAME_OK, 128, 0, 0))
-    assert asm.stats.size_mismatch == 1 and asm.frames.empty()
+    assert asm.stats.size_mismatch == 1 and not delivered
 
 
 def test_no_frame_is_assembled_before_the_limits_are_known():
-    asm = FrameAssembler(ClockMap())
+    delivered: list = []
+    asm = FrameAssembler(ClockMap(), delivered.append)
     asm.on_message(_begin(16, 8, 1))
     assert asm.stats.bad_leaders == 1
 
@@ -93,7 +96,7 @@ def test_a_camera_survives_a_huge_frame_begin_and_keeps_streaming():
         t.set_manipulator(read=_inject_once(m.encode(_begin(65535, 65535, 7, sequence=999))))
         cam.start()
         frame = cam.get_frame(timeout=10)
-        assert frame.width == 320 and cam.link.alive
+        assert frame.width == 320 and cam.alive
         assert cam.stats["bad_leaders"] == 1
     finally:
         cam.close()
@@ -166,14 +169,14 @@ def test_auto_reconnect_rides_through_a_failed_event_path():
         cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=10)
         cam.start()
         cam.get_frame(timeout=10)
-        broken = cam.link
+        broken = cam.connection.link
 
         def explode(msg: m.Message) -> None:
             raise RuntimeError("bug in a frame listener")
         broken._on_event = explode  # this link's event path fails at the next frame message
         frame = cam.get_frame(timeout=15)  # LinkFailedError is a DisconnectedError: reconnect, resume
         assert isinstance(broken.error, stereocam.LinkFailedError) and not broken.alive
-        assert cam.link is not broken and cam.link.alive and frame.width == 320
+        assert cam.connection.link is not broken and cam.alive and frame.width == 320
     finally:
         cam.close()
 

@@ -114,7 +114,7 @@ def test_corrupted_frame_is_dropped_and_counted(faulty):
     assert hits[0].payload[:4] != b""
     bad_seq = struct.unpack_from("<I", hits[0].payload)[0]
     by_seq = {f.sequence: f for f in frames}
-    if cam.assembler.deliver_incomplete:  # handed out, but marked, and the gap reads as zeros
+    if cam.connection.assembler.deliver_incomplete:  # handed out, but marked, and the gap reads as zeros
         assert by_seq[bad_seq].status is stereocam.FrameStatus.MISSING_DATA
         assert all(f.status is stereocam.FrameStatus.COMPLETE for s, f in by_seq.items() if s != bad_seq)
     else:

@@ -26,7 +26,7 @@ def device_cam(device_url):
 
 def _wait_queued(cam, n: int = 1, timeout: float = 30.0) -> None:
     deadline = time.monotonic() + timeout
-    while cam.assembler.frames.qsize() < n:
+    while len(cam.frames) < n:
         assert time.monotonic() < deadline, "no frame queued"
         time.sleep(0.01)
 
@@ -65,7 +65,7 @@ def test_callbacks_run_off_the_reader_thread_and_report_errors(device_cam, caplo
         deadline = time.monotonic() + 10
         while device_cam.callback_errors == 0 and time.monotonic() < deadline:
             time.sleep(0.01)
-    assert seen and all(name != device_cam.link._reader.name for _, name in seen)
+    assert seen and all(name != device_cam.connection.link._reader.name for _, name in seen)
     assert device_cam.callback_errors >= 1
     assert any("boom on" in r.getMessage() for r in caplog.records)
     with pytest.raises(stereocam.CallbackError) as info:

@@ -15,11 +15,13 @@ from stereocam.protocol.segmentation import PLANE_ORDER, capture_messages, plane
 W, H = 96, 40
 
 
-def assembler(**kw) -> FrameAssembler:
-    """A host assembler that negotiated limits this test's format fits in (INFO max_width/max_height)."""
-    asm = FrameAssembler(ClockMap(), **kw)
+def assembler(**kw) -> tuple[FrameAssembler, list]:
+    """A host assembler that negotiated limits this test's format fits in (INFO max_width/max_height),
+    and the list it delivers frames to."""
+    delivered: list = []
+    asm = FrameAssembler(ClockMap(), delivered.append, **kw)
     asm.set_limits(1280, 960)
-    return asm
+    return asm, delivered
 
 
 def begin(planes: Output, sequence: int = 5) -> m.FrameBegin:
@@ -46,10 +48,10 @@ def test_segmented_capture_reassembles_byte_for_byte(chunk: int, planes: Output)
     end = msgs[-1]
     assert (end.left_bytes, end.right_bytes, end.disparity_bytes) == tuple(
         plane_size(p, W, H) if p in planes else 0 for p in PLANE_ORDER)
-    asm = assembler()
+    asm, delivered = assembler()
     for msg in Decoder().feed(b"".join(m.encode(x) for x in msgs)):  # through the real codec
         asm.on_message(m.decode_packet(msg))
-    frame = asm.frames.get_nowait()
+    frame, = delivered
     assert frame.status is FrameStatus.COMPLETE and asm.stats.frames == 1
     for plane, got in ((Output.LEFT, frame.left), (Output.RIGHT, frame.right), (Output.DISPARITY, frame.disparity)):
         if plane in planes:
@@ -84,10 +86,10 @@ def test_a_plane_given_as_a_function_is_computed_when_its_turn_comes() -> None:
 
 def test_a_chunk_lost_on_the_way_is_missing_data() -> None:
     msgs = list(capture_messages(begin(Output.LEFT | Output.RIGHT), images(1), 1024))
-    asm = assembler(deliver_incomplete=True)
+    asm, delivered = assembler(deliver_incomplete=True)
     for x in msgs[:3] + msgs[4:]:
         asm.on_message(x)
-    assert asm.frames.get_nowait().status is FrameStatus.MISSING_DATA and asm.stats.incomplete == 1
+    assert delivered[0].status is FrameStatus.MISSING_DATA and asm.stats.incomplete == 1
 
 
 def test_images_that_do_not_fit_the_capture_are_refused() -> None:

@@ -53,7 +53,7 @@ def test_images_are_always_the_newest_frame(viewer):
     assert int(headers["X-Sequence"]) > first["sequence"]
     img = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_GRAYSCALE)
     assert img.shape == (240, 320)
-    assert viewer.session.cam.stats["queue_overflow"] == 0
+    assert viewer.session.skipped > 0  # the viewer's slot held one frame at a time, never a backlog
 
 
 def _post(url: str, doc: dict | None = None, headers: dict | None = None, body: bytes | None = None

@@ -1,6 +1,6 @@
-"""The viewer's side of the camera: a grab thread that keeps only the newest frame, JPEGs made on
-demand (never queued), the point under the cursor, rates and counters, and a recording that gets
-every frame (the page shows the newest; the file misses none)."""
+"""The viewer's side of the camera: a newest-frame slot listening to the camera's frames, JPEGs made
+on demand (never queued), the point under the cursor, rates and counters, and a recording that
+listens to every frame itself (the page shows the newest; the file misses none)."""
 from __future__ import annotations
 
 import collections
@@ -16,8 +16,8 @@ import cv2
 import numpy as np
 
 import stereocam
-from stereocam.recording import Recorder, RecordingError, describe
-from stereocam.recording.session import counters_of
+from stereocam.dispatch import DropPolicy, FrameQueue
+from stereocam.recording import Recorder, RecordingListener, describe
 from stereocam.tools.info import value_name
 from stereocam.tools.pictures import colorize, depth_ticks, disparity_range
 
@@ -39,51 +39,44 @@ class ViewerSession(Feed):
     def __init__(self, cam: stereocam.Camera, record_dir: Path | None = None):
         self.cam = cam
         self.record_dir = Path.cwd() if record_dir is None else Path(record_dir)
-        self._recorder: Recorder | None = None
-        self._recorded = 0
+        self._recording: RecordingListener | None = None
+        self._slot = FrameQueue("viewer", policy=DropPolicy.KEEP_NEWEST)
+        cam.add_listener(self._slot)
         self._cond = threading.Condition()
         self._frame: stereocam.Frame | None = None
         self._jpegs: dict[tuple[int, str], bytes] = {}
         self._arrivals: collections.deque[float] = collections.deque(maxlen=60)
-        self.skipped = 0  # frames replaced by a newer one before anybody looked: never a backlog
-        self.recording_error: str | None = None  # why the last recording ended early
+        self._unseen = 0  # frames taken from the slot but replaced before the page looked
         self._start("stereocam-viewer-grab")
 
     # -- frames ---------------------------------------------------------------------------------
+    @property
+    def skipped(self) -> int:
+        """Frames replaced by a newer one before anybody looked: never a backlog."""
+        return self._slot.dropped + self._unseen
+
     def _fetch(self) -> stereocam.Frame:
-        frame = self.cam.get_frame(timeout=0.1)
-        self._record(frame)
-        while (newer := self.cam.try_get_frame()) is not None:  # only the newest is shown
-            self._record(newer)
-            frame, self.skipped = newer, self.skipped + 1
+        frame = self._slot.get(0.1)
+        if frame is None:
+            self.cam.connection.check_alive()  # a dead link shows on the page
+            raise stereocam.CameraTimeoutError("no frame in 0.1 s")
         return frame
 
     def _take(self, frame: stereocam.Frame) -> None:
         with self._cond:
             if self._frame is not None and (self._frame.sequence, "left") not in self._jpegs:
-                self.skipped += 1
+                self._unseen += 1
             self._frame = frame
             self._jpegs = {k: v for k, v in self._jpegs.items() if k[0] == frame.sequence}
             self._arrivals.append(time.monotonic())
             self._cond.notify_all()
 
     # -- recording ------------------------------------------------------------------------------
-    def _record(self, frame: stereocam.Frame) -> None:
-        with self._cond:
-            recorder = self._recorder
-            if recorder is None:
-                return
-            try:
-                recorder.put(frame, counters_of(self.cam))
-                self._recorded += 1
-            except RecordingError as exc:  # the disk failed: the recording ends, said so; the view goes on
-                self._recorder, self.recording_error = None, f"recording stopped: {exc}"
-
     def start_recording(self) -> dict[str, Any]:
         """Record every frame from now on to a new MCAP file in ``record_dir``; returns its state."""
         with self._cond:
-            if self._recorder is not None:
-                raise ValueError(f"already recording to {self._recorder.path}")
+            if self._recording is not None:
+                raise ValueError(f"already recording to {self._recording.recorder.path}")
         serial = re.sub(r"[^A-Za-z0-9_.-]", "_", self.cam.info().serial)[:64]  # the device names it: no paths
         stem = f"view_{serial}_{time.strftime('%Y%m%d-%H%M%S')}"
         path = self.record_dir / f"{stem}.mcap"
@@ -91,27 +84,37 @@ class ViewerSession(Feed):
             if not path.exists():
                 break
             path = self.record_dir / f"{stem}-{n}.mcap"
-        recorder = Recorder(path, describe(self.cam))
+        listener = RecordingListener(self.cam, Recorder(path, describe(self.cam)))
         with self._cond:
-            self._recorder, self._recorded, self.recording_error = recorder, 0, None
+            self._recording = listener
+        self.cam.add_listener(listener)
         return self.recording() or {}
 
     def stop_recording(self) -> dict[str, Any]:
         """Finish the file (summary and index); returns its final state."""
         with self._cond:
-            recorder, self._recorder = self._recorder, None
-        if recorder is None:
+            listener, self._recording = self._recording, None
+        if listener is None:
             raise ValueError("not recording")
-        stats = recorder.close()
-        return {"path": str(recorder.path), "frames": self._recorded, "recorder_dropped": stats.recorder_dropped,
-                "megabytes": round(stats.file_bytes / 1e6, 2), "done": True}
+        self.cam.remove_listener(listener)
+        stats = listener.recorder.close()
+        return {"path": str(listener.recorder.path), "frames": listener.frames,
+                "recorder_dropped": stats.recorder_dropped, "megabytes": round(stats.file_bytes / 1e6, 2),
+                "done": True}
+
+    @property
+    def recording_error(self) -> str | None:
+        """Why the recording stopped taking frames (the disk failed); the view goes on."""
+        listener = self._recording
+        return f"recording stopped: {listener.error}" if listener is not None and listener.error else None
 
     def recording(self) -> dict[str, Any] | None:
         with self._cond:
-            recorder = self._recorder
-        if recorder is None:
+            listener = self._recording
+        if listener is None:
             return None
-        return {"path": str(recorder.path), "frames": self._recorded,
+        recorder = listener.recorder
+        return {"path": str(recorder.path), "frames": listener.frames,
                 "recorder_dropped": recorder.stats.recorder_dropped,
                 "megabytes": round(recorder.stats.file_bytes / 1e6, 2), "done": False}
 
@@ -192,5 +195,6 @@ class ViewerSession(Feed):
 
     def close(self) -> None:
         super().close()
-        if self._recorder is not None:
+        self.cam.remove_listener(self._slot)
+        if self._recording is not None:
             self.stop_recording()

@@ -114,6 +114,6 @@ def test_a_camera_rides_through_write_stalls(device_url):
 
         faulty.set_manipulator(write=stall_once)
         assert cam.config()["width"] > 0
-        assert stalled and cam.link.alive
+        assert stalled and cam.alive
     finally:
         cam.close()
