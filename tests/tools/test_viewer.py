@@ -54,6 +54,7 @@ def test_images_are_always_the_newest_frame(viewer):
     img = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_GRAYSCALE)
     assert img.shape == (240, 320)
     assert viewer.session.skipped > 0  # the viewer's slot held one frame at a time, never a backlog
+    assert viewer.session.cam.stats["queue_overflow"] == 0  # and no unread get_frame queue counting drops
 
 
 def _post(url: str, doc: dict | None = None, headers: dict | None = None, body: bytes | None = None

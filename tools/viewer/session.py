@@ -42,6 +42,7 @@ class ViewerSession(Feed):
         self._recording: RecordingListener | None = None
         self._slot = FrameQueue("viewer", policy=DropPolicy.KEEP_NEWEST)
         cam.add_listener(self._slot)
+        cam.remove_listener(cam.frames)  # nobody calls get_frame here: no queue filling up and counting drops
         self._cond = threading.Condition()
         self._frame: stereocam.Frame | None = None
         self._jpegs: dict[tuple[int, str], bytes] = {}
