@@ -6,18 +6,17 @@ chunk is read. Messages are decoded by the ``mcap`` reader and ``mcap-ros2-suppo
 """
 from __future__ import annotations
 
-import os
-import stat
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Any, BinaryIO, Iterator
+from typing import Any, Iterator
 
 import numpy as np
 from mcap.reader import SeekingReader
 from mcap_ros2.decoder import DecoderFactory
 
 from stereocam.calibration_io import StoredCalibration
+from stereocam.input_files import open_regular
 from stereocam.frames import DisparityFormat, Frame, FrameStatus, StereoGeometry
 from stereocam.protocol.errors import ConfigError
 
@@ -27,7 +26,7 @@ from .convert import disparity_from_float
 from .mcapwriter import MAGIC, RECORD_SIZE_LIMIT
 from .recorder import FRAME_INDEX, DamagedRecordingError, RecordingError, UnitDescription
 
-__all__ = ["Recording", "RecordedCapture", "DamagedRecordingError", "RecordingError", "open_regular"]
+__all__ = ["Recording", "RecordedCapture", "DamagedRecordingError", "RecordingError"]
 
 
 @dataclass
@@ -59,29 +58,12 @@ def _plane(msg: Any, dtype: str) -> np.ndarray:
 
 
 
-def open_regular(path: Path) -> BinaryIO:
-    """``path`` opened for reading, if it is a regular file (a FIFO or a device would block or never end)."""
-    try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))  # a FIFO must not block the open
-    except OSError as exc:
-        raise RecordingError(f"cannot read {path}: {exc.strerror or exc}") from exc
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise RecordingError(f"{path} is not a regular file (a FIFO, a device or a folder): a recording is "
-                                 f"an .mcap file")
-        os.set_blocking(fd, True)
-        return os.fdopen(fd, "rb")
-    except BaseException:
-        os.close(fd)
-        raise
-
-
 class Recording:
     """An MCAP recording opened for reading (needs its summary: ``repair`` a crashed one first)."""
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
-        self._file = open_regular(self.path)
+        self._file = open_regular(self.path, what="recording", error=RecordingError)
         try:
             self._open()
         except BaseException:

@@ -18,11 +18,11 @@ import numpy as np
 from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap_ros2.decoder import DecoderFactory
 
+from stereocam.input_files import open_regular
 from stereocam.protocol.params import Output
 
 from . import schemas
 from .mcapwriter import ChunkedWriter
-from .reader import open_regular
 from .recorder import FRAME_INDEX, FRAME_INDEX_TYPE, SUMMARY, RecordingError
 from .scan import Scan
 
@@ -179,7 +179,7 @@ def repair(path: str | Path, out: str | Path | None = None) -> RepairReport:
     tmp = out.with_name(out.name + ".repair-tmp")
     rewrite = _Rewrite()
     try:
-        with open_regular(path) as f:
+        with open_regular(path, what="recording", error=RecordingError) as f:
             scan = Scan(os.fstat(f.fileno()).st_size)
             for record in scan.records(f):
                 if not rewrite.add(record, tmp):
