@@ -285,3 +285,41 @@ def test_a_fifo_is_refused_not_waited_on(tmp_path, capsys):
     assert rc == 1 and "not a regular file" in err
     with pytest.raises(RecordingError, match="not a regular file"):
         Recording(tmp_path)  # a folder
+
+
+# -- issue 22 item 4: repair and rematch never destroy a file --------------------------------------
+def test_repair_leaves_an_existing_repair_tmp_and_the_target_of_a_link_alone(ok, tmp_path, capsys):
+    victim = tmp_path / "victim.txt"
+    victim.write_bytes(b"victim")
+    for name, kind in (("a.mcap", "file"), ("b.mcap", "link")):
+        bad = tmp_path / name
+        bad.write_bytes(ok.read_bytes()[:_chunks(ok)[1].chunk_start_offset + 1000])
+        tmp = tmp_path / f"{name}.repair-tmp"
+        if kind == "file":
+            tmp.write_bytes(b"someone's file")
+        else:
+            tmp.symlink_to(victim)
+        rc, _ = _run(["recording", "repair", str(bad)], capsys)
+        assert rc == 0 and _sequences(bad)
+        assert (tmp.read_bytes() if kind == "file" else os.readlink(tmp)) == (
+            b"someone's file" if kind == "file" else str(victim))
+    assert victim.read_bytes() == b"victim"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        ["a.mcap", "a.mcap.damaged", "a.mcap.repair-tmp", "b.mcap", "b.mcap.damaged", "b.mcap.repair-tmp",
+         "victim.txt"])
+
+
+def test_repair_creates_its_temporary_file_exclusively_never_through_a_link(ok, tmp_path, monkeypatch):
+    import stereocam.recording.repair as repair_module
+
+    class _Fixed:
+        hex = "0" * 32
+
+    monkeypatch.setattr(repair_module.uuid, "uuid4", lambda: _Fixed())
+    victim = tmp_path / "victim.txt"
+    victim.write_bytes(b"victim")
+    (tmp_path / f".out.mcap.{'0' * 12}.repair-tmp").symlink_to(victim)
+    with pytest.raises(FileExistsError):
+        repair(ok, tmp_path / "out.mcap")
+    assert victim.read_bytes() == b"victim" and not (tmp_path / "out.mcap").exists()
+    assert os.path.islink(tmp_path / f".out.mcap.{'0' * 12}.repair-tmp")
