@@ -147,19 +147,23 @@ def test_camera_record_and_recorder_refuse_an_existing_file_and_a_bad_level(tmp_
 
 # -- 3. damaged metadata and indexes: typed errors naming the file and the field ------------------
 def _rewrite(src: Path, dst: Path, metadata: Callable[[dict], dict] = lambda m: m,
-             index: Callable[[np.ndarray], np.ndarray] = lambda t: t, messages: bool = True) -> Path:
-    """``src`` written again by the mcap library's own Writer, its metadata and frame index changed."""
+             index: Callable[[np.ndarray], np.ndarray] = lambda t: t, messages: bool = True,
+             capture: Callable[[str, bytes], bytes] = lambda topic, data: data,
+             schema: Callable[[bytes], bytes] = lambda data: data) -> Path:
+    """``src`` written again by the mcap library's own Writer, its metadata, frame index, messages
+    (``capture(topic, data)``) and schema texts changed."""
     with open(src, "rb") as f, open(dst, "wb") as out:
         reader = make_reader(f)
         summary = reader.get_summary()
         w = Writer(out, compression=CompressionType.ZSTD)
         w.start(profile="ros2", library="test")
-        schema_ids = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
+        schema_ids = {sid: w.register_schema(s.name, s.encoding, schema(s.data)) for sid, s in summary.schemas.items()}
         channel_ids = {cid: w.register_channel(c.topic, c.message_encoding, schema_ids[c.schema_id], c.metadata)
                        for cid, c in summary.channels.items()}
         if messages:
             for _, channel, m in reader.iter_messages():
-                w.add_message(channel_ids[channel.id], m.log_time, m.data, m.publish_time, m.sequence)
+                w.add_message(channel_ids[channel.id], m.log_time, capture(channel.topic, m.data), m.publish_time,
+                              m.sequence)
         meta = metadata({m.name: dict(m.metadata) for m in reader.iter_metadata()})
         for name, data in meta.items():
             w.add_metadata(name, data)
@@ -323,3 +327,129 @@ def test_repair_creates_its_temporary_file_exclusively_never_through_a_link(ok, 
         repair(ok, tmp_path / "out.mcap")
     assert victim.read_bytes() == b"victim" and not (tmp_path / "out.mcap").exists()
     assert os.path.islink(tmp_path / f".out.mcap.{'0' * 12}.repair-tmp")
+
+
+# -- issue 22 item 3: compression bombs --------------------------------------------------------------
+def _zeros_zstd(n: int) -> bytes:
+    """``n`` zero bytes as one zstd frame, compressed as a stream (never held whole)."""
+    import zstandard
+
+    cobj, out, block = zstandard.ZstdCompressor(level=1).compressobj(size=n), [], bytes(1 << 20)
+    for done in range(0, n, len(block)):
+        out.append(cobj.compress(block[:min(len(block), n - done)]))
+    out.append(cobj.flush())
+    return b"".join(out)
+
+
+def _claiming(content_size: int) -> bytes:
+    """A small zstd frame whose header claims ``content_size`` bytes (single segment: its window too)."""
+    import struct
+
+    import zstandard
+
+    frame = zstandard.ZstdCompressor(write_content_size=False, write_checksum=False).compress(b"\0" * 1000)
+    fhd = frame[4]
+    skip = 5 + (0 if fhd & 0x20 else 1) + (0, 1, 2, 4)[fhd & 3]  # window descriptor, dictionary id: none here
+    return frame[:4] + bytes([0xE0]) + struct.pack("<Q", content_size) + frame[skip:]
+
+
+def _with_second_chunk(src: Path, dst: Path, data: bytes, declared: int) -> Path:
+    """``src`` with its second chunk's data replaced by ``data`` declaring ``declared`` bytes."""
+    from mcap.records import Chunk, MessageIndex
+    from mcap.stream_reader import StreamReader
+
+    from stereocam.recording.mcapwriter import ChunkedWriter
+
+    with open(src, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        metadata = list(reader.iter_metadata())
+        attachments = list(reader.iter_attachments())
+        f.seek(0)
+        chunks, chunk = [], None
+        for record in StreamReader(f, emit_chunks=True).records:
+            if isinstance(record, Chunk):
+                chunk = (record, [])
+                chunks.append(chunk)
+            elif isinstance(record, MessageIndex) and chunk is not None:
+                chunk[1].append(record)
+    w = ChunkedWriter(dst)
+    for sid in sorted(summary.schemas):
+        s = summary.schemas[sid]
+        assert w.register_schema(s.name, s.encoding, s.data) == sid
+    for cid in sorted(summary.channels):
+        c = summary.channels[cid]
+        assert w.register_channel(c.topic, c.message_encoding, c.schema_id, c.metadata) == cid
+    for i, (c, indexes) in enumerate(chunks):
+        if i == 1:
+            c = Chunk(message_start_time=c.message_start_time, message_end_time=c.message_end_time,
+                      uncompressed_size=declared, uncompressed_crc=0, compression="zstd", data=data)
+        w.copy_chunk(c, indexes)
+    for m in metadata:
+        w.add_metadata(m.name, dict(m.metadata))
+    for a in attachments:
+        w.add_attachment(a.name, a.media_type, a.data, a.log_time)
+    w.finish()
+    return dst
+
+
+BOMBS = {"declares 1 GiB": (lambda: _zeros_zstd(1 << 30), 1 << 30),
+         "zstd header claims 4 GiB": (lambda: _claiming(4 << 30), 1000),
+         "zstd header claims 1 TiB": (lambda: _claiming(1 << 40), 1000)}
+
+
+@pytest.mark.parametrize("bomb", sorted(BOMBS))
+def test_a_compression_bomb_is_damage_read_in_bounded_time_and_memory(ok, tmp_path, capsys, bomb):
+    import resource
+
+    make, declared = BOMBS[bomb]
+    bad = _with_second_chunk(ok, tmp_path / "bomb.mcap", make(), declared)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB
+    rc, err = returns_within(20, _run, ["recording", "export", str(bad), "--out", str(tmp_path / "x")], capsys)
+    assert rc == 1 and "bomb.mcap: frame" in err and "cannot be read" in err
+    r = returns_within(20, repair, bad, tmp_path / "fixed.mcap")
+    assert r.damaged_chunks == 1 and 0 < r.frames < N and _sequences(tmp_path / "fixed.mcap")
+    grown_mib = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    assert grown_mib < 200, f"reading the bomb grew the process by {grown_mib:.0f} MiB"
+
+
+# -- issue 22 item 7: hostile values in the messages are damage, never a traceback -------------------
+def _capture_info(change: Callable[[dict], dict]) -> Callable[[str, bytes], bytes]:
+    """A message transform: each CaptureInfo decoded, changed by ``change`` and encoded again."""
+    from mcap_ros2.decoder import DecoderFactory
+    from mcap.records import Schema
+
+    from stereocam.recording import schemas
+
+    name = schemas.CAPTURE_INFO
+    decode = DecoderFactory().decoder_for("cdr", Schema(id=1, data=schemas.msgdef(name).encode(), encoding="ros2msg",
+                                                             name=name))
+    encode = schemas.encoder(name)
+
+    def run(topic: str, data: bytes) -> bytes:
+        if topic != schemas.CAPTURE:
+            return data
+        m = decode(data)
+        body = {f: getattr(m, f) for f in schemas.CAPTURE_INFO_FIELDS if f != "header"}
+        body["header"] = {"stamp": {"sec": m.header.stamp.sec, "nanosec": m.header.stamp.nanosec},
+                          "frame_id": m.header.frame_id}
+        return encode(change(body))
+    return run
+
+
+HOSTILE_VALUES = {
+    "status outside the enumeration": dict(capture=_capture_info(lambda b: {**b, "status": "on fire"})),
+    "a 65535x65535 frame": dict(capture=_capture_info(lambda b: {**b, "width": 65535, "height": 65535})),
+    "a renamed schema field": dict(schema=lambda d: d.replace(b"uint32 sequence", b"uint32 sequense")),
+}
+
+
+@pytest.mark.parametrize("case", sorted(HOSTILE_VALUES))
+def test_a_hostile_capture_value_is_a_damaged_recording_exit_1(ok, tmp_path, capsys, case):
+    bad = _rewrite(ok, tmp_path / "hostile.mcap", **HOSTILE_VALUES[case])
+    with Recording(bad) as rec, pytest.raises(DamagedRecordingError, match=r"hostile\.mcap: frame 0 cannot be read"):
+        rec.capture(0).to_frame()
+    for argv in (["recording", "export", str(bad), "--out", str(tmp_path / "x")],
+                 ["rematch", "--workers", "1", "--out", str(tmp_path / "rm"), str(bad)]):
+        rc, err = _run(argv, capsys)
+        assert rc == 1 and "hostile.mcap: frame" in err and "cannot be read" in err, argv
