@@ -7,7 +7,9 @@ import subprocess
 import sys
 import threading
 import time
+import urllib.error
 import urllib.request
+from typing import Callable
 from pathlib import Path
 
 import cv2
@@ -421,3 +423,50 @@ def test_a_viewer_with_a_token_answers_only_requests_that_carry_it(tmp_path):
         assert get("/api/state", "Authorization: Bearer s3cret\r\n").startswith(b"HTTP/1.1 200")
     finally:
         _close(server)
+
+
+# -- issue 22 item 13: the camera restarts under the viewer ------------------------------------------
+def test_the_viewer_marks_the_last_frame_stale_and_reconnects_after_the_camera_restarts(tmp_path):
+    from stereocam.device_sim.process import ServedSimulator
+
+    sim = ServedSimulator("tcp:127.0.0.1:0", seed=44)
+    port = sim.url.rstrip("/").rsplit(":", 1)[1]
+    cam = stereocam.open(sim.url, timeout=2.0)
+    cam.configure(**SMALL, fps=10)
+    server = ViewerServer(ViewerSession(cam, tmp_path))
+    threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
+    cam.start()
+
+    def until(what: Callable[[], bool], seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while not what():
+            assert time.monotonic() < deadline, f"not within {seconds} s"
+            time.sleep(0.05)
+
+    def frame() -> dict:
+        return json.loads(_get(server.url + "api/frame")[1])
+
+    def state_ok() -> bool:
+        try:
+            return not json.loads(_get(server.url + "api/state")[1])["stale"]
+        except urllib.error.HTTPError:
+            return False
+
+    try:
+        until(lambda: frame() is not None, 20)
+        assert frame()["stale"] is False
+        sim.stop()
+        until(lambda: frame()["stale"], 20)  # the last frame is served, said to be stale
+        headers, _ = _get(server.url + "image/left.jpg")
+        assert headers["X-Stale"] == "1"
+        last = frame()["sequence"]
+        sim = ServedSimulator(f"tcp:127.0.0.1:{port}", seed=44)  # the same unit, back on its address
+        until(state_ok, 30)  # reconnected: state answers again
+        until(lambda: (f := frame())["stale"] is False and f["sequence"] != last, 30)  # and frames are live
+        assert json.loads(_get(server.url + "api/state")[1])["config"]["fps"] == 10  # with the viewer's settings
+    finally:
+        server.shutdown()
+        server.server_close()
+        server.session.close()
+        cam.close()
+        sim.stop()

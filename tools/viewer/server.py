@@ -217,7 +217,8 @@ class _Handler(BaseHTTPRequestHandler):
             if got is None:
                 self._json({"error": "no such image in the newest frame"}, HTTPStatus.NOT_FOUND)
             else:
-                self._send(got[1], "image/jpeg", headers={"X-Sequence": str(got[0])})
+                self._send(got[1], "image/jpeg", headers={"X-Sequence": str(got[0]),
+                                                          "X-Stale": "1" if session.stale else "0"})
         elif path == "/api/point":
             self._json(session.point(int(query["x"]), int(query["y"])))
         elif path.startswith("/snapshot/") and path[len("/snapshot/"):] in SNAPSHOTS:
