@@ -18,6 +18,7 @@ from stereocam.recording.reader import DamagedRecordingError, Recording
 from stereocam.recording.recorder import FRAME_INDEX
 from stereocam.recording.repair import repair
 from stereocam.tools import cli
+from stereocam.tools.soak_recordings import BOMBS, bomb, with_chunk_replaced
 from tests.support.hangs import returns_within
 
 N = 5
@@ -330,80 +331,11 @@ def test_repair_creates_its_temporary_file_exclusively_never_through_a_link(ok, 
 
 
 # -- issue 22 item 3: compression bombs --------------------------------------------------------------
-def _zeros_zstd(n: int) -> bytes:
-    """``n`` zero bytes as one zstd frame, compressed as a stream (never held whole)."""
-    import zstandard
-
-    cobj, out, block = zstandard.ZstdCompressor(level=1).compressobj(size=n), [], bytes(1 << 20)
-    for done in range(0, n, len(block)):
-        out.append(cobj.compress(block[:min(len(block), n - done)]))
-    out.append(cobj.flush())
-    return b"".join(out)
-
-
-def _claiming(content_size: int) -> bytes:
-    """A small zstd frame whose header claims ``content_size`` bytes (single segment: its window too)."""
-    import struct
-
-    import zstandard
-
-    frame = zstandard.ZstdCompressor(write_content_size=False, write_checksum=False).compress(b"\0" * 1000)
-    fhd = frame[4]
-    skip = 5 + (0 if fhd & 0x20 else 1) + (0, 1, 2, 4)[fhd & 3]  # window descriptor, dictionary id: none here
-    return frame[:4] + bytes([0xE0]) + struct.pack("<Q", content_size) + frame[skip:]
-
-
-def _with_second_chunk(src: Path, dst: Path, data: bytes, declared: int) -> Path:
-    """``src`` with its second chunk's data replaced by ``data`` declaring ``declared`` bytes."""
-    from mcap.records import Chunk, MessageIndex
-    from mcap.stream_reader import StreamReader
-
-    from stereocam.recording.mcapwriter import ChunkedWriter
-
-    with open(src, "rb") as f:
-        reader = make_reader(f)
-        summary = reader.get_summary()
-        metadata = list(reader.iter_metadata())
-        attachments = list(reader.iter_attachments())
-        f.seek(0)
-        chunks, chunk = [], None
-        for record in StreamReader(f, emit_chunks=True).records:
-            if isinstance(record, Chunk):
-                chunk = (record, [])
-                chunks.append(chunk)
-            elif isinstance(record, MessageIndex) and chunk is not None:
-                chunk[1].append(record)
-    w = ChunkedWriter(dst)
-    for sid in sorted(summary.schemas):
-        s = summary.schemas[sid]
-        assert w.register_schema(s.name, s.encoding, s.data) == sid
-    for cid in sorted(summary.channels):
-        c = summary.channels[cid]
-        assert w.register_channel(c.topic, c.message_encoding, c.schema_id, c.metadata) == cid
-    for i, (c, indexes) in enumerate(chunks):
-        if i == 1:
-            c = Chunk(message_start_time=c.message_start_time, message_end_time=c.message_end_time,
-                      uncompressed_size=declared, uncompressed_crc=0, compression="zstd", data=data)
-        w.copy_chunk(c, indexes)
-    for m in metadata:
-        w.add_metadata(m.name, dict(m.metadata))
-    for a in attachments:
-        w.add_attachment(a.name, a.media_type, a.data, a.log_time)
-    w.finish()
-    return dst
-
-
-BOMBS = {"declares 1 GiB": (lambda: _zeros_zstd(1 << 30), 1 << 30),
-         "zstd header claims 4 GiB": (lambda: _claiming(4 << 30), 1000),
-         "zstd header claims 1 TiB": (lambda: _claiming(1 << 40), 1000)}
-
-
-@pytest.mark.parametrize("bomb", sorted(BOMBS))
-def test_a_compression_bomb_is_damage_read_in_bounded_time_and_memory(ok, tmp_path, capsys, bomb):
+@pytest.mark.parametrize("name", BOMBS)
+def test_a_compression_bomb_is_damage_read_in_bounded_time_and_memory(ok, tmp_path, capsys, name):
     import resource
 
-    make, declared = BOMBS[bomb]
-    bad = _with_second_chunk(ok, tmp_path / "bomb.mcap", make(), declared)
+    bad = with_chunk_replaced(ok, tmp_path / "bomb.mcap", *bomb(name))
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB
     rc, err = returns_within(20, _run, ["recording", "export", str(bad), "--out", str(tmp_path / "x")], capsys)
     assert rc == 1 and "bomb.mcap: frame" in err and "cannot be read" in err
