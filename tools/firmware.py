@@ -27,9 +27,9 @@ from rich.table import Table
 import stereocam
 from stereocam.input_files import read_regular
 from stereocam.protocol.errors import ConfigError, InputFileError
-from stereocam.protocol.firmware_image import (MAX_IMAGE_BYTES, MAX_KEY_BYTES, TARGET_LEN, U32_MAX, FirmwareBuild, ImageError, build_image,
-                                               check_target, inspect_image, load_private_key, private_key_pem,
-                                               public_key_pem)
+from stereocam.protocol.firmware_image import (MAX_IMAGE_BYTES, MAX_KEY_BYTES, TARGET_LEN, U32_MAX, FirmwareBuild,
+                                               ImageError, build_image, check_target, inspect_image,
+                                               load_private_key, private_key_pem, public_key_pem)
 from stereocam.protocol.params import BY_NAME
 
 DEFAULT_TARGET = "STOC-SIM"

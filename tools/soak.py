@@ -8,7 +8,8 @@
 4. hostile recordings: compression bombs and fuzzed files through export, repair, replay and
    rematch, counting crashes, hangs, peak memory and files changed outside the output.
 Exit status 1 on any crash, hang, corrupted frame, counters that do not add up, file changed outside
-an output, peak memory over --max-memory-mib, or a delivery rate below its goal (VGA frames on a serial-class link: 95 % at 1 byte in 10^5 flipped, 50 % at 1 in 10^4).
+an output, peak memory over --max-memory-mib, or a delivery rate below its goal (VGA frames on a
+serial-class link: 95 % at 1 byte in 10^5 flipped, 50 % at 1 in 10^4).
 """
 from __future__ import annotations
 
