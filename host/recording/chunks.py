@@ -68,12 +68,15 @@ def chunk_data(chunk: Chunk, limit: int) -> bytes:
     elif chunk.compression == "zstd":
         dctx = zstandard.ZstdDecompressor(max_window_size=1 << min(max(20, (limit - 1).bit_length()), 27))
         out = bytearray()
-        with dctx.stream_reader(io.BytesIO(chunk.data), read_across_frames=True) as reader:
-            while len(out) <= n:
-                piece = reader.read(n + 1 - len(out))
-                if not piece:
-                    break
-                out += piece
+        try:
+            with dctx.stream_reader(io.BytesIO(chunk.data), read_across_frames=True) as reader:
+                while len(out) <= n:
+                    piece = reader.read(n + 1 - len(out))
+                    if not piece:
+                        break
+                    out += piece
+        except zstandard.ZstdError as exc:  # a damaged frame, or one asking for a window over the limit
+            raise ValueError(f"a chunk does not decompress: {exc}") from exc
         data = bytes(out)
     else:
         raise ValueError(f"a chunk compressed with {chunk.compression!r} (recordings use zstd)")

@@ -385,3 +385,25 @@ def test_a_hostile_capture_value_is_a_damaged_recording_exit_1(ok, tmp_path, cap
                  ["rematch", "--workers", "1", "--out", str(tmp_path / "rm"), str(bad)]):
         rc, err = _run(argv, capsys)
         assert rc == 1 and "hostile.mcap: frame" in err and "cannot be read" in err, argv
+
+
+@pytest.mark.parametrize("claim", [4 << 30, 1 << 40])
+def test_a_zstd_header_claim_allocates_nothing_under_an_address_space_limit(claim):
+    """The mechanism: decompression never sizes a buffer from the zstd header (the mcap library's
+    one-shot decompress does: MemoryError under this limit); the claim is damage, said so."""
+    import subprocess
+    import sys
+
+    code = ("import resource, sys\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30))\n"
+            "from mcap.records import Chunk\n"
+            "from stereocam.recording.chunks import chunk_data\n"
+            "from stereocam.tools.soak_recordings import claiming_zstd\n"
+            f"c = Chunk(compression='zstd', data=claiming_zstd({claim}), message_end_time=0, message_start_time=0, "
+            "uncompressed_crc=0, uncompressed_size=1000)\n"
+            "try:\n"
+            "    chunk_data(c, 12 << 20)\n"
+            "except ValueError as exc:\n"
+            "    print('refused:', exc)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.startswith("refused: a chunk"), r.stdout + r.stderr[-2000:]
