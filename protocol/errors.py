@@ -86,3 +86,11 @@ class MissingPlaneError(StereoCamError, ValueError):
 
 class CallbackError(StereoCamError):
     """A frame callback raised; the callback's own exception is the ``__cause__``."""
+
+
+class InputFileError(StereoCamError):
+    """An input file that is refused before it is read: not a regular file, or larger than it may be."""
+
+
+class MissingInputError(InputFileError):
+    """An input file that does not exist: the caller's mistake (the tools exit 2, bad usage)."""

@@ -47,6 +47,8 @@ _BUILD_LEN = struct.Struct("<I")
 TARGET_LEN = 16  # bytes of the header's load target field
 U32_MAX = 2**32 - 1  # the header's security counter and INFO.capabilities are u32
 U8_MAX = 255  # INFO carries the protocol minor version as one byte
+MAX_IMAGE_BYTES = 4 << 20  # no image slot of a STOC-class unit is larger (8 MiB flash, two slots)
+MAX_KEY_BYTES = 64 << 10  # a PEM Ed25519 key is a few hundred bytes
 VERSION_MAX_BYTES = 255  # INFO and SLOT_INFO carry the version as a u8-length UTF-8 string
 _VERSION = re.compile(r"([0-9]+)\.([0-9]+)\.([0-9]+)(\+.*)?", re.DOTALL)
 

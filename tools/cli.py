@@ -15,6 +15,7 @@ from typing import Any, Callable, Sequence
 import click
 
 import stereocam
+from stereocam.protocol.errors import MissingInputError
 
 from .exit_codes import EXIT_BROKEN_PIPE, EXIT_CAMERA, EXIT_CODES, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE  # noqa: F401
 
@@ -92,6 +93,9 @@ class CommandTable(click.Group):
         except (KeyboardInterrupt, click.Abort):
             click.echo(f"stereocam {_command(ctx)}: interrupted", err=True)
             raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
+        except MissingInputError as exc:  # an input file that does not exist: bad usage
+            click.echo(f"stereocam {_command(ctx)}: error: {exc}", err=True)
+            raise click.exceptions.Exit(EXIT_USAGE) from None
         except stereocam.StereoCamError as exc:
             _log.debug("%s failed", _command(ctx), exc_info=exc)
             click.echo(f"stereocam {_command(ctx)}: error: {exc}", err=True)

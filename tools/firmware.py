@@ -25,10 +25,11 @@ from rich.progress import BarColumn, DownloadColumn, Progress, TransferSpeedColu
 from rich.table import Table
 
 import stereocam
-from stereocam.protocol.errors import ConfigError
-from stereocam.protocol.firmware_image import (TARGET_LEN, U32_MAX, FirmwareBuild, ImageError, build_image,
-                                               check_target, inspect_image, load_private_key, private_key_pem,
-                                               public_key_pem)
+from stereocam.input_files import read_regular
+from stereocam.protocol.errors import ConfigError, InputFileError
+from stereocam.protocol.firmware_image import (MAX_IMAGE_BYTES, MAX_KEY_BYTES, TARGET_LEN, U32_MAX, FirmwareBuild,
+                                               ImageError, build_image, check_target, inspect_image,
+                                               load_private_key, private_key_pem, public_key_pem)
 from stereocam.protocol.params import BY_NAME
 
 DEFAULT_TARGET = "STOC-SIM"
@@ -94,11 +95,9 @@ def keygen(args: argparse.Namespace) -> int:
     return 0
 
 
-def _read(path: Path, what: str) -> bytes:
-    try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise ConfigError(f"cannot read the {what} {path}: {exc}") from exc
+def _read(path: Path, what: str, limit: int = MAX_IMAGE_BYTES) -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes (anything else refused before reading)."""
+    return read_regular(path, what=what, limit=limit)
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -122,7 +121,7 @@ def sign(args: argparse.Namespace) -> int:
         if _same_file(args.out, path):
             return _fail("sign", f"--out {args.out} is the {flag} file; refusing to overwrite it")
     try:
-        key = load_private_key(_read(args.key, "key"))
+        key = load_private_key(_read(args.key, "key", MAX_KEY_BYTES))
         build = dataclasses.replace(FirmwareBuild.from_json(_read(args.build, "build")), version=args.version)
         build.check()  # --version, as the build's own version was
         for name in build.parameter_defaults:
@@ -130,7 +129,7 @@ def sign(args: argparse.Namespace) -> int:
                 raise ConfigError(f"parameter default {name!r}: no such parameter")
         code = _read(args.code, "code") if args.code else b""
         image = build_image(build, key, target=args.target, security_counter=args.security_counter, code=code)
-    except (ImageError, ConfigError) as exc:
+    except (ImageError, ConfigError, InputFileError) as exc:
         return _fail("sign", str(exc))
     try:
         _write_whole(args.out, image, 0o644)

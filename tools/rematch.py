@@ -15,6 +15,7 @@ from stereocam.tools.exit_codes import EXIT_CODES, EXIT_USAGE
 
 import argparse
 import logging
+import os
 import sys
 import time
 from pathlib import Path
@@ -54,6 +55,14 @@ def check_workers(workers: object) -> int:
     return workers
 
 
+def check_outputs(recordings: list[Path], out: Path, force: bool) -> None:
+    """ConfigError if an output (``out``/NAME of each recording) exists and ``force`` is not given."""
+    existing = [str(out / p.name) for p in recordings if os.path.lexists(out / p.name)]
+    if existing and not force:
+        raise ConfigError(f"{', '.join(existing)} already exist{'s' if len(existing) == 1 else ''}: rematch never "
+                          f"replaces a file unless --force")
+
+
 def _client(scheduler: str | None, workers: int):
     from dask.distributed import Client, LocalCluster
 
@@ -66,10 +75,13 @@ def _client(scheduler: str | None, workers: int):
 
 
 def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, algorithm: str | None = None,
-            scheduler: str | None = None, workers: int = 2, chunks_per_task: int = 1, client=None) -> dict:
+            scheduler: str | None = None, workers: int = 2, chunks_per_task: int = 1, client=None,
+            force: bool = False) -> dict:
     """Re-match ``recordings`` into ``out`` with ``algorithm`` ("bm" or "sgm"; None: the recorded
-    one) and the recorded settings changed by ``overrides``; returns frames, seconds and the outputs."""
+    one) and the recorded settings changed by ``overrides``; returns frames, seconds and the outputs.
+    An existing output is a ConfigError unless ``force`` (then it is replaced whole)."""
     check_workers(workers)
+    check_outputs(recordings, out, force)
     if scheduler is not None:
         check_scheduler(scheduler)
     if algorithm is not None:
@@ -105,7 +117,7 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
                                              key=f"rematch-{path.stem}-{a}-{b}-{time.time_ns()}"))
             provenance = {**{k: str(v) for k, v in overrides.items()}, "algorithm": used[path]}
             joins.append(client.submit(_join_after, futures, src, parts, str((out / path.name).resolve()), provenance,
-                                       retries=RETRIES, key=f"join-{path.stem}-{time.time_ns()}"))
+                                       force, retries=RETRIES, key=f"join-{path.stem}-{time.time_ns()}"))
         frames = sum(client.gather(joins))
     finally:
         if own is not None:
@@ -116,9 +128,10 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
     return {"frames": frames, "seconds": dt, "fps": frames / dt, "outputs": [out / p.name for p in recordings]}
 
 
-def _join_after(done: list[tuple[int, float]], source: str, parts: list[str], out: str, provenance: dict) -> int:
+def _join_after(done: list[tuple[int, float]], source: str, parts: list[str], out: str, provenance: dict,
+                replace: bool) -> int:
     """Join once every range of the recording is re-matched (``done``: their results)."""
-    return tasks.join(source, parts, out, provenance)
+    return tasks.join(source, parts, out, provenance, replace)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -133,18 +146,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="a running Dask scheduler")
     ap.add_argument("--workers", type=int, default=2, help="local worker processes (without --scheduler)")
     ap.add_argument("--chunks-per-task", type=int, default=1, help="file chunks per task")
+    ap.add_argument("--force", action="store_true", help="replace outputs that exist already")
     args = ap.parse_args(argv)
+    if any(p.resolve().parent == args.out.resolve() for p in args.recordings):
+        raise ConfigError("--out must not be the folder of the input recordings (outputs keep their names)")
     try:  # before any file is read or cluster started: 0 workers would wait for ever
         check_workers(args.workers)
         if args.scheduler is not None:
             check_scheduler(args.scheduler)
+        check_outputs(args.recordings, args.out, args.force)
     except ConfigError as exc:
         print(f"stereocam rematch: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    if any(p.resolve().parent == args.out.resolve() for p in args.recordings):
-        raise ConfigError("--out must not be the folder of the input recordings (outputs keep their names)")
     r = rematch(args.recordings, args.out, dict(args.set), algorithm=args.algorithm, scheduler=args.scheduler,
-                workers=args.workers, chunks_per_task=args.chunks_per_task)
+                workers=args.workers, chunks_per_task=args.chunks_per_task, force=args.force)
     print(f"{r['frames']} frames re-matched in {r['seconds']:.1f} s ({r['fps']:.1f} frames/s) -> "
           + ", ".join(str(p) for p in r["outputs"]))
     return 0

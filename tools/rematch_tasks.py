@@ -88,9 +88,9 @@ def _copy_chunks(records, writer: ChunkedWriter) -> None:
         writer.copy_chunk(chunk, indexes)
 
 
-def join(source: str, parts: list[str], out: str, provenance: dict[str, str]) -> int:
+def join(source: str, parts: list[str], out: str, provenance: dict[str, str], replace: bool = False) -> int:
     """The parts, in order, as one recording ``out`` (their chunks copied as they are, not
-    decompressed); its frame count."""
+    decompressed); its frame count. An existing ``out`` is FileExistsError unless ``replace``."""
     target = Path(out)
     tmp = _atomic(target)
     writer: ChunkedWriter | None = None
@@ -102,7 +102,8 @@ def join(source: str, parts: list[str], out: str, provenance: dict[str, str]) ->
                 reader = make_reader(f)
                 s = reader.get_summary()
                 if writer is None:
-                    writer = ChunkedWriter(tmp, profile=reader.get_header().profile, library=reader.get_header().library)
+                    writer = ChunkedWriter(tmp, profile=reader.get_header().profile, library=reader.get_header().library,
+                                           exclusive=True)
                     ids = {sid: writer.register_schema(x.name, x.encoding, x.data) for sid, x in s.schemas.items()}
                     chans = {cid: writer.register_channel(c.topic, c.message_encoding, ids[c.schema_id], c.metadata)
                              for cid, c in s.channels.items()}
@@ -124,7 +125,10 @@ def join(source: str, parts: list[str], out: str, provenance: dict[str, str]) ->
         writer.add_metadata(SUMMARY, {**summary, "frames": str(len(index))})
         writer.add_attachment(FRAME_INDEX, FRAME_INDEX_TYPE, index.astype("<i8").tobytes())
         writer.finish()
-        os.replace(tmp, target)
+        if replace:
+            os.replace(tmp, target)
+        else:
+            os.link(tmp, target)  # never over a file that appeared meanwhile
     finally:
         tmp.unlink(missing_ok=True)
     for part in map(Path, parts):

@@ -4,9 +4,12 @@
 2. device fuzz: CRC-valid requests with mutated payloads to the device at URL, each must be answered;
 3. streaming through a faulty link (byte flips, lost bytes, split writes, latency) at each --flip
    rate for --seconds, counting frames sent / delivered / corrupted / dropped and whether the
-   device's and host's counters add up (corruption is checked against the device for sim:// URLs).
-Exit status 1 on any crash, hang, corrupted frame, counters that do not add up, or a delivery rate
-below its goal (VGA frames on a serial-class link: 95 % at 1 byte in 10^5 flipped, 50 % at 1 in 10^4).
+   device's and host's counters add up (corruption is checked against the device for sim:// URLs);
+4. hostile recordings: compression bombs and fuzzed files through export, repair, replay and
+   rematch, counting crashes, hangs, peak memory and files changed outside the output.
+Exit status 1 on any crash, hang, corrupted frame, counters that do not add up, file changed outside
+an output, peak memory over --max-memory-mib, or a delivery rate below its goal (VGA frames on a
+serial-class link: 95 % at 1 byte in 10^5 flipped, 50 % at 1 in 10^4).
 """
 from __future__ import annotations
 
@@ -15,6 +18,7 @@ from stereocam.tools.exit_codes import EXIT_CODES
 import argparse
 
 from .soak_parts import Report, fuzz_decoder, fuzz_device, stream_with_faults
+from .soak_recordings import fuzz_recordings
 
 
 def _print(rep: Report) -> None:
@@ -36,8 +40,15 @@ def _failed(rep: Report, flip: float | None = None) -> bool:
     elif goal is not None:
         f["delivery goal"] = f"met (at least {goal:.0%})"
     return bool(rep.crashes or rep.hangs or f.get("invariant violations") or short
+                or f.get("files changed outside the output") or str(f.get("memory", "")).startswith("NOT")
                 or (isinstance(corrupted, int) and corrupted)
                 or str(f.get("counters add up", "yes")).startswith("NO"))
+
+
+def _memory_goal(rep: Report, limit_mib: int) -> Report:
+    peak = rep.figures["peak memory MiB"]
+    rep.figures["memory"] = f"{'met' if peak <= limit_mib else 'NOT met'} (at most {limit_mib} MiB)"
+    return rep
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -52,6 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--latency", type=float, default=0.001, help="max delay per chunk, s")
     ap.add_argument("--split", type=int, default=16, help="split host writes into pieces of 1..N bytes")
     ap.add_argument("--chunk", type=int, default=1024, help="FRAME_DATA bytes asked for (0: the transport's)")
+    ap.add_argument("--recording-files", type=int, default=200, help="hostile recordings (3 bombs, then fuzzed)")
+    ap.add_argument("--max-memory-mib", type=int, default=2048, help="peak memory the recording stage may reach")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     runs = [(None, lambda: fuzz_decoder(args.decoder_inputs, args.seed)),
@@ -59,6 +72,8 @@ def main(argv: list[str] | None = None) -> int:
     runs += [(flip, lambda flip=flip: stream_with_faults(args.url, args.seconds, flip, args.drop, args.latency,
                                                          args.split, args.chunk or None, seed=args.seed))
              for flip in args.flip or [1e-5, 1e-4]]
+    runs.append((None, lambda: _memory_goal(fuzz_recordings(args.recording_files, args.seed),
+                                            args.max_memory_mib)))
     bad = []
     for flip, run in runs:  # one at a time, each printed as it ends
         rep = run()

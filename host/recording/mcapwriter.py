@@ -33,6 +33,7 @@ from stereocam.protocol.errors import ConfigError
 MAGIC = b"\x89MCAP0\r\n"
 RECORD_SIZE_LIMIT = 1 << 30  # bytes of one MCAP record: a record claiming more is damage, not data
 DEFAULT_CHUNK_BYTES = 4 << 20
+MAX_CHUNK_BYTES = 64 << 20  # a reader refuses a chunk larger than this plus one capture (chunks.py)
 DEFAULT_LEVEL = 1
 MIN_LEVEL, MAX_LEVEL = -(1 << 17), zstandard.MAX_COMPRESSION_LEVEL  # zstd's ZSTD_minCLevel() .. ZSTD_maxCLevel()
 
@@ -75,6 +76,8 @@ class ChunkedWriter:
                  exclusive: bool = False):
         """``exclusive``: never replace a file (FileExistsError if ``path`` exists)."""
         check_level(level)  # before the file is touched: a bad level would otherwise fail at the first chunk
+        if isinstance(chunk_bytes, bool) or not isinstance(chunk_bytes, int) or not 1 <= chunk_bytes <= MAX_CHUNK_BYTES:
+            raise ConfigError(f"chunk_bytes must be an integer from 1 to {MAX_CHUNK_BYTES}, got {chunk_bytes!r}")
         self._out: BinaryIO = open(path, "xb" if exclusive else "wb")  # noqa: SIM115 - closed by finish()
         self._pos = 0
         self._chunk_bytes = chunk_bytes

@@ -6,28 +6,36 @@ chunk is read. Messages are decoded by the ``mcap`` reader and ``mcap-ros2-suppo
 """
 from __future__ import annotations
 
+import io
 import os
-import stat
+
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Any, BinaryIO, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
+from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
+from mcap.records import Channel, Chunk, Message
 from mcap_ros2.decoder import DecoderFactory
 
 from stereocam.calibration_io import StoredCalibration
+from stereocam.input_files import open_regular
 from stereocam.frames import DisparityFormat, Frame, FrameStatus, StereoGeometry
 from stereocam.protocol.errors import ConfigError
+from stereocam.protocol.params import BY_NAME
 
 from . import metadata as meta
 from . import schemas
+from .chunks import Exact, chunk_limit, chunk_records
 from .convert import disparity_from_float
 from .mcapwriter import MAGIC, RECORD_SIZE_LIMIT
 from .recorder import FRAME_INDEX, DamagedRecordingError, RecordingError, UnitDescription
 
-__all__ = ["Recording", "RecordedCapture", "DamagedRecordingError", "RecordingError", "open_regular"]
+_CHUNK_FIELDS = 8 + 8 + 8 + 4 + 4 + 1024 + 8  # a chunk record's fields besides its data (compression name <= 1 KiB)
+
+__all__ = ["Recording", "RecordedCapture", "DamagedRecordingError", "RecordingError"]
 
 
 @dataclass
@@ -59,21 +67,22 @@ def _plane(msg: Any, dtype: str) -> np.ndarray:
 
 
 
-def open_regular(path: Path) -> BinaryIO:
-    """``path`` opened for reading, if it is a regular file (a FIFO or a device would block or never end)."""
-    try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))  # a FIFO must not block the open
-    except OSError as exc:
-        raise RecordingError(f"cannot read {path}: {exc.strerror or exc}") from exc
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise RecordingError(f"{path} is not a regular file (a FIFO, a device or a folder): a recording is "
-                                 f"an .mcap file")
-        os.set_blocking(fd, True)
-        return os.fdopen(fd, "rb")
-    except BaseException:
-        os.close(fd)
-        raise
+def _check_capture(cap: RecordedCapture) -> None:
+    """ValueError unless ``cap`` is a capture a unit could have sent: every CaptureInfo field of this
+    recorder's schema, a known status, a frame size within the unit's range that its planes have."""
+    info = cap.info
+    missing = [f for f in schemas.CAPTURE_INFO_FIELDS if not hasattr(info, f)]
+    if missing:
+        raise ValueError(f"its CaptureInfo has no field {missing[0]!r} (a schema that is not this recorder's)")
+    if info.status not in {s.value for s in FrameStatus}:
+        raise ValueError(f"capture status {info.status!r} is not one of {[s.value for s in FrameStatus]}")
+    for name in ("width", "height"):
+        why = BY_NAME[name].check(getattr(info, name))
+        if why:
+            raise ValueError(f"frame size: {why}")
+    for plane in (cap.left, cap.right, cap.disparity):
+        if plane is not None and plane.shape != (info.height, info.width):
+            raise ValueError(f"a plane of {plane.shape[1]}x{plane.shape[0]} in a {info.width}x{info.height} capture")
 
 
 class Recording:
@@ -81,7 +90,7 @@ class Recording:
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
-        self._file = open_regular(self.path)
+        self._file = open_regular(self.path, what="recording", error=RecordingError)
         try:
             self._open()
         except BaseException:
@@ -106,6 +115,8 @@ class Recording:
         except Exception as exc:  # noqa: BLE001 - whatever a cut-off or damaged end makes the reader raise
             raise RecordingError(f"{path} is truncated or damaged: an MCAP file without a valid summary and footer "
                                  f"at its end (was the recorder killed?); {repair}") from exc
+        self._size = os.fstat(self._file.fileno()).st_size
+        self._decoder_factory, self._decoders = DecoderFactory(), {}
         if self.summary is None or self.summary.statistics is None \
                 or not self.summary.chunk_indexes and self.summary.statistics.message_count:
             raise RecordingError(f"{path} has no summary or index (was the recorder killed?); {repair}")
@@ -115,6 +126,7 @@ class Recording:
         except Exception as exc:  # noqa: BLE001 - offsets or records of a damaged summary
             raise DamagedRecordingError(f"{path}: its metadata or attachments cannot be read ({type(exc).__name__}: "
                                         f"{exc}); {repair}") from exc
+        self._chunk_limit = chunk_limit(self.metadata.get(meta.CONFIG, {}), self.metadata.get(meta.RECORDING, {}))
         if index is None:
             raise RecordingError(f"{path} has no frame index; {repair}")
         if len(index.data) % 8:
@@ -197,14 +209,14 @@ class Recording:
         if start >= stop:
             return
         t0, t1 = int(self.log_times[start]), int(self.log_times[stop - 1])
-        messages = self._reader.iter_decoded_messages(starting_at=t0, ending_before=t1 + 1)
+        messages = self._messages(t0, t1)
         parts: dict[str, Any] = {}
         index, current = start, None
         while index < stop:
             try:
                 item = next(messages, None)
                 ready = None
-                if current is not None and (item is None or item[2].log_time != current):
+                if current is not None and (item is None or item[1].log_time != current):
                     ready = self._assemble(index, current, parts)
             except Exception as exc:  # zstd, CDR, MCAP or shape errors of a damaged or hostile file
                 raise self._damaged(index, f"{type(exc).__name__}: {exc}") from exc
@@ -213,11 +225,54 @@ class Recording:
                 index, parts = index + 1, {}
             if item is None:
                 break
-            _, channel, message, decoded = item
+            channel, message, decoded = item
             current = message.log_time
             parts[channel.topic] = decoded
         if index < stop:
             raise self._damaged(index, "the frame index lists it, the file holds no messages for it")
+
+    def _messages(self, t0: int, t1: int) -> Iterator[tuple[Channel, Message, Any]]:
+        """The messages logged from ``t0`` to ``t1`` (ns, both included), decoded, in time order, read
+        from the chunks that hold them; each chunk bounded (``chunks``): damage raises."""
+        indexes = sorted((c for c in self.summary.chunk_indexes if c.message_start_time <= t1
+                          and c.message_end_time >= t0), key=lambda c: (c.message_start_time, c.chunk_start_offset))
+        for index in indexes:
+            records = chunk_records(self._chunk_at(index.chunk_start_offset), self._chunk_limit)
+            messages = sorted((r for r in records if isinstance(r, Message) and t0 <= r.log_time <= t1),
+                              key=lambda m: m.log_time)
+            for m in messages:
+                channel = self.summary.channels.get(m.channel_id)
+                if channel is None:
+                    raise ValueError(f"a message on channel {m.channel_id}, which the file does not define")
+                yield channel, m, self._decoder(channel)(m.data)
+
+    def _chunk_at(self, offset: int) -> Chunk:
+        """The chunk record at ``offset``, read only if its length fits the limit and the file."""
+        self._file.seek(offset)
+        head = self._file.read(9)
+        if len(head) != 9 or head[0] != Opcode.CHUNK:
+            raise ValueError(f"no chunk at byte {offset}")
+        length = int.from_bytes(head[1:], "little")
+        # zstd never grows data by more than a few bytes per 128 KiB block: 1/64 is ample
+        if length > self._chunk_limit + self._chunk_limit // 64 + _CHUNK_FIELDS or offset + 9 + length > self._size:
+            raise ValueError(f"the chunk at byte {offset} claims {length} bytes")
+        body = self._file.read(length)
+        stream = Exact(io.BytesIO(body))
+        chunk = Chunk.read(stream)
+        if stream.count != len(body):
+            raise ValueError(f"the chunk at byte {offset}: its fields disagree with its record length")
+        return chunk
+
+    def _decoder(self, channel: Channel) -> Callable[[bytes], Any]:
+        decoder = self._decoders.get(channel.id)
+        if decoder is None:
+            schema = self.summary.schemas.get(channel.schema_id)
+            decoder = self._decoder_factory.decoder_for(channel.message_encoding, schema) if schema else None
+            if decoder is None:
+                raise ValueError(f"channel {channel.topic!r}: no decoder for its {channel.message_encoding!r} "
+                                 f"messages")
+            self._decoders[channel.id] = decoder
+        return decoder
 
     def _damaged(self, index: int, why: str) -> DamagedRecordingError:
         return DamagedRecordingError(f"{self.path}: frame {index} cannot be read ({why}); the file is damaged", index)
@@ -228,9 +283,11 @@ class Recording:
         if parts.get(schemas.CAPTURE) is None:
             raise ValueError(f"no {schemas.CAPTURE} message")
         left, right, disp = parts.get(schemas.LEFT), parts.get(schemas.RIGHT), parts.get(schemas.DISPARITY_TOPIC)
-        return RecordedCapture(index, log_time, parts[schemas.CAPTURE],
-                               _plane(left, "u1") if left else None, _plane(right, "u1") if right else None,
-                               disparity_from_float(_plane(disp.image, "<f4")) if disp else None)
+        cap = RecordedCapture(index, log_time, parts[schemas.CAPTURE],
+                              _plane(left, "u1") if left else None, _plane(right, "u1") if right else None,
+                              disparity_from_float(_plane(disp.image, "<f4")) if disp else None)
+        _check_capture(cap)
+        return cap
 
     def close(self) -> None:
         self._file.close()

@@ -79,6 +79,7 @@ class Recorder:
         """``clock_offset_ns``: host wall clock minus monotonic clock for the stamps (default: now;
         re-writing a recording passes the original's so every stamp stays the same)."""
         self.path = Path(path)
+        self._chunk_bytes = chunk_bytes
         try:  # never over an existing file (a failed recording must not cost the one it replaced);
             # written in place, not renamed at the end: a killed recorder leaves a file to repair
             self._writer = ChunkedWriter(self.path, library=f"stereocam {stereocam.__version__}", level=level,
@@ -122,6 +123,7 @@ class Recorder:
                 "calibration_id": str(cal.calibration_id)})
         w.add_metadata(RECORDING, {
             "clock_offset_ns": str(self.clock_offset_ns), "sdk_version": stereocam.__version__,
+            "chunk_bytes": str(self._chunk_bytes),  # bounds what a reader decompresses (chunks.py)
             "stamps": "header stamps and log times: the capture's device time mapped to the host's monotonic "
                       "clock, plus clock_offset_ns (host wall clock at the start of the recording)",
             "disparity": "stereo_msgs/DisparityImage 32FC1 in px, delta_d 1/16: round(d*16) is the camera's "

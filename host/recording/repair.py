@@ -11,6 +11,7 @@ the original beside it (``FILE.damaged``), so a repair never loses a byte.
 from __future__ import annotations
 
 import os
+import uuid
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,11 +19,11 @@ import numpy as np
 from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap_ros2.decoder import DecoderFactory
 
+from stereocam.input_files import open_regular
 from stereocam.protocol.params import Output
 
 from . import schemas
 from .mcapwriter import ChunkedWriter
-from .reader import open_regular
 from .recorder import FRAME_INDEX, FRAME_INDEX_TYPE, SUMMARY, RecordingError
 from .scan import Scan
 
@@ -83,7 +84,7 @@ class _Rewrite:
         """Take one record; False once there is nothing more to take (no MCAP header first)."""
         if isinstance(record, Header):
             if self.writer is None:
-                self.writer = ChunkedWriter(tmp, profile=record.profile, library=record.library)
+                self.writer = ChunkedWriter(tmp, profile=record.profile, library=record.library, exclusive=True)
             return True
         if self.writer is None:
             return False
@@ -176,10 +177,11 @@ def repair(path: str | Path, out: str | Path | None = None) -> RepairReport:
     in_place = out == path or path.exists() and out.exists() and os.path.samefile(path, out)
     if not in_place and os.path.lexists(out):
         raise RecordingError(f"{out} already exists: repair writes a new file (or give no --out to repair in place)")
-    tmp = out.with_name(out.name + ".repair-tmp")
+    # a name of its own, created exclusively: an existing file (or a link) there is never written or removed
+    tmp = out.with_name(f".{out.name}.{uuid.uuid4().hex[:12]}.repair-tmp")
     rewrite = _Rewrite()
     try:
-        with open_regular(path) as f:
+        with open_regular(path, what="recording", error=RecordingError) as f:
             scan = Scan(os.fstat(f.fileno()).st_size)
             for record in scan.records(f):
                 if not rewrite.add(record, tmp):
@@ -190,9 +192,9 @@ def repair(path: str | Path, out: str | Path | None = None) -> RepairReport:
         kept = _keep(path) if in_place else None
         os.replace(tmp, out)
     except BaseException:
-        if rewrite.writer is not None:
+        if rewrite.writer is not None:  # the temporary file is ours only if the writer created it
             rewrite.writer.abandon()
-        tmp.unlink(missing_ok=True)
+            tmp.unlink(missing_ok=True)
         raise
     return RepairReport(len(rewrite.log_times), rewrite.dropped, scan.size, out.stat().st_size, scan.complete,
                         scan.damaged_chunks, scan.damaged_records, scan.cut_short, scan.stopped_at,

@@ -10,17 +10,18 @@ from __future__ import annotations
 
 import io
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import BinaryIO, Iterator
 
-from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, Footer, Header, McapRecord, Message, Metadata, Schema
-from mcap.stream_reader import get_chunk_data_stream
 
+from .chunks import Exact, chunk_limit, chunk_records
 from .mcapwriter import MAGIC, RECORD_SIZE_LIMIT
+from .recorder import CONFIG, RECORDING
 
 _KNOWN = frozenset(int(op) for op in Opcode)
+_MESSAGE_FIXED = 22  # channel id, sequence, log time, publish time
 _HEAD = struct.Struct("<BQ")  # opcode, record length
 # the records a repair copies; the rest (indexes, statistics, summary offsets, data end) it writes anew
 _READERS = {Opcode.HEADER: Header.read, Opcode.SCHEMA: Schema.read, Opcode.CHANNEL: Channel.read,
@@ -37,6 +38,9 @@ class Scan:
     complete: bool = False  # the footer was reached
     cut_short: bool = False  # the file ends without a footer (inside a record or after one)
     stopped_at: int | None = None  # offset of the record the scan stopped at (None: footer or end of file)
+    # the most a chunk may hold: from the recording's metadata once read (written before any chunk)
+    max_chunk_bytes: int = field(default_factory=lambda: chunk_limit({}, {}))
+    _metadata: dict[str, dict[str, str]] = field(default_factory=dict, repr=False)
 
     @property
     def unreadable_bytes(self) -> int:
@@ -68,13 +72,18 @@ class Scan:
             body = f.read(length)
             pos += _HEAD.size + length
             try:
-                records = _parse(opcode, body)
+                records = _parse(opcode, body, self.max_chunk_bytes)
             except Exception:  # noqa: BLE001 - anything a damaged or hostile record makes the parsers raise
                 if opcode == Opcode.CHUNK:
                     self.damaged_chunks += 1
                 else:
                     self.damaged_records += 1
                 continue
+            for record in records:
+                if isinstance(record, Metadata) and record.name in (CONFIG, RECORDING):
+                    self._metadata[record.name] = dict(record.metadata)
+                    meta = self._metadata
+                    self.max_chunk_bytes = chunk_limit(meta.get(CONFIG, {}), meta.get(RECORDING, {}))
             yield from records
             if opcode == Opcode.FOOTER:
                 self.complete = True
@@ -84,47 +93,18 @@ class Scan:
         self.stopped_at, self.cut_short = pos, cut_short
 
 
-class _Exact(ReadDataStream):
-    """A record's fields read from its body: a field running past the body is an error, not short."""
-
-    def read(self, length: int) -> bytes:
-        data = super().read(length) if length > 0 else b""
-        if len(data) != length:
-            raise EOFError(f"a field of {length} bytes runs past its record")
-        return data
-
-
-_MESSAGE_FIXED = 22  # channel id, sequence, log time, publish time
-_IN_CHUNK = {Opcode.SCHEMA: Schema.read, Opcode.CHANNEL: Channel.read}
-
-
-def _parse(opcode: int, body: bytes, readers: dict = _READERS) -> list[McapRecord]:
-    """The records in one record's ``body``: a chunk's records (CRC checked), or the record itself;
-    nothing for records a repair writes anew. Raises on anything damaged."""
-    stream = _Exact(io.BytesIO(body))
-    if opcode == Opcode.CHUNK and readers is _READERS:
+def _parse(opcode: int, body: bytes, limit: int) -> list[McapRecord]:
+    """The records in one record's ``body``: a chunk's records (bounded and CRC checked, see
+    ``chunks``), or the record itself; nothing for records a repair writes anew. Raises on damage."""
+    stream = Exact(io.BytesIO(body))
+    if opcode == Opcode.CHUNK:
         chunk = Chunk.read(stream)
         if stream.count != len(body):
             raise ValueError("chunk fields disagree with its record length")
-        return _chunk_records(chunk)
+        return chunk_records(chunk, limit)
     if opcode == Opcode.MESSAGE:
         if len(body) < _MESSAGE_FIXED:
             raise ValueError("message record too short")
         return [Message.read(stream, len(body))]
-    read = readers.get(opcode)
+    read = _READERS.get(opcode)
     return [] if read is None else [read(stream)]
-
-
-def _chunk_records(chunk: Chunk) -> list[McapRecord]:
-    """The messages (and schemas, channels) of ``chunk``, whose CRC must match."""
-    if chunk.uncompressed_size > RECORD_SIZE_LIMIT:
-        raise ValueError(f"chunk claims {chunk.uncompressed_size} bytes")
-    stream, n = get_chunk_data_stream(chunk, validate_crc=True)
-    if n != chunk.uncompressed_size:
-        raise ValueError(f"chunk holds {n} bytes, says {chunk.uncompressed_size}")
-    inner = _Exact(io.BytesIO(stream.read(n) if n else b""))
-    records: list[McapRecord] = []
-    while inner.count < n:
-        opcode, length = inner.read1(), inner.read8()
-        records += _parse(opcode, inner.read(length), _IN_CHUNK)
-    return records

@@ -58,6 +58,8 @@ uint64 device_dropped        # exposures the device skipped (its last status rep
 uint64 recorder_dropped      # captures this recorder could not write (queue full), so far
 """
 
+CAPTURE_INFO_FIELDS = tuple(line.split()[1] for line in _CAPTURE_INFO.splitlines()
+                            if line.strip() and not line.startswith("#"))  # what a reader may rely on
 _DEPS = {"std_msgs/Header": _HEADER, "builtin_interfaces/Time": _TIME,
          "sensor_msgs/RegionOfInterest": _ROI, "sensor_msgs/Image": _IMAGE}
 _USES = {"sensor_msgs/msg/Image": ["std_msgs/Header", "builtin_interfaces/Time"],

@@ -18,6 +18,7 @@ from stereocam.recording.reader import DamagedRecordingError, Recording
 from stereocam.recording.recorder import FRAME_INDEX
 from stereocam.recording.repair import repair
 from stereocam.tools import cli
+from stereocam.tools.soak_recordings import BOMBS, bomb, with_chunk_replaced
 from tests.support.hangs import returns_within
 
 N = 5
@@ -147,19 +148,23 @@ def test_camera_record_and_recorder_refuse_an_existing_file_and_a_bad_level(tmp_
 
 # -- 3. damaged metadata and indexes: typed errors naming the file and the field ------------------
 def _rewrite(src: Path, dst: Path, metadata: Callable[[dict], dict] = lambda m: m,
-             index: Callable[[np.ndarray], np.ndarray] = lambda t: t, messages: bool = True) -> Path:
-    """``src`` written again by the mcap library's own Writer, its metadata and frame index changed."""
+             index: Callable[[np.ndarray], np.ndarray] = lambda t: t, messages: bool = True,
+             capture: Callable[[str, bytes], bytes] = lambda topic, data: data,
+             schema: Callable[[bytes], bytes] = lambda data: data) -> Path:
+    """``src`` written again by the mcap library's own Writer, its metadata, frame index, messages
+    (``capture(topic, data)``) and schema texts changed."""
     with open(src, "rb") as f, open(dst, "wb") as out:
         reader = make_reader(f)
         summary = reader.get_summary()
         w = Writer(out, compression=CompressionType.ZSTD)
         w.start(profile="ros2", library="test")
-        schema_ids = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
+        schema_ids = {sid: w.register_schema(s.name, s.encoding, schema(s.data)) for sid, s in summary.schemas.items()}
         channel_ids = {cid: w.register_channel(c.topic, c.message_encoding, schema_ids[c.schema_id], c.metadata)
                        for cid, c in summary.channels.items()}
         if messages:
             for _, channel, m in reader.iter_messages():
-                w.add_message(channel_ids[channel.id], m.log_time, m.data, m.publish_time, m.sequence)
+                w.add_message(channel_ids[channel.id], m.log_time, capture(channel.topic, m.data), m.publish_time,
+                              m.sequence)
         meta = metadata({m.name: dict(m.metadata) for m in reader.iter_metadata()})
         for name, data in meta.items():
             w.add_metadata(name, data)
@@ -285,3 +290,120 @@ def test_a_fifo_is_refused_not_waited_on(tmp_path, capsys):
     assert rc == 1 and "not a regular file" in err
     with pytest.raises(RecordingError, match="not a regular file"):
         Recording(tmp_path)  # a folder
+
+
+# -- issue 22 item 4: repair and rematch never destroy a file --------------------------------------
+def test_repair_leaves_an_existing_repair_tmp_and_the_target_of_a_link_alone(ok, tmp_path, capsys):
+    victim = tmp_path / "victim.txt"
+    victim.write_bytes(b"victim")
+    for name, kind in (("a.mcap", "file"), ("b.mcap", "link")):
+        bad = tmp_path / name
+        bad.write_bytes(ok.read_bytes()[:_chunks(ok)[1].chunk_start_offset + 1000])
+        tmp = tmp_path / f"{name}.repair-tmp"
+        if kind == "file":
+            tmp.write_bytes(b"someone's file")
+        else:
+            tmp.symlink_to(victim)
+        rc, _ = _run(["recording", "repair", str(bad)], capsys)
+        assert rc == 0 and _sequences(bad)
+        assert (tmp.read_bytes() if kind == "file" else os.readlink(tmp)) == (
+            b"someone's file" if kind == "file" else str(victim))
+    assert victim.read_bytes() == b"victim"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        ["a.mcap", "a.mcap.damaged", "a.mcap.repair-tmp", "b.mcap", "b.mcap.damaged", "b.mcap.repair-tmp",
+         "victim.txt"])
+
+
+def test_repair_creates_its_temporary_file_exclusively_never_through_a_link(ok, tmp_path, monkeypatch):
+    import stereocam.recording.repair as repair_module
+
+    class _Fixed:
+        hex = "0" * 32
+
+    monkeypatch.setattr(repair_module.uuid, "uuid4", lambda: _Fixed())
+    victim = tmp_path / "victim.txt"
+    victim.write_bytes(b"victim")
+    (tmp_path / f".out.mcap.{'0' * 12}.repair-tmp").symlink_to(victim)
+    with pytest.raises(FileExistsError):
+        repair(ok, tmp_path / "out.mcap")
+    assert victim.read_bytes() == b"victim" and not (tmp_path / "out.mcap").exists()
+    assert os.path.islink(tmp_path / f".out.mcap.{'0' * 12}.repair-tmp")
+
+
+# -- issue 22 item 3: compression bombs --------------------------------------------------------------
+@pytest.mark.parametrize("name", BOMBS)
+def test_a_compression_bomb_is_damage_read_in_bounded_time_and_memory(ok, tmp_path, capsys, name):
+    import resource
+
+    bad = with_chunk_replaced(ok, tmp_path / "bomb.mcap", *bomb(name))
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB
+    rc, err = returns_within(20, _run, ["recording", "export", str(bad), "--out", str(tmp_path / "x")], capsys)
+    assert rc == 1 and "bomb.mcap: frame" in err and "cannot be read" in err
+    r = returns_within(20, repair, bad, tmp_path / "fixed.mcap")
+    assert r.damaged_chunks == 1 and 0 < r.frames < N and _sequences(tmp_path / "fixed.mcap")
+    grown_mib = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    assert grown_mib < 200, f"reading the bomb grew the process by {grown_mib:.0f} MiB"
+
+
+# -- issue 22 item 7: hostile values in the messages are damage, never a traceback -------------------
+def _capture_info(change: Callable[[dict], dict]) -> Callable[[str, bytes], bytes]:
+    """A message transform: each CaptureInfo decoded, changed by ``change`` and encoded again."""
+    from mcap_ros2.decoder import DecoderFactory
+    from mcap.records import Schema
+
+    from stereocam.recording import schemas
+
+    name = schemas.CAPTURE_INFO
+    decode = DecoderFactory().decoder_for("cdr", Schema(id=1, data=schemas.msgdef(name).encode(), encoding="ros2msg",
+                                                             name=name))
+    encode = schemas.encoder(name)
+
+    def run(topic: str, data: bytes) -> bytes:
+        if topic != schemas.CAPTURE:
+            return data
+        m = decode(data)
+        body = {f: getattr(m, f) for f in schemas.CAPTURE_INFO_FIELDS if f != "header"}
+        body["header"] = {"stamp": {"sec": m.header.stamp.sec, "nanosec": m.header.stamp.nanosec},
+                          "frame_id": m.header.frame_id}
+        return encode(change(body))
+    return run
+
+
+HOSTILE_VALUES = {
+    "status outside the enumeration": dict(capture=_capture_info(lambda b: {**b, "status": "on fire"})),
+    "a 65535x65535 frame": dict(capture=_capture_info(lambda b: {**b, "width": 65535, "height": 65535})),
+    "a renamed schema field": dict(schema=lambda d: d.replace(b"uint32 sequence", b"uint32 sequense")),
+}
+
+
+@pytest.mark.parametrize("case", sorted(HOSTILE_VALUES))
+def test_a_hostile_capture_value_is_a_damaged_recording_exit_1(ok, tmp_path, capsys, case):
+    bad = _rewrite(ok, tmp_path / "hostile.mcap", **HOSTILE_VALUES[case])
+    with Recording(bad) as rec, pytest.raises(DamagedRecordingError, match=r"hostile\.mcap: frame 0 cannot be read"):
+        rec.capture(0).to_frame()
+    for argv in (["recording", "export", str(bad), "--out", str(tmp_path / "x")],
+                 ["rematch", "--workers", "1", "--out", str(tmp_path / "rm"), str(bad)]):
+        rc, err = _run(argv, capsys)
+        assert rc == 1 and "hostile.mcap: frame" in err and "cannot be read" in err, argv
+
+
+@pytest.mark.parametrize("claim", [4 << 30, 1 << 40])
+def test_a_zstd_header_claim_allocates_nothing_under_an_address_space_limit(claim):
+    """The mechanism: decompression never sizes a buffer from the zstd header (the mcap library's
+    one-shot decompress does: MemoryError under this limit); the claim is damage, said so."""
+    import subprocess
+    import sys
+
+    code = ("import resource, sys\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30))\n"
+            "from mcap.records import Chunk\n"
+            "from stereocam.recording.chunks import chunk_data\n"
+            "from stereocam.tools.soak_recordings import claiming_zstd\n"
+            f"c = Chunk(compression='zstd', data=claiming_zstd({claim}), message_end_time=0, message_start_time=0, "
+            "uncompressed_crc=0, uncompressed_size=1000)\n"
+            "try:\n"
+            "    chunk_data(c, 12 << 20)\n"
+            "except ValueError as exc:\n"
+            "    print('refused:', exc)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.startswith("refused: a chunk"), r.stdout + r.stderr[-2000:]

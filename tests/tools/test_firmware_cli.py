@@ -15,6 +15,7 @@ from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.handlers.device_info import FACTORY_BUILD
 from stereocam.device_sim.process import ServedSimulator
 from stereocam.tools import cli
+from tests.support.hangs import returns_within
 
 pytestmark = pytest.mark.sim_only("updates the simulated unit's firmware")
 
@@ -236,3 +237,44 @@ def test_a_unit_refuses_an_out_of_range_build_and_keeps_answering(tmp_path: Path
     finally:
         cam.close()
         sim.close()
+
+
+# -- issue 22 items 10 and 16: inputs that are not files, or too large, or missing --------------------
+def _not_files(tmp_path: Path) -> dict[str, Path]:
+    """A FIFO, a device, a folder and a sparse 3 GiB file: none may be read."""
+    fifo = tmp_path / "fifo.img"
+    os.mkfifo(fifo)
+    big = tmp_path / "big.img"
+    with open(big, "wb") as f:
+        f.truncate(3 << 30)
+    return {"fifo": fifo, "device": Path("/dev/zero"), "folder": tmp_path, "3 GiB": big}
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "folder", "3 GiB"])
+def test_update_and_sign_refuse_what_is_not_a_file_or_larger_than_a_slot_before_reading(tmp_path, capsys, kind):
+    path = _not_files(tmp_path)[kind]
+    why = "more than" if kind == "3 GiB" else "not a regular file"
+    rc = returns_within(20, cli.main, ["firmware", "update", "sim://?seed=1", str(path)])
+    err = capsys.readouterr().err
+    assert rc == 1 and why in err and str(path) in err and "Traceback" not in err
+    _sign(tmp_path, FACTORY)[1].unlink()  # the key (its image is not wanted)
+    for flag in ("--code", "--key"):
+        extra = ("--code", str(path)) if flag == "--code" else ()
+        key = ["--key", str(path)] if flag == "--key" else ["--key", str(tmp_path / "vendor.pem")]
+        (tmp_path / "build.json").write_text(json.dumps(FACTORY))
+        rc = returns_within(20, cli.main, ["firmware", "sign", *key, "--version", "1.2.0", "--out",
+                                           str(tmp_path / "out.img"), *extra, str(tmp_path / "build.json")])
+        err = capsys.readouterr().err
+        assert rc == 2 and why in err and "Traceback" not in err, flag
+    assert not (tmp_path / "out.img").exists()
+
+
+def test_a_missing_input_file_is_a_usage_error_exit_2(tmp_path, capsys):
+    _sign(tmp_path, FACTORY)
+    for argv in (["firmware", "update", "sim://?seed=1", str(tmp_path / "nonexistent.img")],
+                 ["firmware", "sign", "--key", str(tmp_path / "nonexistent.pem"), "--version", "1.2.0", "--out",
+                  str(tmp_path / "o.img"), str(tmp_path / "build.json")],
+                 ["recording", "info", str(tmp_path / "nonexistent.mcap")]):
+        assert cli.main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert "nonexistent" in err and "does not exist" in err and "Traceback" not in err

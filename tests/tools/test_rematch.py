@@ -111,3 +111,18 @@ def test_bad_workers_and_scheduler_are_usage_errors_not_hangs(source, tmp_path, 
     with pytest.raises(stereocam.ConfigError, match=what):
         rematch([source], tmp_path / "out", {}, **({"workers": int(args[1])} if args[0] == "--workers"
                                                   else {"scheduler": args[1]}))
+
+
+def test_an_existing_output_is_refused_unless_force(source, tmp_path, capsys):
+    """Issue 22 item 4: rematch --out DIR never replaces DIR/NAME.mcap silently."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "run.mcap").write_bytes(b"precious")
+    assert cli.main(["rematch", str(source), "--out", str(out), "--workers", "1"]) == 2
+    assert "already exists" in capsys.readouterr().err and (out / "run.mcap").read_bytes() == b"precious"
+    with pytest.raises(stereocam.ConfigError, match="already exists"):
+        rematch([source], out, {})
+    assert (out / "run.mcap").read_bytes() == b"precious"
+    with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as client:
+        assert rematch([source], out, {"block_size": 21}, client=client, force=True)["frames"] == N
+    _check(source, out / "run.mcap", 21)

@@ -17,7 +17,7 @@ def test_device_fuzz_short():
 
 def test_soak_command_short(capsys):
     rc = soak.main(["sim://?seed=7", "--decoder-inputs", "500", "--device-inputs", "30", "--seconds", "4",
-                    "--flip", "1e-4"])
+                    "--flip", "1e-4", "--recording-files", "5"])
     out = capsys.readouterr().out
     assert rc == 0, out
     assert "soak: clean" in out and "corrupted: 0" in out and "counters add up: yes" in out
@@ -31,3 +31,23 @@ def test_soak_fails_a_stream_short_of_its_delivery_goal():
     assert soak._failed(rep, 1e-5) and rep.figures["delivery goal"].startswith("NOT MET")
     rep.figures["delivered"] = 95
     assert not soak._failed(rep, 1e-5)
+
+
+def test_hostile_recording_stage_short():
+    """Issue 22: the bombs and fuzzed recordings through export, repair, replay and rematch: no
+    crash, no hang, nothing changed outside the outputs, memory bounded."""
+    from stereocam.tools.soak_recordings import fuzz_recordings
+
+    rep = fuzz_recordings(8, seed=3, hang_s=60)
+    f = rep.figures
+    assert rep.inputs == 8 * 4 and rep.crashes == 0 and rep.hangs == 0, f
+    assert f["files changed outside the output"] == 0 and f["operations refused (damaged, exit 1/2)"] >= 3 * 3
+    assert f["peak memory MiB"] < 2048
+
+
+def test_the_soak_fails_a_file_changed_outside_the_output():
+    rep = soak.Report("hostile recordings", inputs=4)
+    rep.figures.update({"files changed outside the output": 1, "peak memory MiB": 100})
+    assert soak._failed(rep)
+    rep.figures["files changed outside the output"] = 0
+    assert not soak._failed(soak._memory_goal(rep, 2048)) and soak._failed(soak._memory_goal(rep, 50))

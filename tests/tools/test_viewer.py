@@ -7,7 +7,9 @@ import subprocess
 import sys
 import threading
 import time
+import urllib.error
 import urllib.request
+from typing import Callable
 from pathlib import Path
 
 import cv2
@@ -20,6 +22,7 @@ from stereocam.tools.viewer.server import ViewerServer
 from stereocam.tools.viewer.session import ViewerSession
 from tests.support.browser import Chromium, find_chromium
 from tests.support.device import SMALL
+from tests.support.hangs import returns_within
 
 CHROMIUM = find_chromium()
 needs_browser = pytest.mark.skipif(CHROMIUM is None, reason="no Chromium on this machine (apt-get install chromium; "
@@ -298,3 +301,173 @@ def test_a_device_chosen_serial_cannot_put_a_recording_outside_its_folder(tmp_pa
         session.close()
         cam.close()
         sim.close()
+
+
+# -- issue 22 items 5 and 12: a viewer on a network, hostile bodies and connections ----------------
+def _raw(server: ViewerServer, request: bytes, timeout: float = 10) -> bytes:
+    """``request`` sent as it is; the whole answer (up to the server closing or ``timeout``)."""
+    import socket
+
+    with socket.create_connection(server.server_address[:2], timeout=timeout) as s:
+        s.sendall(request)
+        s.shutdown(socket.SHUT_WR)
+        chunks = []
+        while chunk := s.recv(65536):
+            chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def _post_raw(server: ViewerServer, body: bytes, extra: str = "") -> bytes:
+    port = server.server_address[1]
+    head = (f"POST /api/config HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nContent-Type: application/json\r\n"
+            f"Content-Length: {len(body)}\r\nConnection: close\r\n{extra}\r\n")
+    return _raw(server, head.encode() + body)
+
+
+@pytest.mark.parametrize("body", [b"[1, 2]", b'"fps"', b"null", b"12", b'{"fps": Infinity}', b'{"fps": NaN}',
+                                  b'{"fps": 1e400}', b"[" * 30000 + b"]" * 30000, b'{"fps": true}',
+                                  b'{"width": 320.7}', b'{"fps": "12"}', b"\xff\xfe"])
+def test_a_body_that_is_not_integer_settings_is_answered_400_with_a_reason(viewer, body):
+    before = viewer.session.cam.config()
+    answer = _post_raw(viewer, body)
+    assert answer.startswith(b"HTTP/1.1 400"), answer[:200]
+    assert b'"reason"' in answer
+    assert viewer.session.cam.config() == before
+
+
+def test_a_chunked_body_is_refused_not_read_as_empty(viewer):
+    before = viewer.session.cam.config()
+    port = viewer.server_address[1]
+    answer = _raw(viewer, (f"POST /api/config HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nContent-Type: application/json"
+                           f"\r\nTransfer-Encoding: chunked\r\nConnection: close\r\n\r\n"
+                           f"9\r\n{{\"fps\": 5}}\r\n0\r\n\r\n").encode())
+    assert answer.startswith(b"HTTP/1.1 400") and b"Transfer-Encoding" in answer
+    assert viewer.session.cam.config() == before
+
+
+def test_idle_half_sent_connections_time_out_and_are_limited(tmp_path, monkeypatch):
+    import socket
+
+    from stereocam.tools.viewer import server as server_module
+
+    monkeypatch.setattr(server_module._Handler, "timeout", 1.0)
+    cam = stereocam.open("sim://?seed=6", timeout=2.0)
+    server = ViewerServer(ViewerSession(cam, tmp_path), max_connections=4)
+    threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
+    idle = []
+    try:
+        for _ in range(4):
+            s = socket.create_connection(server.server_address[:2], timeout=10)
+            s.sendall(b"POST /api/config HTTP/1.1\r\nHost: 127.0.0.1\r\n")  # and then nothing
+            idle.append(s)
+        deadline = time.monotonic() + 5
+        while server._slots._value and time.monotonic() < deadline:  # every slot taken by a silent peer
+            time.sleep(0.01)
+        assert _raw(server, b"GET /api/state HTTP/1.1\r\n\r\n").startswith(b"HTTP/1.1 503")  # one more: refused
+        for s in idle:  # each silent connection is closed by the server after its timeout
+            assert returns_within(10, s.recv, 100) == b""
+        answer = _raw(server, f"GET /api/frame HTTP/1.1\r\nHost: 127.0.0.1:{server.server_address[1]}\r\n"
+                              f"Connection: close\r\n\r\n".encode())
+        assert answer.startswith(b"HTTP/1.1 200")  # and the viewer serves again
+    finally:
+        for s in idle:
+            s.close()
+        server.shutdown()
+        server.server_close()
+        server.session.close()
+        cam.close()
+
+
+def _network_viewer(tmp_path, **kw) -> ViewerServer:
+    cam = stereocam.open("sim://?seed=6", timeout=2.0)
+    server = ViewerServer(ViewerSession(cam, tmp_path), host="0.0.0.0", **kw)
+    threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
+    return server
+
+
+def _close(server: ViewerServer) -> None:
+    server.shutdown()
+    server.server_close()
+    server.session.close()
+    server.session.cam.close()
+
+
+def test_a_viewer_on_all_addresses_answers_only_its_own_names(tmp_path):
+    server = _network_viewer(tmp_path, allowed_hosts=["camera-bench.lan"])
+    port = server.server_address[1]
+    try:
+        def get(host: str, path: str = "/api/state", extra: str = "") -> bytes:
+            return _raw(server, f"GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n{extra}\r\n".encode())
+        for host in (f"evil.example:{port}", "evil.example", f"camera-bench.lan:{port + 1}"):
+            assert get(host, extra=f"Origin: http://{host}\r\n").startswith(b"HTTP/1.1 421"), host
+            answer = _raw(server, (f"POST /api/start HTTP/1.1\r\nHost: {host}\r\nOrigin: http://{host}\r\n"
+                                   f"Content-Type: application/json\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
+                                   ).encode())
+            assert answer.startswith(b"HTTP/1.1 421"), host
+        for host in (f"camera-bench.lan:{port}", f"localhost:{port}", f"192.168.1.20:{port}", f"[fe80::1]:{port}"):
+            assert get(host).startswith(b"HTTP/1.1 200"), host
+    finally:
+        _close(server)
+
+
+def test_a_viewer_with_a_token_answers_only_requests_that_carry_it(tmp_path):
+    server = _network_viewer(tmp_path, token="s3cret")
+    host = f"127.0.0.1:{server.server_address[1]}"
+    try:
+        def get(path: str, extra: str = "") -> bytes:
+            return _raw(server, f"GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n{extra}\r\n".encode())
+        assert get("/api/state").startswith(b"HTTP/1.1 401")
+        assert get("/api/state?token=wrong").startswith(b"HTTP/1.1 401")
+        page = get("/?token=s3cret")
+        assert page.startswith(b"HTTP/1.1 200") and b"Set-Cookie: stereocam_viewer_token=s3cret" in page
+        assert get("/api/state", "Cookie: stereocam_viewer_token=s3cret\r\n").startswith(b"HTTP/1.1 200")
+        assert get("/api/state", "Authorization: Bearer s3cret\r\n").startswith(b"HTTP/1.1 200")
+    finally:
+        _close(server)
+
+
+# -- issue 22 item 13: the camera restarts under the viewer ------------------------------------------
+def test_the_viewer_marks_the_last_frame_stale_and_reconnects_after_the_camera_restarts(tmp_path):
+    from stereocam.device_sim.process import ServedSimulator
+
+    sim = ServedSimulator("tcp:127.0.0.1:0", seed=44)
+    port = sim.url.rstrip("/").rsplit(":", 1)[1]
+    cam = stereocam.open(sim.url, timeout=2.0)
+    cam.configure(**SMALL, fps=10)
+    server = ViewerServer(ViewerSession(cam, tmp_path))
+    threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
+    cam.start()
+
+    def until(what: Callable[[], bool], seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while not what():
+            assert time.monotonic() < deadline, f"not within {seconds} s"
+            time.sleep(0.05)
+
+    def frame() -> dict:
+        return json.loads(_get(server.url + "api/frame")[1])
+
+    def state_ok() -> bool:
+        try:
+            return not json.loads(_get(server.url + "api/state")[1])["stale"]
+        except urllib.error.HTTPError:
+            return False
+
+    try:
+        until(lambda: frame() is not None, 20)
+        assert frame()["stale"] is False
+        sim.stop()
+        until(lambda: frame()["stale"], 20)  # the last frame is served, said to be stale
+        headers, _ = _get(server.url + "image/left.jpg")
+        assert headers["X-Stale"] == "1"
+        last = frame()["sequence"]
+        sim = ServedSimulator(f"tcp:127.0.0.1:{port}", seed=44)  # the same unit, back on its address
+        until(state_ok, 30)  # reconnected: state answers again
+        until(lambda: (f := frame())["stale"] is False and f["sequence"] != last, 30)  # and frames are live
+        assert json.loads(_get(server.url + "api/state")[1])["config"]["fps"] == 10  # with the viewer's settings
+    finally:
+        server.shutdown()
+        server.server_close()
+        server.session.close()
+        cam.close()
+        sim.stop()

@@ -79,6 +79,15 @@ def report_doc(db: str, attempts: list[Attempt]) -> dict:
             "failures": dict(reasons)}
 
 
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")  # what a spreadsheet would run as a formula
+
+
+def csv_cell(value: object) -> object:
+    """``value`` safe for a spreadsheet: text that a spreadsheet would take as a formula gets a
+    leading apostrophe (OWASP's CSV injection advice); numbers stay numbers."""
+    return "'" + value if isinstance(value, str) and value.startswith(_FORMULA_START) else value
+
+
 def write_csv(attempts: list[Attempt], path: Path) -> None:
     cols = [c for c in COLUMNS if c != "calibration"] + ["calibration_bytes"]
     with path.open("w", newline="") as f:
@@ -86,7 +95,7 @@ def write_csv(attempts: list[Attempt], path: Path) -> None:
         w.writerow(cols)
         for a in attempts:
             d = {**vars(a), "metrics": json.dumps(a.metrics, sort_keys=True)}
-            w.writerow([d[c] for c in cols[:-1]] + [len(a.calibration or b"")])
+            w.writerow([csv_cell(d[c]) for c in cols[:-1]] + [len(a.calibration or b"")])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -112,9 +121,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with FactoryDB(args.db, create=False) as db:
             attempts = db.attempts(args.since)
+            unreadable = db.unreadable
     except FactoryDBError as exc:
         print(f"stereocam factory: error: {exc}", file=sys.stderr)
         return 2
+    for why in unreadable:  # rows written by something else: named, left out of the figures
+        print(f"stereocam factory: warning: {args.db}: {why}: left out of the report", file=sys.stderr)
     if args.json:
         print(json.dumps(report_doc(args.db, attempts), indent=2))
     else:

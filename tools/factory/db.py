@@ -74,6 +74,46 @@ class Attempt:
 
 
 COLUMNS = [f for f in Attempt.__dataclass_fields__]
+SQLITE_BUSY_S = 10.0  # how long a station waits for another's write lock on a shared SQLite file
+_MIGRATION_LOCK = 0x5C_FAC7  # PostgreSQL advisory lock the migration holds (any constant of this tool)
+_TEXT = ("unit_serial", "started_at", "station", "tool_version", "mode", "board", "reason", "lens_model",
+         "output_dir")
+_FLOATS = ("rms_left", "rms_right", "rms_stereo", "epipolar_rms_px", "epipolar_all_rms_px", "fx_left", "baseline_m")
+_INTS = ("views_used", "views_dropped")
+_BOOLS = ("passed", "written", "verified")
+
+
+def attempt_from_row(d: dict[str, Any]) -> Attempt:
+    """The Attempt of one row as stored, each value checked (others may have written the database):
+    ValueError naming the first column that does not hold what it should."""
+    def bad(col: str, why: str) -> ValueError:
+        return ValueError(f"column {col} {why} ({d[col]!r:.60})")
+
+    for col in _TEXT:
+        if d[col] is not None and not isinstance(d[col], str):
+            raise bad(col, "is not text")
+    for col in _FLOATS + _INTS:
+        v = d[col]
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int if col in _INTS else (int, float))):
+            raise bad(col, "is not a number")
+        d[col] = None if v is None else float(v) if col in _FLOATS else v
+    for col in _BOOLS:
+        if d[col] is not None and d[col] not in (0, 1):
+            raise bad(col, "is not true or false")
+        d[col] = None if d[col] is None else bool(d[col])
+    if d["passed"] is None or d["unit_serial"] is None or d["started_at"] is None:
+        raise ValueError("a required column is empty")
+    if d["calibration"] is not None and not isinstance(d["calibration"], (bytes, memoryview, bytearray)):
+        raise bad("calibration", "is not a binary body")
+    d["calibration"] = None if d["calibration"] is None else bytes(d["calibration"])
+    try:
+        metrics = json.loads(d["metrics"] or "{}")
+    except (TypeError, ValueError) as exc:
+        raise bad("metrics", "is not JSON") from exc
+    if not isinstance(metrics, dict):
+        raise bad("metrics", "is not a JSON object")
+    d["metrics"] = metrics
+    return Attempt(**d)
 
 
 def default_url() -> str:
@@ -89,6 +129,7 @@ class FactoryDB:
         it is missing; a reader (report, export) does not: a mistyped path is an error, and a file
         that is not a factory database is left as it was."""
         self.url = url or default_url()
+        self.unreadable: list[str] = []  # rows the last ``attempts()`` skipped, and why
         scheme = self.url.split("://", 1)[0] if "://" in self.url else ""
         if scheme not in ("", "sqlite", "postgresql", "postgres"):
             raise FactoryDBError(f"factory database {self.url}: unknown scheme {scheme!r} "
@@ -104,7 +145,9 @@ class FactoryDB:
                     path.parent.mkdir(parents=True, exist_ok=True)
                 elif not path.is_file():
                     raise FactoryDBError(f"no factory database at {path} (a report never creates one)")
-                self.dialect, self._conn = "sqlite", sqlite3.connect(path)
+                # autocommit: transactions are begun explicitly (the migration takes the write lock first)
+                self.dialect, self._conn = "sqlite", sqlite3.connect(path, timeout=SQLITE_BUSY_S,
+                                                                     isolation_level=None)
             if not create and self.version() == 0:
                 self._conn.close()
                 raise FactoryDBError(f"{self.url} is not a factory database (no schema_version table); left as it was")
@@ -126,30 +169,60 @@ class FactoryDB:
     def _sql(self, text: str) -> str:
         return text.replace("?", "%s") if self.dialect == "postgresql" else text
 
-    def version(self) -> int:
+    def _has_table(self, name: str) -> bool:
         cur = self._conn.cursor()
-        try:
-            cur.execute("SELECT version FROM schema_version")
-        except Exception:
-            self._conn.rollback()
+        if self.dialect == "postgresql":
+            cur.execute("SELECT to_regclass(%s) IS NOT NULL", (name,))
+        else:
+            cur.execute("SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = ?", (name,))
+        return bool(cur.fetchone()[0])
+
+    def version(self) -> int:
+        """The schema version applied; 0 where there is no schema_version table (any other error,
+        a locked file for one, is raised)."""
+        if not self._has_table("schema_version"):
             return 0
+        cur = self._conn.cursor()
+        cur.execute("SELECT version FROM schema_version")
         row = cur.fetchone()
         return int(row[0]) if row else 0
 
     def _migrate(self) -> None:
-        current = self.version()
-        if current > SCHEMA_VERSION:
-            raise FactoryDBError(f"factory database {self.url} has schema {current}, newer than this tool's "
-                                 f"{SCHEMA_VERSION}: update the tool")
+        """Apply the missing migrations in one transaction that holds the database's write lock from
+        its start: stations creating the same database at once take turns, none loses its record."""
         cur = self._conn.cursor()
-        if current == 0:
-            cur.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
-            cur.execute("INSERT INTO schema_version (version) VALUES (0)")
-        for version in range(current + 1, SCHEMA_VERSION + 1):
-            for statement in MIGRATIONS[version]:
-                cur.execute(statement.format(**_TYPES[self.dialect]))
-            cur.execute(self._sql("UPDATE schema_version SET version = ?"), (version,))
-        self._conn.commit()
+        if self.dialect == "postgresql":
+            cur.execute("SELECT pg_advisory_xact_lock(%s)", (_MIGRATION_LOCK,))
+        else:
+            cur.execute("BEGIN IMMEDIATE")
+        try:
+            current = self.version()
+            if current > SCHEMA_VERSION:
+                raise FactoryDBError(f"factory database {self.url} has schema {current}, newer than this tool's "
+                                     f"{SCHEMA_VERSION}: update the tool")
+            if current == 0:
+                cur.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
+                cur.execute("INSERT INTO schema_version (version) VALUES (0)")
+            for version in range(current + 1, SCHEMA_VERSION + 1):
+                for statement in MIGRATIONS[version]:
+                    cur.execute(statement.format(**_TYPES[self.dialect]))
+                cur.execute(self._sql("UPDATE schema_version SET version = ?"), (version,))
+            self._commit()
+        except BaseException:
+            self._rollback()
+            raise
+
+    def _commit(self) -> None:
+        if self.dialect == "postgresql":
+            self._conn.commit()
+        elif self._conn.in_transaction:
+            self._conn.execute("COMMIT")
+
+    def _rollback(self) -> None:
+        if self.dialect == "postgresql":
+            self._conn.rollback()
+        elif self._conn.in_transaction:
+            self._conn.execute("ROLLBACK")
 
     def record(self, attempt: Attempt) -> int:
         """Insert one attempt; returns its id."""
@@ -166,9 +239,9 @@ class FactoryDB:
             else:
                 cur.execute(sql, [row[c] for c in COLUMNS])
                 new_id = cur.lastrowid
-            self._conn.commit()
+            self._commit()
         except Exception as exc:
-            self._conn.rollback()
+            self._rollback()
             raise FactoryDBError(f"factory database {self.url}: cannot record the attempt: {exc}") from exc
         return int(new_id)
 
@@ -180,13 +253,17 @@ class FactoryDB:
             sql += " WHERE started_at >= ?"
             args.append(since)
         cur = self._conn.cursor()
-        cur.execute(self._sql(sql + " ORDER BY started_at, id"), args)
+        try:
+            cur.execute(self._sql(sql.replace("SELECT ", "SELECT id, ", 1) + " ORDER BY started_at, id"), args)
+            rows = cur.fetchall()
+        except Exception as exc:  # a column dropped, a table renamed, a lock held too long
+            self._rollback()
+            raise FactoryDBError(f"factory database {self.url}: cannot read the attempts: {exc}") from exc
+        self.unreadable = []
         out = []
-        for values in cur.fetchall():
-            d = dict(zip(COLUMNS, values))
-            d["metrics"] = json.loads(d["metrics"] or "{}")
-            for key in ("passed", "written", "verified"):
-                d[key] = None if d[key] is None else bool(d[key])
-            d["calibration"] = None if d["calibration"] is None else bytes(d["calibration"])
-            out.append(Attempt(**d))
+        for row_id, *values in rows:
+            try:
+                out.append(attempt_from_row(dict(zip(COLUMNS, values))))
+            except ValueError as exc:
+                self.unreadable.append(f"attempt {row_id}: {exc}")
         return out

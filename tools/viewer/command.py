@@ -2,9 +2,11 @@
 from __future__ import annotations
 
 import contextlib
+import secrets
 import signal
 import threading
 import webbrowser
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -35,8 +37,14 @@ def _interrupt(signum: int, frame: object) -> None:  # noqa: ARG001
 @click.option("--master", default="0", show_default=True, metavar="INDEX|none",
               help="With several URLs: which camera (0 = the first) drives the trigger line; 'none' when "
                    "a generator or a unit outside the group drives it.")
+@click.option("--allow-host", "allow_hosts", multiple=True, metavar="NAME",
+              help="A host name the viewer answers to besides localhost and IP addresses (repeatable; "
+                   "for a viewer reached by name over a network).")
+@click.option("--token", default=None, metavar="TEXT|auto",
+              help="Answer only requests that carry this token ('auto': a random one); the printed "
+                   "address carries it. Advised with --host 0.0.0.0.")
 def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_config: bool,
-            record_dir: Path, master: str) -> int:
+            record_dir: Path, master: str, allow_hosts: tuple[str, ...], token: str | None) -> int:
     """Live viewer: left, right and disparity (colour bar in metres), depth and 3-D point under the
     cursor, frame rate, drops, link and device counters, the configuration with the device's ranges,
     trigger, start/stop, snapshots (PNG, PLY), recording to MCAP. With several URLs: a camera group on
@@ -44,12 +52,14 @@ def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_
     the spread of their capture times, each head's clock-map error and the sets a head missed. The
     first line printed is the viewer's address. Runs until Ctrl-C; then each camera's configuration
     is put back as found unless --keep-config."""
+    access = Access(allow_hosts, secrets.token_urlsafe(18) if token == "auto" else token)
     if len(urls) > 1:
-        return _view_group(list(urls), port, host, no_browser, keep_config, _master_index(master, len(urls)))
+        return _view_group(list(urls), port, host, no_browser, keep_config, _master_index(master, len(urls)),
+                           access)
     output_dir(record_dir, "--record-dir")  # made and written into now, not when Record is pressed
     with stereocam.open(urls[0], timeout=2.0) as cam, \
             (contextlib.nullcontext() if keep_config else preserved_configuration(cam)):
-        _serve(ViewerSession(cam, record_dir), host, port, no_browser, cam.start)
+        _serve(ViewerSession(cam, record_dir), host, port, no_browser, cam.start, access)
     return 0
 
 
@@ -63,7 +73,7 @@ def _master_index(text: str, cameras: int) -> int | None:
 
 
 def _view_group(urls: list[str], port: int, host: str, no_browser: bool, keep_config: bool,
-                master: int | None) -> int:
+                master: int | None, access: Access) -> int:
     found = {}
     if not keep_config:
         for url in urls:
@@ -71,7 +81,7 @@ def _view_group(urls: list[str], port: int, host: str, no_browser: bool, keep_co
                 found[url] = cam.config()
     try:
         with stereocam.CameraGroup(urls, master=master, timeout=5.0) as group:
-            _serve(GroupViewerSession(group), host, port, no_browser, lambda: None)
+            _serve(GroupViewerSession(group), host, port, no_browser, lambda: None, access)
     finally:
         for url, config in found.items():  # each head as found (the group put it on external trigger)
             with stereocam.open(url, timeout=2.0) as cam:
@@ -79,17 +89,26 @@ def _view_group(urls: list[str], port: int, host: str, no_browser: bool, keep_co
     return 0
 
 
+@dataclass(frozen=True)
+class Access:
+    """Who the viewer answers: the host names besides loopback and IP addresses, and its token."""
+
+    allowed_hosts: tuple[str, ...] = ()
+    token: str | None = None
+
+
 def _serve(session: ViewerSession | GroupViewerSession, host: str, port: int, no_browser: bool,
-           start: Callable[[], object]) -> None:
+           start: Callable[[], object], access: Access) -> None:
     try:
-        server = ViewerServer(session, host, port)
+        server = ViewerServer(session, host, port, access.allowed_hosts, access.token)
     except OSError as exc:
         session.close()
         raise click.BadParameter(f"cannot listen on {host}:{port}: {exc.strerror or exc}",
                                  param_hint="'--port'") from exc
-    click.echo(server.url)
+    address = server.url + (f"?token={access.token}" if access.token else "")
+    click.echo(address)
     if not no_browser:
-        threading.Thread(target=webbrowser.open, args=(server.url,), daemon=True).start()
+        threading.Thread(target=webbrowser.open, args=(address,), daemon=True).start()
     signal.signal(signal.SIGTERM, _interrupt)  # a service manager's stop is a Ctrl-C too
     try:
         start()

@@ -29,6 +29,9 @@ class Feed(abc.ABC):
     def _take(self, item: Any) -> None:
         """Keep ``item`` for the page."""
 
+    def _recover(self, exc: stereocam.StereoCamError) -> None:
+        """After a camera error, before the next try (a subclass may reconnect here)."""
+
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
@@ -37,6 +40,7 @@ class Feed(abc.ABC):
                 continue
             except stereocam.StereoCamError as exc:
                 self.error = str(exc)
+                self._recover(exc)
                 self._stop.wait(RETRY_S)
                 continue
             self.error = None

@@ -20,14 +20,18 @@ GET  /image/CAMERA/PLANE.jpg  a head's left or colour-mapped disparity image in 
 """
 from __future__ import annotations
 
+import hmac
+import ipaddress
 import json
 import logging
 import tempfile
+import threading
+from http.cookies import SimpleCookie
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable
 from urllib.parse import parse_qs, urlsplit
 
 import stereocam
@@ -46,12 +50,74 @@ SNAPSHOTS = {"left.png": "left", "right.png": "right", "disparity.png": "dispari
 _log = logging.getLogger(__name__)
 
 
+LOOPBACK_NAMES = ("localhost", "127.0.0.1", "[::1]")
+TOKEN_COOKIE = "stereocam_viewer_token"
+CONNECTION_TIMEOUT_S = 15.0  # a connection silent this long (half-sent request, idle keep-alive) is closed
+MAX_CONNECTIONS = 32  # connections served at once; more are answered 503 and closed
+
+
+def _no_constant(name: str) -> None:
+    raise ValueError(f"{name} is not a number a setting can take")
+
+
+def _settings(body: dict[str, Any]) -> dict[str, int]:
+    """``body`` as parameter settings: every value an integer (not true, 320.7 or 1e400)."""
+    for name, value in body.items():
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"{name}: {json.dumps(value)[:40]} is not an integer")
+    return body
+
+
 class ViewerServer(ThreadingHTTPServer):
     daemon_threads = True
 
-    def __init__(self, session: ViewerSession | GroupViewerSession, host: str = "127.0.0.1", port: int = 0):
+    def __init__(self, session: ViewerSession | GroupViewerSession, host: str = "127.0.0.1", port: int = 0,
+                 allowed_hosts: Iterable[str] = (), token: str | None = None,
+                 max_connections: int = MAX_CONNECTIONS):
+        """``allowed_hosts``: host names (besides loopback names and IP addresses) a request's Host
+        may carry, for a viewer reachable from a network; ``token``: if given, every request must
+        carry it (``?token=`` once, then the cookie the page gets; or ``Authorization: Bearer``)."""
         self.session = session
+        self.allowed_hosts = {h.lower() for h in (*LOOPBACK_NAMES, *allowed_hosts)}
+        self.token = token
+        self._slots = threading.BoundedSemaphore(max_connections)
         super().__init__((host, port), _Handler)
+
+    def process_request(self, request: Any, client_address: Any) -> None:
+        """At most ``max_connections`` at once: one more is answered 503 and closed, not queued."""
+        if not self._slots.acquire(blocking=False):
+            try:
+                request.sendall(b"HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0\r\nConnection: close\r\n\r\n")
+            except OSError:
+                pass
+            self.shutdown_request(request)
+            return
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            self._slots.release()
+            raise
+
+    def process_request_thread(self, request: Any, client_address: Any) -> None:
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self._slots.release()
+
+    def host_allowed(self, asked: str) -> bool:
+        """Whether a request's Host names this viewer: a loopback name, an allowed name or an IP
+        address (DNS rebinding needs a name of the attacker's), with this server's port."""
+        port = self.server_address[1]
+        name, sep, asked_port = asked.lower().rpartition(":")
+        if not sep or asked_port != str(port) or not name:
+            return False
+        if name in self.allowed_hosts:
+            return True
+        try:
+            ipaddress.ip_address(name[1:-1] if name.startswith("[") and name.endswith("]") else name)
+            return True
+        except ValueError:
+            return False
 
     def handle_error(self, request: Any, client_address: Any) -> None:
         """A browser that closed a connection mid-answer is normal; anything else is logged."""
@@ -66,6 +132,8 @@ class ViewerServer(ThreadingHTTPServer):
 class _Handler(BaseHTTPRequestHandler):
     server: ViewerServer
     protocol_version = "HTTP/1.1"
+    timeout = CONNECTION_TIMEOUT_S  # the socket's: a half-sent request or an idle connection ends
+    _set_cookie: str | None = None
 
     def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 - the base class's name
         _log.debug("%s %s", self.address_string(), format % args)
@@ -77,6 +145,8 @@ class _Handler(BaseHTTPRequestHandler):
         self.send_header("Cache-Control", "no-store")
         for k, v in (headers or {}).items():
             self.send_header(k, v)
+        if self._set_cookie:
+            self.send_header("Set-Cookie", self._set_cookie)
         self.end_headers()
         self.wfile.write(body)
 
@@ -84,15 +154,32 @@ class _Handler(BaseHTTPRequestHandler):
         self._send(json.dumps(doc).encode(), "application/json", status)
 
     def _foreign_host(self) -> bool:
-        """A request whose Host is not this server's address (DNS rebinding: another site's name
-        pointed at 127.0.0.1) is refused, so no other site can read the camera through the browser."""
-        host, port = self.server.server_address[:2]
-        names = {host, "localhost", "127.0.0.1", "[::1]"} if host in ("127.0.0.1", "::1", "localhost") else None
+        """A request whose Host is not one of this viewer's names (DNS rebinding: another site's
+        name pointed at this address) is refused 421, so no other site can read the camera through a
+        browser; without the viewer's token (if it has one) a request is refused 401."""
         asked = self.headers.get("Host", "")
-        if names is None or asked in {f"{n}:{port}" for n in names}:
+        if not self.server.host_allowed(asked):
+            self._json({"error": f"Host {asked!r} is not this viewer's address (see --allow-host)"},
+                       HTTPStatus.MISDIRECTED_REQUEST)
+            return True
+        token = self.server.token
+        if token is None or self._token_given(token):
             return False
-        self._json({"error": f"Host {asked!r} is not this viewer's address"}, HTTPStatus.MISDIRECTED_REQUEST)
+        self._json({"error": "this viewer needs its token: open the address it printed (…?token=…)"},
+                   HTTPStatus.UNAUTHORIZED)
         return True
+
+    def _token_given(self, token: str) -> bool:
+        """Whether the request carries ``token``: in the query (then the page's cookie is set with the
+        answer), as its cookie, or as a bearer token."""
+        query = parse_qs(urlsplit(self.path).query).get("token", [""])[0]
+        cookies = SimpleCookie(self.headers.get("Cookie", ""))
+        cookie = cookies[TOKEN_COOKIE].value if TOKEN_COOKIE in cookies else ""
+        bearer = self.headers.get("Authorization", "").removeprefix("Bearer ")
+        if hmac.compare_digest(query.encode(), token.encode()):
+            self._set_cookie = f"{TOKEN_COOKIE}={token}; Path=/; HttpOnly; SameSite=Strict"
+            return True
+        return any(hmac.compare_digest(v.encode(), token.encode()) for v in (cookie, bearer))
 
     def do_GET(self) -> None:  # noqa: N802 - http.server's name
         if self._foreign_host():
@@ -130,7 +217,8 @@ class _Handler(BaseHTTPRequestHandler):
             if got is None:
                 self._json({"error": "no such image in the newest frame"}, HTTPStatus.NOT_FOUND)
             else:
-                self._send(got[1], "image/jpeg", headers={"X-Sequence": str(got[0])})
+                self._send(got[1], "image/jpeg", headers={"X-Sequence": str(got[0]),
+                                                          "X-Stale": "1" if session.stale else "0"})
         elif path == "/api/point":
             self._json(session.point(int(query["x"]), int(query["y"])))
         elif path.startswith("/snapshot/") and path[len("/snapshot/"):] in SNAPSHOTS:
@@ -189,6 +277,24 @@ class _Handler(BaseHTTPRequestHandler):
         self.close_connection = True  # the body, if any, is not read
         return True
 
+    def _body(self) -> dict[str, Any]:
+        """The request's JSON object (empty body: {}); ValueError saying what is wrong with it."""
+        if self.headers.get("Transfer-Encoding") is not None:
+            self.close_connection = True  # its body is not read
+            raise ValueError("a body must come with a Content-Length (Transfer-Encoding is not accepted)")
+        data = self.rfile.read(int(self.headers.get("Content-Length", 0) or 0))
+        if not data:
+            return {}
+        try:
+            body = json.loads(data, parse_constant=_no_constant)
+        except RecursionError:
+            raise ValueError("the JSON body is nested too deeply") from None
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"the body is not UTF-8 ({exc.reason})") from None
+        if not isinstance(body, dict):
+            raise ValueError(f"the body must be a JSON object, not {type(body).__name__}")
+        return body
+
     def do_POST(self) -> None:  # noqa: N802 - http.server's name
         session = self.server.session
         try:
@@ -204,10 +310,13 @@ class _Handler(BaseHTTPRequestHandler):
         cam = session.cam
         path = urlsplit(self.path).path
         try:
-            length = int(self.headers.get("Content-Length", 0))
-            body = json.loads(self.rfile.read(length) or b"{}")
+            body = self._body()
+        except ValueError as exc:
+            self._json({"error": f"bad request: {exc}", "reason": str(exc)}, HTTPStatus.BAD_REQUEST)
+            return
+        try:
             if path == "/api/config":
-                self._json({"config": cam.configure(**{k: int(v) for k, v in body.items()})})
+                self._json({"config": cam.configure(**_settings(body))})
             elif path == "/api/start":
                 cam.start()
                 self._json({"streaming": True})

@@ -25,6 +25,7 @@ from .feed import Feed
 
 PLANES = ("left", "right", "disparity")
 JPEG_QUALITY = 85
+RECONNECT_S = 2.0  # one reconnection attempt of the grab thread (it tries again until the camera is back)
 
 
 def turbo_stops(n: int = 16) -> list[str]:
@@ -62,6 +63,20 @@ class ViewerSession(Feed):
             self.cam.connection.check_alive()  # a dead link shows on the page
             raise stereocam.CameraTimeoutError("no frame in 0.1 s")
         return frame
+
+    def _recover(self, exc: stereocam.StereoCamError) -> None:
+        """A lost link (the camera restarted, a cable): find the same unit again, with the settings
+        this viewer made and its stream; until then the page shows the last frame as stale."""
+        if isinstance(exc, stereocam.DisconnectedError):
+            try:
+                self.cam.reconnect(timeout=RECONNECT_S)
+            except stereocam.StereoCamError as again:
+                self.error = f"camera lost, reconnecting: {again}"
+
+    @property
+    def stale(self) -> bool:
+        """Whether the newest frame is no longer live (the camera failed since it came)."""
+        return self.error is not None
 
     def _take(self, frame: stereocam.Frame) -> None:
         with self._cond:
@@ -161,7 +176,8 @@ class ViewerSession(Feed):
     def frame_meta(self, frame: stereocam.Frame) -> dict[str, Any]:
         meta: dict[str, Any] = {"sequence": frame.sequence, "width": frame.width, "height": frame.height,
                                 "rectified": frame.rectified, "status": frame.status.value,
-                                "planes": [p for p in PLANES if getattr(frame, p) is not None]}
+                                "planes": [p for p in PLANES if getattr(frame, p) is not None],
+                                "stale": self.stale}
         if frame.disparity is not None:
             lo, hi = disparity_range(frame)
             meta["colorbar"] = {"near_to_far": turbo_stops(),
@@ -189,6 +205,7 @@ class ViewerSession(Feed):
         return {
             "url": cam.url, "model": info.model, "serial": info.serial, "firmware": info.firmware_version,
             "streaming": cam.streaming, "fps": round(self.fps(), 1), "viewer_skipped": self.skipped,
+            "stale": self.stale,
             "error": self.error or self.recording_error, "recording": self.recording(), "host": cam.stats, "device": dict(status.counters) if status else {},
             "config": config, "config_names": {k: value_name(k, v) for k, v in config.items()},
             "options": [{**asdict(p), "value": config.get(p.name)} for p in cam.options() if p.name in config],

@@ -142,3 +142,97 @@ def test_a_report_never_creates_or_changes_a_database(tmp_path: Path, capsys) ->
     assert factory_cli.main(["report", "--db", str(tmp_path / "real.sqlite"), "--since", "garbage"]) == 2
     assert "not an ISO date" in capsys.readouterr().err
     assert factory_cli.main(["report", "--db", str(tmp_path / "real.sqlite"), "--since", "2026-11-01"]) == 0
+
+
+# -- issue 22 item 14: a database written by others ------------------------------------------------
+def _one(db_url: str, serial: str = "SN-1", reason: str = "ok", **kw) -> None:
+    with FactoryDB(db_url) as db:
+        db.record(Attempt(serial, "2026-01-02T03:04:05Z", "s", "0.2", "device", "9x6:0.03", True, reason, **kw))
+
+
+@pytest.mark.parametrize("column, value", [("metrics", "{not json"), ("metrics", "[1, 2]"),
+                                           ("calibration", "a calibration stored as text"),
+                                           ("rms_stereo", "small"), ("passed", "yes")])
+def test_a_report_names_rows_others_wrote_badly_and_reports_the_rest(tmp_path, capsys, column, value):
+    url = str(tmp_path / "f.sqlite")
+    _one(url, "SN-good", rms_stereo=0.2)
+    _one(url, "SN-bad")
+    with sqlite3.connect(url) as conn:
+        conn.execute(f"UPDATE attempts SET {column} = ? WHERE unit_serial = 'SN-bad'", (value,))
+    assert factory_cli.main(["report", "--db", url, "--csv", str(tmp_path / "a.csv")]) == 0
+    out, err = capsys.readouterr()
+    assert "1 attempts" in out and "Traceback" not in err
+    assert f"attempt 2: column {column}" in err and "left out of the report" in err
+    assert [r["unit_serial"] for r in csv.DictReader((tmp_path / "a.csv").open())] == ["SN-good"]
+
+
+def test_a_dropped_column_is_a_clean_error(tmp_path, capsys):
+    url = str(tmp_path / "f.sqlite")
+    _one(url)
+    with sqlite3.connect(url) as conn:
+        conn.execute("ALTER TABLE attempts DROP COLUMN reason")
+    assert factory_cli.main(["report", "--db", url]) == 2
+    err = capsys.readouterr().err
+    assert "cannot read the attempts" in err and "reason" in err and "Traceback" not in err
+
+
+def test_a_locked_sqlite_file_is_reported_as_locked_not_as_foreign(tmp_path, capsys, monkeypatch):
+    from stereocam.tools.factory import db as db_module
+
+    url = str(tmp_path / "f.sqlite")
+    _one(url)
+    monkeypatch.setattr(db_module, "SQLITE_BUSY_S", 0.2)
+    holder = sqlite3.connect(url, isolation_level=None)
+    holder.execute("BEGIN EXCLUSIVE")
+    try:
+        assert factory_cli.main(["report", "--db", url]) == 2
+    finally:
+        holder.execute("ROLLBACK")
+        holder.close()
+    err = capsys.readouterr().err
+    assert "locked" in err and "not a factory database" not in err
+
+
+def test_csv_export_defuses_spreadsheet_formulas(tmp_path):
+    url = str(tmp_path / "f.sqlite")
+    _one(url, '=HYPERLINK("http://evil.example","x")', reason="@SUM(A1)", rms_stereo=-0.5)
+    assert factory_cli.main(["report", "--db", url, "--csv", str(tmp_path / "a.csv")]) == 0
+    (row,) = csv.DictReader((tmp_path / "a.csv").open())
+    assert row["unit_serial"] == "'=HYPERLINK(\"http://evil.example\",\"x\")" and row["reason"] == "'@SUM(A1)"
+    assert row["rms_stereo"] == "-0.5"  # a number is no formula
+
+
+def _fresh_postgres_database(postgres_url: str, name: str) -> str:
+    import psycopg
+
+    with psycopg.connect(postgres_url, autocommit=True) as conn:
+        conn.execute(f"DROP DATABASE IF EXISTS {name}")
+        conn.execute(f"CREATE DATABASE {name}")
+    head, _, query = postgres_url.partition("?")
+    return f"{head.rpartition('/')[0]}/{name}" + (f"?{query}" if query else "")
+
+
+@pytest.mark.parametrize("dialect", ["sqlite", "postgresql"])
+def test_stations_creating_the_database_at_once_lose_no_record(tmp_path, request, dialect):
+    import threading
+
+    url = str(tmp_path / "new.sqlite") if dialect == "sqlite" else \
+        _fresh_postgres_database(request.getfixturevalue("postgres_url"), "fresh_concurrent")
+    n, errors = 30, []
+    start = threading.Barrier(n)
+
+    def station(i: int) -> None:
+        try:
+            start.wait()
+            _one(url, f"SN-{i}")
+        except Exception as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=station, args=(i,)) for i in range(n)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert not errors, errors[:3]
+    with FactoryDB(url, create=False) as db:
+        assert sorted(a.unit_serial for a in db.attempts()) == sorted(f"SN-{i}" for i in range(n))
