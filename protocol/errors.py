@@ -86,3 +86,8 @@ class MissingPlaneError(StereoCamError, ValueError):
 
 class CallbackError(StereoCamError):
     """A frame callback raised; the callback's own exception is the ``__cause__``."""
+
+
+class MissingExtraError(StereoCamError, ImportError):
+    """A feature needs a third-party package of an optional install group (a pip extra) that is not
+    installed; the message names the extra. Also an ImportError."""
