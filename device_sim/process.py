@@ -15,7 +15,8 @@ class ServedSimulator:
         """``extra``: more command-line options (``--trigger-line NAME``, ``--truth-log PATH``, ...);
         ``flash``: the unit's flash file (kept across restarts); ``env``: added to the environment."""
         extra = [*(extra or []), *(["--flash", os.fspath(flash)] if flash is not None else [])]
-        self.proc = subprocess.Popen([sys.executable, "-m", "stereocam.device_sim", "--serve", spec, "--seed", str(seed),
+        self.proc = subprocess.Popen([sys.executable, "-m", "stereocam.device_sim", "--serve", spec,
+                                      "--seed", str(seed),
                                       "--scene", scene, *extra],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                      env={**os.environ, **(env or {}), "PYTHONUNBUFFERED": "1"})

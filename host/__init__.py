@@ -47,9 +47,11 @@ _EXPORTS: dict[str, str] = {
 
 __all__ = [
     "__version__",
-    "open", "list_devices", "DeviceEntry", "Camera", "DeviceInfo", "DeviceStatus", "Frame", "FrameStatus",
-    "DisparityFormat", "StereoGeometry", "StereoCalibration", "StoredCalibration", "TriggerMode", "Output",
-    "write_ply", *_ERRORS,
+    "open", "list_devices", "DeviceEntry", "Camera", "CameraGroup", "DeviceInfo", "DeviceStatus", "Frame",
+    "FrameStatus", "DisparityFormat", "StereoGeometry", "StereoCalibration", "StoredCalibration", "TriggerMode",
+    "Output", "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError",
+    "ErrorCode", "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError", "CameraTimeoutError",
+    "VerificationError", "StreamStalledError", "CallbackError", "MissingPlaneError",
 ]
 
 

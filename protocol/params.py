@@ -77,7 +77,8 @@ PARAMS: tuple[Param, ...] = (
     Param(26, "sgm_paths", 8, 4, 8, step=4),  # 4 (horizontal + vertical) or 8 (+ diagonals)
     Param(27, "census_width", 9, 3, 9, odd=True, unit="px"),  # SGM census window
     Param(28, "census_height", 7, 1, 7, odd=True, unit="px"),
-    Param(29, "trigger_output", 0, 0, 1, live=False),  # 1: this unit drives the trigger line at fps (INFO TRIGGER_OUTPUT)
+    # 1: this unit drives the trigger line at fps (INFO TRIGGER_OUTPUT)
+    Param(29, "trigger_output", 0, 0, 1, live=False),
 )
 
 DESCRIPTIONS: dict[str, str] = {

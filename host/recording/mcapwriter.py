@@ -75,7 +75,7 @@ class ChunkedWriter:
                  exclusive: bool = False):
         """``exclusive``: never replace a file (FileExistsError if ``path`` exists)."""
         check_level(level)  # before the file is touched: a bad level would otherwise fail at the first chunk
-        self._out: BinaryIO = open(path, "xb" if exclusive else "wb")  # noqa: SIM115 - closed by finish()
+        self._out: BinaryIO = open(path, "xb" if exclusive else "wb")  # closed by finish()
         self._pos = 0
         self._chunk_bytes = chunk_bytes
         self._level = level

@@ -84,7 +84,7 @@ def discover() -> list["DeviceEntry"]:
             continue
         try:
             entries.extend(find())
-        except Exception as exc:  # noqa: BLE001 - discovery must survive a broken bus or driver
+        except Exception as exc:  # discovery must survive a broken bus or driver
             _log.warning("device discovery via %s failed: %s", name, exc)
     return entries
 

@@ -37,6 +37,7 @@ def test_every_public_name_resolves_and_is_listed_by_dir():
     for name in stereocam.__all__:
         assert getattr(stereocam, name) is not None, name
     assert set(stereocam.__all__) <= set(dir(stereocam))
+    assert set(stereocam.__all__) == {"__version__", *stereocam._EXPORTS}
     assert stereocam.ConfigError.__module__ == "stereocam.protocol.errors"
     assert stereocam.open.__module__ == "stereocam.camera"
 
