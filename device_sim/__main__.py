@@ -88,7 +88,12 @@ def main(argv: list[str] | None = None) -> int:
                           source=source, flash_path=args.flash)
     truth_log = open(args.truth_log, "a", buffering=1) if args.truth_log else None
     if truth_log is not None:
-        sim.truth.on_exposure = lambda seq, t: truth_log.write(f"{seq} {t!r}\n")
+        log = truth_log
+
+        def log_exposure(seq: int, t: float) -> None:
+            log.write(f"{seq} {t!r}\n")
+
+        sim.truth.on_exposure = log_exposure
     server = build_server(args.serve, sim)
 
     def stop(signum, frame):

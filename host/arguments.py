@@ -47,7 +47,7 @@ def int32_arg(value: object, name: str) -> int:
     if isinstance(value, numbers.Integral):
         number = int(value)
     elif isinstance(value, numbers.Real) and float(value).is_integer():
-        number = int(value)
+        number = int(float(value))
     else:
         raise ConfigError(f"{name} must be an integer, got {value!r}")
     if not INT32[0] <= number <= INT32[1]:

@@ -251,13 +251,12 @@ class Nack(Message):
         return cls(rt, code, pid, text)
 
 
-MESSAGES: dict[int, type[Message]] = {
-    cls.TYPE: cls for cls in (
-        GetInfo, GetConfig, SetConfig, Trigger, Start, Stop, Heartbeat, TimeSync, Info, Config,
-        ConfigApplied, Triggered, Started, Stopped, Status, Time, Nack, FrameBegin, FrameData, FrameEnd,
-        CalibRead, CalibData, CalibWrite, CalibWritten, CalibCommit, CalibRestore, CalibCommitted, CalibRestored,
-        SetFrameLink, FrameLink, FrameResend, FrameResent, *UPDATE_MESSAGES)
-}
+_ALL: tuple[type[Message], ...] = (
+    GetInfo, GetConfig, SetConfig, Trigger, Start, Stop, Heartbeat, TimeSync, Info, Config,
+    ConfigApplied, Triggered, Started, Stopped, Status, Time, Nack, FrameBegin, FrameData, FrameEnd,
+    CalibRead, CalibData, CalibWrite, CalibWritten, CalibCommit, CalibRestore, CalibCommitted, CalibRestored,
+    SetFrameLink, FrameLink, FrameResend, FrameResent, *UPDATE_MESSAGES)
+MESSAGES: dict[int, type[Message]] = {cls.TYPE: cls for cls in _ALL}
 
 # request type -> reply class
 REPLIES: dict[int, type[Message]] = {
