@@ -1,14 +1,15 @@
 """The simulated STOC-class camera: firmware, sensor rig, matching core and its servers.
 
-Importing it registers the ``sim://`` and ``replay://`` URL schemes and the simulated USB bus with the SDK.
+The SDK reaches it only through the entry points it declares (pyproject.toml): the ``sim://`` and
+``replay://`` URL schemes (``stereocam.url_schemes``) and the simulated USB bus (``stereocam.usb_backends``).
 """
-from stereocam.transports import register_scheme
+from stereocam.protocol.extras import raise_missing
 
-from .firmware import SimulatedCamera
-from .ground_truth import GroundTruth
-from .trigger import TriggerLine
-
-register_scheme("sim", "stereocam.device_sim.links.inprocess")
-register_scheme("replay", "stereocam.device_sim.links.replay")
+try:
+    from .firmware import SimulatedCamera
+    from .ground_truth import GroundTruth
+    from .trigger import TriggerLine
+except ModuleNotFoundError as exc:  # numba: pip install 'stereocam[sim]'
+    raise_missing(exc, "the simulated camera")
 
 __all__ = ["SimulatedCamera", "GroundTruth", "TriggerLine"]

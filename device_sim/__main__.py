@@ -1,4 +1,5 @@
-"""``python -m stereocam.device_sim --serve pty|tcp:HOST:PORT [--scene board] [--flash PATH]``: run a simulated camera in its own process.
+"""``python -m stereocam.device_sim --serve pty|tcp:HOST:PORT [--scene board] [--flash PATH]``: run a
+simulated camera in its own process.
 
 With ``--replay FILE`` the unit plays a recording back (``--fast``, ``--loop``, ``--start N``; see replay.py).
 
@@ -85,12 +86,17 @@ def main(argv: list[str] | None = None) -> int:
         source = ReplaySource(args.replay, realtime=not args.fast, loop=args.loop, start=args.start)
     sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene, trigger_line=line, vendor_key=key,
                           source=source, flash_path=args.flash)
-    truth_log = open(args.truth_log, "a", buffering=1) if args.truth_log else None  # noqa: SIM115
+    truth_log = open(args.truth_log, "a", buffering=1) if args.truth_log else None
     if truth_log is not None:
-        sim.truth.on_exposure = lambda seq, t: truth_log.write(f"{seq} {t!r}\n")
+        log = truth_log
+
+        def log_exposure(seq: int, t: float) -> None:
+            log.write(f"{seq} {t!r}\n")
+
+        sim.truth.on_exposure = log_exposure
     server = build_server(args.serve, sim)
 
-    def stop(signum, frame):  # noqa: ARG001
+    def stop(signum, frame):
         server.shutdown()
 
     signal.signal(signal.SIGINT, stop)

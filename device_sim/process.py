@@ -15,13 +15,16 @@ class ServedSimulator:
         """``extra``: more command-line options (``--trigger-line NAME``, ``--truth-log PATH``, ...);
         ``flash``: the unit's flash file (kept across restarts); ``env``: added to the environment."""
         extra = [*(extra or []), *(["--flash", os.fspath(flash)] if flash is not None else [])]
-        self.proc = subprocess.Popen([sys.executable, "-m", "stereocam.device_sim", "--serve", spec, "--seed", str(seed),
+        self.proc = subprocess.Popen([sys.executable, "-m", "stereocam.device_sim", "--serve", spec,
+                                      "--seed", str(seed),
                                       "--scene", scene, *extra],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                      env={**os.environ, **(env or {}), "PYTHONUNBUFFERED": "1"})
-        self.url = self.proc.stdout.readline().strip()
+        out, err = self.proc.stdout, self.proc.stderr
+        assert out is not None and err is not None  # both are pipes
+        self.url = out.readline().strip()
         if not self.url:
-            raise RuntimeError(f"simulator did not start: {self.proc.stderr.read()}")
+            raise RuntimeError(f"simulator did not start: {err.read()}")
 
     def stop(self) -> int:
         self.proc.send_signal(signal.SIGTERM)

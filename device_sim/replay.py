@@ -21,7 +21,7 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterator
 
 import numpy as np
 
@@ -34,6 +34,9 @@ from stereocam.recording.reader import DamagedRecordingError, RecordedCapture, R
 from stereocam.stereo.engines import params_from_config
 
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
+
+if TYPE_CHECKING:
+    from stereocam.recording.reader import RecordedCapture
 
 _log = logging.getLogger(__name__)
 
@@ -71,6 +74,8 @@ class ReplaySource:
     """Captures of a recording, in order from ``start``, for the firmware to send."""
 
     def __init__(self, path: str | Path, *, realtime: bool = True, loop: bool = False, start: int = 0):
+        from stereocam.recording.reader import Recording  # the recording extra, needed only here
+
         self.recording = Recording(path)
         try:
             self._open(path, start)
@@ -93,6 +98,8 @@ class ReplaySource:
         d = self.recording.device
         missing = [k for k in IDENTITY if k not in d]
         if missing:
+            from stereocam.recording.reader import DamagedRecordingError
+
             raise DamagedRecordingError(f"{path}: metadata stereocam.device has no {', '.join(missing)}: the "
                                         f"recorded unit cannot be replayed")
         self.model, self.serial, self.firmware_version = (d[k] for k in IDENTITY)
@@ -140,6 +147,8 @@ class ReplaySource:
     def _next(self) -> RecordedCapture | None:
         """The next readable capture: a damaged one is skipped (the host sees its sequence number
         missing, a drop it counts) and logged; None at the end."""
+        from stereocam.recording.reader import DamagedRecordingError
+
         while True:
             try:
                 return next(self._iter, None)

@@ -46,7 +46,7 @@ def int32_arg(value: object, name: str) -> int:
     if isinstance(value, numbers.Integral):
         number = int(value)
     elif isinstance(value, numbers.Real) and float(value).is_integer():
-        number = int(value)
+        number = int(float(value))
     else:
         raise ConfigError(f"{name} must be an integer, got {value!r}")
     if not INT32_MIN <= number <= INT32_MAX:

@@ -61,7 +61,7 @@ class FrameCallbacks:
             for fn in callbacks:
                 try:
                     fn(frame)
-                except Exception as exc:  # noqa: BLE001 - reported, counted and re-raisable via check()
+                except Exception as exc:  # reported, counted and re-raisable via check()
                     _log.error("frame callback %r raised on frame %d: %r", fn, frame.sequence, exc,
                                exc_info=exc)
                     if self.first_error is None:

@@ -76,7 +76,7 @@ class RepairWorker:
                 reply = None
             try:
                 self._on_result(sequence, reply if isinstance(reply, m.FrameResent) else None)
-            except Exception as exc:  # noqa: BLE001 - surfaced as the link's error, never silent
+            except Exception as exc:  # surfaced as the link's error, never silent
                 self._on_error(exc)
                 return
 

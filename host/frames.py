@@ -119,7 +119,7 @@ class FrameAssembler:
             self.stats.lost += b.sequence - self._last_seq - 1
             _log.info("frames %d..%d lost (never seen on the link)", self._last_seq + 1, b.sequence - 1)
         self._last_seq = b.sequence
-        sizes = {p: plane_size(p, b.width, b.height) for p in planes_of(b)}
+        sizes: dict[int, int] = {p: plane_size(p, b.width, b.height) for p in planes_of(b)}
         self._cur = _Building(b, {p: bytearray(k) for p, k in sizes.items()}, Coverage(sizes))
 
     def _plausible(self, b: m.FrameBegin) -> bool:
@@ -148,7 +148,8 @@ class FrameAssembler:
             if cur is not None:
                 self._incomplete(cur)
             return
-        sent = {Output.LEFT: e.left_bytes, Output.RIGHT: e.right_bytes, Output.DISPARITY: e.disparity_bytes}
+        sent: dict[int, int] = {Output.LEFT: e.left_bytes, Output.RIGHT: e.right_bytes,
+                                Output.DISPARITY: e.disparity_bytes}
         if e.status != m.FRAME_OK:
             self._flawed(cur, FrameStatus.DEVICE_ERROR)
         elif cur.bad or any(sent[p] != len(buf) for p, buf in cur.buffers.items()):

@@ -176,7 +176,7 @@ class Link:
             except OSError as exc:
                 self._die(DisconnectedError(f"read from {self.transport.url} failed: {exc}"))
                 return
-            except Exception as exc:  # noqa: BLE001 - a bug or MemoryError must not leave a zombie link
+            except Exception as exc:  # a bug or MemoryError must not leave a zombie link
                 self.fail(exc)
                 return
 

@@ -60,8 +60,8 @@ class CalibData(Message):
 
     @classmethod
     def unpack(cls, payload: bytes) -> "CalibData":
-        head = cls._S.unpack_from(payload, 0)
-        return cls(*head, bytes(payload[cls._S.size:]))
+        source, generation, calibration_id, total, offset = cls._S.unpack_from(payload, 0)
+        return cls(source, generation, calibration_id, total, offset, bytes(payload[cls._S.size:]))
 
 
 @dataclass(frozen=True)

@@ -170,7 +170,8 @@ class StereoCalibration:
         size = d["image_size"]
         if not (isinstance(size, (list, tuple)) and len(size) == 2):
             raise CalibrationFormatError(f"image_size must be [width, height], got {size!r}")
-        return cls(tuple(size), *(d[k] for k in GEOMETRY_KEYS[1:]), d.get("lens_model", "plumb_bob"))
+        geometry = {k: d[k] for k in GEOMETRY_KEYS[1:]}
+        return cls((size[0], size[1]), **geometry, lens_model=d.get("lens_model", "plumb_bob"))
 
     def to_bytes(self) -> bytes:
         """The version-2 binary body described in the module docstring."""
@@ -210,5 +211,5 @@ class StereoCalibration:
             return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
         r = 8 + 2 * n
-        return cls((w, h), K(*v[0:4]), v[4:4 + n], K(*v[4 + n:8 + n]), v[8 + n:r],
-                   np.reshape(v[r:r + 9], (3, 3)), v[r + 9:r + 12], model)
+        return cls((w, h), K(*v[0:4]), np.asarray(v[4:4 + n]), K(*v[4 + n:8 + n]), np.asarray(v[8 + n:r]),
+                   np.reshape(v[r:r + 9], (3, 3)), np.asarray(v[r + 9:r + 12]), model)

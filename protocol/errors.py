@@ -94,3 +94,6 @@ class InputFileError(StereoCamError):
 
 class MissingInputError(InputFileError):
     """An input file that does not exist: the caller's mistake (the tools exit 2, bad usage)."""
+class MissingExtraError(StereoCamError, ImportError):
+    """A feature needs a third-party package of an optional install group (a pip extra) that is not
+    installed; the message names the extra. Also an ImportError."""

@@ -258,7 +258,8 @@ def inspect_image(data: bytes) -> FirmwareImage:
     check_length(len(data), size)
     (blen,) = _BUILD_LEN.unpack_from(data, HEADER_LEN)
     build = FirmwareBuild.from_json(data[HEADER_LEN + 4:HEADER_LEN + 4 + blen])
-    return FirmwareImage(counter, version, target, kid, build, size - 4 - blen, len(data), hashlib.sha256(data).digest())
+    return FirmwareImage(counter, version, target, kid, build, size - 4 - blen, len(data),
+                         hashlib.sha256(data).digest())
 
 
 def load_private_key(pem: bytes) -> Ed25519PrivateKey:

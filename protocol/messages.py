@@ -251,13 +251,12 @@ class Nack(Message):
         return cls(rt, code, pid, text)
 
 
-MESSAGES: dict[int, type[Message]] = {
-    cls.TYPE: cls for cls in (
-        GetInfo, GetConfig, SetConfig, Trigger, Start, Stop, Heartbeat, TimeSync, Info, Config,
-        ConfigApplied, Triggered, Started, Stopped, Status, Time, Nack, FrameBegin, FrameData, FrameEnd,
-        CalibRead, CalibData, CalibWrite, CalibWritten, CalibCommit, CalibRestore, CalibCommitted, CalibRestored,
-        SetFrameLink, FrameLink, FrameResend, FrameResent, *UPDATE_MESSAGES)
-}
+_ALL: tuple[type[Message], ...] = (
+    GetInfo, GetConfig, SetConfig, Trigger, Start, Stop, Heartbeat, TimeSync, Info, Config,
+    ConfigApplied, Triggered, Started, Stopped, Status, Time, Nack, FrameBegin, FrameData, FrameEnd,
+    CalibRead, CalibData, CalibWrite, CalibWritten, CalibCommit, CalibRestore, CalibCommitted, CalibRestored,
+    SetFrameLink, FrameLink, FrameResend, FrameResent, *UPDATE_MESSAGES)
+MESSAGES: dict[int, type[Message]] = {cls.TYPE: cls for cls in _ALL}
 
 # request type -> reply class
 REPLIES: dict[int, type[Message]] = {
@@ -297,7 +296,8 @@ def encode(msg: Message, request_id: int = 0, flags: int = 0) -> bytes:
 __all__ = [  # the whole message catalogue, whichever module defines each part
     "MsgType", "Message", "REPLY_BIT", "EVENT_BIT", "reply_type", "MESSAGES", "REPLIES", "decode_packet", "encode",
     "UnknownMessageError", "GetInfo", "GetConfig", "SetConfig", "Trigger", "Start", "Stop", "Heartbeat", "TimeSync",
-    "Info", "Capability", "Config", "ConfigApplied", "Triggered", "Started", "Stopped", "Status", "COUNTERS", "Time", "Nack",
+    "Info", "Capability", "Config", "ConfigApplied", "Triggered", "Started", "Stopped", "Status", "COUNTERS", "Time",
+    "Nack",
     "FrameBegin", "FrameData", "FrameEnd", "DISPARITY_S16_Q4", "FRAME_RECTIFIED", "FRAME_OK", "FRAME_SENSOR_OVERRUN",
     "CalibSource", "CalibRead", "CalibData", "CalibWrite", "CalibWritten", "CalibCommit", "CalibRestore",
     "CalibState", "CalibCommitted", "CalibRestored", "MAX_CALIB_CHUNK", "calib_id",

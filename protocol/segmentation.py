@@ -18,7 +18,7 @@ from .params import Output
 from .repair_messages import MAX_FRAME_CHUNK
 
 PLANE_ORDER = (Output.LEFT, Output.RIGHT, Output.DISPARITY)  # the order planes are sent in
-PLANE_DTYPE = {Output.LEFT: np.dtype(np.uint8), Output.RIGHT: np.dtype(np.uint8),
+PLANE_DTYPE: dict[int, np.dtype] = {Output.LEFT: np.dtype(np.uint8), Output.RIGHT: np.dtype(np.uint8),
                Output.DISPARITY: np.dtype("<i2")}  # little-endian on the wire, row-major, no padding
 REFERENCE_CHUNK = MAX_FRAME_CHUNK  # FRAME_DATA data bytes per message unless the host set another (§13.1)
 
@@ -51,7 +51,7 @@ def one_plane_bytes(begin: FrameBegin, plane: Output, image: np.ndarray | memory
         raise ValueError(f"plane {plane.name}: expected a {begin.height}x{begin.width} image, got "
                          f"{None if image is None else image.shape}")
     data = np.ascontiguousarray(image, dtype=PLANE_DTYPE[plane])
-    return memoryview(data.tobytes() if copy else data).cast("B")
+    return (memoryview(data.tobytes()) if copy else data.data).cast("B")
 
 
 def plane_bytes(begin: FrameBegin, images: Mapping[Output, np.ndarray], copy: bool = False
@@ -73,7 +73,7 @@ def capture_messages(begin: FrameBegin, images: Mapping[Output, PlaneSource],
     if not 0 < chunk <= MAX_PAYLOAD - FRAME_DATA_HEAD:
         raise ValueError(f"chunk of {chunk} bytes; must be 1..{MAX_PAYLOAD - FRAME_DATA_HEAD}")
     planes = planes_of(begin)
-    missing = [p.name for p in planes if images.get(p) is None]
+    missing = [str(p.name) for p in planes if images.get(p) is None]
     if missing:
         raise ValueError(f"plane {', '.join(missing)}: FRAME_BEGIN names it but no image was given")
     yield begin

@@ -188,12 +188,12 @@ class UpdateState(Message):
 
     @classmethod
     def unpack(cls, payload: bytes) -> "UpdateState":
-        *head, n = cls._S.unpack_from(payload, 0)
+        running_slot, boot_mode, received, size, sha256, security_counter, n = cls._S.unpack_from(payload, 0)
         off, slots = cls._S.size, []
         for _ in range(n):
             slot, off = SlotInfo.unpack_from(payload, off)
             slots.append(slot)
-        return cls(*head, tuple(slots))
+        return cls(running_slot, boot_mode, received, size, sha256, security_counter, tuple(slots))
 
 
 UPDATE_MESSAGES: tuple[type[Message], ...] = (

@@ -55,7 +55,7 @@ def pytest_runtest_logreport(report: pytest.TestReport) -> None:
 _DEVICE_OUTCOMES: dict[str, int] = {}
 
 
-def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Config) -> None:  # noqa: ARG001
+def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Config) -> None:
     url = config.getoption("--device")
     if not url or not _DEVICE_OUTCOMES:
         return
@@ -95,17 +95,13 @@ def served():
 def usb_bus(monkeypatch):
     """A simulated USB bus of this test's own: ``simusb.plug`` and ``usb://`` see only it."""
     import stereocam.device_sim.usb as simusb
-    from stereocam.transports import usb as usb_transport
 
-    original = simusb.BUS
     bus = simusb.SimUsbBus(number=1)
-    monkeypatch.setattr(simusb, "BUS", bus)
-    usb_transport.register_backend("sim", bus.backend)
+    monkeypatch.setattr(simusb, "BUS", bus)  # the SDK scans simusb.get_backend(), its entry point
     try:
         yield bus
     finally:
         bus.unplug_all()
-        usb_transport.register_backend("sim", original.backend)
 
 
 @pytest.fixture

@@ -16,6 +16,7 @@ import click
 
 import stereocam
 from stereocam.protocol.errors import MissingInputError
+from stereocam.protocol.extras import raise_missing
 
 from .exit_codes import EXIT_BROKEN_PIPE, EXIT_CAMERA, EXIT_CODES, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE  # noqa: F401
 
@@ -66,7 +67,11 @@ class CommandTable(click.Group):
         if name not in COMMANDS:
             return None
         module_name, text = COMMANDS[name]
-        module = importlib.import_module(module_name)
+        ctx.meta["stereocam.command"] = name  # for the error messages of invoke
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:  # an optional dependency group not installed
+            raise_missing(exc, "this command")
         command = getattr(module, "command", None)
         if isinstance(command, click.Command):
             return command

@@ -42,16 +42,16 @@ class BootStage:
         state = self.states.read() or BootState()
         if recovery:
             return Booted(None, BootMode.RECOVERY, None, state, ("recovery requested",))
-        if state.trial is not None and not state.tried:
+        if (trial := state.trial) is not None and not state.tried:
             try:
-                image = self.slots.verify(state.trial, state.counter)
+                image = self.slots.verify(trial, state.counter)
             except ImageError as exc:
-                trace.append(f"pending slot {'AB'[state.trial]} refused ({exc}): dropped")
+                trace.append(f"pending slot {'AB'[trial]} refused ({exc}): dropped")
                 state = self.states.write(replace(state, trial=None))
             else:
                 state = self.states.write(replace(state, tried=True))
-                trace.append(f"slot {'AB'[state.trial]} {image.build.version}: trial boot")
-                return Booted(state.trial, BootMode.TRIAL, image, state, tuple(trace))
+                trace.append(f"slot {'AB'[trial]} {image.build.version}: trial boot")
+                return Booted(trial, BootMode.TRIAL, image, state, tuple(trace))
         elif state.trial is not None:
             trace.append(f"slot {'AB'[state.trial]} was not confirmed: revert to slot {'AB'[state.active]}")
             state = self.states.write(replace(state, trial=None, tried=False))

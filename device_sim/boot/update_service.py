@@ -63,7 +63,8 @@ class UpdateService:
             return s  # resume
         if s is not None and not replace_session:
             raise UpdateRefused(ErrorCode.BUSY, f"an update of image {s.sha256.hex()[:16]} is in progress "
-                                                f"({s.total_received} of {s.size} bytes); finish it or begin with REPLACE")
+                                                f"({s.total_received} of {s.size} bytes); "
+                                                "finish it or begin with REPLACE")
         if self.booted.mode == BootMode.TRIAL:
             raise UpdateRefused(ErrorCode.BAD_STATE, "the running image is on trial: confirm it (or reboot to revert) "
                                                      "before the next update")

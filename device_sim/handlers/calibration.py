@@ -78,12 +78,13 @@ class CalibrationService:
         """Rectification maps for this output format from the calibration in force (cached), and
         that calibration's id — one consistent pair even while a write is being committed."""
         with self._lock:
-            if self.calibration is None:
+            record, calibration = self.record, self.calibration  # set together (or neither)
+            if record is None or calibration is None:
                 return None, 0
             key = (width, height)
             if key not in self._maps:
-                self._maps[key] = rectification_maps(self.calibration.scaled(width, height))
-            return self._maps[key], m.calib_id(self.record.body)
+                self._maps[key] = rectification_maps(calibration.scaled(width, height))
+            return self._maps[key], m.calib_id(record.body)
 
     def _state(self, cls: type[m.CalibState]) -> m.CalibState:
         rec = self.record

@@ -9,6 +9,8 @@ from typing import Callable
 
 from stereocam.protocol import messages as m
 
+from ..link_layer.dispatcher import Handler
+
 KEPT_CAPTURES = 8  # recent captures whose planes stay available for FRAME_RESEND
 
 Emit = Callable[[bytes], bool]  # sends one message; False once the link is gone
@@ -32,7 +34,7 @@ class FrameRepair:
         self._kept: collections.OrderedDict[int, _Kept] = collections.OrderedDict()
         self.resent_chunks = 0
 
-    def handlers(self) -> dict[int, Callable[[m.Message], m.Message]]:
+    def handlers(self) -> dict[int, Handler]:
         return {m.MsgType.SET_FRAME_LINK: self.set_link, m.MsgType.FRAME_RESEND: self.resend}
 
     def reset(self) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import collections
 import logging
 from collections.abc import Mapping
-from typing import Callable
+from typing import Any, Callable
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode, ProtocolError
@@ -13,7 +13,8 @@ from stereocam.protocol.framing import Packet
 from .refusal import Refusal
 from .replay_cache import ReplayCache
 
-Handler = Callable[[m.Message], m.Message]
+Handler = Callable[[Any], m.Message]
+"""Each handler takes the message class of the type it is registered for (the table cannot say which)."""
 log = logging.getLogger(__name__)
 
 

@@ -53,6 +53,7 @@ class Handoff(Generic[T]):
                 if self._closed:
                     return
                 item, self._item = self._item, None
+                assert item is not None  # the wait ends with an item or closed
                 self._cond.notify_all()
             try:
                 self._work(item)

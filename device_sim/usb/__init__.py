@@ -16,8 +16,6 @@ timeouts, bus time); errors are libusb1's (``errors``).
 """
 from __future__ import annotations
 
-from stereocam.transports.usb import register_backend
-
 from .backend import SimBackend
 from .bus import SimUsbBus
 from .descriptors import (EP_IN, EP_OUT, INTERFACE_NUMBER, MAX_PACKET_SIZE, PRODUCT_ID,
@@ -26,8 +24,8 @@ from .device import SimHandle, SimUsbDevice, UsbFunction
 from .errors import LibusbError, usb_error
 
 BUS = SimUsbBus(number=1)
-"""The process-wide bus that ``plug()`` uses and ``stereocam.transports.usb`` scans."""
-register_backend("sim", BUS.backend)
+"""The process-wide bus that ``plug()`` uses and ``stereocam.transports.usb`` scans (``get_backend``
+is the ``stereocam.usb_backends`` entry point)."""
 
 
 def plug(sim: UsbFunction, **options: object) -> SimUsbDevice:

@@ -10,7 +10,7 @@ import struct
 from dataclasses import dataclass, field
 
 from stereocam.protocol.messages import UsbSpeed
-from stereocam.protocol.usb_identity import (EP_IN, EP_OUT, INTERFACE_NUMBER, PRODUCT_ID,  # noqa: F401
+from stereocam.protocol.usb_identity import (EP_IN, EP_OUT, INTERFACE_NUMBER, PRODUCT_ID,
                                              VENDOR_ID)
 from stereocam.protocol.usb_identity import INTERFACE_CLASS as CLASS_VENDOR_SPECIFIC
 from stereocam.protocol.usb_identity import MAX_PACKET_SIZE_HS as MAX_PACKET_SIZE

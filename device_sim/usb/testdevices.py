@@ -22,7 +22,7 @@ class EchoDevice:
         self.received: list[bytes] = []
         self._sink: Sink | None = None
 
-    def attach(self, sink: Sink, hang_up: Callable[[], None] | None = None) -> None:  # noqa: ARG002 (never drops)
+    def attach(self, sink: Sink, hang_up: Callable[[], None] | None = None) -> None:  # never drops
         self._sink = sink
 
     @property
@@ -60,7 +60,7 @@ class SourceDevice:
         self._threads: list[threading.Thread] = []
         self._block = bytes(range(256)) * (chunk // 256 + 1)
 
-    def attach(self, sink: Sink, hang_up: Callable[[], None] | None = None) -> None:  # noqa: ARG002 (never drops)
+    def attach(self, sink: Sink, hang_up: Callable[[], None] | None = None) -> None:  # never drops
         self._sink = sink
 
     @property

@@ -78,7 +78,7 @@ class ChunkedWriter:
         check_level(level)  # before the file is touched: a bad level would otherwise fail at the first chunk
         if isinstance(chunk_bytes, bool) or not isinstance(chunk_bytes, int) or not 1 <= chunk_bytes <= MAX_CHUNK_BYTES:
             raise ConfigError(f"chunk_bytes must be an integer from 1 to {MAX_CHUNK_BYTES}, got {chunk_bytes!r}")
-        self._out: BinaryIO = open(path, "xb" if exclusive else "wb")  # noqa: SIM115 - closed by finish()
+        self._out: BinaryIO = open(path, "xb" if exclusive else "wb")  # closed by finish()
         self._pos = 0
         self._chunk_bytes = chunk_bytes
         self._level = level

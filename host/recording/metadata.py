@@ -46,7 +46,7 @@ def calibration(path: Path, metadata: Metadata) -> StoredCalibration | None:
         raise _damaged(path, CALIBRATION, "body_hex", f"is not hexadecimal ({exc})") from exc
     try:
         parsed = StereoCalibration.from_bytes(body)
-    except Exception as exc:  # noqa: BLE001 - any parse failure of a hostile body is damage
+    except Exception as exc:  # any parse failure of a hostile body is damage
         raise _damaged(path, CALIBRATION, "body_hex", f"is not a calibration body ({exc})") from exc
     return StoredCalibration(parsed, body, c["source"], integer(path, CALIBRATION, "generation", c["generation"]),
                              integer(path, CALIBRATION, "calibration_id", c["calibration_id"]))

@@ -112,7 +112,7 @@ class Recording:
             self._reader = SeekingReader(self._file, validate_crcs=True, decoder_factories=[DecoderFactory()],
                                          record_size_limit=RECORD_SIZE_LIMIT)
             self.summary = self._reader.get_summary()
-        except Exception as exc:  # noqa: BLE001 - whatever a cut-off or damaged end makes the reader raise
+        except Exception as exc:  # whatever a cut-off or damaged end makes the reader raise
             raise RecordingError(f"{path} is truncated or damaged: an MCAP file without a valid summary and footer "
                                  f"at its end (was the recorder killed?); {repair}") from exc
         self._size = os.fstat(self._file.fileno()).st_size
@@ -123,7 +123,7 @@ class Recording:
         try:
             self.metadata = {m.name: dict(m.metadata) for m in self._reader.iter_metadata()}
             index = next((a for a in self._reader.iter_attachments() if a.name == FRAME_INDEX), None)
-        except Exception as exc:  # noqa: BLE001 - offsets or records of a damaged summary
+        except Exception as exc:  # offsets or records of a damaged summary
             raise DamagedRecordingError(f"{path}: its metadata or attachments cannot be read ({type(exc).__name__}: "
                                         f"{exc}); {repair}") from exc
         self._chunk_limit = chunk_limit(self.metadata.get(meta.CONFIG, {}), self.metadata.get(meta.RECORDING, {}))

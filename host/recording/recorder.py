@@ -188,7 +188,7 @@ class Recorder:
                     self._queued_bytes -= _frame_bytes(frame)
                     self._cond.notify_all()
             self._finish()
-        except BaseException as exc:  # noqa: BLE001 - reported to the caller by put/close
+        except BaseException as exc:  # reported to the caller by put/close
             self._error = exc
             self._writer.abandon()
 
@@ -217,7 +217,8 @@ class Recorder:
                 blobs.append((topic, body, body, convert.blob(plane)))
         if frame.disparity is not None:
             body = convert.disparity(ns, frame)
-            blobs.append((schemas.DISPARITY_TOPIC, body, body["image"], convert.blob(convert.disparity_to_float(frame))))
+            disparity = convert.blob(convert.disparity_to_float(frame))
+            blobs.append((schemas.DISPARITY_TOPIC, body, body["image"], disparity))
         for topic, body, slot, data in blobs:
             encoded = schemas.encode_with_blob(self._encoders[schemas.TOPICS[topic]], body, slot, data)
             self._writer.add_message(self._channels[topic], ns, encoded, ns, frame.sequence)

@@ -117,7 +117,7 @@ class _Rewrite:
             return None
         try:
             return self.decode(capture[0].data)
-        except Exception:  # noqa: BLE001 - a damaged message: the capture is not whole
+        except Exception:  # a damaged message: the capture is not whole
             return None
 
     def flush_group(self) -> None:

@@ -73,7 +73,7 @@ class Scan:
             pos += _HEAD.size + length
             try:
                 records = _parse(opcode, body, self.max_chunk_bytes)
-            except Exception:  # noqa: BLE001 - anything a damaged or hostile record makes the parsers raise
+            except Exception:  # anything a damaged or hostile record makes the parsers raise
                 if opcode == Opcode.CHUNK:
                     self.damaged_chunks += 1
                 else:

@@ -5,29 +5,30 @@ A scheme module provides ``open_transport(url, timeout) -> Transport`` and may p
 ``discover() -> list[DeviceEntry]`` (cameras it can open now) and ``reopen_url(url, serial) -> str``
 (the URL that finds the same unit again after an unplug or a reboot).
 
-Schemes come from three places, first match wins: ``register_scheme`` calls (a package that
-adds a scheme calls it when imported: the simulator registers ``sim://`` and its USB bus this
-way), the built-in table ``SCHEMES``, and the ``stereocam.url_schemes`` entry-point group (so
-``stereocam.open("sim://")`` works in a fresh process without importing the simulator first).
-Anything else (a device path, ``socket://``, ``rfc2217://``, ``loop://``) goes to pyserial.
+Schemes come from three places, first match wins: ``register_scheme`` calls, the built-in table
+``SCHEMES``, and the ``stereocam.url_schemes`` entry-point group (``plugins``: the simulator declares
+``sim://`` and ``replay://`` there, so ``stereocam.open("sim://")`` works in a fresh process and the
+SDK never imports the simulator by name). Discovery asks the table's modules and the entry-point
+schemes whose package is already imported. Anything else (a device path, ``socket://``,
+``rfc2217://``, ``loop://``) goes to pyserial.
 """
 from __future__ import annotations
 
 import importlib
 import logging
 import threading
-from importlib.metadata import entry_points
 from types import ModuleType
 from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
 
 from ..protocol.errors import TransportError
+from . import plugins
 from .base import Transport
 
 if TYPE_CHECKING:
     from ..discovery import DeviceEntry
 
-ENTRY_POINT_GROUP = "stereocam.url_schemes"
+ENTRY_POINT_GROUP = plugins.URL_SCHEMES
 SERIAL_MODULE = "stereocam.transports.serial_port"
 SCHEMES: dict[str, str] = {"usb": "stereocam.transports.usb"}
 """scheme → module name; ``register_scheme`` adds to it."""
@@ -45,20 +46,13 @@ def scheme_of(url: str) -> str:
     return urlsplit(url).scheme.lower() if "://" in url else ""
 
 
-def _entry_point(scheme: str) -> str | None:
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        if ep.name == scheme:
-            return ep.value
-    return None
-
-
 def scheme_module(url: str) -> ModuleType:
     """The module that handles ``url``'s scheme (pyserial's for anything not in the table)."""
     scheme = scheme_of(url)
     with _lock:
         name = SCHEMES.get(scheme)
-    if name is None and scheme:
-        name = _entry_point(scheme)
+    if name is None and scheme in (declared := plugins.declared(ENTRY_POINT_GROUP)):
+        name = declared[scheme].module
     return importlib.import_module(name or SERIAL_MODULE)
 
 
@@ -79,7 +73,9 @@ def reopen_url(url: str, serial: str) -> str:
 def discover() -> list["DeviceEntry"]:
     """Cameras every loaded scheme module can open now; one failing source does not hide the rest."""
     with _lock:
-        names = list(dict.fromkeys([*SCHEMES.values(), SERIAL_MODULE]))
+        table = [*SCHEMES.values(), SERIAL_MODULE]
+    in_use = [ep.module for ep in plugins.in_use(ENTRY_POINT_GROUP).values()]
+    names = list(dict.fromkeys([*table, *in_use]))
     entries: list[DeviceEntry] = []
     for name in names:
         module = importlib.import_module(name)
@@ -88,7 +84,7 @@ def discover() -> list["DeviceEntry"]:
             continue
         try:
             entries.extend(find())
-        except Exception as exc:  # noqa: BLE001 - discovery must survive a broken bus or driver
+        except Exception as exc:  # discovery must survive a broken bus or driver
             _log.warning("device discovery via %s failed: %s", name, exc)
     return entries
 

@@ -80,7 +80,7 @@ def open_transport(url: str, timeout: float) -> SerialTransport:
         port = serial.serial_for_url(url, baudrate=921600, timeout=timeout, write_timeout=max(timeout, 5.0))
     except (serial.SerialException, OSError, ValueError) as exc:
         raise TransportError(f"cannot open {url}: {exc}") from exc
-    except Exception as exc:  # noqa: BLE001 - pyserial's URL handlers raise KeyError, TypeError, ...
+    except Exception as exc:  # pyserial's URL handlers raise KeyError, TypeError, ...
         raise TransportError(f"cannot open {url}: {type(exc).__name__}: {exc}") from exc
     return SerialTransport(port, url)
 

@@ -3,8 +3,8 @@
 URLs: ``usb://`` (first camera), ``usb://1209:0001`` (hex VID:PID), ``usb://?serial=SN``, or
 both (``usb://1209:0001?serial=SN``). Devices come from the real libusb backend (the library
 ``libusb-package`` ships, else the system's libusb-1.0) and from every backend registered with
-``register_backend`` (the simulator registers its simulated bus this way when it is imported;
-the SDK never imports the simulator).
+``register_backend`` and from the ``stereocam.usb_backends`` entry points of imported packages
+(the simulator declares its simulated bus there; the SDK never imports the simulator).
 
 Reads are bulk IN transfers of ``READ_SIZE`` bytes (a multiple of the 512-byte packet size, so
 no packet can overflow the buffer); a transfer ends at the device's short or zero-length packet,
@@ -30,6 +30,7 @@ import usb.util
 from stereocam.protocol.errors import CameraTimeoutError, DisconnectedError, TransportError
 from stereocam.protocol.usb_identity import CAMERA_IDS, INTERFACE_CLASS, MAX_PACKET_SIZE_HS
 
+from . import plugins
 from .base import Transport
 
 if TYPE_CHECKING:
@@ -114,10 +115,14 @@ def register_backend(kind: str, backend: object) -> None:
 
 
 def backends() -> list[tuple[str, object]]:
-    """(kind, backend) for every bus to scan: "libusb" first, then the registered ones."""
+    """(kind, backend) for every bus to scan: "libusb" first, then the registered ones, then the
+    entry points of imported packages (a registered kind wins over an entry point of that name)."""
     with _backend_lock:
-        extra = list(_extra_backends.items())
-    found = [("libusb", real_backend()), *extra]
+        extra = dict(_extra_backends)
+    for kind, ep in plugins.in_use(plugins.USB_BACKENDS).items():
+        if kind not in extra:
+            extra[kind] = ep.load()()
+    found = [("libusb", real_backend()), *extra.items()]
     return [(kind, b) for kind, b in found if b is not None]
 
 

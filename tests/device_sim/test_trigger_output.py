@@ -100,8 +100,8 @@ def test_a_build_without_the_capability_refuses_the_output_and_keeps_its_configu
     cam = stereocam.open("sim://?serial=NO-OUT", timeout=2.0)
     try:
         b = build("1.3.0")
-        cam.update_firmware(build_image(dataclasses.replace(b, capabilities=b.capabilities & ~m.Capability.TRIGGER_OUTPUT),
-                                        DEV_SIGNING_KEY, target="STOC-SIM"))
+        no_output = dataclasses.replace(b, capabilities=b.capabilities & ~m.Capability.TRIGGER_OUTPUT)
+        cam.update_firmware(build_image(no_output, DEV_SIGNING_KEY, target="STOC-SIM"))
         assert not cam.info().capabilities & m.Capability.TRIGGER_OUTPUT
         cam.configure(trigger_mode=int(stereocam.TriggerMode.EXTERNAL))
         before = cam.config()

@@ -101,8 +101,8 @@ def test_a_master_that_cannot_drive_the_line_or_is_not_in_the_group_is_refused(h
             stereocam.CameraGroup(group_urls(sims), master=master)
     b = build("1.3.0")
     with stereocam.open(group_urls(sims)[2], timeout=2.0) as cam:
-        cam.update_firmware(build_image(dataclasses.replace(b, capabilities=b.capabilities & ~m.Capability.TRIGGER_OUTPUT),
-                                        DEV_SIGNING_KEY, target="STOC-SIM"))
+        no_output = dataclasses.replace(b, capabilities=b.capabilities & ~m.Capability.TRIGGER_OUTPUT)
+        cam.update_firmware(build_image(no_output, DEV_SIGNING_KEY, target="STOC-SIM"))
     with pytest.raises(stereocam.ConfigError, match="cannot drive the trigger line") as refused:
         stereocam.CameraGroup(group_urls(sims), config=SMALL, master=2, settle=0.1).open()
     assert sims[2].serial in str(refused.value)

@@ -18,7 +18,8 @@ URLS = ["sim://?serial=CLUMSY0", "sim://?serial=CLUMSY1"]
 @pytest.mark.parametrize("kwargs, named", [
     (dict(urls="sim://?seed=1"), "list of camera URLs"), (dict(urls=5), "list of camera URLs"),
     (dict(config="x"), "config"), (dict(config=[1]), "config"),
-    (dict(per_camera="ab"), "per_camera"), (dict(per_camera=[5, None]), "per_camera"), (dict(per_camera=5), "per_camera"),
+    (dict(per_camera="ab"), "per_camera"), (dict(per_camera=[5, None]), "per_camera"),
+    (dict(per_camera=5), "per_camera"),
     (dict(deadline=-1), "deadline"), (dict(deadline=math.nan), "deadline"), (dict(settle="x"), "settle"),
     (dict(timeout=math.nan), "timeout"),
 ])

@@ -571,7 +571,8 @@ def test_truncated_frame_followed_by_good_frames(victim, items, data) -> None:
     assume(not spurious_valid_header(stream, starts))
     dec = Decoder()
     out = feed_chunks(dec, stream, [data.draw(st.integers(1, 64), label="chunk")])
-    expect = [packet_of(msg, rid, flags) for msg, rid, flags in items] + [packet_of(m.Heartbeat(), 0xAAAA)] * len(filler)
+    expect = ([packet_of(msg, rid, flags) for msg, rid, flags in items]
+              + [packet_of(m.Heartbeat(), 0xAAAA)] * len(filler))
     assert out == expect
     s = dec.stats
     if cut < 4:

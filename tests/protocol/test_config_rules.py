@@ -42,7 +42,8 @@ def test_non_live_parameters_only_while_stopped() -> None:
     with pytest.raises(ConfigRejected) as err:
         merge(defaults(), {pid("width"): 320}, streaming=True)
     assert err.value.code == ErrorCode.BAD_STATE and err.value.param == "width"
-    assert merge(defaults(), {pid("width"): 640, pid("fps"): 10}, streaming=True)["fps"] == 10  # unchanged width is fine
+    # an unchanged width is fine
+    assert merge(defaults(), {pid("width"): 640, pid("fps"): 10}, streaming=True)["fps"] == 10
 
 
 @pytest.fixture(scope="module")

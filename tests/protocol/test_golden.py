@@ -32,7 +32,8 @@ import pytest
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode
-from stereocam.protocol.framing import FLAG_RESEND, HEADER_LEN, MAGIC, TRAILER_LEN, VERSION_MAJOR, VERSION_MINOR, Decoder, Packet
+from stereocam.protocol.framing import (FLAG_RESEND, HEADER_LEN, MAGIC, TRAILER_LEN, VERSION_MAJOR, VERSION_MINOR,
+                                        Decoder, Packet)
 from stereocam.protocol.params import PARAMS
 from tests.support import paths
 

@@ -13,7 +13,7 @@ def returns_within(seconds: float, fn: Callable[..., Any], *args: Any, **kwargs:
     def run() -> None:
         try:
             box["value"] = fn(*args, **kwargs)
-        except BaseException as exc:  # noqa: BLE001 - handed back to the test
+        except BaseException as exc:  # handed back to the test
             box["error"] = exc
 
     t = threading.Thread(target=run, daemon=True)

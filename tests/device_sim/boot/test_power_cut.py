@@ -78,7 +78,7 @@ def _cut_and_check(path: Path, phases: list[Phase], cut: int, tear: bool, allowe
     u = Unit(path)
     u.boot()
     u.flash.power_loss_after(cut, tear=tear)
-    for name, run in phases:
+    for name, run in phases:  # noqa: B007 - the phase the cut hit, named below
         try:
             run(u)
         except PowerLossError:

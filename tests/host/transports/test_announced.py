@@ -23,7 +23,8 @@ def test_announcement_lives_as_long_as_the_block(runtime):
     with announced.announce("socket://127.0.0.1:9", "SN-1", "STOC-SIM", "1.1.0", "tcp") as path:
         assert path.parent == runtime and (runtime.stat().st_mode & 0o777) == 0o700
         [entry] = announced.discover()
-        assert (entry.url, entry.serial, entry.transport, entry.simulated) == ("socket://127.0.0.1:9", "SN-1", "tcp", True)
+        assert (entry.url, entry.serial, entry.transport, entry.simulated) == ("socket://127.0.0.1:9", "SN-1", "tcp",
+                                                                               True)
     assert announced.discover() == [] and not path.exists()
 
 

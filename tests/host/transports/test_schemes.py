@@ -69,3 +69,15 @@ def test_a_discovery_source_that_fails_does_not_hide_the_others(monkeypatch):
 def test_a_url_that_is_not_a_string_is_a_transport_error(url):
     with pytest.raises(stereocam.TransportError):
         transports.open_transport(url)
+
+
+def test_a_plugin_joins_discovery_only_once_its_package_is_imported():
+    from stereocam.transports import plugins
+
+    assert plugins.provider("stereocam.device_sim.links.inprocess") == "stereocam.device_sim"
+    assert plugins.provider("acme_cams.scheme") == "acme_cams"
+    out = _run("import sys, stereocam.transports.plugins as p\n"
+               "print(sorted(p.declared(p.URL_SCHEMES)), sorted(p.in_use(p.URL_SCHEMES)))\n"
+               "import stereocam.device_sim\n"
+               "print(sorted(p.in_use(p.URL_SCHEMES)), sorted(p.in_use(p.USB_BACKENDS)))")
+    assert out.splitlines() == ["['replay', 'sim'] []", "['replay', 'sim'] ['sim']"]

@@ -20,7 +20,7 @@ def time_sync(ctx: Context) -> str:
     the host's monotonic clock, bounded by each sample's round trip, admits 1 +- 1000 ppm."""
     ctx.require(m.Capability.TIME_SYNC)
     samples = []
-    for i in range(SAMPLES):
+    for _ in range(SAMPLES):
         t0 = time.monotonic()
         r = ctx.s.call(m.TimeSync())
         t1 = time.monotonic()
