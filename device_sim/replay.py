@@ -30,7 +30,6 @@ from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.frame_messages import DISPARITY_SUBPIXEL, invalid_disparity
 from stereocam.protocol.params import BY_NAME, Output, TriggerMode, defaults
-from stereocam.recording.reader import DamagedRecordingError, RecordedCapture, Recording
 from stereocam.stereo.engines import params_from_config
 
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
@@ -174,7 +173,8 @@ class ReplaySource:
             fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)
         elif Output.DISPARITY in wanted:
             planes[Output.DISPARITY] = match(cfg, cap.left, cap.right)
-            fmt = (DISPARITY_SUBPIXEL, cfg["min_disparity"], cfg["num_disparities"], invalid_disparity(cfg["min_disparity"]))
+            fmt = (DISPARITY_SUBPIXEL, cfg["min_disparity"], cfg["num_disparities"],
+                   invalid_disparity(cfg["min_disparity"]))
         else:
             fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)
         planes = {p: a for p, a in planes.items() if p in wanted and a is not None}

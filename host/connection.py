@@ -169,7 +169,7 @@ class Connection:
                     self.sync_clock(SYNC_BURST)
             except StereoCamError:
                 pass  # a dead link shows in the user's next call; reconnect() brings a new one
-            except Exception as exc:  # noqa: BLE001 - a bug here ends the link visibly, not silently
+            except Exception as exc:
                 self.link.fail(exc)
 
     # -- state --------------------------------------------------------------------------------

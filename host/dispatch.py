@@ -114,5 +114,5 @@ class FrameDispatcher:
         for listener in self._listeners:
             try:
                 listener.put(frame)
-            except Exception as exc:  # noqa: BLE001 - one broken listener must not starve the rest
+            except Exception as exc:
                 _log.error("frame listener %r failed on frame %d: %r", listener, frame.sequence, exc, exc_info=exc)

@@ -119,7 +119,8 @@ CROSS_RULES: tuple[CrossRule, ...] = (
               lambda c: f"exposure_us={c['exposure_us']} longer than the frame period at fps={c['fps']}"),
     CrossRule("sgm_disparity_range_vs_width", ("algorithm", "min_disparity", "num_disparities", "width"),
               ("num_disparities", "min_disparity", "width", "algorithm"),
-              lambda c: _algorithm(c) == Algorithm.SEMI_GLOBAL and _sgm_no_valid_column(c), lambda c: _range_why(c, "")),
+              lambda c: _algorithm(c) == Algorithm.SEMI_GLOBAL and _sgm_no_valid_column(c),
+              lambda c: _range_why(c, "")),
     CrossRule("trigger_output_needs_external", ("trigger_output", "trigger_mode"), ("trigger_output", "trigger_mode"),
               lambda c: c["trigger_output"] == 1 and c["trigger_mode"] != TriggerMode.EXTERNAL,
               lambda c: "trigger_output=1 needs trigger_mode=external: the master captures on its own pulses "

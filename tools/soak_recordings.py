@@ -170,7 +170,7 @@ def fuzz_recordings(files: int, seed: int = 0, hang_s: float = 60.0) -> Report:
                 "export": _cli(["recording", "export", str(src), "--out", str(out / "export")]),
                 "repair": _cli(["recording", "repair", str(src), "--out", str(out / "repaired.mcap")]),
                 "replay": _cli(["info", f"replay://{src}?speed=fast"]),
-                "rematch": lambda: rematch([src], out / "rematch", {}, client=client),
+                "rematch": lambda src=src, out=out: rematch([src], out / "rematch", {}, client=client),
             }
             for name, run in operations.items():
                 before = _digests(root, out)

@@ -69,7 +69,8 @@ class CalibrationStore:
 
     def __init__(self, flash: NorFlash) -> None:
         if flash.size < CALIBRATION_SECTORS * flash.sector_size:
-            raise StoreError(f"the store needs {CALIBRATION_SECTORS} sectors, the flash has {flash.size // flash.sector_size}")
+            raise StoreError(f"the store needs {CALIBRATION_SECTORS} sectors, "
+                             f"the flash has {flash.size // flash.sector_size}")
         self.flash = flash
         self.capacity = flash.sector_size - _HEADER.size - _CRC.size
 

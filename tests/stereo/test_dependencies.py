@@ -8,7 +8,8 @@ import sys
 
 from tests.support.paths import REPO
 
-ALLOWED = ("stereocam.protocol", "stereocam.stereo", "numpy", "numba", "llvmlite")  # llvmlite: numba's own IR (intrinsics)
+# llvmlite: numba's own IR (intrinsics)
+ALLOWED = ("stereocam.protocol", "stereocam.stereo", "numpy", "numba", "llvmlite")
 
 
 def _imports(path) -> set[str]:

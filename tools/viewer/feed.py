@@ -29,7 +29,7 @@ class Feed(abc.ABC):
     def _take(self, item: Any) -> None:
         """Keep ``item`` for the page."""
 
-    def _recover(self, exc: stereocam.StereoCamError) -> None:
+    def _recover(self, exc: stereocam.StereoCamError) -> None:  # noqa: B027 - a hook, doing nothing by default
         """After a camera error, before the next try (a subclass may reconnect here)."""
 
     def _run(self) -> None:

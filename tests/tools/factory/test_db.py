@@ -225,7 +225,7 @@ def test_stations_creating_the_database_at_once_lose_no_record(tmp_path, request
         try:
             start.wait()
             _one(url, f"SN-{i}")
-        except Exception as exc:  # noqa: BLE001 - reported below
+        except Exception as exc:
             errors.append(exc)
 
     threads = [threading.Thread(target=station, args=(i,)) for i in range(n)]
