@@ -4,7 +4,14 @@ A set is emitted, in trigger-id order, once every camera has either delivered it
 id or moved past it (a camera's frames arrive in order, so a later id means this one will never
 come), or once ``deadline`` seconds have passed since the set's first frame arrived. A camera
 without its frame is named in ``missing``: a set is never completed with a frame of another
-trigger. Pulses no camera captured show as sets missing every camera.
+trigger. Pulses no camera captured show as sets missing every camera (up to ``MAX_GAP`` of them in a
+row; a longer run is only counted, in ``SetStats.skipped``).
+
+Trigger ids come from devices, so none is trusted to be sane: a frame whose id is more than
+``MAX_JUMP`` past the newest id any other camera claimed (for the only camera: past its own
+previous one) is refused and its camera named in ``SetStats.implausible``. A jump the whole line
+makes (every camera) is followed after one refused frame per camera. Work and memory per frame are
+bounded whatever ids arrive.
 """
 from __future__ import annotations
 
@@ -16,6 +23,8 @@ from typing import Iterable
 from .frames import Frame
 
 MAX_PENDING = 256  # sets waiting for frames; beyond this the oldest is emitted as it stands
+MAX_GAP = MAX_PENDING  # longest run of uncaptured pulses emitted as empty sets; longer runs are counted
+MAX_JUMP = 1 << 16  # a trigger id this far past every other camera's is a lie (9 min of pulses at 120 fps)
 
 
 @dataclass(frozen=True)
@@ -49,6 +58,8 @@ class SetStats:
     missing: collections.Counter[str] = field(default_factory=collections.Counter)  # by camera
     late: collections.Counter[str] = field(default_factory=collections.Counter)  # frames after their set went
     before_start: int = 0  # frames of triggers before every camera was streaming
+    implausible: collections.Counter[str] = field(default_factory=collections.Counter)  # frames refused: id jumped
+    skipped: int = 0  # pulses in gaps too long to emit as empty sets
 
 
 class SetMatcher:
@@ -62,12 +73,16 @@ class SetMatcher:
         self._arrived: dict[int, float] = {}  # when each pending set's first frame arrived
         self._first: dict[str, int] = {}  # each camera's first trigger id
         self._last: dict[str, int] = {}  # each camera's latest trigger id
+        self._claimed: dict[str, int] = {}  # each camera's latest trigger id, refused ones included
         self._since: float | None = None  # arrival of the very first frame
         self._start: int | None = None  # the first trigger id every camera was expected to capture
         self._emitted: int | None = None  # the last trigger id emitted
 
     def add(self, name: str, frame: Frame, now: float) -> None:
         tid = frame.trigger_id
+        if not self._plausible(name, tid):
+            self.stats.implausible[name] += 1
+            return
         self._first.setdefault(name, tid)
         self._last[name] = max(self._last.get(name, tid), tid)
         self._since = now if self._since is None else self._since
@@ -76,6 +91,14 @@ class SetMatcher:
             return
         self._pending.setdefault(tid, {})[name] = frame
         self._arrived.setdefault(tid, now)
+
+    def _plausible(self, name: str, tid: int) -> bool:
+        """Whether ``tid`` is within ``MAX_JUMP`` of the ids the other cameras (or, alone, this one)
+        claimed last; records it as this camera's claim either way."""
+        others = [t for n, t in self._claimed.items() if n != name]
+        reference = max(others) if others else self._claimed.get(name)
+        self._claimed[name] = tid
+        return reference is None or tid - reference <= MAX_JUMP
 
     def pop_ready(self, now: float) -> list[MatchedSet]:
         if self._start is None and not self._find_start(now):
@@ -88,7 +111,10 @@ class SetMatcher:
             if not (settled or now - self._arrived[tid] > self.deadline or len(self._pending) > MAX_PENDING):
                 break
             first_gap = tid if self._emitted is None else self._emitted + 1
-            out.extend(self._emit(gap, {}) for gap in range(first_gap, tid))  # pulses nobody captured
+            if tid - first_gap > MAX_GAP:
+                self.stats.skipped += tid - first_gap
+            else:
+                out.extend(self._emit(gap, {}) for gap in range(first_gap, tid))  # pulses nobody captured
             del self._pending[tid], self._arrived[tid]
             out.append(self._emit(tid, frames))
         return out
