@@ -111,3 +111,15 @@ def test_one_transfer_at_a_time_and_resume(unit: Unit) -> None:
     with pytest.raises(UpdateRefused, match="continue there"):
         unit.service.data(0, NEW[:1000])
     assert unit.service.begin(len(other), hashlib.sha256(other).digest(), True).total_received == 0
+
+
+def test_a_fresh_unit_refuses_an_image_older_than_the_one_it_runs(tmp_path: Path) -> None:
+    """Issue 22.2: fresh from the factory (1.1.0 confirmed), the floor is already 1.1.0's counter, so a
+    vendor-signed 0.9.0 is refused before a byte of the other slot changes."""
+    u = Unit.factory(tmp_path / "fresh.flash")
+    b = u.boot()
+    assert (b.slot, b.mode, b.image.build.version) == (0, BootMode.NORMAL, "1.1.0")
+    assert u.states.read().counter == auto_security_counter("1.1.0") == b.image.security_counter
+    with pytest.raises(UpdateRefused, match="rollback"):
+        u.transfer(image("0.9.0"))
+    assert u.service.slot_info(1).state == SlotState.EMPTY
