@@ -120,7 +120,8 @@ class TcpServer:
     """The firmware behind a listening TCP socket, one host connection at a time.
 
     A second client is accepted, told why with a NACK, and closed at once: nothing it sent is ever
-    executed, and nothing waits in the listen queue for the first host to leave. A host that stops
+    executed, and nothing waits in the listen queue for the first host to leave; but a host silent
+    past its link timeout (the default one when it turned the watchdog off) yields to it. A host that stops
     reading for ``send_timeout`` seconds is dropped (the send fails, the device detaches and stops
     streaming); one silent for the link timeout is dropped by the device's watchdog (SPEC §9).
     """
@@ -186,6 +187,8 @@ class TcpServer:
                 if not self.sim.attached:  # dropped meanwhile: the waiting client is the next host
                     break
                 if self._sock in ready:
+                    if self.sim.heartbeat.yield_link():  # silent with the watchdog off: the waiting client is next
+                        break
                     self._refuse(peer)
                 if conn not in ready:
                     continue

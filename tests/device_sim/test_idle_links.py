@@ -204,3 +204,27 @@ def test_a_usb_host_that_went_silent_is_dropped_and_the_next_one_served() -> Non
     finally:
         device.unplug()
         sim.close()
+
+
+def test_a_silent_host_with_the_watchdog_off_yields_the_tcp_slot_to_the_next_host(tcp) -> None:
+    """Issue 22.6: a client that sets heartbeat_timeout_ms=0 and goes silent keeps no one out for
+    long: once it has been silent for the default link timeout, the next host that connects gets
+    the device (it used to be refused forever)."""
+    server, sim = tcp
+    squatter = RawTcp(server.url)
+    squatter.send(set_config(1, heartbeat_timeout_ms=0))
+    assert isinstance(squatter.messages(0.3)[0], m.ConfigApplied)
+    silent_since = time.monotonic()
+    deadline = silent_since + 15
+    while True:
+        assert time.monotonic() < deadline, "the silent host still holds the device after 15 s"
+        host = RawTcp(server.url)
+        host.send(m.encode(m.GetInfo(), 2))
+        got = host.messages(0.5) or []
+        if any(isinstance(x, m.Info) for x in got):
+            break
+        assert isinstance(got[0], m.Nack) and "busy" in got[0].message
+        host.close()
+    assert time.monotonic() - silent_since > 5.5  # not before the default link timeout (2 × 3 s)
+    assert squatter.messages(0.5) is None  # the silent host was hung up on
+    host.close()
