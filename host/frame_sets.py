@@ -8,8 +8,9 @@ trigger. Pulses no camera captured show as sets missing every camera (up to ``MA
 row; a longer run is only counted, in ``SetStats.skipped``).
 
 Trigger ids come from devices, so none is trusted to be sane: a frame whose id is more than
-``MAX_JUMP`` past the newest id any other camera claimed (for the only camera: past its own
-previous one) is refused and its camera named in ``SetStats.implausible``. A jump the whole line
+``MAX_JUMP`` past the (lower) median of the other cameras' latest ids (for the only camera: past its
+own previous one) is refused and its camera named in ``SetStats.implausible``; so is a first frame
+that far past the median of the first frames (a liar that spoke first). A jump the whole line
 makes (every camera) is followed after one refused frame per camera. Work and memory per frame are
 bounded whatever ids arrive.
 """
@@ -96,7 +97,7 @@ class SetMatcher:
         """Whether ``tid`` is within ``MAX_JUMP`` of the ids the other cameras (or, alone, this one)
         claimed last; records it as this camera's claim either way."""
         others = [t for n, t in self._claimed.items() if n != name]
-        reference = max(others) if others else self._claimed.get(name)
+        reference = _lower_median(others) if others else self._claimed.get(name)
         self._claimed[name] = tid
         return reference is None or tid - reference <= MAX_JUMP
 
@@ -123,6 +124,7 @@ class SetMatcher:
         """Sets begin at the first trigger every camera streamed for (or, if a camera stays silent
         past the deadline, the first any camera did); earlier frames are discarded."""
         if len(self._first) == len(self.names):
+            self._drop_implausible_firsts()
             self._start = max(self._first.values())
         elif self._pending and self._since is not None and now - self._since > self.deadline:
             self._start = min(self._pending)
@@ -133,6 +135,21 @@ class SetMatcher:
             del self._arrived[tid]
         return True
 
+    def _drop_implausible_firsts(self) -> None:
+        """Refuse the frames of cameras whose first id lies more than MAX_JUMP past the median first id
+        delivered (a liar whose frame came before any other camera's, so nothing refused it)."""
+        limit = _lower_median(list(self._first.values())) + MAX_JUMP
+        liars = {n for n, t in self._first.items() if t > limit}
+        for tid in [t for t in self._pending if t > limit]:
+            for name in [n for n in self._pending[tid] if n in liars]:
+                del self._pending[tid][name]
+                self.stats.implausible[name] += 1
+            if not self._pending[tid]:
+                del self._pending[tid], self._arrived[tid]
+        for name in liars:
+            self._first[name] = min(self._first.values())
+            self._last.pop(name, None)
+
     def _emit(self, tid: int, frames: dict[str, Frame]) -> MatchedSet:
         missing = tuple(n for n in self.names if n not in frames)
         self._emitted = tid
@@ -142,6 +159,10 @@ class SetMatcher:
         else:
             self.stats.complete += 1
         return MatchedSet(tid, {n: frames[n] for n in self.names if n in frames}, missing)
+
+
+def _lower_median(values: list[int]) -> int:
+    return sorted(values)[(len(values) - 1) // 2]
 
 
 def sync_problems(sets: Iterable[MatchedSet], max_skew: float) -> list[str]:

@@ -93,3 +93,17 @@ def test_a_jump_every_camera_makes_is_followed_and_the_gap_counted_not_filled():
     sets = m.pop_ready(0.0)
     assert [(s.trigger_id, s.missing) for s in sets] == [(1, ()), (2, ()), (10**7, ("A",)), (10**7 + 1, ())]
     assert m.stats.implausible == {"A": 1} and m.stats.skipped == 10**7 - 3
+
+
+def test_a_liar_whose_frame_comes_first_does_not_set_the_start():
+    """A lying head's frame is the very first one the matcher sees: nothing could refuse it then, so
+    the start (the first trigger every camera streamed for) ignores it and the sets come from the
+    honest heads' ids, the liar missing and named."""
+    m = SetMatcher(NAMES, deadline=0.5)
+    m.add("B", frame(1 + 10**7), 0.0)
+    for tid in range(1, 6):
+        for n in NAMES:
+            m.add(n, frame(tid + 10**7 if n == "B" else tid), tid * 0.01)
+    sets = m.pop_ready(1.0)
+    assert [(s.trigger_id, s.missing) for s in sets] == [(t, ("B",)) for t in range(1, 6)]
+    assert m.stats.implausible == {"B": 6}
