@@ -4,8 +4,10 @@
 2. device fuzz: CRC-valid requests with mutated payloads to the device at URL, each must be answered;
 3. streaming through a faulty link (byte flips, lost bytes, split writes, latency) at each --flip
    rate for --seconds, counting frames sent / delivered / corrupted / dropped and whether the
-   device's and host's counters add up (corruption is checked against the device for sim:// URLs).
-Exit status 1 on any crash, hang, corrupted frame, counters that do not add up, or a delivery rate
+   device's and host's counters add up (corruption is checked against the device for sim:// URLs);
+4. lying-head group: a CameraGroup of simulated heads, one whose trigger ids jump by 10^6..2^32
+   (soak_group.py): crashes, hangs, whether the liar is named, peak memory.
+Exit status 1 on any crash, hang, unnamed liar, memory growth over its limit, corrupted frame, counters that do not add up, or a delivery rate
 below its goal (VGA frames on a serial-class link: 95 % at 1 byte in 10^5 flipped, 50 % at 1 in 10^4).
 """
 from __future__ import annotations
@@ -14,6 +16,7 @@ from stereocam.tools.exit_codes import EXIT_CODES
 
 import argparse
 
+from .soak_group import lying_head_group
 from .soak_parts import Report, fuzz_decoder, fuzz_device, stream_with_faults
 
 
@@ -37,6 +40,7 @@ def _failed(rep: Report, flip: float | None = None) -> bool:
         f["delivery goal"] = f"met (at least {goal:.0%})"
     return bool(rep.crashes or rep.hangs or f.get("invariant violations") or short
                 or (isinstance(corrupted, int) and corrupted)
+                or str(f.get("liar named", "")).startswith("NO") or f.get("memory goal") == "NOT MET"
                 or str(f.get("counters add up", "yes")).startswith("NO"))
 
 
@@ -52,6 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--latency", type=float, default=0.001, help="max delay per chunk, s")
     ap.add_argument("--split", type=int, default=16, help="split host writes into pieces of 1..N bytes")
     ap.add_argument("--chunk", type=int, default=1024, help="FRAME_DATA bytes asked for (0: the transport's)")
+    ap.add_argument("--group-seconds", type=float, default=60.0, help="lying-head group stage (0: skip)")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     runs = [(None, lambda: fuzz_decoder(args.decoder_inputs, args.seed)),
@@ -59,6 +64,8 @@ def main(argv: list[str] | None = None) -> int:
     runs += [(flip, lambda flip=flip: stream_with_faults(args.url, args.seconds, flip, args.drop, args.latency,
                                                          args.split, args.chunk or None, seed=args.seed))
              for flip in args.flip or [1e-5, 1e-4]]
+    if args.group_seconds > 0:
+        runs.append((None, lambda: lying_head_group(args.group_seconds, seed=args.seed)))
     bad = []
     for flip, run in runs:  # one at a time, each printed as it ends
         rep = run()
