@@ -29,14 +29,18 @@ class PtyServer:
 
     A pty has no connections: after the device dropped a host (silence or a send timeout) the next
     bytes that arrive start a new link, and the output still queued for the old host is discarded.
+    The server does not hold the slave open itself, so a host that closes it (or dies) shows at
+    once (the master reads EIO while nobody holds the slave): the device detaches, which stops the
+    stream, and what the pty still holds is discarded.
     """
 
     def __init__(self, sim: SimulatedCamera, send_timeout: float = SEND_TIMEOUT_S):
         self.sim = sim
         self.send_timeout = send_timeout
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)  # no echo, no line discipline: an 8-bit clean wire
-        self.path = os.ttyname(self._slave)
+        self._master, slave = os.openpty()
+        tty.setraw(slave)  # no echo, no line discipline: an 8-bit clean wire (kept while the master is open)
+        self.path = os.ttyname(slave)
+        os.close(slave)
         self._stop = threading.Event()
         self._wlock = threading.Lock()
         self._session = 0  # bumped by every hang-up: a write of an older session gives up
@@ -68,15 +72,25 @@ class PtyServer:
     def _hang_up(self) -> None:
         self._session += 1
 
+    def _flush(self) -> None:
+        """Discard what the pty holds in both directions."""
+        try:
+            termios.tcflush(self._master, termios.TCIOFLUSH)
+        except termios.error:
+            pass
+
     def _attach(self) -> None:
         """A new host: discard what the pty still holds for the last one, then link up."""
         self._session += 1
-        for fd, queue in ((self._master, termios.TCOFLUSH), (self._slave, termios.TCIFLUSH)):
-            try:
-                termios.tcflush(fd, queue)
-            except termios.error:
-                pass
+        self._flush()
         self.sim.attach(self._write, self._hang_up)
+
+    def _host_left(self) -> None:
+        """Nobody holds the slave open: the host closed it or died; end its link at once."""
+        if self.sim.attached:
+            self._session += 1
+            self.sim.detach()
+            self._flush()
 
     def serve_forever(self) -> None:
         os.set_blocking(self._master, False)
@@ -89,7 +103,8 @@ class PtyServer:
                 data = os.read(self._master, READ_CHUNK)
             except (BlockingIOError, InterruptedError):
                 continue
-            except OSError:  # EIO while no host holds the slave open: wait for the next one
+            except OSError:  # EIO while no host holds the slave open: the host left; wait for the next
+                self._host_left()
                 self._stop.wait(0.05)
                 continue
             if data:
@@ -103,11 +118,10 @@ class PtyServer:
     def close(self) -> None:
         self.shutdown()
         self.sim.detach()
-        for fd in (self._master, self._slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        try:
+            os.close(self._master)
+        except OSError:
+            pass
 
 
 def busy_nack(holder: str) -> bytes:

@@ -228,3 +228,42 @@ def test_a_silent_host_with_the_watchdog_off_yields_the_tcp_slot_to_the_next_hos
     assert time.monotonic() - silent_since > 5.5  # not before the default link timeout (2 × 3 s)
     assert squatter.messages(0.5) is None  # the silent host was hung up on
     host.close()
+
+
+@pytest.fixture
+def default_pty():
+    sim = SimulatedCamera(seed=94)
+    server = PtyServer(sim)  # the default send timeout (5 s): longer than the watchdog's
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield server, sim
+    server.close()
+    thread.join(5)
+    sim.close()
+
+
+def test_the_next_pty_host_after_one_killed_mid_stream_gets_no_stale_output_and_a_prompt_answer(default_pty) -> None:
+    """Issue 22.17: a streaming pty host dies (its port closed, no STOP, the watchdog at its default
+    3 s); the next host, opening at once, is answered within a second and reads nothing of the old
+    stream."""
+    server, sim = default_pty
+    dead = serial.Serial(server.url, timeout=0.5)
+    dead.write(set_config(1, **SMALL, outputs=7) + m.encode(m.Start(), 2))
+    decoder, ends = Decoder(), 0
+    deadline = time.monotonic() + 10
+    while ends < 2 and time.monotonic() < deadline:  # a host reading its stream
+        ends += sum(p.msg_type == m.MsgType.FRAME_END for p in decoder.feed(dead.read(65536)))
+    assert ends >= 2 and sim.engine.streaming
+    dead.close()  # killed: the port closes with the stream running
+    deadline = time.monotonic() + 2
+    while sim.engine.streaming and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert not sim.engine.streaming, "the device must notice that no host holds the pty"
+    with serial.Serial(server.url, timeout=0.2) as host:
+        sent = time.monotonic()
+        host.write(m.encode(m.GetInfo(), 9))
+        decoder, got = Decoder(), []
+        while not any(isinstance(x, m.Info) for x in got) and time.monotonic() - sent < 5:
+            got += [m.decode_packet(p) for p in decoder.feed(host.read(65536))]
+        answered = time.monotonic() - sent
+    assert [type(x).__name__ for x in got] == ["Info"] and answered < 1.0, (answered, len(got))
