@@ -22,6 +22,7 @@ from ..firmware import SimulatedCamera
 READ_CHUNK = 65536
 SEND_TIMEOUT_S = 5.0
 REFUSE_LINGER_S = 0.5  # a refused client's bytes are read and discarded this long, so the NACK is not reset away
+WAIT_FOR_SLOT_S = 2.0  # a second TCP client waits this long for the host to leave before it is refused
 
 
 class PtyServer:
@@ -124,6 +125,18 @@ class PtyServer:
             pass
 
 
+TCP_CLOSE_WAIT = 8  # Linux tcp_info.tcpi_state: the peer has closed its side
+
+
+def peer_closed(conn: socket.socket) -> bool:
+    """Whether the peer of ``conn`` has closed its side (FIN received), even with its bytes still
+    unread (Linux TCP_INFO; False where the platform cannot tell)."""
+    try:
+        return conn.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 1)[0] == TCP_CLOSE_WAIT
+    except (AttributeError, OSError):
+        return False
+
+
 def busy_nack(holder: str) -> bytes:
     """What a second TCP client hears before the device hangs up on it."""
     return m.encode(m.Nack(0, ErrorCode.BAD_STATE, 0, f"busy: another host ({holder}) holds this device; "
@@ -133,9 +146,11 @@ def busy_nack(holder: str) -> bytes:
 class TcpServer:
     """The firmware behind a listening TCP socket, one host connection at a time.
 
-    A second client is accepted, told why with a NACK, and closed at once: nothing it sent is ever
-    executed, and nothing waits in the listen queue for the first host to leave; but a host silent
-    past its link timeout (the default one when it turned the watchdog off) yields to it. A host that stops
+    A second client is accepted and waits up to ``WAIT_FOR_SLOT_S`` for the host to leave (then it
+    is served: a host that just closed may still have bytes the device works through); if the host
+    stays, the client is told why with a NACK and closed, nothing it sent executed. A third client
+    meanwhile is refused at once. A host that has closed its side or is silent past its link
+    timeout (the default one when it turned the watchdog off) yields to the waiting client. A host that stops
     reading for ``send_timeout`` seconds is dropped (the send fails, the device detaches and stops
     streaming); one silent for the link timeout is dropped by the device's watchdog (SPEC §9).
     """
@@ -148,6 +163,7 @@ class TcpServer:
         self._sock.settimeout(0.1)
         self.address = self._sock.getsockname()[:2]
         self._stop = threading.Event()
+        self._waiting: tuple[socket.socket, str, float] | None = None  # a client waiting for the slot, its deadline
 
     @property
     def url(self) -> str:
@@ -155,12 +171,36 @@ class TcpServer:
 
     def serve_forever(self) -> None:
         while not self._stop.is_set():
-            try:
-                conn, peer = self._sock.accept()
-            except (socket.timeout, OSError):
-                continue
+            if self._waiting is not None:  # the host left while a client waited: it is next
+                conn, peer, _ = self._waiting
+                self._waiting = None
+            else:
+                try:
+                    conn, addr = self._sock.accept()
+                except (socket.timeout, OSError):
+                    continue
+                peer = f"{addr[0]}:{addr[1]}"
             with conn:
-                self._serve(conn, f"{peer[0]}:{peer[1]}")
+                self._serve(conn, peer)
+
+    def _knock(self, holder: str) -> None:
+        """A client connects while ``holder`` has the device: it waits for the slot (one at a time)."""
+        if self._waiting is not None:
+            self._refuse(holder)
+            return
+        try:
+            conn, addr = self._sock.accept()
+        except OSError:
+            return
+        self._waiting = (conn, f"{addr[0]}:{addr[1]}", time.monotonic() + WAIT_FOR_SLOT_S)
+
+    def _refuse_waiting(self, holder: str) -> None:
+        """The waiting client's time is up: tell it why and hang up (in its own thread)."""
+        if self._waiting is not None and time.monotonic() > self._waiting[2]:
+            conn = self._waiting[0]
+            self._waiting = None
+            self.sim.counters["hosts_refused"] += 1
+            threading.Thread(target=self._tell_busy, args=(conn, holder), name="tcp-refuse", daemon=True).start()
 
     def _refuse(self, holder: str) -> None:
         """Accept the waiting client and hang up on it (in its own thread: the host is not kept waiting)."""
@@ -201,9 +241,12 @@ class TcpServer:
                 if not self.sim.attached:  # dropped meanwhile: the waiting client is the next host
                     break
                 if self._sock in ready:
-                    if self.sim.heartbeat.yield_link():  # silent with the watchdog off: the waiting client is next
-                        break
-                    self._refuse(peer)
+                    self._knock(peer)
+                # a host that has closed its side (its unread bytes answer no one), or one silent
+                # with the watchdog off, yields: the waiting client is next
+                if self._waiting is not None and (peer_closed(conn) or self.sim.heartbeat.yield_link()):
+                    break
+                self._refuse_waiting(peer)
                 if conn not in ready:
                     continue
                 data = conn.recv(READ_CHUNK)
@@ -222,3 +265,5 @@ class TcpServer:
         self.shutdown()
         self.sim.detach()
         self._sock.close()
+        if self._waiting is not None:
+            self._waiting[0].close()

@@ -7,6 +7,8 @@ errors inside TCP. The option is taken out of the URL before pyserial sees it.
 """
 from __future__ import annotations
 
+import select
+import socket
 from typing import TYPE_CHECKING
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
@@ -49,8 +51,13 @@ class SerialTransport(Transport):
     def read(self, max_bytes: int, timeout: float) -> bytes:
         """Wait up to ``timeout`` for one byte, then take whatever else is ready without waiting.
 
-        (``in_waiting`` is no help here: for ``socket://`` pyserial reports it as 0 or 1.)
+        (``in_waiting`` is no help here: for ``socket://`` pyserial reports it as 0 or 1.) A
+        ``socket://`` port is read from its socket: pyserial drops the bytes it read just before the
+        peer closed (the device's last word, e.g. its 'busy' NACK).
         """
+        sock = getattr(self.port, "_socket", None)
+        if isinstance(sock, socket.socket):
+            return self._read_socket(sock, max_bytes, timeout)
         try:
             self._timeout(timeout)
             first = self.port.read(1)
@@ -60,6 +67,17 @@ class SerialTransport(Transport):
             return first + self.port.read(max_bytes - 1)
         except (serial.SerialException, OSError) as exc:
             raise DisconnectedError(f"read from {self.url} failed: {exc}") from exc
+
+    def _read_socket(self, sock: socket.socket, max_bytes: int, timeout: float) -> bytes:
+        try:
+            if not select.select([sock], [], [], timeout)[0]:
+                return b""
+            data = sock.recv(max_bytes)
+        except (OSError, ValueError) as exc:  # ValueError: the socket was closed meanwhile
+            raise DisconnectedError(f"read from {self.url} failed: {exc}") from exc
+        if not data:
+            raise DisconnectedError(f"read from {self.url} failed: the device closed the connection")
+        return data
 
     def close(self) -> None:
         self.port.close()
