@@ -9,7 +9,9 @@ reads, streaming over every transport), so a host cannot tell a replay from the 
   (in free run whatever triggered the recorded unit: the recording paces the replay);
   the recorded calibration in flash (same body, so the same calibration id in every frame);
 * timing: ``realtime`` plays captures at their recorded device-time spacing, else as fast as the
-  host reads (the link's back-pressure paces it); ``loop`` starts over at the end, else the stream
+  host reads (the link's back-pressure paces it); recorded times are not trusted: a step backwards
+  or of more than ``MAX_PACE_GAP_S`` restarts the pacing at that capture (played at once), and
+  closing the replay interrupts any wait; ``loop`` starts over at the end, else the stream
   ends; ``start`` is the first frame index (found through the file's index, nothing before read);
 * disparity: with the recorded matching configuration the recorded plane is resent as it was;
   after the host changes any matching parameter the recorded images are matched again on board.
@@ -41,6 +43,7 @@ _log = logging.getLogger(__name__)
 
 IDENTITY = ("model", "serial", "firmware_version")  # what a replayed unit needs of the recorded INFO
 Matcher = Callable[[dict, np.ndarray, np.ndarray], np.ndarray]
+MAX_PACE_GAP_S = 10.0  # longest recorded pause replayed as a pause; a longer (or backward) step re-anchors
 
 
 @dataclass(frozen=True)
@@ -86,6 +89,8 @@ class ReplaySource:
         self._iter: Iterator[RecordedCapture] | None = None
         self._pending: RecordedCapture | None = None
         self._t0: tuple[float, int] | None = None  # (host monotonic, device µs) the pacing counts from
+        self._last_us: int | None = None  # the recorded device time of the capture last paced
+        self._closed = threading.Event()
         self.sent = 0
 
     def _open(self, path: str | Path, start: int) -> None:
@@ -119,7 +124,7 @@ class ReplaySource:
         """A new stream: play from ``start`` again (a capture taken for the old stream stays pending:
         the firmware finds it no longer current and does not send it)."""
         with self._lock:
-            self._iter, self._t0 = None, None
+            self._iter, self._t0, self._last_us = None, None, None
 
     def next_request(self, epoch: int, paced: bool = True) -> CaptureRequest | None:
         """The next capture as a request (recorded sequence and trigger id), once it is due (at once
@@ -130,17 +135,19 @@ class ReplaySource:
             cap = self._next()
             if cap is None and self.loop:
                 self._iter = self.recording.captures(self.start)
-                self._t0 = None
+                self._t0, self._last_us = None, None
                 cap = self._next()
             self._pending = cap
         if cap is None:
             return None
-        now = time.monotonic()
-        if self._t0 is None:
-            self._t0 = (now, cap.info.device_time_us)
-        due = self._t0[0] + (cap.info.device_time_us - self._t0[1]) / 1e6 if self.realtime and paced else now
-        if due > now:
-            time.sleep(due - now)
+        now, t_us = time.monotonic(), cap.info.device_time_us
+        step_us = None if self._last_us is None else t_us - self._last_us
+        if self._t0 is None or step_us is None or not 0 <= step_us <= MAX_PACE_GAP_S * 1e6:
+            self._t0 = (now, t_us)
+        self._last_us = t_us
+        due = self._t0[0] + (t_us - self._t0[1]) / 1e6 if self.realtime and paced else now
+        if due > now and self._closed.wait(due - now):
+            return None
         return CaptureRequest(cap.info.sequence, cap.info.trigger_id, max(due, now), epoch)
 
     def _next(self) -> RecordedCapture | None:
@@ -185,7 +192,12 @@ class ReplaySource:
         self.sent += 1
         return ReplayedCapture(begin, planes)
 
+    def interrupt(self) -> None:
+        """End any wait for a capture's due time (the replay is closing)."""
+        self._closed.set()
+
     def close(self) -> None:
+        self.interrupt()
         self.recording.close()
 
 
@@ -201,6 +213,10 @@ class ReplayEngine(CaptureEngine):
     def start(self, mode: TriggerMode, fps: int) -> None:
         self.source.restart()
         super().start(mode, fps)
+
+    def close(self) -> None:
+        self.source.interrupt()
+        super().close()
 
     def _next_request(self) -> CaptureRequest | None:
         with self._cond:

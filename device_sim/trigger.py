@@ -67,7 +67,8 @@ class TriggerInput:
 
     Two simulator faults: ``miss_next`` — the unit misses that many coming edges (no exposure; their
     ids are appended to ``missed``); ``delay_frames`` — it latches each pulse's id but exposes on
-    a later pulse, so its frames carry the right id and the wrong instant (a head a frame behind).
+    a later pulse, so its frames carry the right id and the wrong instant (a head a frame behind);
+    ``id_offset`` — it adds this to every id it latches (a head lying about trigger ids).
     """
 
     def __init__(self, seed: int, expose: OnPulse):
@@ -75,6 +76,7 @@ class TriggerInput:
         self.latency_s = rnd.uniform(*LATENCY_RANGE_S)
         self.delay_frames = 0
         self.miss_next = 0
+        self.id_offset = 0
         self.missed: list[int] = []
         self._expose = expose
         self._noise = random.Random(seed ^ 0x7A1D)
@@ -85,6 +87,7 @@ class TriggerInput:
             self.miss_next -= 1
             self.missed.append(trigger_id)
             return
+        trigger_id += self.id_offset
         at = instant + self.latency_s + self._noise.gauss(0.0, LATENCY_JITTER_S)
         if self.delay_frames:
             self._held.append(trigger_id)

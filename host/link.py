@@ -194,6 +194,9 @@ class Link:
         except ProtocolError as exc:
             self._counters.add("undecodable")
             msg, bad = None, exc
+        if isinstance(msg, m.Nack) and packet.request_id == 0:  # the device refuses this link (SPEC §9: busy)
+            self._die(DisconnectedError(f"{self.transport.url}: the device refused this link: {msg.message}"))
+            return
         if packet.msg_type & m.REPLY_BIT:
             with self._lock:
                 pending = self._pending.get(packet.request_id)
@@ -219,8 +222,9 @@ class Link:
         with self._lock:
             waiting = list(self._pending.values())
         for p in waiting:
-            p.error = error
-            p.event.set()
+            if not p.event.is_set():  # the first error ends the link; a later one (the hang-up after a refusal) is not news
+                p.error = self.error
+                p.event.set()
 
     @property
     def alive(self) -> bool:

@@ -34,7 +34,7 @@ Outputs in OUTDIR:
 Exit status: 0 passed; 1 the camera could not be reached; 2 bad arguments or unreadable images;
 3 no solution (board never found, too few views); 4 the solution failed the gate (calibration.json
 says passed: false, the YAML files are not written and stale ones from an earlier run are removed);
-5 the write to the camera failed or read back different (the camera keeps its previous calibration);
+5 the write to the camera failed or read back different (the verdict says what the camera holds);
 6 the outputs could not be saved (in device mode after a successful write: the camera holds the new
 calibration and the factory record says so). --out and --db are checked before anything is
 captured or written; every attempt is recorded in the factory database (tools/factory/).

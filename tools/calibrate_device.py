@@ -5,8 +5,10 @@ advertises with INFO capability RAW_OUTPUT) while the operator or a fixture pres
 (against the simulator: ``--scene board`` or ``sim://?scene=board``); feed the pairs to the solver
 (tools/calib_solve.py) until it has enough distinct views; gate; on a pass,
 write the calibration to the device, read it back and compare byte for byte, and only then report
-success. On any failure nothing is written (or the device keeps its previous calibration) and the
-reason is printed. The camera's own configuration is restored afterwards.
+success. On any failure before the write nothing is written; a write that fails is followed by a
+read-back (after reconnecting, when the link dropped: an unplug after the commit ran leaves the
+new record stored), and the verdict says what the camera holds: the new calibration, its previous
+one, or that it could not be read. The camera's own configuration is restored afterwards.
 """
 from __future__ import annotations
 
@@ -34,7 +36,8 @@ def raw_pairs(cam: stereocam.Camera, count: int, timeout: float) -> Iterator[tup
 
 def calibrate_device(cam: stereocam.Camera, board, config: SolveConfig, outdir: Path, *, target: str = "user",
                      pairs: int = 200, fps: int = 10, size: tuple[int, int] | None = None, progress=None,
-                     write_outputs=None, frame_timeout: float = 60.0) -> tuple[int, CalibrationResult | None, str]:
+                     write_outputs=None, frame_timeout: float = 60.0, reconnect_timeout: float = 10.0
+                     ) -> tuple[int, CalibrationResult | None, str]:
     """Returns (exit code, result or None, one-line verdict)."""
     info = cam.info()
     if not info.capabilities & m.Capability.RAW_OUTPUT:
@@ -57,17 +60,44 @@ def calibrate_device(cam: stereocam.Camera, board, config: SolveConfig, outdir: 
     if not result.passed:
         verdict = "calibration FAILED the gate: " + "; ".join(result.failures) + "; nothing was written to the camera"
         return _finish(EXIT_GATE, result, verdict, outdir, write_outputs)
+    previous = cam.read_calibration(target)
     try:
         stored = cam.write_calibration(result.calibration, target)
     except stereocam.StereoCamError as exc:
-        result.quality = dataclasses.replace(result.quality, written=False, verified=False)
-        verdict = (f"writing the calibration failed: {exc}; calibration in force on the camera: "
-                   f"{cam.info().calibration_id:08x}")
-        return _finish(EXIT_WRITE, result, verdict, outdir, write_outputs)
+        code, verdict = _after_failed_write(cam, result, target, previous, exc, reconnect_timeout)
+        return _finish(code, result, verdict, outdir, write_outputs)
     result.quality = dataclasses.replace(result.quality, written=True, verified=True)
     verdict = (f"calibration PASSED, written to {cam.info().serial} as the {stored.source} record "
                f"(generation {stored.generation}, id {stored.calibration_id:08x}) and verified by read-back")
     return _finish(EXIT_OK, result, verdict, outdir, write_outputs)
+
+
+def _after_failed_write(cam: stereocam.Camera, result: CalibrationResult, target: str,
+                        previous: stereocam.StoredCalibration | None, exc: stereocam.StereoCamError,
+                        reconnect_timeout: float) -> tuple[int, str]:
+    """Read back what the camera holds after a write that raised ``exc`` (reconnecting first if the
+    link dropped); the exit code and the verdict that says so (``result.quality`` updated)."""
+    body = result.calibration.to_bytes()
+    result.quality = dataclasses.replace(result.quality, written=False, verified=False)
+    try:
+        if isinstance(exc, stereocam.DisconnectedError):
+            cam.reconnect(timeout=reconnect_timeout)
+        held = cam.read_calibration(target)
+        in_force = cam.info().calibration_id
+    except stereocam.StereoCamError as again:
+        return EXIT_WRITE, (f"writing the calibration failed: {exc}; the camera could not be read back after "
+                            f"it ({again}): whether it holds the new calibration or its previous one is unknown")
+    if held is not None and held.body == body:
+        result.quality = dataclasses.replace(result.quality, written=True, verified=True)
+        how = "after reconnecting, " if isinstance(exc, stereocam.DisconnectedError) else ""
+        return EXIT_OK, (f"calibration PASSED; the write reported {type(exc).__name__} ({exc}), but {how}the camera "
+                         f"holds it as the {held.source} record (generation {held.generation}, id "
+                         f"{held.calibration_id:08x}), verified by read-back")
+    if (held.body if held else None) == (previous.body if previous else None):
+        kept = "the camera keeps its previous calibration"
+    else:
+        kept = "the camera holds neither the new nor its previous calibration"
+    return EXIT_WRITE, f"writing the calibration failed: {exc}; {kept} (in force: {in_force:08x})"
 
 
 def _finish(code: int, result: CalibrationResult, verdict: str, outdir: Path, write_outputs

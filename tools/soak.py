@@ -6,10 +6,13 @@
    rate for --seconds, counting frames sent / delivered / corrupted / dropped and whether the
    device's and host's counters add up (corruption is checked against the device for sim:// URLs);
 4. hostile recordings: compression bombs and fuzzed files through export, repair, replay and
-   rematch, counting crashes, hangs, peak memory and files changed outside the output.
-Exit status 1 on any crash, hang, corrupted frame, counters that do not add up, file changed outside
-an output, peak memory over --max-memory-mib, or a delivery rate below its goal (VGA frames on a
-serial-class link: 95 % at 1 byte in 10^5 flipped, 50 % at 1 in 10^4).
+   rematch, counting crashes, hangs, peak memory and files changed outside the output;
+5. lying-head group: a CameraGroup of simulated heads, one whose trigger ids jump by 10^6..2^32
+   (soak_group.py): crashes, hangs, whether the liar is named, peak memory.
+Exit status 1 on any crash, hang, unnamed liar, corrupted frame, counters that do not add up, file
+changed outside an output, peak memory over --max-memory-mib (or the group's memory growth over its
+limit), or a delivery rate below its goal (VGA frames on a serial-class link: 95 % at 1 byte in 10^5
+flipped, 50 % at 1 in 10^4).
 """
 from __future__ import annotations
 
@@ -17,6 +20,7 @@ from stereocam.tools.exit_codes import EXIT_CODES
 
 import argparse
 
+from .soak_group import lying_head_group
 from .soak_parts import Report, fuzz_decoder, fuzz_device, stream_with_faults
 from .soak_recordings import fuzz_recordings
 
@@ -42,6 +46,7 @@ def _failed(rep: Report, flip: float | None = None) -> bool:
     return bool(rep.crashes or rep.hangs or f.get("invariant violations") or short
                 or f.get("files changed outside the output") or str(f.get("memory", "")).startswith("NOT")
                 or (isinstance(corrupted, int) and corrupted)
+                or str(f.get("liar named", "")).startswith("NO") or f.get("memory goal") == "NOT MET"
                 or str(f.get("counters add up", "yes")).startswith("NO"))
 
 
@@ -65,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--chunk", type=int, default=1024, help="FRAME_DATA bytes asked for (0: the transport's)")
     ap.add_argument("--recording-files", type=int, default=200, help="hostile recordings (3 bombs, then fuzzed)")
     ap.add_argument("--max-memory-mib", type=int, default=2048, help="peak memory the recording stage may reach")
+    ap.add_argument("--group-seconds", type=float, default=60.0, help="lying-head group stage (0: skip)")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     runs = [(None, lambda: fuzz_decoder(args.decoder_inputs, args.seed)),
@@ -74,6 +80,8 @@ def main(argv: list[str] | None = None) -> int:
              for flip in args.flip or [1e-5, 1e-4]]
     runs.append((None, lambda: _memory_goal(fuzz_recordings(args.recording_files, args.seed),
                                             args.max_memory_mib)))
+    if args.group_seconds > 0:
+        runs.append((None, lambda: lying_head_group(args.group_seconds, seed=args.seed)))
     bad = []
     for flip, run in runs:  # one at a time, each printed as it ends
         rep = run()

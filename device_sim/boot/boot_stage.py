@@ -4,7 +4,9 @@
      One that does not verify is dropped (state rewritten without it) and never runs.
   2. A trial already tried and still unconfirmed (the unit rebooted before UPDATE_CONFIRM):
      revert, i.e. drop the trial from the state, and go on with step 3.
-  3. The active slot if its image verifies, else the other slot if its image verifies.
+  3. The active slot if its image verifies, else the other slot if its image verifies. The active
+     (confirmed) image's counter is the floor: a state below it (a unit fresh from the factory) is
+     raised to it before the image runs.
   4. Neither: recovery (the boot stage's own update service, always present).
 Every state change is one atomic record write (boot_state.py), so a power cut at any step leaves
 the old or the new state, and the next boot takes one of these branches again.
@@ -61,6 +63,9 @@ class BootStage:
             except ImageError as exc:
                 trace.append(f"slot {'AB'[slot]} refused: {exc}")
                 continue
+            if slot == state.active and image.security_counter > state.counter:
+                state = self.states.write(replace(state, counter=image.security_counter))
+                trace.append(f"security floor raised to {image.security_counter}")
             trace.append(f"slot {'AB'[slot]} {image.build.version}: boot")
             return Booted(slot, BootMode.NORMAL, image, state, tuple(trace))
         trace.append("no image verifies: recovery")

@@ -8,7 +8,7 @@ import hashlib
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
-from stereocam.protocol.firmware_image import FirmwareBuild, build_image
+from stereocam.protocol.firmware_image import FirmwareBuild, build_image, parse_header
 
 from ..calibration.flash import NorFlash
 from .boot_state import BootState, BootStateStore
@@ -41,4 +41,4 @@ def provision(layout: FlashLayout, vendor_key: Ed25519PrivateKey, build: Firmwar
     for sector in range(addr, addr + len(image), flash.sector_size):
         flash.erase_sector(sector)
     flash.program_range(addr, image)
-    states.write(BootState(active=0))
+    states.write(BootState(active=0, counter=parse_header(image)[1]))  # the shipped image is the floor

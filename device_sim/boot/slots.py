@@ -32,9 +32,13 @@ class Slots:
         total = min(HEADER_LEN + size + SIGNATURE_LEN, self.layout.slot_size)
         return self.flash.read(addr, total)
 
+    def check(self, data: bytes, min_counter: int) -> FirmwareImage:
+        """``data`` parsed if it may run on this unit; ImageError if not."""
+        return verify_image(data, self.trusted, self.target, min_counter)
+
     def verify(self, slot: int, min_counter: int) -> FirmwareImage:
         """The slot's image if it may run; ImageError (MALFORMED for an empty slot) if not."""
         data = self.image_bytes(slot)
         if data is None:
             raise ImageError(ImageFault.MALFORMED, f"slot {'AB'[slot]} is empty")
-        return verify_image(data, self.trusted, self.target, min_counter)
+        return self.check(data, min_counter)

@@ -3,9 +3,10 @@ not running, verify, activate, confirm (SPEC §14.3). The session lives in RAM: 
 resume it (same size and hash) while the unit stays powered; a reboot or power cut ends it.
 
 Refusals raise ``UpdateRefused`` and leave the boot state as it was. The image header is checked
-(length, target, signing key, security counter) before a single flash byte is changed; a tampered
-payload can only show at verify, when it has been written to the slot that is not running: that
-slot then reads INVALID, and nothing in the boot state refers to it.
+(length, target, signing key, security counter) before a single flash byte is changed. The transfer
+is held in RAM and written to the slot that is not running only once it verifies (hash, signature,
+counter), so a refused image (a genuine header over garbage) leaves that slot's image, the
+fallback, as it was.
 """
 from __future__ import annotations
 
@@ -36,13 +37,12 @@ class Session:
     slot: int
     size: int
     sha256: bytes
-    received: bytearray = field(default_factory=bytearray)  # bytes not yet programmed (header, page tail)
-    written: int = 0  # bytes programmed into the slot
+    received: bytearray = field(default_factory=bytearray)  # the image so far, held until it verifies
     verified: FirmwareImage | None = None
 
     @property
     def total_received(self) -> int:
-        return self.written + len(self.received)
+        return len(self.received)
 
 
 class UpdateService:
@@ -91,9 +91,6 @@ class UpdateService:
             except ImageError as exc:
                 self.session = None
                 raise UpdateRefused(ErrorCode.IMAGE_REJECTED, str(exc)) from exc
-            self._clear_trial(s.slot)
-        if s.total_received >= HEADER_LEN:
-            self._program(s)
         return s
 
     def _check_header(self, head: bytes, size: int) -> None:
@@ -114,34 +111,38 @@ class UpdateService:
         if state.trial == slot:
             self.states.write(replace(state, trial=None, tried=False))
 
-    def _program(self, s: Session) -> None:
-        """Program whole pages (the tail of the last chunk waits for the next one, or for verify)."""
+    def _program(self, slot: int, data: bytes) -> None:
+        """Erase the slot's sectors and program ``data`` page by page."""
         page, sector = self.flash.page_size, self.flash.sector_size
-        base = self.slots.layout.slot_addr(s.slot)
-        end = s.total_received if s.total_received == s.size else s.total_received - s.total_received % page
-        while s.written < end:
-            addr = base + s.written
-            if addr % sector == 0:
-                self.flash.erase_sector(addr)
-            n = min(page - addr % page, end - s.written)
-            self.flash.program(addr, bytes(s.received[:n]))
-            del s.received[:n]
-            s.written += n
+        base = self.slots.layout.slot_addr(slot)
+        for off in range(0, len(data), page):
+            if (base + off) % sector == 0:
+                self.flash.erase_sector(base + off)
+            self.flash.program(base + off, data[off:off + page])
 
     def verify(self) -> tuple[int, FirmwareImage]:
+        """Verify the received image, then (only then) write it to the slot and read it back."""
         s = self._need_session()
         if s.total_received != s.size:
             raise UpdateRefused(ErrorCode.BAD_STATE, f"{s.total_received} of {s.size} bytes received")
-        data = self.slots.image_bytes(s.slot) or b""
+        data = bytes(s.received)
         if hashlib.sha256(data).digest() != s.sha256:
             self.session = None
-            raise UpdateRefused(ErrorCode.IMAGE_REJECTED, "hash_mismatch: the slot does not hold the announced image; "
-                                                          "begin again")
+            raise UpdateRefused(ErrorCode.IMAGE_REJECTED, "hash_mismatch: the unit did not receive the announced "
+                                                          "image; begin again")
         try:
+            self.slots.check(data, self._state().counter)
+            self._clear_trial(s.slot)
+            self._program(s.slot, data)
+            if hashlib.sha256(self.slots.image_bytes(s.slot) or b"").digest() != s.sha256:
+                raise UpdateRefused(ErrorCode.STORAGE, "the slot does not read back as the image written; begin again")
             s.verified = self.slots.verify(s.slot, self._state().counter)
         except ImageError as exc:
             self.session = None
             raise UpdateRefused(ErrorCode.IMAGE_REJECTED, str(exc)) from exc
+        except UpdateRefused:
+            self.session = None
+            raise
         return s.slot, s.verified
 
     def activate(self) -> int:

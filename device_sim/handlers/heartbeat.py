@@ -52,3 +52,11 @@ class HeartbeatHandlers:
             self._engine.stop()
         if self._link.drop_if_silent(timeout_ms):
             self._counters["links_dropped"] += 1
+
+    def yield_link(self) -> bool:
+        """Another host wants the unit (a TCP client knocking): drop the link if it is silent past
+        its link timeout, the default one when the watchdog is off (SPEC §9). True if dropped."""
+        dropped = self._link.drop_if_silent(self._store.snapshot()["heartbeat_timeout_ms"], contested=True)
+        if dropped:
+            self._counters["links_dropped"] += 1
+        return dropped

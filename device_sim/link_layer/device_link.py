@@ -22,11 +22,19 @@ LINK_TIMEOUT_FACTOR = 2
 watchdog stops the stream at one, so a host whose traffic comes back in time can restart it."""
 
 
-def link_timeout(spoken: bool, heartbeat_timeout_ms: int) -> float | None:
-    """Seconds of silence after which a link is dropped; None: never (heartbeat_timeout_ms = 0)."""
+CONTESTED_LINK_TIMEOUT_S = LINK_TIMEOUT_FACTOR * FIRST_MESSAGE_TIMEOUT_S
+"""With the watchdog off (heartbeat_timeout_ms = 0) a link silent this long (the default link
+timeout) yields to another host that wants the unit (SPEC §9)."""
+
+
+def link_timeout(spoken: bool, heartbeat_timeout_ms: int, contested: bool = False) -> float | None:
+    """Seconds of silence after which a link is dropped; None: never (heartbeat_timeout_ms = 0 and
+    no other host waiting: ``contested``)."""
     if not spoken:
         return FIRST_MESSAGE_TIMEOUT_S
-    return LINK_TIMEOUT_FACTOR * heartbeat_timeout_ms / 1000 if heartbeat_timeout_ms else None
+    if heartbeat_timeout_ms:
+        return LINK_TIMEOUT_FACTOR * heartbeat_timeout_ms / 1000
+    return CONTESTED_LINK_TIMEOUT_S if contested else None
 
 
 class DeviceLink:
@@ -76,10 +84,11 @@ class DeviceLink:
             self._sink = None
         self._on_lost()
 
-    def drop_if_silent(self, heartbeat_timeout_ms: int) -> bool:
+    def drop_if_silent(self, heartbeat_timeout_ms: int, contested: bool = False) -> bool:
         """SPEC §9: end a link silent for longer than its link timeout (from the watchdog thread,
-        never blocked by a sender stuck in the sink). True if it was dropped."""
-        limit = link_timeout(self.spoken, heartbeat_timeout_ms)
+        never blocked by a sender stuck in the sink; ``contested``: another host is waiting for the
+        unit). True if it was dropped."""
+        limit = link_timeout(self.spoken, heartbeat_timeout_ms, contested)
         if self._sink is None or limit is None or time.monotonic() - self.last_rx <= limit:
             return False
         hang_up = self._hang_up

@@ -22,6 +22,7 @@ from ..firmware import SimulatedCamera
 READ_CHUNK = 65536
 SEND_TIMEOUT_S = 5.0
 REFUSE_LINGER_S = 0.5  # a refused client's bytes are read and discarded this long, so the NACK is not reset away
+WAIT_FOR_SLOT_S = 2.0  # a second TCP client waits this long for the host to leave before it is refused
 
 
 class PtyServer:
@@ -29,14 +30,18 @@ class PtyServer:
 
     A pty has no connections: after the device dropped a host (silence or a send timeout) the next
     bytes that arrive start a new link, and the output still queued for the old host is discarded.
+    The server does not hold the slave open itself, so a host that closes it (or dies) shows at
+    once (the master reads EIO while nobody holds the slave): the device detaches, which stops the
+    stream, and what the pty still holds is discarded.
     """
 
     def __init__(self, sim: SimulatedCamera, send_timeout: float = SEND_TIMEOUT_S):
         self.sim = sim
         self.send_timeout = send_timeout
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)  # no echo, no line discipline: an 8-bit clean wire
-        self.path = os.ttyname(self._slave)
+        self._master, slave = os.openpty()
+        tty.setraw(slave)  # no echo, no line discipline: an 8-bit clean wire (kept while the master is open)
+        self.path = os.ttyname(slave)
+        os.close(slave)
         self._stop = threading.Event()
         self._wlock = threading.Lock()
         self._session = 0  # bumped by every hang-up: a write of an older session gives up
@@ -68,15 +73,25 @@ class PtyServer:
     def _hang_up(self) -> None:
         self._session += 1
 
+    def _flush(self) -> None:
+        """Discard what the pty holds in both directions."""
+        try:
+            termios.tcflush(self._master, termios.TCIOFLUSH)
+        except termios.error:
+            pass
+
     def _attach(self) -> None:
         """A new host: discard what the pty still holds for the last one, then link up."""
         self._session += 1
-        for fd, queue in ((self._master, termios.TCOFLUSH), (self._slave, termios.TCIFLUSH)):
-            try:
-                termios.tcflush(fd, queue)
-            except termios.error:
-                pass
+        self._flush()
         self.sim.attach(self._write, self._hang_up)
+
+    def _host_left(self) -> None:
+        """Nobody holds the slave open: the host closed it or died; end its link at once."""
+        if self.sim.attached:
+            self._session += 1
+            self.sim.detach()
+            self._flush()
 
     def serve_forever(self) -> None:
         os.set_blocking(self._master, False)
@@ -89,7 +104,8 @@ class PtyServer:
                 data = os.read(self._master, READ_CHUNK)
             except (BlockingIOError, InterruptedError):
                 continue
-            except OSError:  # EIO while no host holds the slave open: wait for the next one
+            except OSError:  # EIO while no host holds the slave open: the host left; wait for the next
+                self._host_left()
                 self._stop.wait(0.05)
                 continue
             if data:
@@ -103,11 +119,22 @@ class PtyServer:
     def close(self) -> None:
         self.shutdown()
         self.sim.detach()
-        for fd in (self._master, self._slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        try:
+            os.close(self._master)
+        except OSError:
+            pass
+
+
+TCP_CLOSE_WAIT = 8  # Linux tcp_info.tcpi_state: the peer has closed its side
+
+
+def peer_closed(conn: socket.socket) -> bool:
+    """Whether the peer of ``conn`` has closed its side (FIN received), even with its bytes still
+    unread (Linux TCP_INFO; False where the platform cannot tell)."""
+    try:
+        return conn.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 1)[0] == TCP_CLOSE_WAIT
+    except (AttributeError, OSError):
+        return False
 
 
 def busy_nack(holder: str) -> bytes:
@@ -119,8 +146,11 @@ def busy_nack(holder: str) -> bytes:
 class TcpServer:
     """The firmware behind a listening TCP socket, one host connection at a time.
 
-    A second client is accepted, told why with a NACK, and closed at once: nothing it sent is ever
-    executed, and nothing waits in the listen queue for the first host to leave. A host that stops
+    A second client is accepted and waits up to ``WAIT_FOR_SLOT_S`` for the host to leave (then it
+    is served: a host that just closed may still have bytes the device works through); if the host
+    stays, the client is told why with a NACK and closed, nothing it sent executed. A third client
+    meanwhile is refused at once. A host that has closed its side or is silent past its link
+    timeout (the default one when it turned the watchdog off) yields to the waiting client. A host that stops
     reading for ``send_timeout`` seconds is dropped (the send fails, the device detaches and stops
     streaming); one silent for the link timeout is dropped by the device's watchdog (SPEC §9).
     """
@@ -133,6 +163,7 @@ class TcpServer:
         self._sock.settimeout(0.1)
         self.address = self._sock.getsockname()[:2]
         self._stop = threading.Event()
+        self._waiting: tuple[socket.socket, str, float] | None = None  # a client waiting for the slot, its deadline
 
     @property
     def url(self) -> str:
@@ -140,12 +171,36 @@ class TcpServer:
 
     def serve_forever(self) -> None:
         while not self._stop.is_set():
-            try:
-                conn, peer = self._sock.accept()
-            except (socket.timeout, OSError):
-                continue
+            if self._waiting is not None:  # the host left while a client waited: it is next
+                conn, peer, _ = self._waiting
+                self._waiting = None
+            else:
+                try:
+                    conn, addr = self._sock.accept()
+                except (socket.timeout, OSError):
+                    continue
+                peer = f"{addr[0]}:{addr[1]}"
             with conn:
-                self._serve(conn, f"{peer[0]}:{peer[1]}")
+                self._serve(conn, peer)
+
+    def _knock(self, holder: str) -> None:
+        """A client connects while ``holder`` has the device: it waits for the slot (one at a time)."""
+        if self._waiting is not None:
+            self._refuse(holder)
+            return
+        try:
+            conn, addr = self._sock.accept()
+        except OSError:
+            return
+        self._waiting = (conn, f"{addr[0]}:{addr[1]}", time.monotonic() + WAIT_FOR_SLOT_S)
+
+    def _refuse_waiting(self, holder: str) -> None:
+        """The waiting client's time is up: tell it why and hang up (in its own thread)."""
+        if self._waiting is not None and time.monotonic() > self._waiting[2]:
+            conn = self._waiting[0]
+            self._waiting = None
+            self.sim.counters["hosts_refused"] += 1
+            threading.Thread(target=self._tell_busy, args=(conn, holder), name="tcp-refuse", daemon=True).start()
 
     def _refuse(self, holder: str) -> None:
         """Accept the waiting client and hang up on it (in its own thread: the host is not kept waiting)."""
@@ -186,7 +241,12 @@ class TcpServer:
                 if not self.sim.attached:  # dropped meanwhile: the waiting client is the next host
                     break
                 if self._sock in ready:
-                    self._refuse(peer)
+                    self._knock(peer)
+                # a host that has closed its side (its unread bytes answer no one), or one silent
+                # with the watchdog off, yields: the waiting client is next
+                if self._waiting is not None and (peer_closed(conn) or self.sim.heartbeat.yield_link()):
+                    break
+                self._refuse_waiting(peer)
                 if conn not in ready:
                     continue
                 data = conn.recv(READ_CHUNK)
@@ -205,3 +265,5 @@ class TcpServer:
         self.shutdown()
         self.sim.detach()
         self._sock.close()
+        if self._waiting is not None:
+            self._waiting[0].close()

@@ -19,9 +19,9 @@ import logging
 import threading
 from types import ModuleType
 from typing import TYPE_CHECKING
-from urllib.parse import urlsplit
+from urllib.parse import SplitResult, urlsplit
 
-from ..protocol.errors import TransportError
+from ..protocol.errors import ConfigError, StereoCamError, TransportError
 from . import plugins
 from .base import Transport
 
@@ -42,8 +42,17 @@ def register_scheme(scheme: str, module: str) -> None:
         SCHEMES[scheme.lower()] = module
 
 
+def split_url(url: str) -> SplitResult:
+    """``url``'s parts; ConfigError naming it if it does not parse (an unclosed IPv6 bracket, a
+    bracketed host that is no address, characters the parser refuses)."""
+    try:
+        return urlsplit(url)
+    except ValueError as exc:
+        raise ConfigError(f"{url!r} is not a valid camera URL: {exc}") from exc
+
+
 def scheme_of(url: str) -> str:
-    return urlsplit(url).scheme.lower() if "://" in url else ""
+    return split_url(url).scheme.lower() if "://" in url else ""
 
 
 def scheme_module(url: str) -> ModuleType:
@@ -60,7 +69,14 @@ def open_transport(url: str, timeout: float = 1.0) -> Transport:
     """Open the transport that ``url`` names."""
     if not isinstance(url, str) or not url:
         raise TransportError(f"a camera URL must be a non-empty string, got {url!r}")
-    return scheme_module(url).open_transport(url, timeout)
+    split_url(url)
+    module = scheme_module(url)
+    try:
+        return module.open_transport(url, timeout)
+    except StereoCamError:
+        raise
+    except ValueError as exc:  # a scheme module's parsing (UnicodeError included): typed, naming the URL
+        raise ConfigError(f"{url!r} is not a valid camera URL: {type(exc).__name__}: {exc}") from exc
 
 
 def reopen_url(url: str, serial: str) -> str:

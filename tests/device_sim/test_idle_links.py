@@ -16,7 +16,7 @@ import serial
 import stereocam.device_sim.usb as simusb
 from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.links.inprocess import InProcessTransport
-from stereocam.device_sim.links.servers import PtyServer, TcpServer
+from stereocam.device_sim.links.servers import WAIT_FOR_SLOT_S, PtyServer, TcpServer
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import DisconnectedError, ErrorCode
 from stereocam.protocol.framing import Decoder
@@ -114,8 +114,8 @@ def test_a_second_client_is_refused_and_nothing_it_sent_runs(tcp) -> None:
     assert isinstance(first.messages(0.5)[0], m.ConfigApplied)
     second = RawTcp(server.url)
     second.send(set_config(7, heartbeat_timeout_ms=0) + m.encode(m.Start(), 8))
-    told = second.messages(2.0)
-    assert told is not None and told[-1] is None, "refused: the device hangs up at once"
+    told = second.messages(5.0)
+    assert told is not None and told[-1] is None, "refused: the device hangs up once the wait for the slot is over"
     nack = told[0]
     assert isinstance(nack, m.Nack) and nack.code == ErrorCode.BAD_STATE and "another host" in nack.message
     second.close()
@@ -204,3 +204,108 @@ def test_a_usb_host_that_went_silent_is_dropped_and_the_next_one_served() -> Non
     finally:
         device.unplug()
         sim.close()
+
+
+def test_a_silent_host_with_the_watchdog_off_yields_the_tcp_slot_to_the_next_host(tcp) -> None:
+    """Issue 22.6: a client that sets heartbeat_timeout_ms=0 and goes silent keeps no one out for
+    long: once it has been silent for the default link timeout, the next host that connects gets
+    the device (it used to be refused forever)."""
+    server, sim = tcp
+    squatter = RawTcp(server.url)
+    squatter.send(set_config(1, heartbeat_timeout_ms=0))
+    assert isinstance(squatter.messages(0.3)[0], m.ConfigApplied)
+    silent_since = time.monotonic()
+    deadline = silent_since + 15
+    while True:
+        assert time.monotonic() < deadline, "the silent host still holds the device after 15 s"
+        host = RawTcp(server.url)
+        host.send(m.encode(m.GetInfo(), 2))
+        got = host.messages(3.0) or []
+        if any(isinstance(x, m.Info) for x in got):
+            break
+        assert isinstance(got[0], m.Nack) and "busy" in got[0].message
+        host.close()
+    assert time.monotonic() - silent_since > 5.5  # not before the default link timeout (2 × 3 s)
+    assert squatter.messages(0.5) is None  # the silent host was hung up on
+    host.close()
+
+
+@pytest.fixture
+def default_pty():
+    sim = SimulatedCamera(seed=94)
+    server = PtyServer(sim)  # the default send timeout (5 s): longer than the watchdog's
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield server, sim
+    server.close()
+    thread.join(5)
+    sim.close()
+
+
+def test_the_next_pty_host_after_one_killed_mid_stream_gets_no_stale_output_and_a_prompt_answer(default_pty) -> None:
+    """Issue 22.17: a streaming pty host dies (its port closed, no STOP, the watchdog at its default
+    3 s); the next host, opening at once, is answered within a second and reads nothing of the old
+    stream."""
+    server, sim = default_pty
+    dead = serial.Serial(server.url, timeout=0.5)
+    dead.write(set_config(1, **SMALL, outputs=7) + m.encode(m.Start(), 2))
+    decoder, ends = Decoder(), 0
+    deadline = time.monotonic() + 10
+    while ends < 2 and time.monotonic() < deadline:  # a host reading its stream
+        ends += sum(p.msg_type == m.MsgType.FRAME_END for p in decoder.feed(dead.read(65536)))
+    assert ends >= 2 and sim.engine.streaming
+    dead.close()  # killed: the port closes with the stream running
+    deadline = time.monotonic() + 2
+    while sim.engine.streaming and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert not sim.engine.streaming, "the device must notice that no host holds the pty"
+    with serial.Serial(server.url, timeout=0.2) as host:
+        sent = time.monotonic()
+        host.write(m.encode(m.GetInfo(), 9))
+        decoder, got = Decoder(), []
+        while not any(isinstance(x, m.Info) for x in got) and time.monotonic() - sent < 5:
+            got += [m.decode_packet(p) for p in decoder.feed(host.read(65536))]
+        answered = time.monotonic() - sent
+    assert [type(x).__name__ for x in got] == ["Info"] and answered < 1.0, (answered, len(got))
+
+
+def test_a_host_that_sent_a_lot_and_closed_does_not_keep_the_next_one_out(tcp) -> None:
+    """Issue 22.17: a client writes 1.4 MB and closes; a host connecting right after is served as
+    soon as the device has worked through those bytes, not refused 'busy' meanwhile."""
+    import random
+
+    server, sim = tcp
+    noise = random.Random(17).randbytes(1_400_000)
+    for attempt in range(3):
+        gone = RawTcp(server.url)
+        gone.send(noise)
+        gone.close()
+        host = RawTcp(server.url)
+        sent = time.monotonic()
+        host.send(m.encode(m.GetInfo(), 1))
+        host.sock.settimeout(3.0)
+        got: list[m.Message] = []
+        while not got:  # the first answer, timed (a socket timeout here fails the test)
+            data = host.sock.recv(65536)
+            assert data, f"attempt {attempt}: the device hung up on the next host"
+            got += [m.decode_packet(p) for p in host.decoder.feed(data)]
+        assert isinstance(got[0], m.Info), (attempt, got[:1])
+        assert time.monotonic() - sent < WAIT_FOR_SLOT_S
+        host.close()
+        deadline = time.monotonic() + 5
+        while sim.attached and time.monotonic() < deadline:
+            time.sleep(0.02)
+
+
+def test_the_sdk_says_the_device_is_busy_when_another_host_holds_it(tcp) -> None:
+    """Issue 22.17: refused because another host holds the device, the SDK's error carries the
+    device's reason ('busy: another host ...'), not a bare 'socket disconnected'."""
+    import stereocam
+
+    server, _ = tcp
+    holder = RawTcp(server.url)
+    holder.send(m.encode(m.Heartbeat(), 1))
+    assert isinstance(holder.messages(0.3)[0], m.Status)
+    with pytest.raises(stereocam.TransportError, match="busy: another host"):
+        stereocam.open(server.url, timeout=1.0)
+    holder.close()

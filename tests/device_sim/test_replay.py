@@ -167,3 +167,37 @@ def test_seek_reads_only_the_index_and_one_chunk(tmp_path):
             cap = rec.capture(i)
             assert cap.info.sequence == i + 1 and cap.info.device_time_us == 1_000_000 + i * 33_333
             assert _bytes_read() - before < 2 * biggest
+
+
+@pytest.mark.parametrize("jump_us", [10**11, 2**63])
+def test_hostile_device_times_neither_kill_nor_stall_the_replay(tmp_path, jump_us):
+    """Issue 22.8: recorded device times that jump by 10^11 µs (28 h) or 2^63 µs: every frame still
+    plays (a jump past the pacing limit restarts the pacing) and close() ends the capture thread."""
+    import threading
+
+    from stereocam.recording import Recorder, UnitDescription
+
+    path = tmp_path / "hostile.mcap"
+    times = [1_000_000, 1_033_333, 1_033_333 + jump_us, 1_066_666 + jump_us, 1_100_000 + jump_us]
+    plane = np.zeros((48, 64), np.uint8)
+    unit = UnitDescription({"model": "STOC-SYNTH", "serial": "SYNTH0002", "firmware_version": "0",
+                            "protocol_version": "1.1"}, {"width": 64, "height": 48, "fps": 30}, None)
+    with Recorder(path, unit) as rec:
+        for i, t in enumerate(times):
+            rec.put_wait(stereocam.Frame(i + 1, 0, min(t, 2**64 - 1), 100.0 + i / 30, plane, plane,
+                                         np.zeros((48, 64), np.int16), 4000, 0, 64, 48, True,
+                                         stereocam.DisparityFormat(16, 0, 64, -16),
+                                         stereocam.StereoGeometry(60.0, 32.0, 24.0, 0.1)))
+    before = set(threading.enumerate())
+    cam = stereocam.open(f"replay://{path}", timeout=3.0)
+    try:
+        cam.start()
+        frames = [cam.get_frame(timeout=5.0) for _ in times]
+        assert [f.device_time_us for f in frames] == times
+    finally:
+        t0 = time.monotonic()
+        cam.close()
+    left = [t for t in set(threading.enumerate()) - before if t.name == "capture"]
+    for t in left:
+        t.join(timeout=max(0.0, 5.0 - (time.monotonic() - t0)))
+    assert not any(t.is_alive() for t in left)

@@ -149,3 +149,36 @@ def test_without_repair_the_same_line_delivers_almost_nothing():
     """The break as issue 9 found it: a 1.1 device (128 KiB chunks, no resend) on that line."""
     sent, ok, bad = stream_through_noise(1e-4, frames=6, v1_1=True)
     assert bad == 0 and ok <= 1, (ok, sent)
+
+
+def test_a_socket_url_asks_for_repair_chunks_when_it_says_so():
+    """Issue 22.18: ``socket://`` may be a serial line behind a network bridge (ser2net) whose line
+    errors arrive inside TCP; ``?frame_chunk=N`` asks for N-byte repair chunks on any pyserial URL
+    (stripped before pyserial sees the URL); a bad value is a ConfigError naming the option."""
+    import threading
+
+    import stereocam
+    from stereocam.device_sim.links.servers import TcpServer
+
+    sim = SimulatedCamera(seed=53)
+    server = TcpServer(sim)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        with stereocam.open(server.url, timeout=2.0) as cam:
+            assert cam.link.transport.frame_chunk is None and sim.repair.chunk == m.MAX_FRAME_CHUNK  # TCP's default
+        deadline = time.monotonic() + 5
+        while sim.attached and time.monotonic() < deadline:
+            time.sleep(0.02)
+        with stereocam.open(f"{server.url}?frame_chunk=1024", timeout=2.0) as cam:
+            assert sim.repair.chunk == 1024
+            cam.configure(width=160, height=120, num_disparities=16, block_size=9, fps=10)
+            cam.start()
+            assert cam.get_frame(timeout=10).left is not None
+        for bad in ("0", "100", "x", "1024&frame_chunk=2048"):
+            with pytest.raises(stereocam.ConfigError, match="frame_chunk"):
+                stereocam.open(f"{server.url}?frame_chunk={bad}", timeout=1.0)
+    finally:
+        server.close()
+        thread.join(5)
+        sim.close()

@@ -61,3 +61,49 @@ def test_sets_begin_when_every_camera_streams():
     m.add("C", frame(2), 0.03)
     assert [(s.trigger_id, s.complete) for s in m.pop_ready(0.03)] == [(2, True)]
     assert m.stats.before_start == 1
+
+
+def _bounded_run(m: SetMatcher, liar: str, jump: int) -> tuple[list, float]:
+    """Ten honest pulses, the liar's frame for pulse 5 claiming ``5 + jump``."""
+    import time
+    out, t0 = [], time.perf_counter()
+    for tid in range(1, 11):
+        for n in NAMES:
+            m.add(n, frame(tid + jump if (n == liar and tid == 5) else tid), tid * 0.01)
+        out += m.pop_ready(tid * 0.01)
+    out += m.pop_ready(10.0)
+    return out, time.perf_counter() - t0
+
+
+def test_a_head_lying_about_trigger_ids_costs_bounded_work_and_is_named():
+    for jump in (10**6, 10**7, 2**32, 2**63):
+        m = SetMatcher(NAMES, deadline=0.5)
+        sets, took = _bounded_run(m, "B", jump)
+        assert took < 0.5 and len(sets) <= 10, (jump, took, len(sets))
+        assert [s.trigger_id for s in sets] == list(range(1, 11))
+        assert [s.trigger_id for s in sets if not s.complete] == [5] and sets[4].missing == ("B",)
+        assert m.stats.implausible == {"B": 1}
+
+
+def test_a_jump_every_camera_makes_is_followed_and_the_gap_counted_not_filled():
+    m = SetMatcher(("A", "B"), deadline=0.5)
+    for tid in (1, 2, 10**7, 10**7 + 1):
+        for n in ("A", "B"):
+            m.add(n, frame(tid), 0.0)
+    sets = m.pop_ready(0.0)
+    assert [(s.trigger_id, s.missing) for s in sets] == [(1, ()), (2, ()), (10**7, ("A",)), (10**7 + 1, ())]
+    assert m.stats.implausible == {"A": 1} and m.stats.skipped == 10**7 - 3
+
+
+def test_a_liar_whose_frame_comes_first_does_not_set_the_start():
+    """A lying head's frame is the very first one the matcher sees: nothing could refuse it then, so
+    the start (the first trigger every camera streamed for) ignores it and the sets come from the
+    honest heads' ids, the liar missing and named."""
+    m = SetMatcher(NAMES, deadline=0.5)
+    m.add("B", frame(1 + 10**7), 0.0)
+    for tid in range(1, 6):
+        for n in NAMES:
+            m.add(n, frame(tid + 10**7 if n == "B" else tid), tid * 0.01)
+    sets = m.pop_ready(1.0)
+    assert [(s.trigger_id, s.missing) for s in sets] == [(t, ("B",)) for t in range(1, 6)]
+    assert m.stats.implausible == {"B": 6}

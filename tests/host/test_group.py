@@ -178,3 +178,22 @@ def test_three_heads_served_over_tcp_on_a_shared_line(tmp_path: Path):
     assert all(s.missing and set(s.missing) | set(s.frames) == set(logs) for s in sets if not s.complete)
     assert [s.trigger_id for s in sets] == list(range(sets[0].trigger_id, sets[0].trigger_id + 30))
     check_against_truth(complete, lambda name, seq: truth[name][seq])
+
+
+def test_a_head_lying_about_trigger_ids_is_named_and_costs_the_group_bounded_work(heads):
+    """Issue 22.1: one head's ids jump by 10^7 (then keep lying); get_set stays prompt, the other
+    heads' sets keep coming, the liar is missing from them and named."""
+    line, sims = heads
+    with stereocam.CameraGroup(group_urls(sims), config=SMALL, master=None, settle=0.2, deadline=0.3) as group:
+        pulse(line, 2)
+        sims[1].trigger_input.id_offset = 10**7
+        pulse(line, 4)
+        took, sets = [], []
+        for _ in range(6):
+            t0 = time.monotonic()
+            sets.append(group.get_set(timeout=20))
+            took.append(time.monotonic() - t0)
+        stats = group.stats
+    assert max(took) < 5 and [s.trigger_id for s in sets] == list(range(sets[0].trigger_id, sets[0].trigger_id + 6))
+    assert [s.missing for s in sets[2:]] == [(sims[1].serial,)] * 4
+    assert stats.implausible == {sims[1].serial: 4} and stats.incomplete == 4

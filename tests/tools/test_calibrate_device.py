@@ -143,3 +143,50 @@ def test_an_out_folder_that_cannot_be_written_stops_before_the_camera(tmp_path):
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "cannot write into directory" in r.stderr and "nothing was done" in r.stderr
     assert not (tmp_path / "f.sqlite").exists()  # not even the factory record was opened
+
+
+@pytest.mark.parametrize("replug", [True, False])
+def test_an_unplug_during_the_write_is_followed_by_a_read_back_that_says_what_the_unit_holds(tmp_path, replug):
+    """Issue 22.15: the USB plug is pulled just after CALIB_COMMIT ran on the unit (the new record is
+    stored, the host sees DisconnectedError). The tool reconnects, reads back and reports what the
+    unit holds: the new calibration (exit 0, verified); or, when the unit does not come back, exit 5
+    saying that what it holds is unknown, never that it keeps its previous calibration."""
+    import threading
+    import time
+
+    import stereocam
+    import stereocam.device_sim.usb as simusb
+
+    sim = SimulatedCamera(serial="UNPLUG-15", seed=75, flash_path=tmp_path / "p.flash", scene="board")
+    handles = [simusb.plug(sim)]
+    real = sim.dispatcher.handlers[m.MsgType.CALIB_COMMIT]
+
+    def commit_then_unplug(msg):
+        reply = real(msg)
+
+        def pull():
+            handles[-1].unplug()
+            if replug:
+                time.sleep(0.3)
+                handles.append(simusb.plug(sim))
+        threading.Thread(target=pull, daemon=True).start()
+        return reply
+
+    sim.dispatcher.handlers[m.MsgType.CALIB_COMMIT] = commit_then_unplug
+    cam = stereocam.open("usb://?serial=UNPLUG-15", timeout=1.0)
+    try:
+        before = cam.read_calibration()
+        code, result, verdict = run(cam, tmp_path, SolveConfig(max_views=12), reconnect_timeout=3.0)
+        stored = sim.calibration.store.read()
+        assert stored.body == result.calibration.to_bytes() != before.body  # the unit did store it
+        doc = json.loads((tmp_path / "calibration.json").read_text())
+        if replug:
+            assert code == EXIT_OK and "reconnect" in verdict and f"{m.calib_id(stored.body):08x}" in verdict, verdict
+            assert doc["written"] and doc["verified"]
+        else:
+            assert code == EXIT_WRITE and "unknown" in verdict and "keeps its previous" not in verdict, verdict
+            assert doc["verified"] is False
+    finally:
+        cam.close()
+        for h in handles:
+            h.unplug()

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from stereocam.tools import soak
+from stereocam.tools.soak_group import lying_head_group
 from stereocam.tools.soak_parts import fuzz_decoder, fuzz_device
 
 
@@ -17,7 +18,7 @@ def test_device_fuzz_short():
 
 def test_soak_command_short(capsys):
     rc = soak.main(["sim://?seed=7", "--decoder-inputs", "500", "--device-inputs", "30", "--seconds", "4",
-                    "--flip", "1e-4", "--recording-files", "5"])
+                    "--flip", "1e-4", "--recording-files", "5", "--group-seconds", "2"])
     out = capsys.readouterr().out
     assert rc == 0, out
     assert "soak: clean" in out and "corrupted: 0" in out and "counters add up: yes" in out
@@ -51,3 +52,10 @@ def test_the_soak_fails_a_file_changed_outside_the_output():
     assert soak._failed(rep)
     rep.figures["files changed outside the output"] = 0
     assert not soak._failed(soak._memory_goal(rep, 2048)) and soak._failed(soak._memory_goal(rep, 50))
+def test_lying_head_group_stage_short():
+    """Issue 22: one head's trigger ids jump by 10^6..2^32; the group neither crashes nor hangs, names
+    the liar, and its memory stays bounded."""
+    rep = lying_head_group(3.0, seed=3)
+    f = rep.figures
+    assert rep.crashes == rep.hangs == 0 and f["sets"] > 10 and f["liar named"].startswith("LIAR3-1 ")
+    assert "memory goal" not in f and not soak._failed(rep)

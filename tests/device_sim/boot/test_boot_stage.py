@@ -93,7 +93,7 @@ def test_a_tampered_payload_is_refused_at_verify_and_the_boot_state_is_untouched
     state = unit.states.read()
     with pytest.raises(UpdateRefused, match="^tampered"):
         unit.transfer(bytes(bad))
-    assert unit.states.read() == state and unit.service.slot_info(1).state == SlotState.INVALID
+    assert unit.states.read() == state and unit.service.slot_info(1).state == SlotState.EMPTY  # never written
     with pytest.raises(UpdateRefused, match="no update in progress"):
         unit.service.activate()
     assert unit.boot().slot == 0
@@ -111,3 +111,29 @@ def test_one_transfer_at_a_time_and_resume(unit: Unit) -> None:
     with pytest.raises(UpdateRefused, match="continue there"):
         unit.service.data(0, NEW[:1000])
     assert unit.service.begin(len(other), hashlib.sha256(other).digest(), True).total_received == 0
+
+
+def test_a_fresh_unit_refuses_an_image_older_than_the_one_it_runs(tmp_path: Path) -> None:
+    """Issue 22.2: fresh from the factory (1.1.0 confirmed), the floor is already 1.1.0's counter, so a
+    vendor-signed 0.9.0 is refused before a byte of the other slot changes."""
+    u = Unit.factory(tmp_path / "fresh.flash")
+    b = u.boot()
+    assert (b.slot, b.mode, b.image.build.version) == (0, BootMode.NORMAL, "1.1.0")
+    assert u.states.read().counter == auto_security_counter("1.1.0") == b.image.security_counter
+    with pytest.raises(UpdateRefused, match="rollback"):
+        u.transfer(image("0.9.0"))
+    assert u.service.slot_info(1).state == SlotState.EMPTY
+
+
+def test_a_genuine_header_over_garbage_leaves_the_fallback_image_in_place(unit: Unit) -> None:
+    """Issue 22.11: after a confirmed update slot A holds the previous image (the fallback); a genuine
+    header followed by garbage is refused at verify and slot A still holds, and boots, that image."""
+    _install(unit, NEW)
+    unit.boot()
+    unit.service.confirm()
+    fallback = unit.slots.image_bytes(0)
+    newer = image("1.3.0", code_size=5000)
+    garbage = newer[:200] + bytes(len(newer) - 200)
+    with pytest.raises(UpdateRefused, match="^tampered"):
+        unit.transfer(garbage)
+    assert unit.slots.image_bytes(0) == fallback and unit.service.slot_info(0).state == SlotState.STANDBY

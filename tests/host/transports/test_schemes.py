@@ -81,3 +81,21 @@ def test_a_plugin_joins_discovery_only_once_its_package_is_imported():
                "import stereocam.device_sim\n"
                "print(sorted(p.in_use(p.URL_SCHEMES)), sorted(p.in_use(p.USB_BACKENDS)))")
     assert out.splitlines() == ["['replay', 'sim'] []", "['replay', 'sim'] ['sim']"]
+HOSTILE_URLS = ["spy://17.0.0.1:1[", "socket://[::1", "spy://17.]0.0.1:1", "spy://17.[0].0.1:1",
+                "rfc2217://12@[7.0.0].1:1", "rfc2217://[zz]:1", "usb://[", "sim://[?serial=x", "replay://[",
+                "loop://[", "replay:///no\x00where.mcap", "socket://\udcff:1", "usb://\udcff", "\udcff://x"]
+
+
+@pytest.mark.parametrize("url", HOSTILE_URLS)
+def test_a_malformed_url_raises_a_typed_error_naming_it(url):
+    """Issue 22.9: whatever the URL, opening it raises a StereoCamError (never a bare ValueError or
+    UnicodeError from the URL parser)."""
+    with pytest.raises(stereocam.StereoCamError) as err:
+        stereocam.open(url, timeout=0.2).close()
+    assert err.value.__class__.__module__.startswith("stereocam")
+
+
+def test_the_info_tool_says_what_is_wrong_with_a_malformed_url_without_a_traceback():
+    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "info", "socket://[::1"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode != 0 and "Traceback" not in r.stderr and "socket://[::1" in r.stderr
