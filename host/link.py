@@ -222,7 +222,7 @@ class Link:
         with self._lock:
             waiting = list(self._pending.values())
         for p in waiting:
-            if not p.event.is_set():  # the first error ends the link; a later one (the hang-up after a refusal) is not news
+            if not p.event.is_set():  # the first error ends the link; a later one (a hang-up) is not news
                 p.error = self.error
                 p.event.set()
 
