@@ -334,7 +334,7 @@ class Camera:
         """Frames whose carried geometry disagreed with the one derived from the stored calibration."""
         return self._geometry.mismatches
 
-    def record(self, path: str, *, frames: int | None = None, seconds: float | None = None, **options):
+    def record(self, path: str | os.PathLike[str], *, frames: int | None = None, seconds: float | None = None, **options):
         """Record to an MCAP file (ROS 2 profile) until ``frames`` or ``seconds``; see stereocam.recording."""
         from .recording import record
 

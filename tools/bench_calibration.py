@@ -16,7 +16,7 @@ import time
 import cv2
 import numpy as np
 
-from stereocam.calibration_board import BoardSpec
+from stereocam.stereo.calibration_board import BoardSpec
 from stereocam.device_sim.calibration.board import StereoBoardRenderer, board_poses
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.device_sim.calibration.rays import project_points

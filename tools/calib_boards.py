@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from stereocam.calibration_board import BoardSpec
+from stereocam.stereo.calibration_board import BoardSpec
 
 _SUBPIX = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
 MIN_CHARUCO_CORNERS = 8

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from stereocam.calibration_board import BoardSpec
+from stereocam.stereo.calibration_board import BoardSpec
 from stereocam.tools.calib_boards import CharucoSpec
 
 PARAM_NAMES = ("X", "Y", "Size", "Skew")

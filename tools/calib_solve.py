@@ -37,7 +37,7 @@ from typing import Literal
 
 import numpy as np
 
-from stereocam.calibration_board import BoardSpec
+from stereocam.stereo.calibration_board import BoardSpec
 from stereocam.protocol.rectification import RectifiedGeometry
 from stereocam.tools.calib_boards import CharucoSpec, Detection, describe, detect_all, gray, match_pair
 from stereocam.tools.calib_coverage import CoverageSelector, view_params

@@ -8,6 +8,7 @@ outside an operation's output folder (the input and everything beside it must st
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import io
 import logging
@@ -63,6 +64,8 @@ def with_chunk_replaced(src: Path, dst: Path, data: bytes, declared: int, which:
     with open(src, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
+        if summary is None:
+            raise ValueError(f"{src}: no summary section to rebuild the file from")
         metadata, attachments = list(reader.iter_metadata()), list(reader.iter_attachments())
         f.seek(0)
         chunks: list[tuple[Chunk, list[MessageIndex]]] = []
@@ -78,11 +81,11 @@ def with_chunk_replaced(src: Path, dst: Path, data: bytes, declared: int, which:
     for cid in sorted(summary.channels):
         c = summary.channels[cid]
         w.register_channel(c.topic, c.message_encoding, c.schema_id, c.metadata)
-    for i, (c, indexes) in enumerate(chunks):
+    for i, (chunk, indexes) in enumerate(chunks):
         if i == which:
-            c = Chunk(message_start_time=c.message_start_time, message_end_time=c.message_end_time,
-                      uncompressed_size=declared, uncompressed_crc=0, compression="zstd", data=data)
-        w.copy_chunk(c, indexes)
+            chunk = Chunk(message_start_time=chunk.message_start_time, message_end_time=chunk.message_end_time,
+                          uncompressed_size=declared, uncompressed_crc=0, compression="zstd", data=data)
+        w.copy_chunk(chunk, indexes)
     for m in metadata:
         w.add_metadata(m.name, dict(m.metadata))
     for a in attachments:
@@ -166,11 +169,11 @@ def fuzz_recordings(files: int, seed: int = 0, hang_s: float = 60.0) -> Report:
             else:
                 src.write_bytes(mutate(rng, clean))
             out = case / "out"
-            operations = {
+            operations: dict[str, Callable[[], Any]] = {
                 "export": _cli(["recording", "export", str(src), "--out", str(out / "export")]),
                 "repair": _cli(["recording", "repair", str(src), "--out", str(out / "repaired.mcap")]),
                 "replay": _cli(["info", f"replay://{src}?speed=fast"]),
-                "rematch": lambda src=src, out=out: rematch([src], out / "rematch", {}, client=client),
+                "rematch": functools.partial(rematch, [src], out / "rematch", {}, client=client),
             }
             for name, run in operations.items():
                 before = _digests(root, out)

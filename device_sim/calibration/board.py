@@ -1,5 +1,5 @@
 """Chessboard calibration target in the simulator: varied poses and ray-cast rendering of raw views.
-The board's geometry (BoardSpec, BoardPose, the board frame) is stereocam.calibration_board.
+The board's geometry (BoardSpec, BoardPose, the board frame) is stereocam.stereo.calibration_board.
 
 Anti-aliasing is analytic: each (sub-)pixel ray is intersected with the board plane and the
 pattern is box-filtered over the sample's footprint on the board (an axis-aligned box in board
@@ -15,7 +15,7 @@ from collections.abc import Iterator
 import numba
 import numpy as np
 
-from stereocam.calibration_board import BoardPose, BoardSpec
+from stereocam.stereo.calibration_board import BoardPose, BoardSpec
 from stereocam.protocol.calibration import StereoCalibration
 from .rays import pixel_rays, project_points
 from stereocam.protocol.rectification import rodrigues

@@ -13,7 +13,7 @@ import numba as nb
 import numpy as np
 
 from . import render, scene
-from stereocam.calibration_board import BoardPose, BoardSpec
+from stereocam.stereo.calibration_board import BoardPose, BoardSpec
 from ..calibration.board import StereoBoardRenderer, board_poses
 from stereocam.protocol.calibration import StereoCalibration
 from ..calibration.rays import pixel_rays

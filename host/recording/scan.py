@@ -11,8 +11,9 @@ from __future__ import annotations
 import io
 import struct
 from dataclasses import dataclass, field
-from typing import BinaryIO, Iterator
+from typing import Any, BinaryIO, Callable, Iterator
 
+from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, Footer, Header, McapRecord, Message, Metadata, Schema
 
@@ -24,8 +25,9 @@ _KNOWN = frozenset(int(op) for op in Opcode)
 _MESSAGE_FIXED = 22  # channel id, sequence, log time, publish time
 _HEAD = struct.Struct("<BQ")  # opcode, record length
 # the records a repair copies; the rest (indexes, statistics, summary offsets, data end) it writes anew
-_READERS = {Opcode.HEADER: Header.read, Opcode.SCHEMA: Schema.read, Opcode.CHANNEL: Channel.read,
-            Opcode.METADATA: Metadata.read, Opcode.ATTACHMENT: Attachment.read, Opcode.FOOTER: Footer.read}
+_READERS: dict[int, Callable[[ReadDataStream], Any]] = {
+    Opcode.HEADER: Header.read, Opcode.SCHEMA: Schema.read, Opcode.CHANNEL: Channel.read,
+    Opcode.METADATA: Metadata.read, Opcode.ATTACHMENT: Attachment.read, Opcode.FOOTER: Footer.read}
 
 
 @dataclass

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from stereocam.calibration_board import BoardSpec
+from stereocam.stereo.calibration_board import BoardSpec
 from stereocam.device_sim.calibration.board import StereoBoardRenderer, board_poses
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.device_sim.calibration.truth import true_calibration

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from stereocam.calibration_board import BoardSpec
+from stereocam.stereo.calibration_board import BoardSpec
 from stereocam.device_sim.calibration.board import StereoBoardRenderer, board_poses, render_board_view
 from stereocam.device_sim.calibration.rays import pixel_rays, project_points
 from stereocam.device_sim.calibration.truth import true_calibration

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from stereocam.calibration_board import BoardSpec
+from stereocam.stereo.calibration_board import BoardSpec
 from stereocam.device_sim.calibration.board import StereoBoardRenderer, board_poses
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.device_sim.calibration.rectify import rectification_maps, remap_bilinear, undistort_rectify_map

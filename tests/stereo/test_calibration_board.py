@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from stereocam.calibration_board import BoardSpec
+from stereocam.stereo.calibration_board import BoardSpec
 from stereocam.protocol.errors import ConfigError
 from tests.support.paths import REPO
 
