@@ -20,21 +20,21 @@ from .exit_codes import EXIT_BROKEN_PIPE, EXIT_CAMERA, EXIT_CODES, EXIT_INTERRUP
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "view": ("stereocam.tools.viewer.command", "live viewer in the browser: images, disparity, depth, settings"),
-    "list": ("stereocam.tools.list_devices", "list cameras: USB, serial ports, served and in-process simulators"),
-    "info": ("stereocam.tools.info", "print a camera's identity, calibration, configuration and counters"),
-    "capture": ("stereocam.tools.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
-    "calibrate": ("stereocam.tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
-    "calibration": ("stereocam.tools.calibration_export", "calibration export URL --size WxH: ROS camera_info from a unit"),
+    "list": ("stereocam.tools.camera.list_devices", "list cameras: USB, serial ports, served and in-process simulators"),
+    "info": ("stereocam.tools.camera.info", "print a camera's identity, calibration, configuration and counters"),
+    "capture": ("stereocam.tools.camera.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
+    "calibrate": ("stereocam.tools.calibration.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
+    "calibration": ("stereocam.tools.calibration.export", "calibration export URL --size WxH: ROS camera_info from a unit"),
     "factory": ("stereocam.tools.factory.cli", "factory record: yield and metric distributions per day and station"),
-    "firmware": ("stereocam.tools.firmware", "signed firmware images: keygen, sign, update a camera, slot status"),
-    "demo": ("stereocam.tools.demo", "simulator + streaming + outputs in ./out + summary"),
+    "firmware": ("stereocam.tools.firmware.cli", "signed firmware images: keygen, sign, update a camera, slot status"),
+    "demo": ("stereocam.tools.demo.cli", "simulator + streaming + outputs in ./out + summary"),
     "conformance": ("stereocam.tools.conformance.cli", "hold a camera to the protocol: one line per check, JUnit/JSON"),
-    "record": ("stereocam.tools.record", "record a camera to an MCAP file (ROS 2 profile)"),
-    "recording": ("stereocam.tools.recording", "recording files: info, repair, export"),
-    "rematch": ("stereocam.tools.rematch", "re-run matching over recordings on a Dask cluster"),
+    "record": ("stereocam.tools.recording.record", "record a camera to an MCAP file (ROS 2 profile)"),
+    "recording": ("stereocam.tools.recording.files", "recording files: info, repair, export"),
+    "rematch": ("stereocam.tools.recording.rematch", "re-run matching over recordings on a Dask cluster"),
     "sim": ("stereocam.device_sim.__main__", "serve a simulated camera over a pty or TCP"),
-    "bench": ("stereocam.tools.bench", "benchmarks: protocol, transports, USB, matching core, calibration"),
-    "soak": ("stereocam.tools.soak", "long fuzz + faulty-link streaming run with crash/hang/frame counts"),
+    "bench": ("stereocam.tools.bench.cli", "benchmarks: protocol, transports, USB, matching core, calibration"),
+    "soak": ("stereocam.tools.soak.cli", "long fuzz + faulty-link streaming run with crash/hang/frame counts"),
 }
 """name -> (module, one-line help). The module provides ``command`` or ``main(argv)``."""
 

@@ -14,7 +14,7 @@ import stereocam
 from stereocam.device_sim.matching import Matcher
 from stereocam.device_sim.pipeline.stereo import params_from_config
 from stereocam.recording.reader import Recording
-from stereocam.tools.bench_record import synthetic_recording
+from stereocam.tools.bench.record import synthetic_recording
 
 N = 8
 

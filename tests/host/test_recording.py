@@ -15,7 +15,7 @@ from stereocam.protocol.params import defaults
 from stereocam.protocol.rectification import stereo_rectify
 from stereocam.recording import Recorder, RecordingError, describe, schemas
 from stereocam.recording.reader import Recording
-from stereocam.tools import recording as recording_tool
+from stereocam.tools.recording import files as recording_tool
 
 N = 6
 

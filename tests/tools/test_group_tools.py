@@ -6,7 +6,8 @@ import sys
 
 import pytest
 
-from stereocam.tools import bench_sync, cli
+from stereocam.tools import cli
+from stereocam.tools.bench import sync as bench_sync
 
 
 def test_demo_with_three_heads_prints_sets_and_saves_each_head(tmp_path, capsys):

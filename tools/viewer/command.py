@@ -11,7 +11,7 @@ from typing import Callable
 import click
 
 import stereocam
-from stereocam.tools.session import output_dir, preserved_configuration
+from stereocam.tools.camera.session import output_dir, preserved_configuration
 
 from .group_session import GroupViewerSession
 from .server import ViewerServer

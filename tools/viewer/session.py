@@ -18,8 +18,8 @@ import numpy as np
 import stereocam
 from stereocam.recording import Recorder, RecordingError, describe
 from stereocam.recording.session import counters_of
-from stereocam.tools.info import value_name
-from stereocam.tools.pictures import colorize, depth_ticks, disparity_range
+from stereocam.tools.camera.info import value_name
+from stereocam.tools.camera.pictures import colorize, depth_ticks, disparity_range
 
 from .feed import Feed
 

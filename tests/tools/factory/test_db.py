@@ -10,7 +10,7 @@ import pytest
 
 from tests.support.paths import DATA
 
-from stereocam.tools import calibrate
+from stereocam.tools.calibration import calibrate
 from stereocam.tools.factory import cli as factory_cli
 from stereocam.tools.factory.db import MIGRATIONS, SCHEMA_VERSION, Attempt, FactoryDB, FactoryDBError
 

@@ -1,0 +1,152 @@
+"""``stereocam rematch RECORDINGS... --out DIR``: match recorded images again, on a Dask cluster.
+
+Each recording is split into frame ranges that follow its chunks; every range is one task (re-match
+its frames into a part file), and one task per recording joins the parts into DIR/NAME.mcap: the
+original images, camera infos and capture metadata beside the new disparity, and the new matching
+configuration in the file's configuration (so replaying it resends the new disparity). Tasks are
+retried; outputs are written under temporary names and renamed, so a killed worker loses nothing.
+
+By default a local cluster of worker processes (nothing to set up); ``--scheduler tcp://HOST:PORT``
+uses a running Dask scheduler (its workers need stereocam installed and must see the same paths).
+"""
+from __future__ import annotations
+
+from stereocam.tools.exit_codes import EXIT_CODES, EXIT_USAGE
+
+import argparse
+import logging
+import sys
+import time
+from pathlib import Path
+
+from stereocam.device_sim.pipeline.stereo import params_from_config
+from stereocam.protocol.errors import ConfigError
+from stereocam.protocol.params import BY_NAME
+from stereocam.recording.reader import Recording
+from stereocam.tools.recording import rematch_tasks as tasks
+from stereocam.tools.recording.record import _setting
+
+RETRIES = 3
+
+
+def check_scheduler(address: str) -> str:
+    """``address`` if it reads as a Dask scheduler address (tcp://HOST:PORT and the like), else ConfigError."""
+    from distributed.comm import registry
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, where = parse_address(address)
+        if scheme not in registry.backends:
+            raise ValueError(f"unknown protocol {scheme!r} (known: {', '.join(sorted(registry.backends))})")
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            host, port = parse_host_port(where)
+            if not host or not 0 < port < 65536:
+                raise ValueError("needs a host and a port from 1 to 65535")
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"scheduler {address!r} is not an address like tcp://HOST:PORT: {exc}") from exc
+    return address
+
+
+def check_workers(workers: object) -> int:
+    """``workers`` if it is a number of worker processes (an integer >= 1), else ConfigError."""
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ConfigError(f"workers (local worker processes) must be at least 1, got {workers!r}")
+    return workers
+
+
+def _client(scheduler: str | None, workers: int):
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        return Client(scheduler, timeout="10s"), None
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.WARNING,  # the cluster's own INFO lines are not ours to print
+                           env={"NUMBA_NUM_THREADS": "1"})  # one core per worker: scale by processes
+    return Client(cluster), cluster
+
+
+def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, algorithm: str | None = None,
+            scheduler: str | None = None, workers: int = 2, chunks_per_task: int = 1, client=None) -> dict:
+    """Re-match ``recordings`` into ``out`` with ``algorithm`` ("bm" or "sgm"; None: the recorded
+    one) and the recorded settings changed by ``overrides``; returns frames, seconds and the outputs."""
+    check_workers(workers)
+    if scheduler is not None:
+        check_scheduler(scheduler)
+    if algorithm is not None:
+        if algorithm not in tasks.ALGORITHMS:
+            raise ConfigError(f"unknown algorithm {algorithm!r}; known: {', '.join(tasks.ALGORITHMS)}")
+        overrides = {**overrides, "algorithm": tasks.ALGORITHMS[algorithm]}
+    unknown = set(overrides) - set(BY_NAME)
+    if unknown:
+        raise ConfigError(f"unknown parameter(s) {sorted(unknown)}")
+    why = [w for k, v in overrides.items() if (w := BY_NAME[k].check(v))]
+    if why:
+        raise ConfigError("; ".join(why))
+    used = {}  # recording -> the algorithm its frames are matched with
+    for path in recordings:
+        with Recording(path) as rec:  # a bad file or a bad combination fails here, before any work
+            cfg = tasks.matching_config(rec.config, overrides)
+            try:
+                params_from_config(cfg)
+            except ValueError as exc:
+                raise ConfigError(f"{path}: {exc}") from exc
+        used[path] = next(k for k, v in tasks.ALGORITHMS.items() if v == cfg["algorithm"])
+    out.mkdir(parents=True, exist_ok=True)
+    own, cluster = (None, None) if client is not None else _client(scheduler, workers)
+    client = client or own
+    t0 = time.perf_counter()
+    try:
+        joins = []
+        for path in recordings:
+            src = str(path.resolve())
+            parts, futures = [], []
+            for a, b in tasks.plan(src, chunks_per_task):
+                part = str((out / f".{path.stem}.{a:08d}-{b:08d}.part.mcap").resolve())
+                parts.append(part)
+                futures.append(client.submit(tasks.rematch_range, src, a, b, overrides, part, retries=RETRIES,
+                                             key=f"rematch-{path.stem}-{a}-{b}-{time.time_ns()}"))
+            provenance = {**{k: str(v) for k, v in overrides.items()}, "algorithm": used[path]}
+            joins.append(client.submit(_join_after, futures, src, parts, str((out / path.name).resolve()), provenance,
+                                       retries=RETRIES, key=f"join-{path.stem}-{time.time_ns()}"))
+        frames = sum(client.gather(joins))
+    finally:
+        if own is not None:
+            own.close()
+        if cluster is not None:
+            cluster.close()
+    dt = time.perf_counter() - t0
+    return {"frames": frames, "seconds": dt, "fps": frames / dt, "outputs": [out / p.name for p in recordings]}
+
+
+def _join_after(done: list[tuple[int, float]], source: str, parts: list[str], out: str, provenance: dict) -> int:
+    """Join once every range of the recording is re-matched (``done``: their results)."""
+    return tasks.join(source, parts, out, provenance)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="stereocam rematch", description=__doc__.splitlines()[0].replace("``", ""),
+                                 epilog=EXIT_CODES)
+    ap.add_argument("recordings", nargs="+", type=Path)
+    ap.add_argument("--out", type=Path, required=True, help="folder for the re-matched recordings")
+    ap.add_argument("--algorithm", choices=sorted(tasks.ALGORITHMS), default=None,
+                    help="matcher: bm (block matching) or sgm (semi-global); default: the recorded one")
+    ap.add_argument("--set", type=_setting, action="append", default=[], metavar="NAME=VALUE",
+                    help="matching parameter to change from the recorded configuration (repeatable)")
+    ap.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="a running Dask scheduler")
+    ap.add_argument("--workers", type=int, default=2, help="local worker processes (without --scheduler)")
+    ap.add_argument("--chunks-per-task", type=int, default=1, help="file chunks per task")
+    args = ap.parse_args(argv)
+    try:  # before any file is read or cluster started: 0 workers would wait for ever
+        check_workers(args.workers)
+        if args.scheduler is not None:
+            check_scheduler(args.scheduler)
+    except ConfigError as exc:
+        print(f"stereocam rematch: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if any(p.resolve().parent == args.out.resolve() for p in args.recordings):
+        raise ConfigError("--out must not be the folder of the input recordings (outputs keep their names)")
+    r = rematch(args.recordings, args.out, dict(args.set), algorithm=args.algorithm, scheduler=args.scheduler,
+                workers=args.workers, chunks_per_task=args.chunks_per_task)
+    print(f"{r['frames']} frames re-matched in {r['seconds']:.1f} s ({r['fps']:.1f} frames/s) -> "
+          + ", ".join(str(p) for p in r["outputs"]))
+    return 0
