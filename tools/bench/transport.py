@@ -18,6 +18,7 @@ import numpy as np
 from tqdm import tqdm
 
 from stereocam.device_sim.pipeline.stereo import BLOCK_MATCHING, SEMI_GLOBAL
+from stereocam.tools.progress import progress_wanted
 
 KINDS = ("sim", "pty", "tcp", "usb-high", "usb-super")
 ALGORITHMS = {"bm": BLOCK_MATCHING, "sgm": SEMI_GLOBAL}  # names of the device's ``algorithm`` values
@@ -79,7 +80,8 @@ def stream(kind: str, algorithm: str, seconds: float) -> Run:
             sim.pipeline.profile.reset()
         lat, nbytes, n = [], 0, 0
         cpu0, t0 = time.process_time(), time.monotonic()
-        with tqdm(total=round(seconds * 60), unit="frame", desc=f"{kind} {algorithm}", leave=False) as bar:
+        with tqdm(total=round(seconds * 60), unit="frame", desc=f"{kind} {algorithm}", leave=False,
+                  disable=not progress_wanted()) as bar:
             while time.monotonic() - t0 < seconds:
                 f = cam.get_frame(timeout=5.0)
                 lat.append(time.monotonic() - f.host_time)

@@ -15,6 +15,7 @@ from stereocam.tools.calibration.report import write_html, write_report
 from stereocam.tools.calibration.coverage import PARAM_NAMES
 from stereocam.tools.calibration.solve import CalibrationResult, Progress
 from stereocam.tools.calibration.camera_info import ros_camera_info, write_camera_info
+from stereocam.tools.progress import progress_wanted
 
 _PASS_ONLY = ("calibration.yaml", "left.yaml", "right.yaml")
 
@@ -36,7 +37,8 @@ class PairProgress:
     unless ``quiet``. Use as a context manager; call it with each Progress."""
 
     def __init__(self, total: int, quiet: bool = False):
-        self._bar = tqdm(total=total, unit="pair", desc="calibration", file=sys.stderr)
+        self._bar = tqdm(total=total, unit="pair", desc="calibration", file=sys.stderr,
+                         disable=not progress_wanted())
         self._quiet = quiet
 
     def __call__(self, p: Progress) -> None:

@@ -10,6 +10,7 @@ import numpy as np
 from tqdm import tqdm
 
 import stereocam
+from stereocam.tools.progress import progress_wanted
 
 from .pictures import save_disparity_png
 from .session import output_dir, preserved_configuration
@@ -49,7 +50,7 @@ def command(url: str, out: Path, count: int, timeout: float, as_json: bool) -> i
         cam.set_trigger_mode("software")
         cam.start()
         saved = []
-        with tqdm(total=count, unit="frame", desc="capture") as bar:
+        with tqdm(total=count, unit="frame", desc="capture", disable=not progress_wanted()) as bar:
             for _ in range(count):
                 cam.trigger()
                 frame = cam.get_frame(timeout=timeout)

@@ -17,6 +17,7 @@ from stereocam.device_sim.links.inprocess import InProcessTransport
 from . import group as demo_group
 from stereocam.tools.camera.capture import save_frame
 from stereocam.tools.camera.session import output_dir
+from stereocam.tools.progress import progress_wanted
 
 KEEP_UP = 0.9  # below this share of the asked frame rate the summary says the machine fell short
 
@@ -70,7 +71,7 @@ def command(out: Path, seconds: float, fps: int, seed: int, as_json: bool, heads
         recent: list = []
         frames = 0
         t0 = time.monotonic()
-        with tqdm(total=round(seconds * fps), unit="frame", desc="demo") as bar:
+        with tqdm(total=round(seconds * fps), unit="frame", desc="demo", disable=not progress_wanted()) as bar:
             while time.monotonic() - t0 < seconds:
                 recent = (recent + [cam.get_frame(timeout=5.0)])[-GROUND_TRUTH_KEEP // 2:]
                 frames += 1

@@ -30,6 +30,7 @@ from stereocam.protocol.firmware_image import (TARGET_LEN, U32_MAX, FirmwareBuil
                                                check_target, inspect_image, load_private_key, private_key_pem,
                                                public_key_pem)
 from stereocam.protocol.params import BY_NAME
+from stereocam.tools.progress import progress_wanted
 
 DEFAULT_TARGET = "STOC-SIM"
 
@@ -145,7 +146,7 @@ def update(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
     with stereocam.open(args.url, timeout=args.timeout) as cam, \
             Progress("[progress.description]{task.description}", BarColumn(), DownloadColumn(),
-                     TransferSpeedColumn(), console=console) as bar:
+                     TransferSpeedColumn(), console=console, disable=not progress_wanted()) as bar:
         before = cam.info().firmware_version
         task = bar.add_task(f"{cam.info().serial}: {before} → {inspect_image(image).build.version}", total=len(image))
         result = cam.update_firmware(image, progress=lambda done, total: bar.update(task, completed=done),

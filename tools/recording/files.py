@@ -6,17 +6,16 @@ export  per frame: left/right PNG, disparity .npy (int16, disparity*16) and colo
 """
 from __future__ import annotations
 
-from stereocam.tools.exit_codes import EXIT_CODES, EXIT_USAGE
-
-import argparse
 import json
-import sys
 from pathlib import Path
+
+import click
 
 from stereocam.recording.reader import Recording
 from stereocam.recording.recorder import SUMMARY
 from stereocam.recording.repair import repair
 from stereocam.tools.camera.capture import save_frame
+from stereocam.tools.options import CONTEXT, epilog
 
 
 DROP_KEYS = ("link_lost", "link_incomplete", "host_queue_overflow", "device_dropped", "recorder_dropped")
@@ -82,32 +81,44 @@ def export(path: Path, out: Path, start: int, stop: int | None) -> int:
     return n
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam recording", description=__doc__.splitlines()[0].replace("``", ""),
-                                 epilog=EXIT_CODES)
-    sub = ap.add_subparsers(dest="what", required=True)
-    p = sub.add_parser("info", help="what a recording holds")
-    p.add_argument("file", type=Path)
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of lines")
-    p = sub.add_parser("repair", help="rewrite a recording cut short with its summary and indexes")
-    p.add_argument("file", type=Path)
-    p.add_argument("--out", type=Path, default=None, help="write here instead of in place")
-    p = sub.add_parser("export", help="PNG / NPY / PLY per frame")
-    p.add_argument("file", type=Path)
-    p.add_argument("--out", type=Path, required=True)
-    p.add_argument("--start", type=int, default=0, help="first frame (from 0)")
-    p.add_argument("--stop", type=int, default=None, help="frame to stop before")
-    args = ap.parse_args(argv)
-    if args.what == "info":
-        info(args.file, args.json)
-    elif args.what == "repair":
-        r = repair(args.file, args.out)
-        print(f"{args.out or args.file}: {r.line()}")
-    else:
-        if args.start < 0 or args.stop is not None and args.stop < 0:
-            print("stereocam recording: error: --start and --stop are frame numbers from 0 (not negative), got "
-                  f"--start {args.start}" + ("" if args.stop is None else f" --stop {args.stop}"), file=sys.stderr)
-            return EXIT_USAGE
-        n = export(args.file, args.out, args.start, args.stop)
-        print(f"{n} frames exported to {args.out}")
+@click.group("recording", epilog=epilog(), context_settings=CONTEXT)
+def command() -> None:
+    """Look into, fix and unpack MCAP recordings."""
+
+
+_FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
+
+
+@command.command("info", epilog=epilog())
+@click.argument("file", type=_FILE)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of lines.")
+def info_command(file: Path, as_json: bool) -> int:
+    """Duration, frames, topics, drops, the unit and its calibration."""
+    info(file, as_json)
+    return 0
+
+
+@command.command("repair", epilog=epilog())
+@click.argument("file", type=_FILE)
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write here.  [default: FILE, in place]")
+def repair_command(file: Path, out: Path | None) -> int:
+    """Rewrite a recording cut short (recorder killed) with its summary and indexes."""
+    r = repair(file, out)
+    click.echo(f"{out or file}: {r.line()}")
+    return 0
+
+
+@command.command("export", epilog=epilog())
+@click.argument("file", type=_FILE)
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True, help="Folder to write to.")
+@click.option("--start", type=int, default=0, show_default=True, help="First frame (from 0).")
+@click.option("--stop", type=int, default=None, help="Frame to stop before.  [default: the end]")
+def export_command(file: Path, out: Path, start: int, stop: int | None) -> int:
+    """Per frame: left/right PNG, disparity .npy (int16, disparity*16) and colour PNG, point cloud .ply."""
+    if start < 0 or stop is not None and stop < 0:
+        raise click.UsageError(f"--start and --stop are frame numbers from 0 (not negative), got --start {start}"
+                               + ("" if stop is None else f" --stop {stop}"))
+    n = export(file, out, start, stop)
+    click.echo(f"{n} frames exported to {out}")
     return 0

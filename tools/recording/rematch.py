@@ -11,20 +11,18 @@ uses a running Dask scheduler (its workers need stereocam installed and must see
 """
 from __future__ import annotations
 
-from stereocam.tools.exit_codes import EXIT_CODES, EXIT_USAGE
-
-import argparse
 import logging
-import sys
 import time
 from pathlib import Path
+
+import click
 
 from stereocam.device_sim.pipeline.stereo import params_from_config
 from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.params import BY_NAME
 from stereocam.recording.reader import Recording
 from stereocam.tools.recording import rematch_tasks as tasks
-from stereocam.tools.recording.record import _setting
+from stereocam.tools.options import CONTEXT, SETTING, epilog
 
 RETRIES = 3
 
@@ -123,30 +121,36 @@ def _join_after(done: list[tuple[int, float]], source: str, parts: list[str], ou
     return tasks.join(source, parts, out, provenance)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam rematch", description=__doc__.splitlines()[0].replace("``", ""),
-                                 epilog=EXIT_CODES)
-    ap.add_argument("recordings", nargs="+", type=Path)
-    ap.add_argument("--out", type=Path, required=True, help="folder for the re-matched recordings")
-    ap.add_argument("--algorithm", choices=sorted(tasks.ALGORITHMS), default=None,
-                    help="matcher: bm (block matching) or sgm (semi-global); default: the recorded one")
-    ap.add_argument("--set", type=_setting, action="append", default=[], metavar="NAME=VALUE",
-                    help="matching parameter to change from the recorded configuration (repeatable)")
-    ap.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="a running Dask scheduler")
-    ap.add_argument("--workers", type=int, default=2, help="local worker processes (without --scheduler)")
-    ap.add_argument("--chunks-per-task", type=int, default=1, help="file chunks per task")
-    args = ap.parse_args(argv)
-    try:  # before any file is read or cluster started: 0 workers would wait for ever
-        check_workers(args.workers)
-        if args.scheduler is not None:
-            check_scheduler(args.scheduler)
+def _scheduler(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    try:
+        return None if value is None else check_scheduler(value)
     except ConfigError as exc:
-        print(f"stereocam rematch: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    if any(p.resolve().parent == args.out.resolve() for p in args.recordings):
-        raise ConfigError("--out must not be the folder of the input recordings (outputs keep their names)")
-    r = rematch(args.recordings, args.out, dict(args.set), algorithm=args.algorithm, scheduler=args.scheduler,
-                workers=args.workers, chunks_per_task=args.chunks_per_task)
-    print(f"{r['frames']} frames re-matched in {r['seconds']:.1f} s ({r['fps']:.1f} frames/s) -> "
-          + ", ".join(str(p) for p in r["outputs"]))
+        raise click.BadParameter(str(exc)) from None
+
+
+@click.command("rematch", epilog=epilog(), context_settings=CONTEXT)
+@click.argument("recordings", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="Folder for the re-matched recordings (not the inputs' folder: outputs keep their names).")
+@click.option("--algorithm", type=click.Choice(sorted(tasks.ALGORITHMS)), default=None,
+              help="Matcher: bm (block matching) or sgm (semi-global).  [default: the recorded one]")
+@click.option("--set", "settings", type=SETTING, multiple=True,
+              help="Matching parameter to change from the recorded configuration (repeatable).")
+@click.option("--scheduler", default=None, metavar="tcp://HOST:PORT", callback=_scheduler,
+              help="A running Dask scheduler.  [default: a local cluster]")
+@click.option("--workers", type=click.IntRange(min=1), default=2, show_default=True,
+              help="Local worker processes (without --scheduler).")
+@click.option("--chunks-per-task", type=click.IntRange(min=1), default=1, show_default=True,
+              help="File chunks per task.")
+def command(recordings: tuple[Path, ...], out: Path, algorithm: str | None, settings: tuple[tuple[str, int], ...],
+            scheduler: str | None, workers: int, chunks_per_task: int) -> int:
+    """Match recorded images again, on a Dask cluster: each recording is split into tasks by chunk,
+    re-matched, and joined into OUT/NAME.mcap with the original images and the new disparity."""
+    if any(p.resolve().parent == out.resolve() for p in recordings):
+        raise click.BadParameter("must not be the folder of the input recordings (outputs keep their names)",
+                                 param_hint="--out")
+    r = rematch(list(recordings), out, dict(settings), algorithm=algorithm, scheduler=scheduler,
+                workers=workers, chunks_per_task=chunks_per_task)
+    click.echo(f"{r['frames']} frames re-matched in {r['seconds']:.1f} s ({r['fps']:.1f} frames/s) -> "
+               + ", ".join(str(p) for p in r["outputs"]))
     return 0

@@ -91,7 +91,7 @@ def test_bad_arguments(source, tmp_path):
         rematch([source], tmp_path, {"block_size": 4})  # even block size: refused before any work
     with pytest.raises(stereocam.ConfigError):
         rematch([source], tmp_path, {}, algorithm="census")  # no such matcher
-    assert cli.main(["rematch", str(source), "--out", str(source.parent)]) == 1
+    assert cli.main(["rematch", str(source), "--out", str(source.parent)]) == 2  # usage: outputs would replace inputs
 
 
 @pytest.mark.parametrize("args, what", [(["--workers", "0"], "workers"), (["--workers", "-1"], "workers"),
