@@ -1,8 +1,8 @@
 """The ``stereocam`` command: one click command tree built from the COMMANDS table.
 
-A module in COMMANDS either exposes ``command`` (a click command) or ``main(argv) -> int`` (an
-argparse tool, passed its arguments untouched, ``--help`` included). Adding a tool is one line.
-Errors are handled once, here, for every command: see EXIT_CODES.
+Every module in COMMANDS exposes ``command``, a click command (or group) with its defaults and the
+exit codes in its ``--help``. Adding a tool is one line. Errors are handled once, here, for every
+command: see EXIT_CODES.
 """
 from __future__ import annotations
 
@@ -10,13 +10,14 @@ import importlib
 import logging
 import os
 import sys
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
 import click
 
 import stereocam
 
 from .exit_codes import EXIT_BROKEN_PIPE, EXIT_CAMERA, EXIT_CODES, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE  # noqa: F401
+from .logs import configure, parse_levels
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "view": ("stereocam.tools.viewer.command", "live viewer in the browser: images, disparity, depth, settings"),
@@ -36,23 +37,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("stereocam.tools.bench.cli", "benchmarks: protocol, transports, USB, matching core, calibration"),
     "soak": ("stereocam.tools.soak.cli", "long fuzz + faulty-link streaming run with crash/hang/frame counts"),
 }
-"""name -> (module, one-line help). The module provides ``command`` or ``main(argv)``."""
+"""name -> (module, one-line help). The module provides ``command``."""
 
 
 _log = logging.getLogger("stereocam.cli")
-
-
-def _pass_through(name: str, main: Callable[[list[str]], int | None], text: str) -> click.Command:
-    """An argparse tool as a click command: every argument, --help included, goes to its main."""
-    def run(args: tuple[str, ...]) -> int:
-        try:
-            return main(list(args)) or 0
-        except SystemExit as exc:  # argparse's own exits (--help, usage errors)
-            return exc.code if isinstance(exc.code, int) else (EXIT_USAGE if exc.code else EXIT_OK)
-
-    return click.Command(name, callback=run, help=text, short_help=text, add_help_option=False,
-                         context_settings={"ignore_unknown_options": True, "allow_extra_args": True},
-                         params=[click.Argument(["args"], nargs=-1, type=click.UNPROCESSED)])
 
 
 class CommandTable(click.Group):
@@ -64,12 +52,7 @@ class CommandTable(click.Group):
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
         if name not in COMMANDS:
             return None
-        module_name, text = COMMANDS[name]
-        module = importlib.import_module(module_name)
-        command = getattr(module, "command", None)
-        if isinstance(command, click.Command):
-            return command
-        return _pass_through(name, module.main, text)
+        return importlib.import_module(COMMANDS[name][0]).command
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         with formatter.section("Commands"):
@@ -92,6 +75,9 @@ class CommandTable(click.Group):
         except (KeyboardInterrupt, click.Abort):
             click.echo(f"stereocam {_command(ctx)}: interrupted", err=True)
             raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
+        except stereocam.ConfigError as exc:  # a value that cannot be used (a URL without a port, a bad setting)
+            click.echo(f"stereocam {_command(ctx)}: error: {exc}", err=True)
+            raise click.exceptions.Exit(EXIT_USAGE) from None
         except stereocam.StereoCamError as exc:
             _log.debug("%s failed", _command(ctx), exc_info=exc)
             click.echo(f"stereocam {_command(ctx)}: error: {exc}", err=True)
@@ -107,20 +93,29 @@ def _command(ctx: click.Context) -> str:
     return ctx.meta.get("stereocam.command", "")
 
 
-LOG_LEVELS = ("ERROR", "WARNING", "INFO", "DEBUG")
+def _log_levels(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -> tuple[str, ...]:
+    try:
+        parse_levels(0, value)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc)) from None
+    return value
 
 
 @click.group("stereocam", cls=CommandTable, epilog=EXIT_CODES, no_args_is_help=True,
              context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(stereocam.__version__, "--version", prog_name="stereocam", message="%(prog)s %(version)s")
 @click.option("-v", "--verbose", count=True,
-              help="Log more to stderr: -v info (reconnects, CRC errors, drops), -vv debug.  [default: warnings only]")
-@click.option("--log-level", type=click.Choice(LOG_LEVELS, case_sensitive=False), default=None,
-              help="Log level, overrides -v.")
-def cli(verbose: int, log_level: str | None) -> None:
+              help="Log more of stereocam's own lines to stderr: -v info (reconnects, CRC errors, drops), -vv debug.  "
+                   "[default: warnings only]")
+@click.option("--log-level", "log_levels", multiple=True, metavar="[NAME=]LEVEL", callback=_log_levels,
+              help="LEVEL (ERROR, WARNING, INFO, DEBUG) for stereocam's loggers, overriding -v; NAME=LEVEL for "
+                   "another library's logger, e.g. distributed=INFO (repeatable).  [default: other libraries "
+                   "at WARNING]")
+@click.pass_context
+def cli(ctx: click.Context, verbose: int, log_levels: tuple[str, ...]) -> None:
     """Tools for STOC-class stereo cameras and their simulator. Run a command with --help for more."""
-    level = log_level.upper() if log_level else LOG_LEVELS[min(1 + verbose, len(LOG_LEVELS) - 1)]
-    logging.basicConfig(level=level, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    configure(parse_levels(verbose, log_levels))
+    _log.debug("stereocam %s (Python %s): %s", stereocam.__version__, sys.version.split()[0], ctx.invoked_subcommand)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -7,29 +7,32 @@ the tool chose and the same corner detections. Reported: model chosen, pairs use
 the reasons), focal (left, right) and baseline relative error, and epipolar RMS of both solutions
 over all those pairs (converged undistortion, each solution's own rectification).
 
-    python -m stereocam.tools.bench.calib_real [--sets DIR] [--only NAME]
+    stereocam bench calib-real [--sets DIR] [--only NAME]
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import io
 import json
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
 
+import click
 import cv2
 import numpy as np
 
 from stereocam.protocol.calibration import N_DIST, StereoCalibration
 from stereocam.protocol.rectification import stereo_rectify
-from stereocam.tools.calibration import calibrate
-from stereocam.tools.calibration.boards import parse_board
+from stereocam.tools import cli
+from stereocam.tools.calibration.boards import detect_all, parse_board
+from stereocam.tools.calibration.files import find_pairs
 from stereocam.tools.calibration.fit import PairPoints, epipolar_dy, rms
 from stereocam.tools.calibration.lens import SOLVE, calibrate_mono, calibrate_stereo
-from stereocam.tools.calibration.boards import detect_all
 from stereocam.tools.calibration.solve import choose_detector, match_detections
+from stereocam.tools.options import CONTEXT, epilog
 
 SETS = {  # name: (folder relative to the sets folder, or to the repository for OpenCV's pairs, board, square)
     "opencv_pairs": ("tests/data/opencv_chessboard_pairs", "9x6", "0.025"),
@@ -51,7 +54,7 @@ def opencv_all_pairs(directory: Path, board_text: str, square: str | None, model
     """OpenCV's solution on every pair where both boards are found (same detections as the tool)."""
     board = parse_board(board_text, None if square is None else float(square))
     found = []
-    for n, lp, rp in calibrate.find_pairs(directory):
+    for n, lp, rp in find_pairs(directory):
         dl, dr = (detect_all(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), board) for p in (lp, rp))
         if match_detections(dl, dr, board, ()) is not None:
             found.append((n, lp.name, dl, dr))
@@ -86,7 +89,7 @@ def compare(directory: Path, board: str, square: str | None, out: Path) -> dict:
     """Run the tool as a user would and compare it with OpenCV's all-pairs solution."""
     argv = ["-q", "--images", str(directory), "--board", board, "--out", str(out), "--db", str(out / "f.sqlite")]
     with contextlib.redirect_stdout(io.StringIO()):
-        code = calibrate.main(argv + ([] if square is None else ["--square-size", square]))
+        code = cli.main(["calibrate", *argv, *([] if square is None else ["--square-size", square])])
     doc = json.loads((out / "calibration.json").read_text())
     mine = StereoCalibration.from_json_dict(doc)
     ref, pairs = opencv_all_pairs(directory, board, square, mine.lens_model)
@@ -97,11 +100,13 @@ def compare(directory: Path, board: str, square: str | None, out: Path) -> dict:
             "fx": mine.K_left[0, 0], "baseline_m": mine.baseline_m}
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="bench_calib_real", description=__doc__.splitlines()[0])
-    ap.add_argument("--sets", type=Path, default=Path("../shared/data/calibration"), help="the shared sets folder")
-    ap.add_argument("--only", choices=list(SETS), action="append", help="run only these sets")
-    args = ap.parse_args(argv)
+@click.command("calib-real", context_settings=CONTEXT, epilog=epilog())
+@click.option("--sets", type=click.Path(file_okay=False, path_type=Path), default=Path("../shared/data/calibration"),
+              show_default=True, help="The shared sets folder.")
+@click.option("--only", type=click.Choice(list(SETS)), multiple=True, help="Run only these sets (repeatable).  [default: all]")
+def command(**params: Any) -> int:
+    """Real calibration sets against OpenCV's own all-pairs solution, with the done-when targets."""
+    args = SimpleNamespace(**params)
     print(f"{'set':<20} {'exit':>4} {'model':<20} {'used':>4} {'drop':>4} {'fxL %':>7} {'fxR %':>7} "
           f"{'base %':>7} {'epi px':>7} {'cv epi':>7} {'time s':>6}")
     ok = True
@@ -126,6 +131,3 @@ def main(argv: list[str] | None = None) -> int:
           + ("MET" if ok else "MISSED"))
     return 0 if ok else 1
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

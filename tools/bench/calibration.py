@@ -10,17 +10,28 @@ Targets: every relative error ≤ 0.2 %, held-out epipolar RMS < 0.1 px. Exit st
 """
 from __future__ import annotations
 
-import argparse
 import time
+from types import SimpleNamespace
+from typing import Any
 
+import click
 import cv2
 import numpy as np
 
-from stereocam.device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
-from stereocam.protocol.calibration import StereoCalibration
+from stereocam.device_sim.calibration.board import (
+    BoardSpec,
+    StereoBoardRenderer,
+    board_poses,
+)
 from stereocam.device_sim.calibration.rays import project_points
 from stereocam.device_sim.calibration.truth import true_calibration
-from stereocam.tools.calibration.solve import CalibrationResult, SolveConfig, calibrate_pairs
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.tools.calibration.solve import (
+    CalibrationResult,
+    SolveConfig,
+    calibrate_pairs,
+)
+from stereocam.tools.options import CONTEXT, epilog
 
 MAX_REL_ERROR = 0.002
 MAX_EPIPOLAR_PX = 0.1
@@ -66,15 +77,17 @@ def run_seed(seed: int, size: tuple[int, int], board: BoardSpec, views: int, noi
     return row
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam bench-calibration", description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=5, help="number of simulated units (seeds 0..N-1)")
-    ap.add_argument("--views", type=int, default=100, help="board poses rendered per unit")
-    ap.add_argument("--width", type=int, default=1280)
-    ap.add_argument("--height", type=int, default=960)
-    ap.add_argument("--noise", type=float, default=1.0, help="sensor noise sigma, DN")
-    ap.add_argument("--supersample", type=int, default=1)
-    args = ap.parse_args(argv)
+@click.command("calibration", context_settings=CONTEXT, epilog=epilog())
+@click.option("--seeds", type=click.IntRange(min=1), default=5, show_default=True,
+              help="Number of simulated units (seeds 0..N-1).")
+@click.option("--views", type=click.IntRange(min=1), default=100, show_default=True, help="Board poses rendered per unit.")
+@click.option("--width", type=click.IntRange(min=1), default=1280, show_default=True, help="Image width, px.")
+@click.option("--height", type=click.IntRange(min=1), default=960, show_default=True, help="Image height, px.")
+@click.option("--noise", type=click.FloatRange(min=0), default=1.0, show_default=True, help="Sensor noise sigma, DN.")
+@click.option("--supersample", type=click.IntRange(min=1), default=1, show_default=True, help="Render supersampling.")
+def command(**params: Any) -> int:
+    """Calibration accuracy benchmark: calibrate simulated units from rendered views, compare to truth."""
+    args = SimpleNamespace(**params)
     board = BoardSpec(9, 6, 0.025)
     print(f"board {board.cols}x{board.rows} x {board.square_m * 1000:.0f} mm, {args.width}x{args.height}, "
           f"{args.views} poses/unit, noise {args.noise} DN, supersample {args.supersample}")
@@ -97,6 +110,3 @@ def main(argv: list[str] | None = None) -> int:
           + ("MET" if ok else "MISSED"))
     return 0 if ok else 1
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

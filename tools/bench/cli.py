@@ -1,4 +1,4 @@
-"""stereocam bench: benchmark figures, not pass/fail (see the command's help for the modes)."""
+"""stereocam bench: benchmark figures, not pass/fail; one subcommand per benchmark (see MODULES)."""
 from __future__ import annotations
 
 import importlib
@@ -9,6 +9,7 @@ import numpy as np
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import Decoder
+from stereocam.tools.options import CONTEXT, epilog
 
 
 def bench_protocol(seconds: float = 2.0) -> dict[str, float]:
@@ -33,60 +34,73 @@ def bench_protocol(seconds: float = 2.0) -> dict[str, float]:
     return {"decode_MBps": mbps}
 
 
-MODES = ("protocol", "decoder", "transport", "usb", "matching", "calibration", "calib-real", "sync", "firmware",
-         "record", "rematch",
-         "all")
+MODULES: dict[str, tuple[str, str]] = {
+    "decoder": ("decoder", "the decoder's cost per byte on adversarial streams against its clean cost"),
+    "transport": ("transport", "end-to-end fps, MB/s, drops, latency p50/p99 at 640x480 over sim, pty, tcp, usb"),
+    "usb": ("usb", "the USB path alone: bulk IN MB/s through pyusb"),
+    "matching": ("matching", "the numba matching core against cv2.StereoBM (--algorithm sgm: against SGBM)"),
+    "calibration": ("calibration", "calibration accuracy of the solver against the simulator's truth"),
+    "device-calibration": ("device_calibration", "device-mode calibration against truth, depth through it"),
+    "calib-real": ("calib_real", "the offline tool on real calibration sets against OpenCV's all-pairs solution"),
+    "sync": ("sync", "three heads on one trigger line: skew within matched sets, clock-map error vs truth"),
+    "firmware": ("firmware", "a 2 MiB signed image installed per transport, and one update's state trace"),
+    "record": ("record", "the recorder's ceiling (MB/s), a live recording's drops, seek time by frame index"),
+    "rematch": ("rematch", "stereocam rematch frames/s with 1 and 2 local Dask workers"),
+}
+"""name -> (module in stereocam.tools.bench, one-line help); each module provides ``command``."""
+
+EPILOG = epilog("Figures, never pass/fail: 0 done; a bench with targets (calibration, device-calibration, "
+                "calib-real) exits 1 when it misses them.")
 
 
-@click.command("bench", context_settings={"ignore_unknown_options": True},
-               epilog="Exit codes: 0 done (figures, never pass/fail); 1 a camera or simulator failed; 2 bad usage.")
-@click.argument("what", type=click.Choice(MODES), default="all")
-@click.option("--seconds", type=click.FloatRange(0, min_open=True), default=None,
-              help="Capture time per transport (transport: 5 s, record: 5 s, sync: 120 s when not given).")
-@click.argument("extra", nargs=-1, type=click.UNPROCESSED)
-def command(what: str, seconds: float | None, extra: tuple[str, ...]) -> int:
-    """Print benchmark figures. WHAT is one of:
+class BenchTable(click.Group):
+    """``protocol`` and ``all`` here, the other benches from MODULES, imported only when run."""
 
-    \b
-    protocol     decoder throughput (MB/s): 640x480 frame messages fed in 64 KiB chunks
-    decoder      the decoder's cost per byte on adversarial streams against its clean cost
-    transport    end-to-end fps, MB/s, drops, latency p50/p99 at 640x480 over sim, pty, tcp,
-                 usb high and super speed (--algorithm bm|sgm, --transport KIND), stage profile
-    usb          the USB path alone: bulk IN MB/s through pyusb
-    matching     the numba matching core against cv2.StereoBM
-    calibration  calibration accuracy against the simulator's truth, solver and device tool
-    calib-real   the offline tool on real calibration sets against OpenCV's all-pairs solution
-    sync         three heads on one trigger line: skew within matched sets, clock-map error vs truth
-    firmware     a 2 MiB signed image installed per transport, and one update's state trace
-    record       the recorder's ceiling (MB/s), a live recording's drops, seek time by frame index
-    rematch      stereocam rematch frames/s with 1 and 2 local Dask workers
-    all          protocol, decoder, transport, matching and calibration (default)
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return ["protocol", *MODULES, "all"]
 
-    Arguments after WHAT that this command does not know go to the transport, usb or matching bench."""
-    rest = list(extra)
-    timed = rest + ([] if seconds is None else ["--seconds", str(seconds)])  # for the modes with a --seconds
-    if what in ("protocol", "all"):
-        bench_protocol()
-    if what in ("decoder", "all"):
-        importlib.import_module("stereocam.tools.bench.decoder").main([])
-    if what in ("transport", "all"):
-        importlib.import_module("stereocam.tools.bench.transport").main(rest if what == "transport" else [],
-                                                                        5.0 if seconds is None else seconds)
-    if what == "sync":  # minutes of capture: only when asked for
-        importlib.import_module("stereocam.tools.bench.sync").main(timed)
-    if what == "firmware":
-        importlib.import_module("stereocam.tools.bench.firmware").main(rest)
-    if what == "calib-real":
-        importlib.import_module("stereocam.tools.bench.calib_real").main(rest)
-    if what == "record":
-        importlib.import_module("stereocam.tools.bench.record").main(timed)
-    if what == "rematch":
-        importlib.import_module("stereocam.tools.bench.rematch").main(rest)
-    if what == "usb":
-        importlib.import_module("stereocam.tools.bench.usb").main(rest)
-    if what in ("matching", "all"):
-        importlib.import_module("stereocam.tools.bench.matching").main(rest)
-    if what in ("calibration", "all"):
-        importlib.import_module("stereocam.tools.bench.calibration").main([])
-        importlib.import_module("stereocam.tools.bench.device_calibration").main([])
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name in MODULES:
+            return importlib.import_module(f"stereocam.tools.bench.{MODULES[name][0]}").command
+        return super().get_command(ctx, name)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        with formatter.section("Benchmarks"):
+            formatter.write_dl([("protocol", "decoder throughput (MB/s): 640x480 frame messages in 64 KiB reads"),
+                                *((name, text) for name, (_, text) in MODULES.items()),
+                                ("all", "protocol, decoder, transport, matching, calibration, device-calibration "
+                                        "(the default)")])
+
+
+@click.group("bench", cls=BenchTable, invoke_without_command=True, context_settings=CONTEXT, epilog=EPILOG,
+             subcommand_metavar="[BENCHMARK [OPTIONS]]")
+@click.pass_context
+def command(ctx: click.Context) -> int | None:
+    """Print benchmark figures; without a BENCHMARK, all of the quick ones. Each benchmark's --help
+    lists its options and their defaults."""
+    if ctx.invoked_subcommand is None:
+        return ctx.invoke(run_all)
+    return None
+
+
+@command.command("protocol", epilog=EPILOG)
+@click.option("--seconds", type=click.FloatRange(0, min_open=True), default=2.0, show_default=True,
+              help="Decoding time.")
+def protocol(seconds: float) -> int:
+    """Decoder throughput (MB/s): 640x480 frame messages fed in 64 KiB chunks."""
+    bench_protocol(seconds)
+    return 0
+
+
+@command.command("all", epilog=EPILOG)
+@click.option("--seconds", type=click.FloatRange(0, min_open=True), default=5.0, show_default=True,
+              help="Capture time per transport.")
+@click.pass_context
+def run_all(ctx: click.Context, seconds: float) -> int:
+    """protocol, decoder, transport, matching, calibration and device-calibration with their defaults."""
+    bench_protocol()
+    group = ctx.parent.command if ctx.parent is not None else command
+    for name, extra in (("decoder", {}), ("transport", {"seconds": seconds}), ("matching", {}),
+                        ("calibration", {}), ("device-calibration", {})):
+        ctx.invoke(group.get_command(ctx, name), **extra)
     return 0

@@ -6,16 +6,18 @@ these shapes probe; tests/protocol/test_decoder_hostile.py checks it with a gene
 """
 from __future__ import annotations
 
-import argparse
 import binascii
 import struct
 import time
-from typing import Callable
+from types import SimpleNamespace
+from typing import Any, Callable
 
+import click
 import numpy as np
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import MAGIC, MAX_PAYLOAD, Decoder
+from stereocam.tools.options import CONTEXT, epilog
 
 READ = 65536
 
@@ -89,10 +91,12 @@ def cost_per_byte(stream: bytes, repeat: int = 1) -> float:
     return best
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam bench decoder", description=__doc__.splitlines()[0])
-    ap.add_argument("--mib", type=float, default=4.0, help="stream size per shape")
-    args = ap.parse_args(argv)
+@click.command("decoder", context_settings=CONTEXT, epilog=epilog())
+@click.option("--mib", type=click.FloatRange(min=0, min_open=True), default=4.0, show_default=True,
+              help="Stream size per shape, MiB.")
+def command(**params: Any) -> int:
+    """The decoder's cost per input byte on clean and adversarial streams."""
+    args = SimpleNamespace(**params)
     size = int(args.mib * (1 << 20))
     costs = {name: cost_per_byte(make(size), 3) for name, make in SHAPES.items()}
     clean = costs["clean 640x480 captures"]

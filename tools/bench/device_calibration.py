@@ -8,21 +8,23 @@ depth error is measured. Prints a table; exits 1 if a target is missed.
 """
 from __future__ import annotations
 
-import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
 
+import click
 import numpy as np
 
-from stereocam.device_sim import SimulatedCamera
-from stereocam.device_sim.rig.scene import WALL_DISTANCE_M
 from stereocam.camera import Camera
+from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.links.inprocess import InProcessTransport
-from stereocam.tools.calibration.solve import SolveConfig
-from stereocam.tools.calibration.device import calibrate_device
+from stereocam.device_sim.rig.scene import WALL_DISTANCE_M
 from stereocam.device_sim.rig.sensor import BOARD
+from stereocam.tools.calibration.device import calibrate_device
+from stereocam.tools.calibration.solve import SolveConfig
+from stereocam.tools.options import CONTEXT, epilog
 
 TARGET_PCT, TARGET_EPI_PX, TARGET_DEPTH_PCT = 0.2, 0.1, 1.0
 
@@ -60,10 +62,12 @@ def one_unit(seed: int, workdir: Path) -> dict[str, float]:
         valid=100 * float(np.isfinite(z).mean()), views=result.quality.views_used, secs=elapsed)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam bench calibration", description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
-    args = ap.parse_args(argv)
+@click.command("device-calibration", context_settings=CONTEXT, epilog=epilog())
+@click.option("--seeds", type=int, multiple=True, default=(0, 1, 2, 3, 4), show_default=True,
+              help="Simulated units (repeatable).")
+def command(**params: Any) -> int:
+    """Device-mode calibration against the simulator's truth, and metric depth through the result."""
+    args = SimpleNamespace(**params)
     cols = ("fx", "fy", "cx", "cy", "baseline", "rms", "epi", "depth", "valid", "views", "secs")
     print("device-mode calibration vs truth (errors in %, worst of both cameras; rms/epi in px; "
           "depth = median error on a wall at 1 m through the stored calibration, %)")
@@ -83,6 +87,3 @@ def main(argv: list[str] | None = None) -> int:
           f"depth at 1 m within {TARGET_DEPTH_PCT} %: {'MET' if ok else 'MISSED'}")
     return 0 if ok else 1
 
-
-if __name__ == "__main__":
-    sys.exit(main())

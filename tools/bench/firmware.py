@@ -2,11 +2,13 @@
 USB) side by side, and the states a unit goes through in one update (a trace)."""
 from __future__ import annotations
 
-import argparse
 import contextlib
 import hashlib
 import time
-from typing import Iterator
+from types import SimpleNamespace
+from typing import Any, Iterator
+
+import click
 
 import stereocam
 from stereocam import firmware_update as fw
@@ -16,6 +18,7 @@ from stereocam.device_sim.handlers.device_info import FACTORY_BUILD, MODEL
 from stereocam.device_sim.process import ServedSimulator
 from stereocam.protocol import messages as m
 from stereocam.protocol.firmware_image import FirmwareBuild, build_image
+from stereocam.tools.options import CONTEXT, epilog
 
 
 def signed_image(version: str, size: int) -> bytes:
@@ -74,11 +77,12 @@ def trace(image: bytes) -> list[str]:
     return lines
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam bench firmware", description=__doc__.splitlines()[0])
-    ap.add_argument("--size", type=int, default=2 << 20, help="image size in bytes")
-    ap.add_argument("--repeat", type=int, default=2)
-    args = ap.parse_args(argv)
+@click.command("firmware", context_settings=CONTEXT, epilog=epilog())
+@click.option("--size", type=click.IntRange(min=1), default=2 << 20, show_default=True, help="Image size in bytes.")
+@click.option("--repeat", type=click.IntRange(min=1), default=2, show_default=True, help="Updates per transport (the best counts).")
+def command(**params: Any) -> int:
+    """A signed image installed per transport (in-process, TCP, USB), and one update's state trace."""
+    args = SimpleNamespace(**params)
     image = signed_image("1.2.0", args.size)
     print(f"firmware update of a {len(image)}-byte signed image (transfer, verify, reboot, reconnect, read-back, "
           "confirm)")

@@ -12,16 +12,19 @@ machine are only comparable within one run.
 """
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 import time
 import tracemalloc
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
 
+import click
 import numpy as np
 
 from stereocam.tools.bench.stereobm_oracle import opencv_stereobm
+from stereocam.tools.options import CONTEXT, epilog
 
 
 def synthetic_scene(h: int = 480, w: int = 640, seed: int = 0):
@@ -115,19 +118,17 @@ def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam bench matching", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--threads", type=int, default=2, help="threads for both (default 2)")
-    ap.add_argument("--repeat", type=int, default=15, help="timed runs per case")
-    ap.add_argument("--quick", action="store_true", help="only 640x480, D=64, block 9")
-    ap.add_argument("--profile", action="store_true", help="per-stage timings of the core")
-    ap.add_argument("--cold-jit", action="store_true",
-                    help="also time a from-scratch compile (subprocess, empty numba cache)")
-    ap.add_argument("--algorithm", choices=["bm", "sgm"], default="bm",
-                    help="bm: the block matcher vs cv2.StereoBM; sgm: our SGM vs every "
-                         "cv2.StereoSGBM mode and StereoBM (tools/bench/sgm.py)")
-    args = ap.parse_args(argv)
+@click.command("matching", context_settings=CONTEXT, epilog=epilog())
+@click.option("--threads", type=click.IntRange(min=1), default=2, show_default=True, help="Threads for both.")
+@click.option("--repeat", type=click.IntRange(min=1), default=15, show_default=True, help="Timed runs per case.")
+@click.option("--quick", is_flag=True, help="Only 640x480, D=64, block 9.")
+@click.option("--profile", is_flag=True, help="Per-stage timings of the core.")
+@click.option("--cold-jit", is_flag=True, help="Also time a from-scratch compile (subprocess, empty numba cache).")
+@click.option("--algorithm", type=click.Choice(["bm", "sgm"]), default="bm", show_default=True,
+              help="bm: the block matcher vs cv2.StereoBM; sgm: our SGM vs every cv2.StereoSGBM mode and StereoBM.")
+def command(**params: Any) -> int:
+    """Benchmark the device matching core against cv2.StereoBM in one process."""
+    args = SimpleNamespace(**params)
     if args.algorithm == "sgm":
         from .sgm import main as sgm_main
         return sgm_main(args)
@@ -197,6 +198,3 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average at the end: {os.getloadavg()[0]:.2f}")
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -9,17 +9,20 @@ Seek: random frames of a 10 000-frame recording, each read through the file's in
 """
 from __future__ import annotations
 
-import argparse
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
 
+import click
 import numpy as np
 import zstandard
 
 import stereocam
 from stereocam.recording import Recorder, UnitDescription, convert, describe
 from stereocam.recording.reader import Recording
+from stereocam.tools.options import CONTEXT, epilog
 
 YARDSTICK_MBPS = 1280 * 960 * 3 * 30 / 1e6  # the issue's "1280x960, three planes, 30 fps"
 
@@ -123,14 +126,18 @@ def bench_seek(frames: int, out_dir: Path, probes: int = 20) -> dict[str, float]
     return {"seek_median_ms": float(np.median(times) * 1e3), "open_ms": opened * 1e3}
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam bench record", description=__doc__.splitlines()[0])
-    ap.add_argument("--seconds", type=float, default=5.0)
-    ap.add_argument("--level", type=int, default=1)
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--seek-frames", type=int, default=10_000, help="length of the recording to seek in")
-    ap.add_argument("--dir", default=None, help="where to write the files (default: a temporary folder)")
-    args = ap.parse_args(argv)
+@click.command("record", context_settings=CONTEXT, epilog=epilog())
+@click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=5.0, show_default=True,
+              help="Time per measurement.")
+@click.option("--level", type=int, default=1, show_default=True, help="zstd level of the chunks.")
+@click.option("--threads", type=click.IntRange(min=1), default=2, show_default=True, help="Compression threads.")
+@click.option("--seek-frames", type=click.IntRange(min=1), default=10_000, show_default=True,
+              help="Length of the recording to seek in.")
+@click.option("--dir", type=click.Path(file_okay=False), default=None,
+              help="Where to write the files.  [default: a temporary folder]")
+def command(**params: Any) -> int:
+    """The recorder's ceiling, and a live recording at the camera's full rate."""
+    args = SimpleNamespace(**params)
     with tempfile.TemporaryDirectory(prefix="stereocam-bench-", dir=args.dir) as tmp:
         bench_ceiling(args.seconds, args.level, args.threads, Path(tmp))
         r = bench_ceiling(args.seconds, args.level, args.threads, Path(tmp), 640, 480)

@@ -7,12 +7,16 @@ re-matching itself.
 """
 from __future__ import annotations
 
-import argparse
 import logging
 import tempfile
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import click
 
 import stereocam
+from stereocam.tools.options import CONTEXT, epilog
 from stereocam.tools.recording.rematch import _client, rematch
 
 
@@ -26,11 +30,13 @@ def _warm(_: int = 0) -> None:
 RUNS = (("bm", {"block_size": 21}, "block matching, block_size 15 -> 21"), ("sgm", {}, "SGM, 8 paths"))
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam bench rematch", description=__doc__.splitlines()[0])
-    ap.add_argument("--frames", type=int, default=40)
-    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
-    args = ap.parse_args(argv)
+@click.command("rematch", context_settings=CONTEXT, epilog=epilog())
+@click.option("--frames", type=click.IntRange(min=1), default=40, show_default=True, help="Frames to record and re-match.")
+@click.option("--workers", type=click.IntRange(min=1), multiple=True, default=(1, 2), show_default=True,
+              help="Local worker counts to time (repeatable).")
+def command(**params: Any) -> int:
+    """Frames/s of stereocam rematch with 1 and 2 local Dask workers."""
+    args = SimpleNamespace(**params)
     with tempfile.TemporaryDirectory(prefix="stereocam-rematch-") as tmp:
         src = Path(tmp) / "in" / "run.mcap"
         src.parent.mkdir()

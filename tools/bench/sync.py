@@ -11,23 +11,25 @@ never from the wire.
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import os
 import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator
+from types import SimpleNamespace
+from typing import Any, Callable, Iterator
 
+import click
 import numpy as np
 
 import stereocam
+from stereocam.clock import MapError
 from stereocam.device_sim import SimulatedCamera, TriggerLine
 from stereocam.device_sim.process import ServedSimulator
-from stereocam.clock import MapError
 from stereocam.frame_sets import MatchedSet
 from stereocam.protocol.params import Output
+from stereocam.tools.options import CONTEXT, epilog
 
 SEEDS = (4, 14, 25)  # units with large drifts of both signs (-46, +50, +45 ppm)
 CONFIG = dict(width=160, height=120, outputs=int(Output.LEFT))  # timing, not imaging: keep the CPU for it
@@ -119,12 +121,15 @@ def report(kind: str, run: Run, truth: Callable[[str, int], float | None]) -> di
     return out
 
 
-def main(argv: list[str] | None = None) -> dict[str, dict[str, float]]:
-    ap = argparse.ArgumentParser(prog="stereocam bench sync", description=__doc__.splitlines()[0])
-    ap.add_argument("--seconds", type=float, default=120.0, help="capture time per transport")
-    ap.add_argument("--fps", type=int, default=30, help="the master head's frame rate (1..120)")
-    ap.add_argument("--transports", default="inprocess,tcp,pty", help="comma-separated: inprocess, tcp, pty")
-    args = ap.parse_args(argv)
+@click.command("sync", context_settings=CONTEXT, epilog=epilog())
+@click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=120.0, show_default=True,
+              help="Capture time per transport.")
+@click.option("--fps", type=click.IntRange(1, 120), default=30, show_default=True, help="The master head's frame rate.")
+@click.option("--transports", default="inprocess,tcp,pty", show_default=True,
+              help="Comma-separated: inprocess, tcp, pty.")
+def command(**params: Any) -> dict[str, dict[str, float]]:
+    """Several heads on one trigger line, how well their capture times agree."""
+    args = SimpleNamespace(**params)
     kinds = [k.strip() for k in args.transports.split(",") if k.strip()]
     print(f"{len(SEEDS)} heads (seeds {SEEDS}) on one external trigger line at {args.fps:g} fps, "
           f"{CONFIG['width']}x{CONFIG['height']} left plane only, {args.seconds:g} s per transport.")

@@ -8,16 +8,18 @@ usb) also the device's stage profile (ms per frame, wall) and the process CPU pe
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import time
 from dataclasses import dataclass, field
-from typing import Iterator, Sequence
+from types import SimpleNamespace
+from typing import Any, Iterator
 
+import click
 import numpy as np
 from tqdm import tqdm
 
 from stereocam.device_sim.pipeline.stereo import BLOCK_MATCHING, SEMI_GLOBAL
+from stereocam.tools.options import CONTEXT, epilog
 from stereocam.tools.progress import progress_wanted
 
 KINDS = ("sim", "pty", "tcp", "usb-high", "usb-super")
@@ -118,19 +120,21 @@ def report(runs: list[Run], algorithm: str) -> None:
               f"{1e3 * CORES / best:.0f} fps if its stages overlapped perfectly.")
 
 
-def main(argv: Sequence[str] | None = None, seconds: float = 5.0) -> dict[str, float]:
-    parser = argparse.ArgumentParser(prog="stereocam bench transport", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--algorithm", choices=list(ALGORITHMS), action="append",
-                        help="matching engine on the device (repeatable; default bm)")
-    parser.add_argument("--transport", choices=KINDS, action="append", dest="kinds",
-                        help="transport to measure (repeatable; default all)")
-    args = parser.parse_args(list(argv or ()))
+@click.command("transport", context_settings=CONTEXT, epilog=epilog())
+@click.option("--algorithm", type=click.Choice(list(ALGORITHMS)), multiple=True,
+              help="Matching engine on the device (repeatable).  [default: bm]")
+@click.option("--transport", "kinds", type=click.Choice(KINDS), multiple=True,
+              help="Transport to measure (repeatable).  [default: all]")
+@click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=5.0, show_default=True,
+              help="Capture time per transport.")
+def command(**params: Any) -> dict[str, float]:
+    """End-to-end figures of a simulated camera per transport and algorithm."""
+    args = SimpleNamespace(**params)
     out: dict[str, float] = {}
     for algorithm in args.algorithm or ["bm"]:
         print(f"end-to-end at 640x480, 64 disparities, all three planes, 60 fps asked, {algorithm}, "
-              f"{seconds:.0f} s each (sim and usb run the device in this process, pty and tcp in a second one):")
-        runs = [stream(kind, algorithm, seconds) for kind in args.kinds or KINDS]
+              f"{args.seconds:.0f} s each (sim and usb run the device in this process, pty and tcp in a second one):")
+        runs = [stream(kind, algorithm, args.seconds) for kind in args.kinds or KINDS]
         report(runs, algorithm)
         out.update({f"{r.kind}_{algorithm}_fps": r.fps for r in runs})
     return out

@@ -6,15 +6,17 @@
 """
 from __future__ import annotations
 
-import argparse
 import array
 import time
-from typing import Sequence
+from types import SimpleNamespace
+from typing import Any
 
+import click
 import usb.core
 
 import stereocam.device_sim.usb as simusb
 from stereocam.device_sim.usb.testdevices import SourceDevice
+from stereocam.tools.options import CONTEXT, epilog
 from stereocam.transports import usb as usb_transport
 
 MB = 1e6
@@ -78,20 +80,21 @@ def bench_camera(frames: int, fps: int) -> tuple[float, float]:
         cam.close()
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="bench_usb", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--mb", type=float, default=256, help="MB to stream per raw test")
-    parser.add_argument("--chunk", type=int, default=640 * 480 * 2,
-                        help="bytes per device IN transfer (default: one 640x480 16-bit plane)")
-    parser.add_argument("--read-size", type=int, default=usb_transport.READ_SIZE,
-                        help="bytes per host bulk read (a multiple of 512)")
-    parser.add_argument("--frames", type=int, default=60, help="frames for the camera test")
-    parser.add_argument("--fps", type=int, default=120, help="fps requested from the camera")
-    parser.add_argument("--no-camera", action="store_true", help="skip the SimulatedCamera test")
-    args = parser.parse_args(argv)
+@click.command("usb", context_settings=CONTEXT, epilog=epilog())
+@click.option("--mb", type=click.FloatRange(min=0, min_open=True), default=256, show_default=True,
+              help="MB to stream per raw test.")
+@click.option("--chunk", type=click.IntRange(min=1), default=640 * 480 * 2, show_default=True,
+              help="Bytes per device IN transfer (one 640x480 16-bit plane).")
+@click.option("--read-size", type=click.IntRange(min=512), default=usb_transport.READ_SIZE, show_default=True,
+              help="Bytes per host bulk read (a multiple of 512).")
+@click.option("--frames", type=click.IntRange(min=1), default=60, show_default=True, help="Frames for the camera test.")
+@click.option("--fps", type=click.IntRange(min=1), default=120, show_default=True, help="fps requested from the camera.")
+@click.option("--no-camera", is_flag=True, help="Skip the SimulatedCamera test.")
+def command(**params: Any) -> int:
+    """Benchmark the USB path on the simulated bus."""
+    args = SimpleNamespace(**params)
     if args.read_size % simusb.MAX_PACKET_SIZE:
-        parser.error("--read-size must be a multiple of 512")
+        raise click.BadParameter("must be a multiple of 512", param_hint="--read-size")
     total = int(args.mb * MB)
     print(f"USB bulk IN, {total / MB:.0f} MB, device transfers of {args.chunk} B")
     print(f"  pyusb core, {args.read_size} B reads : {bench_pyusb(total, args.chunk, args.read_size):8.1f} MB/s")
@@ -106,6 +109,3 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"  {fps:8.1f} frames/s, {rate:8.1f} MB/s of image data")
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

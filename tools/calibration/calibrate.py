@@ -42,27 +42,38 @@ captured or written; every attempt is recorded in the factory database (tools/fa
 """
 from __future__ import annotations
 
-import argparse
-import re
 import socket
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
 
+import click
 import cv2
 import numpy as np
 
 from stereocam.tools.calibration.boards import describe, parse_board
-from stereocam.tools.calibration.outputs import PairProgress, print_summary, write_outputs
 from stereocam.tools.calibration.camera_info import stream_sizes
-from stereocam.tools.camera.session import writable_dir
-from stereocam.tools.factory.db import FactoryDB, FactoryDBError, default_url
-from stereocam.tools.factory.record import make_attempt, now_utc
 from stereocam.tools.calibration.files import find_pairs
 from stereocam.tools.calibration.fit import OutlierRules
 from stereocam.tools.calibration.lens import ALIASES
-from stereocam.tools.calibration.solve import (CalibrationError, CalibrationResult, SolveConfig, UnusableImagesError,
-                                        calibrate_pairs)
+from stereocam.tools.calibration.outputs import (
+    PairProgress,
+    print_summary,
+    write_outputs,
+)
+from stereocam.tools.calibration.solve import (
+    CalibrationError,
+    CalibrationResult,
+    SolveConfig,
+    UnusableImagesError,
+    calibrate_pairs,
+)
+from stereocam.tools.camera.session import writable_dir
+from stereocam.tools.factory.db import FactoryDB, FactoryDBError, default_url
+from stereocam.tools.factory.record import make_attempt, now_utc
+from stereocam.tools.options import CONTEXT, SIZE, epilog
 
 EXIT_OK, EXIT_USAGE, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_SAVE = 0, 2, 3, 4, 6
 
@@ -73,75 +84,85 @@ def _load(pairs: list[tuple[int, Path, Path]]) -> Iterator[tuple[np.ndarray | No
         yield cv2.imread(str(left), cv2.IMREAD_GRAYSCALE), cv2.imread(str(right), cv2.IMREAD_GRAYSCALE)
 
 
-def _size(text: str) -> tuple[int, int]:
-    m = re.fullmatch(r"(\d+)[xX](\d+)", text)
-    if not m:
-        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 640x480, got {text!r}")
-    return int(m.group(1)), int(m.group(2))
+class Range(click.ParamType):
+    """``MIN:MAX`` as (min, max)."""
+
+    name = "MIN:MAX"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> tuple[float, float]:
+        if isinstance(value, tuple):
+            return value
+        try:
+            lo, hi = (float(v) for v in str(value).split(":"))
+        except ValueError:
+            self.fail(f"expected MIN:MAX, got {value!r}", param, ctx)
+        return lo, hi
 
 
-def _range(text: str) -> tuple[float, float]:
-    try:
-        lo, hi = (float(v) for v in text.split(":"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected MIN:MAX, got {text!r}") from None
-    return lo, hi
+_DOC = __doc__.replace("``", "")
+_D, _O = SolveConfig(), OutlierRules()
 
 
-def _parser() -> argparse.ArgumentParser:
-    doc = __doc__.replace("``", "")
-    ap = argparse.ArgumentParser(prog="stereocam calibrate", description=doc.splitlines()[0],
-                                 epilog="Exit codes: " + doc[doc.index("Exit status:") + len("Exit status:"):].strip(),
-                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    ap.add_argument("url", nargs="?", help="camera to calibrate (device mode)")
-    ap.add_argument("--images", type=Path,
-                    help="folder of left<N>/right<N> (or L<N>/R<N>) images, or of left/ and right/ folders (offline mode)")
-    ap.add_argument("--board", default="9x6",
-                    help="COLSxROWS inner corners of a chessboard, or charuco:COLSxROWS:SQUARE:MARKER:DICT "
-                         "(squares; lengths in metres)")
-    ap.add_argument("--square-size", type=float, default=None,
-                    help="chessboard square side in metres (required offline; device default 0.03)")
-    ap.add_argument("--out", type=Path, required=True, help="output folder")
-    ap.add_argument("--target", choices=["user", "factory"], default="user",
-                    help="device record to write: user (any unit), or factory (only a unit fresh from assembly: "
-                         "once written the factory record is write-protected and the unit refuses, exit 5)")
-    ap.add_argument("--pairs", type=int, default=200, help="device mode: most pairs to capture")
-    ap.add_argument("--size", type=_size, default=None, metavar="WxH",
-                    help="device mode: capture format (default the full sensor)")
-    ap.add_argument("--lens-model", default="auto", choices=["auto", *ALIASES],
-                    help="lens model; auto: chosen by held-out error, the simpler wins ties")
-    d, o = SolveConfig(), OutlierRules()
-    ap.add_argument("--max-stereo-rms", type=float, default=d.max_stereo_rms_px, help="gate: stereo RMS, px")
-    ap.add_argument("--max-epipolar", type=float, default=d.max_epipolar_rms_px,
-                    help="gate: held-out epipolar RMS, px")
-    ap.add_argument("--max-pixel-aspect", type=float, default=d.max_pixel_aspect,
-                    help="gate: fy/fx must lie within [1/A, A]")
-    ap.add_argument("--baseline-range", type=_range, default=(d.min_baseline_m, d.max_baseline_m),
-                    metavar="MIN:MAX", help="gate: plausible baseline, metres")
-    ap.add_argument("--min-views", type=int, default=d.min_views, help="device mode: distinct views needed")
-    ap.add_argument("--max-views", type=int, default=d.max_views, help="device mode: stop after this many views")
-    ap.add_argument("--min-pairs", type=int, default=d.min_pairs,
-                    help="offline: pairs with the board (outliers removed) needed")
-    ap.add_argument("--holdout-every", type=int, default=d.holdout_every,
-                    help="hold out every N-th pair for the lens-model choice and the epipolar check")
-    ap.add_argument("--model-tie", type=float, default=d.model_tie,
-                    help="relative held-out score difference within which the simpler lens model wins")
-    ap.add_argument("--outlier-k", type=float, default=o.k, help="outlier: > median + k x 1.4826 MAD ...")
-    ap.add_argument("--outlier-ratio", type=float, default=o.ratio, help="... and > ratio x median")
-    ap.add_argument("--outlier-rounds", type=int, default=o.rounds, help="outlier removal rounds")
-    ap.add_argument("--max-drop-fraction", type=float, default=o.max_drop_fraction,
-                    help="most pairs removed as outliers, fraction")
-    ap.add_argument("--db", default=default_url(),
-                    help="factory database for the record of this attempt: SQLite path or postgresql://...")
-    ap.add_argument("--station", default=socket.gethostname(), help="station name in the factory record")
-    ap.add_argument("--serial", default=None,
-                    help="unit serial in the factory record (default: the camera's; offline the folder name)")
-    ap.add_argument("-q", "--quiet", action="store_true",
-                    help="no per-pair lines; only the progress bar (pairs done / total, rate) on stderr")
-    return ap
+@click.command("calibrate", context_settings=CONTEXT,
+               epilog=epilog("Calibrate's own exit codes: " + _DOC[_DOC.index("Exit status:") + len("Exit status:"):].strip()))
+@click.argument("url", required=False)
+@click.option("--images", type=click.Path(path_type=Path), default=None,
+              help="Folder of left<N>/right<N> (or L<N>/R<N>) images, or of left/ and right/ folders (offline mode).")
+@click.option("--board", default="9x6", show_default=True,
+              help="COLSxROWS inner corners of a chessboard, or charuco:COLSxROWS:SQUARE:MARKER:DICT "
+                   "(squares; lengths in metres).")
+@click.option("--square-size", type=float, default=None,
+              help="Chessboard square side in metres (required offline).  [default: 0.03 in device mode]")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True, help="Output folder.")
+@click.option("--target", type=click.Choice(["user", "factory"]), default="user", show_default=True,
+              help="Device record to write: user (any unit), or factory (only a unit fresh from assembly: once "
+                   "written the factory record is write-protected and the unit refuses, exit 5).")
+@click.option("--pairs", type=click.IntRange(min=1), default=200, show_default=True,
+              help="Device mode: most pairs to capture.")
+@click.option("--size", type=SIZE, default=None, help="Device mode: capture format.  [default: the full sensor]")
+@click.option("--lens-model", type=click.Choice(["auto", *ALIASES]), default="auto", show_default=True,
+              help="Lens model; auto: chosen by held-out error, the simpler wins ties.")
+@click.option("--max-stereo-rms", type=float, default=_D.max_stereo_rms_px, show_default=True,
+              help="Gate: stereo RMS, px.")
+@click.option("--max-epipolar", type=float, default=_D.max_epipolar_rms_px, show_default=True,
+              help="Gate: held-out epipolar RMS, px.")
+@click.option("--max-pixel-aspect", type=float, default=_D.max_pixel_aspect, show_default=True,
+              help="Gate: fy/fx must lie within [1/A, A].")
+@click.option("--baseline-range", type=Range(), default=f"{_D.min_baseline_m}:{_D.max_baseline_m}", show_default=True,
+              help="Gate: plausible baseline, metres.")
+@click.option("--min-views", type=int, default=_D.min_views, show_default=True,
+              help="Device mode: distinct views needed.")
+@click.option("--max-views", type=int, default=_D.max_views, show_default=True,
+              help="Device mode: stop after this many views.")
+@click.option("--min-pairs", type=int, default=_D.min_pairs, show_default=True,
+              help="Offline: pairs with the board (outliers removed) needed.")
+@click.option("--holdout-every", type=int, default=_D.holdout_every, show_default=True,
+              help="Hold out every N-th pair for the lens-model choice and the epipolar check.")
+@click.option("--model-tie", type=float, default=_D.model_tie, show_default=True,
+              help="Relative held-out score difference within which the simpler lens model wins.")
+@click.option("--outlier-k", type=float, default=_O.k, show_default=True,
+              help="Outlier: > median + k x 1.4826 MAD ...")
+@click.option("--outlier-ratio", type=float, default=_O.ratio, show_default=True, help="... and > ratio x median.")
+@click.option("--outlier-rounds", type=int, default=_O.rounds, show_default=True, help="Outlier removal rounds.")
+@click.option("--max-drop-fraction", type=float, default=_O.max_drop_fraction, show_default=True,
+              help="Most pairs removed as outliers, fraction.")
+@click.option("--db", default=default_url(), show_default=True,
+              help="Factory database for the record of this attempt: SQLite path or postgresql://...")
+@click.option("--station", default=socket.gethostname(), show_default=True, help="Station name in the factory record.")
+@click.option("--serial", default=None,
+              help="Unit serial in the factory record.  [default: the camera's; offline the folder name]")
+@click.option("-q", "--quiet", is_flag=True,
+              help="No per-pair lines; only the progress bar (pairs done / total, rate) on a terminal.")
+def command(**params: Any) -> int:
+    """Factory stereo calibration, from a camera (URL: device mode; written to the unit and verified)
+    or from image pairs (--images DIR: offline). DIR holds pairs paired by the number in the name
+    (left01.png / right01.png, L01.png / R01.png, ...) or two folders (left/ right/, cam0/ cam1/).
+    Writes calibration.json, calibration.yaml, left.yaml / right.yaml and report.png / report.html
+    to --out, and records every attempt in the factory database (--db)."""
+    return calibrate(SimpleNamespace(**params))
 
 
-def _config(args: argparse.Namespace) -> SolveConfig:
+def _config(args: SimpleNamespace) -> SolveConfig:
     return SolveConfig(
         max_stereo_rms_px=args.max_stereo_rms, max_epipolar_rms_px=args.max_epipolar, min_views=args.min_views,
         max_views=args.max_views, min_pairs=args.min_pairs, holdout_every=args.holdout_every,
@@ -156,7 +177,7 @@ def _fail(code: int, text: str) -> int:
     return code
 
 
-def _record(db: FactoryDB, args: argparse.Namespace, serial: str, started: str, result: CalibrationResult | None,
+def _record(db: FactoryDB, args: SimpleNamespace, serial: str, started: str, result: CalibrationResult | None,
             code: int, reason: str, blob: bytes | None) -> None:
     attempt = make_attempt(serial=serial, started_at=started, station=args.station,
                            mode="device" if args.url else "offline", board=describe(args.board), result=result,
@@ -169,8 +190,8 @@ def _record(db: FactoryDB, args: argparse.Namespace, serial: str, started: str, 
         print(f"stereocam calibrate: warning: {exc}", file=sys.stderr)
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+def calibrate(args: SimpleNamespace) -> int:
+    """Check the arguments, then calibrate in device or offline mode; returns the exit code."""
     started = now_utc()
     if args.url is None and args.images is None:
         return _fail(EXIT_USAGE, "nothing to calibrate: give a camera URL (device mode) or --images DIR (offline)")
@@ -206,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
         return _offline(args, config, db, started)
 
 
-def _offline(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, started: str) -> int:
+def _offline(args: SimpleNamespace, config: SolveConfig, db: FactoryDB, started: str) -> int:
     serial = args.serial or args.images.resolve().name
     try:
         pairs = find_pairs(args.images)
@@ -238,7 +259,7 @@ def _offline(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, start
     return EXIT_OK
 
 
-def _device_mode(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, started: str) -> int:
+def _device_mode(args: SimpleNamespace, config: SolveConfig, db: FactoryDB, started: str) -> int:
     import stereocam
     from stereocam.tools.calibration.device import calibrate_device
 
@@ -274,6 +295,3 @@ def _device_mode(args: argparse.Namespace, config: SolveConfig, db: FactoryDB, s
     print(verdict)
     return EXIT_OK
 
-
-if __name__ == "__main__":
-    sys.exit(main())

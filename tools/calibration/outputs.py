@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 import sys
+import time
 from pathlib import Path
 
 import cv2
@@ -33,25 +34,32 @@ def progress_line(p: Progress) -> str:
 
 
 class PairProgress:
-    """A bar with pairs done / total and the rate (tqdm, on stderr), and a line per pair above it
-    unless ``quiet``. Use as a context manager; call it with each Progress."""
+    """A bar with pairs done / total and the rate (tqdm, on stderr, on a terminal; elsewhere one line
+    at the end), and a line per pair above it unless ``quiet``. Use as a context manager; call it
+    with each Progress."""
 
     def __init__(self, total: int, quiet: bool = False):
         self._bar = tqdm(total=total, unit="pair", desc="calibration", file=sys.stderr,
                          disable=not progress_wanted())
         self._quiet = quiet
+        self._total, self._done, self._t0 = total, 0, time.monotonic()
 
     def __call__(self, p: Progress) -> None:
         if not self._quiet:
             self._bar.write(progress_line(p), file=sys.stdout)
         self._bar.set_postfix(kept=p.kept, held_out=p.held_out, refresh=False)
         self._bar.update()
+        self._done += 1
 
     def __enter__(self) -> "PairProgress":
         return self
 
     def __exit__(self, *exc: object) -> None:
         self._bar.close()
+        if self._bar.disable:  # no bar in a log: the figures it would have ended on, once
+            seconds = time.monotonic() - self._t0
+            print(f"calibration: {self._done}/{self._total} pairs in {seconds:.1f} s "
+                  f"({self._done / seconds if seconds else 0.0:.1f} pair/s)", file=sys.stderr)
 
 
 def print_summary(result: CalibrationResult) -> None:

@@ -10,6 +10,7 @@ import numpy as np
 from tqdm import tqdm
 
 import stereocam
+from stereocam.tools.options import CONTEXT, epilog
 from stereocam.tools.progress import progress_wanted
 
 from .pictures import save_disparity_png
@@ -33,8 +34,7 @@ def save_frame(frame: stereocam.Frame, out: Path, stem: str = "frame") -> dict[s
     return paths
 
 
-@click.command("capture", epilog="Exit codes: 0 saved; 1 camera unreachable, refused or timed out; 2 bad usage "
-               "(including an --out that cannot be created); 130 interrupted.")
+@click.command("capture", epilog=epilog(), context_settings=CONTEXT)
 @click.argument("url")
 @click.option("--out", type=click.Path(path_type=Path), required=True,
               help="Directory for the files; created if missing (checked before the camera is opened).")

@@ -9,6 +9,7 @@ import click
 import stereocam
 from stereocam.protocol.messages import Capability
 from stereocam.protocol.params import VALUE_NAMES, Output
+from stereocam.tools.options import CONTEXT, epilog
 
 
 def value_name(name: str, value: int) -> str | int:
@@ -48,7 +49,7 @@ def format_text(doc: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-@click.command("info", epilog="Exit codes: 0 printed; 1 camera unreachable or failed; 2 bad usage.")
+@click.command("info", epilog=epilog(), context_settings=CONTEXT)
 @click.argument("url")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of lines.")
 @click.option("--timeout", type=click.FloatRange(0, min_open=True), default=2.0, show_default=True,

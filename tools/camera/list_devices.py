@@ -7,6 +7,7 @@ from typing import Sequence
 import click
 
 from stereocam.discovery import DeviceEntry, list_devices
+from stereocam.tools.options import CONTEXT, epilog
 
 COLUMNS = (("URL", "url"), ("TRANSPORT", "transport"), ("SERIAL", "serial"), ("MODEL", "model"),
            ("FIRMWARE", "firmware"), ("WHERE", "location"))
@@ -24,7 +25,7 @@ def format_table(entries: Sequence[DeviceEntry]) -> str:
     return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows)
 
 
-@click.command("list", epilog="Exit codes: 0 listed (also when none were found); 2 bad usage.")
+@click.command("list", epilog=epilog("Exit codes: 0 also when no camera was found."), context_settings=CONTEXT)
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON array instead of a table.")
 def command(as_json: bool) -> int:
     """Print the cameras this host can open: USB cameras (real and simulated), camera serial ports,

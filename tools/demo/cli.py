@@ -14,10 +14,12 @@ from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.ground_truth import GROUND_TRUTH_KEEP
 from stereocam.device_sim.links.inprocess import InProcessTransport
 
-from . import group as demo_group
 from stereocam.tools.camera.capture import save_frame
 from stereocam.tools.camera.session import output_dir
+from stereocam.tools.options import CONTEXT, epilog
 from stereocam.tools.progress import progress_wanted
+
+from . import group as demo_group
 
 KEEP_UP = 0.9  # below this share of the asked frame rate the summary says the machine fell short
 
@@ -41,8 +43,7 @@ def keep_up_note(fps: float, asked: int, dropped: int) -> str:
             f"programs running")
 
 
-@click.command("demo", epilog="Exit codes: 0 done; 1 the simulator failed; 2 bad usage (including an --out "
-               "that cannot be created); 130 interrupted.")
+@click.command("demo", epilog=epilog(), context_settings=CONTEXT)
 @click.option("--out", type=click.Path(path_type=Path), default=Path("out"), show_default=True,
               help="Directory for the outputs (images, disparity with a depth colour bar, point cloud).")
 @click.option("--seconds", type=click.FloatRange(0, min_open=True), default=4.0, show_default=True,

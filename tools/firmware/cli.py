@@ -9,16 +9,15 @@
 """
 from __future__ import annotations
 
-from stereocam.tools.exit_codes import EXIT_CODES, EXIT_USAGE
-
-import argparse
 import dataclasses
 import json
 import os
 import sys
 import tempfile
 from pathlib import Path
+from types import SimpleNamespace
 
+import click
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from rich.console import Console
 from rich.progress import BarColumn, DownloadColumn, Progress, TransferSpeedColumn
@@ -26,10 +25,21 @@ from rich.table import Table
 
 import stereocam
 from stereocam.protocol.errors import ConfigError
-from stereocam.protocol.firmware_image import (TARGET_LEN, U32_MAX, FirmwareBuild, ImageError, build_image,
-                                               check_target, inspect_image, load_private_key, private_key_pem,
-                                               public_key_pem)
+from stereocam.protocol.firmware_image import (
+    TARGET_LEN,
+    U32_MAX,
+    FirmwareBuild,
+    ImageError,
+    build_image,
+    check_target,
+    inspect_image,
+    load_private_key,
+    private_key_pem,
+    public_key_pem,
+)
 from stereocam.protocol.params import BY_NAME
+from stereocam.tools.exit_codes import EXIT_USAGE
+from stereocam.tools.options import CONTEXT, epilog
 from stereocam.tools.progress import progress_wanted
 
 DEFAULT_TARGET = "STOC-SIM"
@@ -65,7 +75,7 @@ def _write_whole(path: Path, data: bytes, mode: int, replace: bool = True) -> No
         Path(tmp).unlink(missing_ok=True)
 
 
-def keygen(args: argparse.Namespace) -> int:
+def keygen(args: SimpleNamespace) -> int:
     """A new Ed25519 key pair: KEY (0600 from creation) and KEY.pub; an existing KEY or KEY.pub is never
     overwritten unless --force (then each is replaced whole, atomically)."""
     pub = args.out.with_name(args.out.name + ".pub")
@@ -109,7 +119,7 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
-def sign(args: argparse.Namespace) -> int:
+def sign(args: SimpleNamespace) -> int:
     """A signed image of BUILD.json; a bad build, key, version, counter or target: a message and exit 2."""
     if args.security_counter is not None and not 0 <= args.security_counter <= U32_MAX:
         return _fail("sign", f"--security-counter {args.security_counter} is outside 0..{U32_MAX} "
@@ -141,7 +151,7 @@ def sign(args: argparse.Namespace) -> int:
     return 0
 
 
-def update(args: argparse.Namespace) -> int:
+def update(args: SimpleNamespace) -> int:
     image = _read(args.image, "image")
     console = Console(stderr=True)
     with stereocam.open(args.url, timeout=args.timeout) as cam, \
@@ -157,7 +167,7 @@ def update(args: argparse.Namespace) -> int:
     return 0
 
 
-def status(args: argparse.Namespace) -> int:
+def status(args: SimpleNamespace) -> int:
     with stereocam.open(args.url, timeout=args.timeout) as cam:
         st = cam.firmware_status()
     if args.json:
@@ -181,35 +191,54 @@ def status(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam firmware", description=__doc__.splitlines()[0].replace("``", ""),
-                                 epilog=EXIT_CODES)
-    sub = ap.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("keygen", help="make an Ed25519 signing key pair")
-    p.add_argument("--out", type=Path, required=True)
-    p.add_argument("--force", action="store_true",
-                   help="replace an existing KEY and KEY.pub (the old private key is lost for good)")
-    p.set_defaults(run=keygen)
-    p = sub.add_parser("sign", help="build a signed image from a firmware build (JSON)")
-    p.add_argument("--key", type=Path, required=True)
-    p.add_argument("--version", required=True)
-    p.add_argument("--out", type=Path, required=True)
-    p.add_argument("--security-counter", type=int, default=None,
-                   help="default: the version as a number; a rollback image sets one >= the unit's")
-    p.add_argument("--target", default=DEFAULT_TARGET,
-                   help=f"model the image is for (printable ASCII, at most {TARGET_LEN} characters)")
-    p.add_argument("--code", type=Path, default=None, help="the firmware's code (opaque bytes)")
-    p.add_argument("build", type=Path)
-    p.set_defaults(run=sign)
-    for name, fn, text in (("update", update, "install a signed image"), ("status", status, "show both slots")):
-        p = sub.add_parser(name, help=text)
-        p.add_argument("url")
-        if name == "update":
-            p.add_argument("image", type=Path)
-            p.add_argument("--replace", action="store_true", help="abandon another image's transfer in progress")
-        else:
-            p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
-        p.add_argument("--timeout", type=float, default=2.0)
-        p.set_defaults(run=fn)
-    args = ap.parse_args(argv)
-    return args.run(args)
+@click.group("firmware", epilog=epilog(), context_settings=CONTEXT)
+def command() -> None:
+    """Signed firmware images: make a signing key, sign a build, update a camera, show its slots."""
+
+
+_TIMEOUT = click.option("--timeout", type=click.FloatRange(min=0, min_open=True), default=2.0, show_default=True,
+                        help="Seconds to wait for each reply.")
+
+
+@command.command("keygen", epilog=epilog())
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="The private key file KEY; its public half goes to KEY.pub.")
+@click.option("--force", is_flag=True, help="Replace an existing KEY and KEY.pub (the old private key is lost for good).")
+def keygen_command(**params: object) -> int:
+    """Make an Ed25519 signing key pair (an existing KEY or KEY.pub is kept unless --force)."""
+    return keygen(SimpleNamespace(**params))
+
+
+@command.command("sign", epilog=epilog())
+@click.argument("build", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--key", type=click.Path(dir_okay=False, path_type=Path), required=True, help="The private key (PEM).")
+@click.option("--version", required=True, help="Version of the image, e.g. 1.4.0.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True, help="The image file to write.")
+@click.option("--security-counter", type=int, default=None,
+              help="Anti-rollback counter; a rollback image sets one >= the unit's.  [default: the version as a number]")
+@click.option("--target", default=DEFAULT_TARGET, show_default=True,
+              help=f"Model the image is for (printable ASCII, at most {TARGET_LEN} characters).")
+@click.option("--code", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="The firmware's code (opaque bytes).  [default: none]")
+def sign_command(**params: object) -> int:
+    """Build a signed image from a firmware build (BUILD: JSON)."""
+    return sign(SimpleNamespace(**params))
+
+
+@command.command("update", epilog=epilog())
+@click.argument("url")
+@click.argument("image", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--replace", is_flag=True, help="Abandon another image's transfer in progress.")
+@_TIMEOUT
+def update_command(**params: object) -> int:
+    """Install a signed image; succeeds only once the unit runs it (a progress bar on a terminal)."""
+    return update(SimpleNamespace(**params))
+
+
+@command.command("status", epilog=epilog())
+@click.argument("url")
+@click.option("--json", is_flag=True, help="Print one JSON object instead of a table.")
+@_TIMEOUT
+def status_command(**params: object) -> int:
+    """Show both slots: version, state, hash, confirmed."""
+    return status(SimpleNamespace(**params))

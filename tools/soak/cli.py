@@ -1,4 +1,4 @@
-"""``stereocam soak URL``: a long fuzz and fault run with counts, outside the CI suite (issue 9).
+"""``stereocam soak URL``: a long fuzz and fault run with counts, outside the CI suite.
 
 1. decoder fuzz: mutated frame streams into fresh decoders (default 1 000 000 inputs);
 2. device fuzz: CRC-valid requests with mutated payloads to the device at URL, each must be answered;
@@ -10,17 +10,17 @@ below its goal (VGA frames on a serial-class link: 95 % at 1 byte in 10^5 flippe
 """
 from __future__ import annotations
 
-from stereocam.tools.exit_codes import EXIT_CODES
+import click
 
-import argparse
+from stereocam.tools.options import CONTEXT, epilog
 
 from .parts import Report, fuzz_decoder, fuzz_device, stream_with_faults
 
 
 def _print(rep: Report) -> None:
-    print(f"{rep.name}: inputs {rep.inputs}, crashes {rep.crashes}, hangs {rep.hangs}")
+    click.echo(f"{rep.name}: inputs {rep.inputs}, crashes {rep.crashes}, hangs {rep.hangs}")
     for key, value in rep.figures.items():
-        print(f"    {key}: {value}")
+        click.echo(f"    {key}: {value}")
 
 
 DELIVERY_GOALS = {1e-5: 0.95, 1e-4: 0.50}  # byte flip rate -> share of the frames sent that must arrive
@@ -40,30 +40,44 @@ def _failed(rep: Report, flip: float | None = None) -> bool:
                 or str(f.get("counters add up", "yes")).startswith("NO"))
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam soak", description=__doc__.splitlines()[0].replace("``", ""),
-                                 epilog=EXIT_CODES)
-    ap.add_argument("url", nargs="?", default="sim://?seed=1")
-    ap.add_argument("--decoder-inputs", type=int, default=1_000_000)
-    ap.add_argument("--device-inputs", type=int, default=5_000)
-    ap.add_argument("--seconds", type=float, default=120.0, help="streaming time per flip rate")
-    ap.add_argument("--flip", type=float, action="append", help="byte flip rate(s) (default 1e-5 and 1e-4)")
-    ap.add_argument("--drop", type=float, default=1e-6, help="byte loss rate")
-    ap.add_argument("--latency", type=float, default=0.001, help="max delay per chunk, s")
-    ap.add_argument("--split", type=int, default=16, help="split host writes into pieces of 1..N bytes")
-    ap.add_argument("--chunk", type=int, default=1024, help="FRAME_DATA bytes asked for (0: the transport's)")
-    ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args(argv)
-    runs = [(None, lambda: fuzz_decoder(args.decoder_inputs, args.seed)),
-            (None, lambda: fuzz_device(args.url, args.device_inputs, args.seed))]
-    runs += [(flip, lambda flip=flip: stream_with_faults(args.url, args.seconds, flip, args.drop, args.latency,
-                                                         args.split, args.chunk or None, seed=args.seed))
-             for flip in args.flip or [1e-5, 1e-4]]
+@click.command("soak", context_settings=CONTEXT,
+               epilog=epilog("Exit codes: 1 also on any crash, hang, corrupted frame, counters that do not add up, "
+                             "or a delivery rate below its goal."))
+@click.argument("url", default="sim://?seed=1")
+@click.option("--decoder-inputs", type=click.IntRange(min=0), default=1_000_000, show_default=True,
+              help="Mutated frame streams fed to fresh decoders.")
+@click.option("--device-inputs", type=click.IntRange(min=0), default=5_000, show_default=True,
+              help="CRC-valid requests with mutated payloads sent to the device.")
+@click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=120.0, show_default=True,
+              help="Streaming time per flip rate.")
+@click.option("--flip", "flips", type=click.FloatRange(0, 1), multiple=True,
+              help="Byte flip rate (repeatable).  [default: 1e-5 and 1e-4]")
+@click.option("--drop", type=click.FloatRange(0, 1), default=1e-6, show_default=True, help="Byte loss rate.")
+@click.option("--latency", type=click.FloatRange(min=0), default=0.001, show_default=True,
+              help="Most delay per chunk, seconds.")
+@click.option("--split", type=click.IntRange(min=1), default=16, show_default=True,
+              help="Split host writes into pieces of 1..N bytes.")
+@click.option("--chunk", type=click.IntRange(min=0), default=1024, show_default=True,
+              help="FRAME_DATA bytes asked for (0: the transport's).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of every random choice.")
+def command(url: str, decoder_inputs: int, device_inputs: int, seconds: float, flips: tuple[float, ...], drop: float,
+            latency: float, split: int, chunk: int, seed: int) -> int:
+    """A long fuzz and fault run with counts, outside the CI suite: (1) mutated frame streams into
+    fresh decoders; (2) CRC-valid requests with mutated payloads to the device at URL, each must be
+    answered; (3) streaming through a faulty link (byte flips, lost bytes, split writes, latency) at
+    each --flip rate for --seconds, counting frames sent / delivered / corrupted / dropped and whether
+    the device's and host's counters add up. Delivery goals (VGA frames on a serial-class link): 95 %
+    at 1 byte in 10^5 flipped, 50 % at 1 in 10^4."""
+    runs = [(None, lambda: fuzz_decoder(decoder_inputs, seed)),
+            (None, lambda: fuzz_device(url, device_inputs, seed))]
+    runs += [(flip, lambda flip=flip: stream_with_faults(url, seconds, flip, drop, latency, split, chunk or None,
+                                                         seed=seed))
+             for flip in flips or (1e-5, 1e-4)]
     bad = []
     for flip, run in runs:  # one at a time, each printed as it ends
         rep = run()
         if _failed(rep, flip):
             bad.append(rep.name)
         _print(rep)
-    print("soak: " + (f"FAILED ({', '.join(bad)})" if bad else "clean"))
+    click.echo("soak: " + (f"FAILED ({', '.join(bad)})" if bad else "clean"))
     return 1 if bad else 0

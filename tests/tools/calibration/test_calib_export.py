@@ -11,7 +11,7 @@ from stereocam.device_sim import SimulatedCamera
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.rectification import stereo_rectify
 from stereocam.tools.calibration import calibrate
-from stereocam.tools.calibration import export as calibration_export
+from stereocam.tools import cli
 from stereocam.tools.factory.db import FactoryDB
 
 
@@ -21,21 +21,21 @@ def _matrix(text: str, key: str) -> np.ndarray:
 
 
 def test_export_writes_camera_info_that_matches_the_unit_frames(tmp_path: Path) -> None:
-    assert calibration_export.main(["export", "sim://?seed=5", "--size", "320x240", "--out", str(tmp_path)]) == 0
+    assert cli.main(["calibration", "export", "sim://?seed=5", "--size", "320x240", "--out", str(tmp_path)]) == 0
     truth = SimulatedCamera(seed=5).true_calibration()
     text = (tmp_path / "right_320x240.yaml").read_text()
     assert "image_width: 320" in text and "distortion_model: plumb_bob" in text
     expect = stereo_rectify(truth.scaled(320, 240))
     np.testing.assert_allclose(_matrix(text, "projection_matrix"), expect.P2, rtol=1e-12)
     np.testing.assert_allclose(_matrix(text, "camera_matrix"), truth.scaled(320, 240).K_right, rtol=1e-12)
-    assert calibration_export.main(["export", "sim://?seed=5", "--out", str(tmp_path / "all")]) == 0
+    assert cli.main(["calibration", "export", "sim://?seed=5", "--out", str(tmp_path / "all")]) == 0
     names = {p.name for p in (tmp_path / "all").iterdir()}
     assert {"left_1280x960.yaml", "left_640x480.yaml", "left_320x240.yaml", "right_160x120.yaml",
             "calibration.json"} <= names
 
 
 def _device(tmp_path: Path, *extra: str) -> int:
-    return calibrate.main(["sim://?seed=74&scene=board", "--out", str(tmp_path / "out"), "--size", "640x480", "--max-views", "12",
+    return cli.main(["calibrate", "sim://?seed=74&scene=board", "--out", str(tmp_path / "out"), "--size", "640x480", "--max-views", "12",
                            "-q", "--db", str(tmp_path / "f.sqlite"), "--station", "st-3", *extra])
 
 

@@ -12,6 +12,7 @@ import pytest
 from stereocam.device_sim.calibration.board import BoardSpec, StereoBoardRenderer, board_poses
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.device_sim.calibration.truth import true_calibration
+from stereocam.tools import cli
 from stereocam.tools.calibration import calibrate
 from stereocam.tools.calibration.solve import (
     BoardNotFoundError, CalibrationError, SolveConfig, TooFewViewsError, calibrate_pairs,
@@ -42,7 +43,7 @@ def image_dir(tmp_path_factory: pytest.TempPathFactory, pairs) -> Path:
 
 
 def run(image_dir: Path, out: Path, *extra: str) -> int:
-    return calibrate.main(["-q", "--images", str(image_dir), "--board", "9x6", "--square-size", "0.03",
+    return cli.main(["calibrate", "-q", "--images", str(image_dir), "--board", "9x6", "--square-size", "0.03",
                            "--out", str(out), *extra])
 
 
@@ -162,12 +163,12 @@ def test_engine_stops_reading_when_enough(pairs) -> None:
 
 def test_bad_arguments(image_dir: Path, tmp_path: Path, capsys) -> None:
     assert run(image_dir, tmp_path, "--holdout-every", "1") == calibrate.EXIT_USAGE
-    assert calibrate.main(["--images", str(image_dir), "--board", "9x6", "--square-size", "25",
+    assert cli.main(["calibrate", "--images", str(image_dir), "--board", "9x6", "--square-size", "25",
                            "--out", str(tmp_path)]) == calibrate.EXIT_USAGE
     assert "metres" in capsys.readouterr().err
-    assert calibrate.main(["--images", str(image_dir), "--board", "9by6", "--square-size", "0.03",
+    assert cli.main(["calibrate", "--images", str(image_dir), "--board", "9by6", "--square-size", "0.03",
                            "--out", "x"]) == calibrate.EXIT_USAGE
-    assert calibrate.main(["--images", str(image_dir), "--board", "6x6", "--square-size", "0.03",
+    assert cli.main(["calibrate", "--images", str(image_dir), "--board", "6x6", "--square-size", "0.03",
                            "--out", str(tmp_path)]) == calibrate.EXIT_USAGE
     assert "cols != rows" in capsys.readouterr().err
 

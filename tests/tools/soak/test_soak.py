@@ -1,6 +1,7 @@
 """The CI-sized soak (issue 9): each fuzz and the faulty-link stream, short; the long run is `make soak`."""
 from __future__ import annotations
 
+from stereocam.tools import cli
 from stereocam.tools.soak import cli as soak
 from stereocam.tools.soak.parts import fuzz_decoder, fuzz_device
 
@@ -16,7 +17,7 @@ def test_device_fuzz_short():
 
 
 def test_soak_command_short(capsys):
-    rc = soak.main(["sim://?seed=7", "--decoder-inputs", "500", "--device-inputs", "30", "--seconds", "4",
+    rc = cli.main(["soak", "sim://?seed=7", "--decoder-inputs", "500", "--device-inputs", "30", "--seconds", "4",
                     "--flip", "1e-4"])
     out = capsys.readouterr().out
     assert rc == 0, out
