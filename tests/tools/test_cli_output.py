@@ -2,11 +2,14 @@
 libraries' only when asked (--log-level NAME=LEVEL), progress bars only on a terminal."""
 from __future__ import annotations
 
+import fcntl
 import logging
 import os
 import pty
+import struct
 import subprocess
 import sys
+import termios
 import time
 
 import pytest
@@ -59,6 +62,7 @@ def test_progress_bars_only_on_a_terminal(tmp_path):
     _, err = proc.communicate(timeout=180)
     assert proc.returncode == 0 and "\r" not in err and "frame/s" not in err, err
     controller, terminal = pty.openpty()
+    fcntl.ioctl(terminal, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a terminal 100 wide
     proc = _capture(tmp_path / "tty", stderr=terminal)
     os.close(terminal)
     seen, deadline = b"", time.monotonic() + 180
