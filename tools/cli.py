@@ -17,7 +17,7 @@ import click
 import stereocam
 
 from .exit_codes import EXIT_BROKEN_PIPE, EXIT_CAMERA, EXIT_CODES, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE  # noqa: F401
-from .logs import configure, parse_levels
+from .logs import configure, parse_levels, restored
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "view": ("stereocam.tools.viewer.command", "live viewer in the browser: images, disparity, depth, settings"),
@@ -122,7 +122,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run ``stereocam`` with ``argv``; returns the exit code (see EXIT_CODES)."""
     args = list(sys.argv[1:] if argv is None else argv)
     try:
-        rc = cli.main(args=args, prog_name="stereocam", standalone_mode=False)
+        with restored():
+            rc = cli.main(args=args, prog_name="stereocam", standalone_mode=False)
     except click.ClickException as exc:  # usage errors, bad parameters: before any camera is touched
         exc.show()
         return exc.exit_code

@@ -5,7 +5,10 @@ from __future__ import annotations
 import logging
 import os
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+from typing import TextIO
 
 OWN = "stereocam"
 LEVELS = ("CRITICAL", "ERROR", "WARNING", "INFO", "DEBUG")
@@ -20,12 +23,29 @@ class LogLevels:
     named: dict[str, int] = field(default_factory=dict)
 
     def allows(self, record: logging.LogRecord) -> bool:
-        """stereocam's records as its loggers' levels decide; another logger's at WARNING and above, or
-        at the level asked for it (or for a logger above it: ``distributed`` covers ``distributed.core``)."""
+        """stereocam's records from its level on; another logger's from WARNING on, or from the level
+        asked for it (or for a logger above it: ``distributed`` covers ``distributed.core``)."""
         if _under(record.name, OWN):
-            return True
+            return record.levelno >= self.own
         asked = [level for name, level in self.named.items() if _under(record.name, name)]
         return record.levelno >= (asked[-1] if asked else logging.WARNING)
+
+    @property
+    def lowest(self) -> int:
+        """The most verbose level anything is asked at (never above WARNING)."""
+        return min(logging.WARNING, self.own, *self.named.values())
+
+
+class StderrHandler(logging.StreamHandler):
+    """Writes to whatever ``sys.stderr`` is when a record comes (click and pytest swap it)."""
+
+    @property
+    def stream(self) -> TextIO:
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: object) -> None:
+        pass
 
 
 def _under(name: str, parent: str) -> bool:
@@ -52,16 +72,27 @@ def parse_levels(verbose: int, specs: tuple[str, ...]) -> LogLevels:
 
 def configure(levels: LogLevels) -> None:
     """One stderr handler on the root logger that lets through what ``levels`` allows."""
-    handler = logging.StreamHandler(sys.stderr)
+    handler = StderrHandler()
     handler.setFormatter(logging.Formatter(FORMAT))
     handler.addFilter(levels.allows)
     root = logging.getLogger()
-    for old in list(root.handlers):
-        root.removeHandler(old)
     root.addHandler(handler)
-    root.setLevel(logging.WARNING)  # other libraries' records below it are never made
-    logging.getLogger(OWN).setLevel(levels.own)
+    root.setLevel(levels.lowest)  # below it no record is made at all
     for name, level in levels.named.items():
-        logging.getLogger(name).setLevel(level)
         if _under(name, "distributed"):  # Dask sets its loggers' levels when imported: tell its config
             os.environ[f"DASK_LOGGING__{name.upper()}"] = logging.getLevelName(level).lower()
+
+
+@contextmanager
+def restored() -> Iterator[None]:
+    """The root logger's level and handlers as they were before, afterwards (a command run in-process
+    leaves no logging behind)."""
+    root = logging.getLogger()
+    level, handlers = root.level, list(root.handlers)
+    try:
+        yield
+    finally:
+        for handler in root.handlers[:]:
+            if handler not in handlers:
+                root.removeHandler(handler)
+        root.setLevel(level)

@@ -14,6 +14,7 @@ import time
 
 import pytest
 
+from stereocam.tools import cli
 from stereocam.tools.logs import LogLevels, parse_levels
 
 STEREOCAM = [sys.executable, "-m", "stereocam.tools.cli"]
@@ -37,12 +38,22 @@ def test_levels_from_verbosity_and_names():
 def test_other_libraries_stay_at_warnings_unless_asked():
     quiet = LogLevels(logging.DEBUG)
     assert quiet.allows(_record("stereocam.link", logging.DEBUG))
+    assert not LogLevels(logging.INFO).allows(_record("stereocam.link", logging.DEBUG))
     for name in ("matplotlib.font_manager", "distributed.scheduler", "dask", "urllib3", "PIL.PngImagePlugin", "numba"):
         assert not quiet.allows(_record(name, logging.INFO)) and quiet.allows(_record(name, logging.WARNING))
     asked = LogLevels(logging.WARNING, {"distributed": logging.INFO})
     assert asked.allows(_record("distributed.scheduler", logging.INFO))
     assert not asked.allows(_record("distributed.scheduler", logging.DEBUG))
     assert not asked.allows(_record("distributedx", logging.INFO))  # a logger, not a prefix of a name
+    assert asked.lowest == logging.INFO and LogLevels(logging.DEBUG).lowest == logging.DEBUG
+
+
+def test_a_command_run_in_process_leaves_logging_as_found(capsys):
+    root = logging.getLogger()
+    level, handlers = root.level, list(root.handlers)
+    assert cli.main(["-vv", "--log-level", "PIL=INFO", "list", "--json"]) == 0
+    assert "DEBUG stereocam.cli" in capsys.readouterr().err
+    assert root.level == level and root.handlers == handlers
 
 
 def _capture(tmp_path, *options: str, stderr=subprocess.PIPE) -> subprocess.Popen:
