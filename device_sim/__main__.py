@@ -11,16 +11,16 @@ simulator's truth, for benchmarks; never on the wire).
 """
 from __future__ import annotations
 
-import argparse
 import signal
-import sys
 from pathlib import Path
-from typing import NoReturn
+from types import SimpleNamespace
+from typing import Any, NoReturn
 
-from stereocam.transports.announced import announce
+import click
+
 from stereocam.protocol.errors import ConfigError
-
 from stereocam.protocol.firmware_image import ImageError, load_private_key
+from stereocam.transports.announced import announce
 
 from .boot.factory import DEV_SIGNING_KEY
 from .firmware import SimulatedCamera
@@ -31,8 +31,7 @@ from .shared_line import SharedTriggerLine
 
 def usage_error(message: str) -> NoReturn:
     """A bad argument: the reason on stderr and exit code 2, as the epilog promises."""
-    print(f"stereocam sim: {message}", file=sys.stderr)
-    raise SystemExit(2)
+    raise click.UsageError(message)
 
 
 def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
@@ -46,31 +45,37 @@ def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
     usage_error(f"--serve takes 'pty' or 'tcp:HOST:PORT', got {spec!r}")
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam sim", description="Serve a simulated camera over a pty or TCP "
-                                 "until SIGINT or SIGTERM (also: python -m stereocam.device_sim). The first line "
-                                 "printed is the URL to open; stereocam list shows it while it runs.",
-                                 epilog="Exit codes: 0 stopped by SIGINT/SIGTERM; 2 bad usage (a --serve, --scene, "
-                                        "--trigger-line or --vendor-key that cannot be used).")
-    ap.add_argument("--serve", required=True, metavar="pty|tcp:HOST:PORT")
-    ap.add_argument("--seed", type=int, default=0, help="which simulated unit")
-    ap.add_argument("--serial", default=None, help="serial number (default derived from the seed)")
-    ap.add_argument("--flash", type=Path, default=None, metavar="PATH",
-                    help="file behind the unit's flash, kept across restarts (created erased if missing); "
-                         "default: a private file removed at exit")
-    ap.add_argument("--scene", choices=[s.value for s in Scene], default=Scene.LAB.value,
-                    help="what the rig looks at (board: the calibration fixture's chessboard)")
-    ap.add_argument("--trigger-line", metavar="NAME", help="wire the trigger connector to the machine-wide line NAME "
-                    "(the unit a host sets trigger_output=1 on drives it)")
-    ap.add_argument("--truth-log", metavar="PATH", help="append each exposure's true instant to PATH")
-    ap.add_argument("--replay", default=None, metavar="FILE", help="play this recording back as the unit")
-    ap.add_argument("--fast", action="store_true", help="replay as fast as the host reads (default: recorded speed)")
-    ap.add_argument("--loop", action="store_true", help="replay in a loop (default: once)")
-    ap.add_argument("--start", type=int, default=0, help="replay from this frame index")
-    ap.add_argument("--vendor-key", type=Path, default=None,
-                    help="PEM Ed25519 key the factory provisions and signs the shipped image with "
-                         "(default: the simulator's development key)")
-    args = ap.parse_args(argv)
+@click.command("sim", context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+               epilog="Exit codes: 0 stopped by SIGINT/SIGTERM; 2 bad usage (a --serve, --scene, --trigger-line "
+                      "or --vendor-key that cannot be used).")
+@click.option("--serve", required=True, metavar="pty|tcp:HOST:PORT", help="Where to serve the unit.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Which simulated unit.")
+@click.option("--serial", default=None, help="Serial number.  [default: derived from the seed]")
+@click.option("--flash", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="PATH",
+              help="File behind the unit's flash, kept across restarts (created erased if missing).  "
+                   "[default: a private file removed at exit]")
+@click.option("--scene", type=click.Choice([s.value for s in Scene]), default=Scene.LAB.value, show_default=True,
+              help="What the rig looks at (board: the calibration fixture's chessboard).")
+@click.option("--trigger-line", metavar="NAME", default=None,
+              help="Wire the trigger connector to the machine-wide line NAME (the unit a host sets "
+                   "trigger_output=1 on drives it).")
+@click.option("--truth-log", metavar="PATH", default=None, help="Append each exposure's true instant to PATH.")
+@click.option("--replay", default=None, metavar="FILE", help="Play this recording back as the unit.")
+@click.option("--fast", is_flag=True, help="Replay as fast as the host reads.  [default: recorded speed]")
+@click.option("--loop", is_flag=True, help="Replay in a loop.  [default: once]")
+@click.option("--start", type=click.IntRange(min=0), default=0, show_default=True, help="Replay from this frame index.")
+@click.option("--vendor-key", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="PEM Ed25519 key the factory provisions and signs the shipped image with.  "
+                   "[default: the simulator's development key]")
+def command(**params: Any) -> int:
+    """Serve a simulated camera over a pty or TCP until SIGINT or SIGTERM (also: python -m
+    stereocam.device_sim). The first line printed is the URL to open; stereocam list shows it while
+    it runs."""
+    return serve(SimpleNamespace(**params))
+
+
+def serve(args: SimpleNamespace) -> int:
+    """Serve the unit ``args`` describe until SIGINT or SIGTERM; returns 0."""
     try:
         line = SharedTriggerLine(args.trigger_line) if args.trigger_line else None
     except ConfigError as exc:
@@ -116,4 +121,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    command.main(prog_name="stereocam sim")

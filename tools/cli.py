@@ -1,8 +1,8 @@
 """The ``stereocam`` command: one click command tree built from the COMMANDS table.
 
-A module in COMMANDS either exposes ``command`` (a click command) or ``main(argv) -> int`` (an
-argparse tool, passed its arguments untouched, ``--help`` included). Adding a tool is one line.
-Errors are handled once, here, for every command: see EXIT_CODES.
+Every module in COMMANDS exposes ``command``, a click command (or group) with its defaults and the
+exit codes in its ``--help``. Adding a tool is one line. Errors are handled once, here, for every
+command: see EXIT_CODES.
 """
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import importlib
 import logging
 import os
 import sys
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
 import click
 
@@ -19,42 +19,30 @@ from stereocam.protocol.errors import MissingInputError
 from stereocam.protocol.extras import raise_missing
 
 from .exit_codes import EXIT_BROKEN_PIPE, EXIT_CAMERA, EXIT_CODES, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE  # noqa: F401
+from .logs import configure, parse_levels, restored
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "view": ("stereocam.tools.viewer.command", "live viewer in the browser: images, disparity, depth, settings"),
-    "list": ("stereocam.tools.list_devices", "list cameras: USB, serial ports, served and in-process simulators"),
-    "info": ("stereocam.tools.info", "print a camera's identity, calibration, configuration and counters"),
-    "capture": ("stereocam.tools.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
-    "calibrate": ("stereocam.tools.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
-    "calibration": ("stereocam.tools.calibration_export", "calibration export URL --size WxH: ROS camera_info from a unit"),
+    "list": ("stereocam.tools.camera.list_devices", "list cameras: USB, serial ports, served and in-process simulators"),
+    "info": ("stereocam.tools.camera.info", "print a camera's identity, calibration, configuration and counters"),
+    "capture": ("stereocam.tools.camera.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
+    "calibrate": ("stereocam.tools.calibration.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
+    "calibration": ("stereocam.tools.calibration.export", "calibration export URL --size WxH: ROS camera_info from a unit"),
     "factory": ("stereocam.tools.factory.cli", "factory record: yield and metric distributions per day and station"),
-    "firmware": ("stereocam.tools.firmware", "signed firmware images: keygen, sign, update a camera, slot status"),
-    "demo": ("stereocam.tools.demo", "simulator + streaming + outputs in ./out + summary"),
+    "firmware": ("stereocam.tools.firmware.cli", "signed firmware images: keygen, sign, update a camera, slot status"),
+    "demo": ("stereocam.tools.demo.cli", "simulator + streaming + outputs in ./out + summary"),
     "conformance": ("stereocam.tools.conformance.cli", "hold a camera to the protocol: one line per check, JUnit/JSON"),
-    "record": ("stereocam.tools.record", "record a camera to an MCAP file (ROS 2 profile)"),
-    "recording": ("stereocam.tools.recording", "recording files: info, repair, export"),
-    "rematch": ("stereocam.tools.rematch", "re-run matching over recordings on a Dask cluster"),
+    "record": ("stereocam.tools.recording.record", "record a camera to an MCAP file (ROS 2 profile)"),
+    "recording": ("stereocam.tools.recording.files", "recording files: info, repair, export"),
+    "rematch": ("stereocam.tools.recording.rematch", "re-run matching over recordings on a Dask cluster"),
     "sim": ("stereocam.device_sim.__main__", "serve a simulated camera over a pty or TCP"),
-    "bench": ("stereocam.tools.bench", "benchmarks: protocol, transports, USB, matching core, calibration"),
-    "soak": ("stereocam.tools.soak", "long fuzz + faulty-link streaming run with crash/hang/frame counts"),
+    "bench": ("stereocam.tools.bench.cli", "benchmarks: protocol, transports, USB, matching core, calibration"),
+    "soak": ("stereocam.tools.soak.cli", "long fuzz + faulty-link streaming run with crash/hang/frame counts"),
 }
-"""name -> (module, one-line help). The module provides ``command`` or ``main(argv)``."""
+"""name -> (module, one-line help). The module provides ``command``."""
 
 
 _log = logging.getLogger("stereocam.cli")
-
-
-def _pass_through(name: str, main: Callable[[list[str]], int | None], text: str) -> click.Command:
-    """An argparse tool as a click command: every argument, --help included, goes to its main."""
-    def run(args: tuple[str, ...]) -> int:
-        try:
-            return main(list(args)) or 0
-        except SystemExit as exc:  # argparse's own exits (--help, usage errors)
-            return exc.code if isinstance(exc.code, int) else (EXIT_USAGE if exc.code else EXIT_OK)
-
-    return click.Command(name, callback=run, help=text, short_help=text, add_help_option=False,
-                         context_settings={"ignore_unknown_options": True, "allow_extra_args": True},
-                         params=[click.Argument(["args"], nargs=-1, type=click.UNPROCESSED)])
 
 
 class CommandTable(click.Group):
@@ -66,16 +54,13 @@ class CommandTable(click.Group):
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
         if name not in COMMANDS:
             return None
-        module_name, text = COMMANDS[name]
+        module_name, _ = COMMANDS[name]
         ctx.meta["stereocam.command"] = name  # for the error messages of invoke
         try:
             module = importlib.import_module(module_name)
         except ModuleNotFoundError as exc:  # an optional dependency group not installed
             raise_missing(exc, "this command")
-        command = getattr(module, "command", None)
-        if isinstance(command, click.Command):
-            return command
-        return _pass_through(name, module.main, text)
+        return module.command
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         with formatter.section("Commands"):
@@ -98,7 +83,8 @@ class CommandTable(click.Group):
         except (KeyboardInterrupt, click.Abort):
             click.echo(f"stereocam {_command(ctx)}: interrupted", err=True)
             raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
-        except MissingInputError as exc:  # an input file that does not exist: bad usage
+        except (MissingInputError, stereocam.ConfigError) as exc:  # a missing input file, a value that cannot
+            # be used (a URL without a port, a bad setting): bad usage
             click.echo(f"stereocam {_command(ctx)}: error: {exc}", err=True)
             raise click.exceptions.Exit(EXIT_USAGE) from None
         except stereocam.StereoCamError as exc:
@@ -116,27 +102,37 @@ def _command(ctx: click.Context) -> str:
     return ctx.meta.get("stereocam.command", "")
 
 
-LOG_LEVELS = ("ERROR", "WARNING", "INFO", "DEBUG")
+def _log_levels(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -> tuple[str, ...]:
+    try:
+        parse_levels(0, value)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc)) from None
+    return value
 
 
 @click.group("stereocam", cls=CommandTable, epilog=EXIT_CODES, no_args_is_help=True,
              context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(stereocam.__version__, "--version", prog_name="stereocam", message="%(prog)s %(version)s")
 @click.option("-v", "--verbose", count=True,
-              help="Log more to stderr: -v info (reconnects, CRC errors, drops), -vv debug.  [default: warnings only]")
-@click.option("--log-level", type=click.Choice(LOG_LEVELS, case_sensitive=False), default=None,
-              help="Log level, overrides -v.")
-def cli(verbose: int, log_level: str | None) -> None:
+              help="Log more of stereocam's own lines to stderr: -v info (reconnects, CRC errors, drops), -vv debug.  "
+                   "[default: warnings only]")
+@click.option("--log-level", "log_levels", multiple=True, metavar="[NAME=]LEVEL", callback=_log_levels,
+              help="LEVEL (ERROR, WARNING, INFO, DEBUG) for stereocam's loggers, overriding -v; NAME=LEVEL for "
+                   "another library's logger, e.g. distributed=INFO (repeatable).  [default: other libraries "
+                   "at WARNING]")
+@click.pass_context
+def cli(ctx: click.Context, verbose: int, log_levels: tuple[str, ...]) -> None:
     """Tools for STOC-class stereo cameras and their simulator. Run a command with --help for more."""
-    level = log_level.upper() if log_level else LOG_LEVELS[min(1 + verbose, len(LOG_LEVELS) - 1)]
-    logging.basicConfig(level=level, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    configure(parse_levels(verbose, log_levels))
+    _log.debug("stereocam %s (Python %s): %s", stereocam.__version__, sys.version.split()[0], ctx.invoked_subcommand)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``stereocam`` with ``argv``; returns the exit code (see EXIT_CODES)."""
     args = list(sys.argv[1:] if argv is None else argv)
     try:
-        rc = cli.main(args=args, prog_name="stereocam", standalone_mode=False)
+        with restored():
+            rc = cli.main(args=args, prog_name="stereocam", standalone_mode=False)
     except click.ClickException as exc:  # usage errors, bad parameters: before any camera is touched
         exc.show()
         return exc.exit_code

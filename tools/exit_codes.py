@@ -3,6 +3,7 @@ from __future__ import annotations
 
 EXIT_OK, EXIT_CAMERA, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 0, 1, 2, 130, 141
 EXIT_CODES = """Exit codes: 0 success; 1 the camera or a file failed (unreachable, refused, timed out; a
-recording, image or key that is damaged or refused); 2 bad usage (unknown option, a bad value, a
-path that cannot be written or is missing); 3-7 calibrate's own (see its --help); 130 interrupted
-(Ctrl-C); 141 output closed early (for example piped into head)."""
+recording, image or key that is damaged or refused); 2 bad usage, checked before any camera is
+touched where it can be (unknown option, a bad value, a URL without a port, a path that cannot be
+written or is missing); 3-7 calibrate's own (see its --help); 130 interrupted (Ctrl-C); 141 output
+closed before everything was written (a reader such as head that exits early)."""

@@ -1,7 +1,7 @@
 """Tiny byte-level firmwares for exercising the USB path without the camera firmware.
 
 They implement the same three methods as ``device_sim.SimulatedCamera`` (``attach``,
-``detach``, ``receive``) and are what the USB tests and ``tools/bench_usb.py`` plug in.
+``detach``, ``receive``) and are what the USB tests and ``tools/bench/usb.py`` plug in.
 """
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ import stereocam
 from stereocam.stereo import Matcher
 from stereocam.stereo.engines import params_from_config
 from stereocam.recording.reader import Recording
-from stereocam.tools.bench_record import synthetic_recording
+from stereocam.tools.bench.record import synthetic_recording
 
 N = 8
 

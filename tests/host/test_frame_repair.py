@@ -16,7 +16,7 @@ from stereocam.link import Link
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import encode_frame
 
-from stereocam.tools.soak_parts import PlaneTruth  # what the device sent, by plane CRC
+from stereocam.tools.soak.parts import PlaneTruth  # what the device sent, by plane CRC
 from tests.support.faults import FaultyTransport, LineNoise, PacketFilter
 
 

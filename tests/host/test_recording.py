@@ -15,7 +15,7 @@ from stereocam.protocol.params import defaults
 from stereocam.protocol.rectification import stereo_rectify
 from stereocam.recording import Recorder, RecordingError, describe, schemas
 from stereocam.recording.reader import Recording
-from stereocam.tools import recording as recording_tool
+from stereocam.tools import cli
 
 N = 6
 
@@ -120,10 +120,10 @@ def test_camera_record_and_tools(tmp_path, capsys, device_url):
         serial, stored = cam.info().serial, cam.read_calibration()
         stats = cam.record(path, frames=4)
     assert stats.frames == 4 and stats.recorder_dropped == 0
-    assert recording_tool.main(["info", str(path)]) == 0
+    assert cli.main(["recording", "info", str(path)]) == 0
     out = capsys.readouterr().out
     assert serial in out and "frames    4" in out and "stereo_msgs/msg/DisparityImage" in out
-    assert recording_tool.main(["info", str(path), "--json"]) == 0
+    assert cli.main(["recording", "info", str(path), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["unit"]["serial"] == serial and doc["frames"] == 4 and doc["drops"]["recorder_dropped"] == 0
     assert doc["topics"]["/stereo/disparity"]["messages"] == 4
@@ -131,7 +131,7 @@ def test_camera_record_and_tools(tmp_path, capsys, device_url):
     if stored is not None:
         assert doc["calibration"]["lens_model"] == stored.calibration.lens_model
         assert doc["calibration"]["id"] == f"{stored.calibration_id:08x}"
-    assert recording_tool.main(["export", str(path), "--out", str(tmp_path / "x"), "--stop", "2"]) == 0
+    assert cli.main(["recording", "export", str(path), "--out", str(tmp_path / "x"), "--stop", "2"]) == 0
     names = sorted(p.name for p in (tmp_path / "x").iterdir())
     assert names[:5] == ["frame000000_disparity.npy", "frame000000_disparity.png", "frame000000_left.png",
                          "frame000000_points.ply", "frame000000_right.png"] and len(names) == 10
@@ -166,7 +166,6 @@ def test_a_damaged_chunk_is_a_typed_error_naming_the_frame(tmp_path, recorded, c
         assert rec.capture(0).info.sequence == frames[0].sequence  # the chunks before it still read
         with pytest.raises(RecordingError, match=r"bad\.mcap: frame \d+ cannot be read"):
             list(rec.captures())
-    from stereocam.tools import cli
 
     assert cli.main(["recording", "export", str(bad), "--out", str(tmp_path / "x")]) == 1
     err = capsys.readouterr().err
@@ -202,10 +201,9 @@ def test_spliced_cdr_equals_the_library_encoding(n):
         assert spliced == encode(body)
 
 
-def test_record_cli_limits_and_output(tmp_path, capsys):
-    from stereocam.tools import cli
-
-    assert cli.main(["record", "sim://?seed=2", "--out", str(tmp_path / "a.mcap"), "--frames", "0"]) == 1
+def test_record_cli_limits_and_output(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("stereocam.tools.recording.record.progress_wanted", lambda: True)  # as on a terminal
+    assert cli.main(["record", "sim://?seed=2", "--out", str(tmp_path / "a.mcap"), "--frames", "0"]) == 2
     assert cli.main(["record", "sim://?seed=2", "--out", str(tmp_path / "a.mcap"), "--frames", "2", "--set",
                      "width=320", "--set", "height=240"]) == 0
     captured = capsys.readouterr()

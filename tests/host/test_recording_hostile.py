@@ -18,7 +18,7 @@ from stereocam.recording.reader import DamagedRecordingError, Recording
 from stereocam.recording.recorder import FRAME_INDEX
 from stereocam.recording.repair import repair
 from stereocam.tools import cli
-from stereocam.tools.soak_recordings import BOMBS, bomb, with_chunk_replaced
+from stereocam.tools.soak.recordings import BOMBS, bomb, with_chunk_replaced
 from tests.support.hangs import returns_within
 
 N = 5
@@ -398,7 +398,7 @@ def test_a_zstd_header_claim_allocates_nothing_under_an_address_space_limit(clai
             "resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30))\n"
             "from mcap.records import Chunk\n"
             "from stereocam.recording.chunks import chunk_data\n"
-            "from stereocam.tools.soak_recordings import claiming_zstd\n"
+            "from stereocam.tools.soak.recordings import claiming_zstd\n"
             f"c = Chunk(compression='zstd', data=claiming_zstd({claim}), message_end_time=0, message_start_time=0, "
             "uncompressed_crc=0, uncompressed_size=1000)\n"
             "try:\n"

@@ -12,7 +12,7 @@ from stereocam.protocol import crc_range
 from stereocam.protocol import framing
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import MAX_PAYLOAD, Decoder
-from stereocam.tools import bench_decoder as shapes
+from stereocam.tools.bench import decoder as shapes
 
 
 def test_a_partial_frame_is_abandoned_after_the_message_timeout():

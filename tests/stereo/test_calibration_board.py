@@ -23,8 +23,9 @@ def test_board_geometry() -> None:
 
 
 def test_hardware_tools_load_no_simulator_module() -> None:
-    code = ("import sys, stereocam.tools.calib_solve, stereocam.tools.calib_boards, stereocam.tools.calib_coverage, "
-            "stereocam.tools.rematch, stereocam.tools.rematch_tasks; "
+    code = ("import sys, stereocam.tools.calibration.solve, stereocam.tools.calibration.boards, "
+            "stereocam.tools.calibration.coverage, "
+            "stereocam.tools.recording.rematch, stereocam.tools.recording.rematch_tasks; "
             "print(sorted(n for n in sys.modules if n.startswith('stereocam.device_sim')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
     assert out.returncode == 0, out.stderr

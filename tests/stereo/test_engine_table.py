@@ -16,7 +16,7 @@ from stereocam.recording.reader import Recording
 from stereocam.stereo import MatchParams, SGMParams, engines
 from stereocam.stereo.config_map import config_of
 from stereocam.tools import rematch_tasks
-from stereocam.tools.bench_record import synthetic_recording
+from stereocam.tools.bench.record import synthetic_recording
 
 from . import sad_engine
 

@@ -10,7 +10,7 @@ import pytest
 cv2 = pytest.importorskip("cv2")
 
 from stereocam.stereo import Matcher, MatchParams, match  # noqa: E402
-from stereocam.tools.stereobm_oracle import opencv_stereobm as cv_stereo_bm  # noqa: E402
+from stereocam.tools.bench.stereobm_oracle import opencv_stereobm as cv_stereo_bm  # noqa: E402
 
 
 def scene(h: int, w: int, shift: int, seed: int) -> tuple[np.ndarray, np.ndarray]:

@@ -118,7 +118,7 @@ def test_motorcycle_bit_exact(motorcycle_small, kw) -> None:
 
 @pytest.fixture(scope="module")
 def sim_pair():
-    from stereocam.tools.bench_sgm import sim_scene
+    from stereocam.tools.bench.sgm import sim_scene
     left, right, truth = sim_scene(320, 240, scene="lab", seed=5)
     return left[5:152, 3:290], right[5:152, 3:290], truth[5:152, 3:290]
 

@@ -1,11 +1,11 @@
 """Fault injection for the tests: the transport wrapper and line noise live in the package
-(``stereocam.tools.fault_link``, shared with ``stereocam soak``); packet-level rules live here."""
+(``stereocam.tools.soak.fault_link``, shared with ``stereocam soak``); packet-level rules live here."""
 from __future__ import annotations
 
 from typing import Callable
 
 from stereocam.protocol.framing import Decoder, encode_frame
-from stereocam.tools.fault_link import FaultyTransport, LineNoise, Manipulator
+from stereocam.tools.soak.fault_link import FaultyTransport, LineNoise, Manipulator
 
 __all__ = ["FaultyTransport", "LineNoise", "Manipulator", "PacketFilter"]
 

@@ -92,11 +92,10 @@ def test_capture_count_must_be_positive(count, tmp_path):
     assert r.returncode == 2 and "--count" in r.stderr and not list(tmp_path.iterdir())
 
 
-def test_capture_leaves_the_camera_as_found_and_shows_progress(tmp_path):
+def test_capture_leaves_the_camera_as_found(tmp_path):
     with ServedSimulator("tcp:127.0.0.1:0", seed=4) as server:
         r = run("capture", server.url, "--out", str(tmp_path), "--count", "2")
-        assert r.returncode == 0, r.stderr
-        assert "2/2" in r.stderr and "frame/s" in r.stderr
+        assert r.returncode == 0, r.stderr  # its progress bar: tests/tools/test_cli_output.py
         assert len(list(tmp_path.glob("*_left.png"))) == 2
         with stereocam.open(server.url, timeout=2.0) as cam:
             assert cam.config()["trigger_mode"] == stereocam.TriggerMode.FREE_RUN

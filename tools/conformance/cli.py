@@ -5,46 +5,58 @@ every applicable check passed. The device is left stopped, configured and calibr
 """
 from __future__ import annotations
 
-import argparse
 import re
-import sys
+from pathlib import Path
+from typing import Callable
+
+import click
+
+from stereocam.tools.options import CONTEXT, epilog
 
 from . import report
 from .results import CheckResult
 from .runner import run_suite
 
+ALWAYS = ("identity.connect", "session.restored")
+"""Results every run reports, whatever -k selects."""
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam conformance", description=__doc__.split("\n\n")[1],
-                                 epilog="Exit codes: 0 every applicable check passed; 1 a check failed or the "
-                                        "camera could not be reached; 2 bad usage.")
-    ap.add_argument("url", help="camera URL (usb://?serial=..., socket://host:port, /dev/ttyACM0, ...)")
-    ap.add_argument("--junit", metavar="FILE", help="also write the results as JUnit XML")
-    ap.add_argument("--json", action="store_true", help="print the results as JSON instead of text")
-    ap.add_argument("--timeout", type=float, default=1.0,
-                    help="reply deadline the device is held to, seconds (SPEC §7: well inside 1 s)")
-    ap.add_argument("-k", metavar="REGEX", help="run only the checks whose name matches")
-    args = ap.parse_args(argv)
-    if not args.timeout > 0:
-        ap.error("--timeout must be a positive number of seconds")
+
+def _pattern(ctx: click.Context, param: click.Parameter, value: str | None) -> Callable[[str], object] | None:
     try:
-        only = re.compile(args.k).search if args.k else None
+        return re.compile(value).search if value else None
     except re.error as exc:
-        ap.error(f"-k: not a regular expression: {exc}")
+        raise click.BadParameter(f"not a regular expression: {exc}") from None
+
+
+@click.command("conformance", context_settings=CONTEXT,
+               epilog=epilog("Exit codes: 0 every applicable check passed; 1 a check failed or the camera could "
+                             "not be reached; 2 bad usage (also a -k that selects no check)."))
+@click.argument("url")
+@click.option("--junit", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write the results as JUnit XML to this file.")
+@click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of text.")
+@click.option("--timeout", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True,
+              help="Reply deadline the device is held to, seconds (SPEC §7: well inside 1 s).")
+@click.option("-k", "only", metavar="REGEX", default=None, callback=_pattern,
+              help="Run only the checks whose name matches.  [default: every check]")
+def command(url: str, junit: Path | None, as_json: bool, timeout: float, only: Callable[[str], object] | None) -> int:
+    """Hold a camera to the protocol: one line per check (PASS / FAIL / SKIP with the reason), then a
+    summary. The device is left stopped, configured and calibrated as found. URL: usb://?serial=...,
+    socket://HOST:PORT, /dev/ttyACM0, ..."""
+    selected: list[CheckResult] = []
 
     def show(result: CheckResult) -> None:
-        if not args.json:
-            print(report.text_line(result), flush=True)
+        if result.name not in ALWAYS:
+            selected.append(result)
+        elif only is not None and not selected and result.name == "session.restored":
+            return  # nothing was selected: refused below, without a line about it
+        if not as_json:
+            click.echo(report.text_line(result))
 
-    suite = run_suite(args.url, args.timeout, on_result=show, only=only)
-    if args.json:
-        print(report.to_json(suite))
-    else:
-        print(report.summary(suite))
-    if args.junit:
-        report.write_junit(suite, args.junit)
+    suite = run_suite(url, timeout, on_result=show, only=only)
+    if only is not None and not selected and suite.device:
+        raise click.BadParameter("selects no check", param_hint="-k")
+    click.echo(report.to_json(suite) if as_json else report.summary(suite))
+    if junit is not None:
+        report.write_junit(suite, str(junit))
     return 0 if suite.passed else 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())

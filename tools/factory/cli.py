@@ -7,19 +7,23 @@ as its length in bytes).
 """
 from __future__ import annotations
 
-from stereocam.tools.exit_codes import EXIT_CODES
-
-import argparse
 import csv
 import json
-import sys
 from collections import defaultdict
 from datetime import datetime
 from pathlib import Path
 
+import click
 import numpy as np
 
-from stereocam.tools.factory.db import COLUMNS, Attempt, FactoryDB, FactoryDBError, default_url
+from stereocam.tools.factory.db import (
+    COLUMNS,
+    Attempt,
+    FactoryDB,
+    FactoryDBError,
+    default_url,
+)
+from stereocam.tools.options import CONTEXT, epilog
 
 METRICS = ("rms_stereo", "epipolar_rms_px", "baseline_m")
 
@@ -98,45 +102,45 @@ def write_csv(attempts: list[Attempt], path: Path) -> None:
             w.writerow([csv_cell(d[c]) for c in cols[:-1]] + [len(a.calibration or b"")])
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="stereocam factory", description=__doc__.splitlines()[0].replace("``", ""),
-                                 epilog=EXIT_CODES,
-                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    sub = ap.add_subparsers(dest="command", required=True)
-    rep = sub.add_parser("report", help="yield and metric distributions per day and station", epilog=EXIT_CODES,
-                         description=__doc__.split("\n\n", 1)[1].strip(),
-                         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    rep.add_argument("--db", default=default_url(), help="SQLite path / sqlite:///PATH or postgresql://...")
-    rep.add_argument("--since", default=None, help="only attempts from this ISO date (UTC), e.g. 2026-11-01")
-    rep.add_argument("--csv", type=Path, default=None, help="also write every attempt to this CSV file")
-    rep.add_argument("--json", action="store_true", help="print one JSON object: yield and metrics per day and station")
-    args = ap.parse_args(argv)
-    if args.since is not None:
+def _since(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    if value is not None:
         try:
-            datetime.fromisoformat(args.since)
+            datetime.fromisoformat(value)
         except ValueError:
-            print(f"stereocam factory: error: --since {args.since!r} is not an ISO date or time (e.g. 2026-11-01)",
-                  file=sys.stderr)
-            return 2
+            raise click.BadParameter(f"{value!r} is not an ISO date or time (e.g. 2026-11-01)") from None
+    return value
+
+
+@click.group("factory", epilog=epilog(), context_settings=CONTEXT)
+def command() -> None:
+    """The factory record: every calibration attempt, in a SQLite file or on PostgreSQL."""
+
+
+@command.command("report", epilog=epilog())
+@click.option("--db", default=default_url(), show_default=True, help="SQLite path / sqlite:///PATH or postgresql://...")
+@click.option("--since", default=None, callback=_since,
+              help="Only attempts from this ISO date (UTC), e.g. 2026-11-01.  [default: all]")
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write every attempt to this CSV file.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object: yield and metrics per day and station.")
+def report(db: str, since: str | None, csv_path: Path | None, as_json: bool) -> int:
+    """Yield and metric distributions per day (UTC) and station: attempts, passed, yield, and for
+    rms_stereo, epipolar_rms_px (held-out) and baseline_m their median, 90th percentile and maximum.
+    --csv writes every attempt (metrics as JSON; the calibration blob as its length in bytes)."""
     try:
-        with FactoryDB(args.db, create=False) as db:
-            attempts = db.attempts(args.since)
-            unreadable = db.unreadable
+        with FactoryDB(db, create=False) as fdb:
+            attempts = fdb.attempts(since)
+            unreadable = fdb.unreadable
     except FactoryDBError as exc:
-        print(f"stereocam factory: error: {exc}", file=sys.stderr)
-        return 2
+        raise click.BadParameter(str(exc), param_hint="--db") from None
     for why in unreadable:  # rows written by something else: named, left out of the figures
-        print(f"stereocam factory: warning: {args.db}: {why}: left out of the report", file=sys.stderr)
-    if args.json:
-        print(json.dumps(report_doc(args.db, attempts), indent=2))
+        click.echo(f"stereocam factory: warning: {db}: {why}: left out of the report", err=True)
+    if as_json:
+        click.echo(json.dumps(report_doc(db, attempts), indent=2))
     else:
-        print(f"factory record {args.db}: {len(attempts)} attempts" + (f" since {args.since}" if args.since else ""))
-        print("\n".join(report_lines(attempts)))
-    if args.csv is not None:
-        write_csv(attempts, args.csv)
-        print(f"wrote {args.csv}")
+        click.echo(f"factory record {db}: {len(attempts)} attempts" + (f" since {since}" if since else ""))
+        click.echo("\n".join(report_lines(attempts)))
+    if csv_path is not None:
+        write_csv(attempts, csv_path)
+        click.echo(f"wrote {csv_path}")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

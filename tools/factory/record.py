@@ -6,7 +6,7 @@ import datetime as dt
 from pathlib import Path
 
 import stereocam
-from stereocam.tools.calib_solve import CalibrationResult
+from stereocam.tools.calibration.solve import CalibrationResult
 from stereocam.tools.factory.db import Attempt
 
 

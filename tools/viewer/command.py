@@ -13,7 +13,8 @@ from typing import Callable
 import click
 
 import stereocam
-from stereocam.tools.session import output_dir, preserved_configuration
+from stereocam.tools.camera.session import output_dir, preserved_configuration
+from stereocam.tools.options import CONTEXT, epilog
 
 from .group_session import GroupViewerSession
 from .server import ViewerServer
@@ -24,8 +25,9 @@ def _interrupt(signum: int, frame: object) -> None:  # noqa: ARG001
     raise KeyboardInterrupt
 
 
-@click.command("view", epilog="Exit codes: 0 stopped with Ctrl-C (130 if interrupted before serving); "
-               "1 camera unreachable; 2 bad usage (including a port that is taken).")
+@click.command("view", context_settings=CONTEXT,
+               epilog=epilog("Exit codes: 0 stopped with Ctrl-C once serving (130 if interrupted before); 2 also "
+                             "a port that is taken."))
 @click.argument("urls", nargs=-1, required=True, metavar="URL [URL...]")
 @click.option("--port", type=click.IntRange(0, 65535), default=0, show_default=True,
               help="Local port to serve on (0: any free port).")

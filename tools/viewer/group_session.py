@@ -10,7 +10,7 @@ import cv2
 
 import stereocam
 from stereocam.frame_sets import MatchedSet
-from stereocam.tools.pictures import colorize
+from stereocam.tools.camera.pictures import colorize
 
 from .feed import Feed
 from .session import JPEG_QUALITY

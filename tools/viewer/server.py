@@ -36,7 +36,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import stereocam
 from stereocam.recording import RecordingError
-from stereocam.tools.capture import save_frame
+from stereocam.tools.camera.capture import save_frame
 
 from .group_session import GroupViewerSession
 from .session import ViewerSession

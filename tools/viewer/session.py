@@ -18,8 +18,8 @@ import numpy as np
 import stereocam
 from stereocam.dispatch import DropPolicy, FrameQueue
 from stereocam.recording import Recorder, RecordingListener, describe
-from stereocam.tools.info import value_name
-from stereocam.tools.pictures import colorize, depth_ticks, disparity_range
+from stereocam.tools.camera.info import value_name
+from stereocam.tools.camera.pictures import colorize, depth_ticks, disparity_range
 
 from .feed import Feed
 

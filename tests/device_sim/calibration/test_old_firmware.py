@@ -9,8 +9,8 @@ from stereocam.device_sim.calibration import acceptance as calib_service  # wher
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.device_sim.rig.sensor import BOARD
 from stereocam.protocol.calibration import CalibrationFormatError, StereoCalibration
-from stereocam.tools.calib_solve import SolveConfig
-from stereocam.tools.calibrate_device import EXIT_WRITE, calibrate_device
+from stereocam.tools.calibration.solve import SolveConfig
+from stereocam.tools.calibration.device import EXIT_WRITE, calibrate_device
 
 
 class _Version1Firmware(StereoCalibration):

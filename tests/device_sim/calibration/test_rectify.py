@@ -11,7 +11,7 @@ from stereocam.protocol.calibration import StereoCalibration
 from stereocam.device_sim.calibration.rectify import rectification_maps, remap_bilinear, undistort_rectify_map
 from stereocam.device_sim.calibration.truth import true_calibration
 from stereocam.protocol.rectification import _log_rotation, rodrigues, stereo_rectify, undistort_points
-from stereocam.tools.calib_boards import detect_all
+from stereocam.tools.calibration.boards import detect_all
 
 
 def cv_rectify(c: StereoCalibration):

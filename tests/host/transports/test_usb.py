@@ -205,7 +205,7 @@ def test_list_devices_includes_free_in_process_simulators():
 
 
 def test_list_devices_table(capsys):
-    from stereocam.tools.list_devices import main
+    from stereocam.tools.camera.list_devices import main
     simusb.plug(EchoDevice(serial="TBL1"))
     assert main([]) == 0
     out = capsys.readouterr().out

@@ -19,7 +19,7 @@ from stereocam.device_sim.process import ServedSimulator
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import Packet
 from stereocam.protocol.params import BY_ID
-from stereocam.tools.conformance import cli
+from stereocam.tools import cli
 from stereocam.tools.conformance.checks.config import UNUSED_PARAM_ID
 from tests.support.broken_devices import (RewritingProxy, clamp_into_range, dead_trigger_output, forget_resend,
                                           stale_slot_report, unchanged, without_capabilities)
@@ -38,7 +38,7 @@ BUILT_HERE = pytest.mark.sim_only("judges simulators and broken devices this mod
 def _run_cli(argv: list[str]) -> tuple[int, str]:
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        rc = cli.main(argv)
+        rc = cli.main(["conformance", *argv])
     return rc, out.getvalue()
 
 

@@ -10,8 +10,8 @@ import pytest
 
 from tests.support.paths import DATA
 
-from stereocam.tools import calibrate
-from stereocam.tools.factory import cli as factory_cli
+from stereocam.tools.calibration import calibrate
+from stereocam.tools import cli
 from stereocam.tools.factory.db import MIGRATIONS, SCHEMA_VERSION, Attempt, FactoryDB, FactoryDBError
 
 PAIRS = DATA / "opencv_chessboard_pairs"
@@ -41,7 +41,7 @@ def db_url(request, tmp_path: Path) -> str:
 
 
 def _run(db_url: str, out: Path, *extra: str) -> int:
-    return calibrate.main(["-q", "--images", str(PAIRS), "--board", "9x6", "--square-size", "0.025",
+    return cli.main(["calibrate", "-q", "--images", str(PAIRS), "--board", "9x6", "--square-size", "0.025",
                            "--out", str(out), "--db", db_url, "--station", "line-1", *extra])
 
 
@@ -62,7 +62,7 @@ def test_every_attempt_is_recorded_and_reported(db_url: str, tmp_path: Path, cap
     assert "epipolar" in bad.reason and bad.metrics["failures"]
     capsys.readouterr()
     day = ok.started_at[:10]
-    assert factory_cli.main(["report", "--db", db_url, "--since", day, "--csv", str(tmp_path / "r.csv")]) == 0
+    assert cli.main(["factory", "report", "--db", db_url, "--since", day, "--csv", str(tmp_path / "r.csv")]) == 0
     out = capsys.readouterr().out
     assert "2 attempts" in out and "line-1" in out and "line-2" in out and "50.0%" in out
     assert "calibration FAILED the gate" in out
@@ -70,9 +70,9 @@ def test_every_attempt_is_recorded_and_reported(db_url: str, tmp_path: Path, cap
         table = list(csv.DictReader(f))
     assert [t["station"] for t in table] == ["line-1", "line-2"] and float(table[0]["rms_stereo"]) > 0
     assert json.loads(table[0]["metrics"])["lens_model_scores"] == ok.metrics["lens_model_scores"]
-    assert factory_cli.main(["report", "--db", db_url, "--since", "2999-01-01"]) == 0
+    assert cli.main(["factory", "report", "--db", db_url, "--since", "2999-01-01"]) == 0
     assert "0 attempts" in capsys.readouterr().out
-    assert factory_cli.main(["report", "--db", db_url, "--json"]) == 0
+    assert cli.main(["factory", "report", "--db", db_url, "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert (doc["total"]["attempts"], doc["total"]["passed"], doc["total"]["yield"]) == (2, 1, 0.5)
     assert set(doc["groups"]) == {f"{day} line-1", f"{day} line-2"}
@@ -134,14 +134,14 @@ def test_a_report_never_creates_or_changes_a_database(tmp_path: Path, capsys) ->
     before = other.read_bytes()
     for db, named in ((str(missing), "no factory database"), (f"sqlite:///{missing}", "no factory database"),
                       (str(other), "not a factory database"), ("mysql://x/y", "unknown scheme")):
-        assert factory_cli.main(["report", "--db", db]) == 2
+        assert cli.main(["factory", "report", "--db", db]) == 2
         assert named in capsys.readouterr().err
     assert not missing.parent.exists() and other.read_bytes() == before and not (tmp_path / "mysql:").exists()
     with FactoryDB(str(tmp_path / "real.sqlite")):
         pass
-    assert factory_cli.main(["report", "--db", str(tmp_path / "real.sqlite"), "--since", "garbage"]) == 2
+    assert cli.main(["factory", "report", "--db", str(tmp_path / "real.sqlite"), "--since", "garbage"]) == 2
     assert "not an ISO date" in capsys.readouterr().err
-    assert factory_cli.main(["report", "--db", str(tmp_path / "real.sqlite"), "--since", "2026-11-01"]) == 0
+    assert cli.main(["factory", "report", "--db", str(tmp_path / "real.sqlite"), "--since", "2026-11-01"]) == 0
 
 
 # -- issue 22 item 14: a database written by others ------------------------------------------------
@@ -159,7 +159,7 @@ def test_a_report_names_rows_others_wrote_badly_and_reports_the_rest(tmp_path, c
     _one(url, "SN-bad")
     with sqlite3.connect(url) as conn:
         conn.execute(f"UPDATE attempts SET {column} = ? WHERE unit_serial = 'SN-bad'", (value,))
-    assert factory_cli.main(["report", "--db", url, "--csv", str(tmp_path / "a.csv")]) == 0
+    assert cli.main(["factory", "report", "--db", url, "--csv", str(tmp_path / "a.csv")]) == 0
     out, err = capsys.readouterr()
     assert "1 attempts" in out and "Traceback" not in err
     assert f"attempt 2: column {column}" in err and "left out of the report" in err
@@ -171,7 +171,7 @@ def test_a_dropped_column_is_a_clean_error(tmp_path, capsys):
     _one(url)
     with sqlite3.connect(url) as conn:
         conn.execute("ALTER TABLE attempts DROP COLUMN reason")
-    assert factory_cli.main(["report", "--db", url]) == 2
+    assert cli.main(["factory", "report", "--db", url]) == 2
     err = capsys.readouterr().err
     assert "cannot read the attempts" in err and "reason" in err and "Traceback" not in err
 
@@ -185,7 +185,7 @@ def test_a_locked_sqlite_file_is_reported_as_locked_not_as_foreign(tmp_path, cap
     holder = sqlite3.connect(url, isolation_level=None)
     holder.execute("BEGIN EXCLUSIVE")
     try:
-        assert factory_cli.main(["report", "--db", url]) == 2
+        assert cli.main(["factory", "report", "--db", url]) == 2
     finally:
         holder.execute("ROLLBACK")
         holder.close()
@@ -196,7 +196,7 @@ def test_a_locked_sqlite_file_is_reported_as_locked_not_as_foreign(tmp_path, cap
 def test_csv_export_defuses_spreadsheet_formulas(tmp_path):
     url = str(tmp_path / "f.sqlite")
     _one(url, '=HYPERLINK("http://evil.example","x")', reason="@SUM(A1)", rms_stereo=-0.5)
-    assert factory_cli.main(["report", "--db", url, "--csv", str(tmp_path / "a.csv")]) == 0
+    assert cli.main(["factory", "report", "--db", url, "--csv", str(tmp_path / "a.csv")]) == 0
     (row,) = csv.DictReader((tmp_path / "a.csv").open())
     assert row["unit_serial"] == "'=HYPERLINK(\"http://evil.example\",\"x\")" and row["reason"] == "'@SUM(A1)"
     assert row["rms_stereo"] == "-0.5"  # a number is no formula

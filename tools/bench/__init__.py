@@ -1,0 +1,1 @@
+"""stereocam bench: benchmarks of the protocol, transports, USB, matching core, calibration, recordings."""

@@ -1,0 +1,202 @@
+"""Benchmark the device matching core against cv2.StereoBM in one process.
+
+    python -m tools.bench_matching [--threads 2] [--repeat 15] [--quick] [--profile]
+                                   [--cold-jit] [--algorithm bm|sgm]
+
+Prints per case: median ms of each (runs interleaved), ratio core/cv2, G disparity
+evaluations/s (W*H*D/time), bad-2.0 against ground truth (Middlebury Motorcycle from
+scikit-image, and the synthetic scene's exact shifts; invalid counts as bad, unknown ground
+truth skipped), bit-identical, peak extra memory per call (tracemalloc) and the matcher's
+scratch size, plus the JIT warm-up. The load average is printed because timings on a shared
+machine are only comparable within one run.
+"""
+from __future__ import annotations
+
+import statistics
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import click
+import numpy as np
+
+from stereocam.protocol.params import BY_NAME
+from stereocam.stereo import engines
+from stereocam.tools.bench.stereobm_oracle import opencv_stereobm
+from stereocam.tools.options import CONTEXT, epilog
+
+
+def synthetic_scene(h: int = 480, w: int = 640, seed: int = 0):
+    """Smoothed random texture: background at 20 px, a slanted plane and a box nearer."""
+    rng = np.random.default_rng(seed)
+    pad = 160
+    base = rng.integers(0, 256, (h, w + 2 * pad)).astype(np.float32)
+    k = np.array([1, 2, 1], np.float32) / 4
+    base = np.apply_along_axis(lambda v: np.convolve(v, k, "same"), 1, base)
+    base = np.apply_along_axis(lambda v: np.convolve(v, k, "same"), 0, base)
+    base = base.astype(np.uint8)
+    right = base[:, pad:pad + w].copy()
+    gt = np.full((h, w), 20.0, np.float32)
+    gt[:, :] += np.linspace(0, 12, w)[None, :] * (np.arange(h)[:, None] > h // 2)
+    gt[h // 5:h // 2, w // 4:w // 2] = 45.0
+    xs = np.arange(w)[None, :] + pad - np.rint(gt).astype(int)
+    left = np.take_along_axis(base, xs, axis=1)
+    return left.astype(np.uint8), right, gt
+
+
+def motorcycle():
+    import cv2
+    from skimage import data
+    left, right, gt = data.stereo_motorcycle()
+    return (cv2.cvtColor(left, cv2.COLOR_RGB2GRAY), cv2.cvtColor(right, cv2.COLOR_RGB2GRAY),
+            gt.astype(np.float32))
+
+
+def bad_rate(disp: np.ndarray, gt: np.ndarray, invalid: int, thr: float = 2.0) -> float:
+    """Middlebury bad-thr over known pixels (finite gt); invalid output counts as bad."""
+    known = np.isfinite(gt)
+    d = disp.astype(np.float32) / 16.0
+    bad = (disp == invalid) | (np.abs(d - gt) > thr)
+    return float(np.count_nonzero(bad & known)) / max(1, int(np.count_nonzero(known)))
+
+
+def _median_ms(fn, repeat: int) -> float:
+    ts = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        ts.append((time.perf_counter() - t0) * 1e3)
+    return statistics.median(ts)
+
+
+def _cache_present() -> bool:
+    d = Path(engines.__file__).resolve().parent / "__pycache__"
+    return d.is_dir() and any(d.glob("*.nbi"))
+
+
+def cold_jit_seconds() -> float:
+    """Seconds a fresh process needs to import the core and compile every kernel."""
+    import os
+    import subprocess
+    import tempfile
+    code = ("import time; t0 = time.perf_counter(); from stereocam.stereo.engines import warm_up; "
+            "warm_up(); print(time.perf_counter() - t0)")
+    root = Path(__file__).resolve().parent.parent
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(os.environ, NUMBA_CACHE_DIR=tmp)
+        res = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, check=True,
+                             capture_output=True, text=True)
+    return float(res.stdout.strip().splitlines()[-1])
+
+
+def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
+    """Median ms per pipeline stage of Matcher m.
+
+    'cost volume' runs the SAD stage with a texture threshold no pixel passes, so it times the
+    running sums alone; 'wta+subpixel+lr' is the SAD stage minus that."""
+    from dataclasses import replace
+
+    from stereocam.stereo import Matcher
+    from stereocam.stereo.postfilter import filter_speckles
+    from stereocam.stereo.prefilter import prefilter_pair
+    p = m.params
+    disp = m.match(left, right)
+    out = {"prefilter": _median_ms(lambda: prefilter_pair(
+        left, right, m.pl, m.pr, p.pre_filter_type, p.pre_filter_size, p.pre_filter_cap,
+        m.pf_vsum), repeat)}
+    stage = _median_ms(lambda: m.run_sad(disp), repeat)
+    mc = Matcher(left.shape, replace(p, texture_threshold=BY_NAME["texture_threshold"].hi, disp12_max_diff=-1))
+    mc.match(left, right)
+    out["cost volume"] = _median_ms(lambda: mc.run_sad(disp), repeat)
+    out["wta+subpixel+lr"] = stage - out["cost volume"]
+    if p.use_speckle:
+        out["speckle"] = _median_ms(lambda: filter_speckles(
+            disp.copy(), p.invalid_value, p.speckle_window_size, p.speckle_range, m.labels,
+            m.stack, m.rtype), repeat)
+    out["total"] = _median_ms(lambda: m.match(left, right), repeat)
+    return out
+
+
+@click.command("matching", context_settings=CONTEXT, epilog=epilog())
+@click.option("--threads", type=click.IntRange(min=1), default=2, show_default=True, help="Threads for both.")
+@click.option("--repeat", type=click.IntRange(min=1), default=15, show_default=True, help="Timed runs per case.")
+@click.option("--quick", is_flag=True, help="Only 640x480, D=64, block 9.")
+@click.option("--profile", is_flag=True, help="Per-stage timings of the core.")
+@click.option("--cold-jit", is_flag=True, help="Also time a from-scratch compile (subprocess, empty numba cache).")
+@click.option("--algorithm", type=click.Choice(engines.names()), default="bm", show_default=True,
+              help="bm: the block matcher vs cv2.StereoBM; sgm: our SGM vs every cv2.StereoSGBM mode and StereoBM.")
+def command(**params: Any) -> int:
+    """Benchmark the device matching core against cv2.StereoBM in one process."""
+    args = SimpleNamespace(**params)
+    if args.algorithm == "sgm":
+        from .sgm import main as sgm_main
+        return sgm_main(args)
+
+    import cv2
+    import numba
+
+    cached = _cache_present()
+    t0 = time.perf_counter()
+    from stereocam.stereo import Matcher, MatchParams
+    t_import = time.perf_counter() - t0
+    cv2.setNumThreads(args.threads)
+    numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
+
+    sl, sr, sgt = synthetic_scene()
+    scenes = [("synthetic 640x480", sl, sr, sgt)]
+    if not args.quick:
+        try:
+            scenes.append(("Motorcycle 741x500", *motorcycle()))
+        except Exception as exc:  # skimage missing or data unavailable
+            print(f"(Motorcycle skipped: {exc})")
+    cases = [(64, 9)] if args.quick else [(64, 9), (64, 15), (128, 9), (128, 15)]
+
+    t_jit = engines.warm_up() + t_import  # compiles, or loads numba's disk cache of, every kernel
+
+    import os
+    print(f"threads={args.threads} (cv2 {cv2.__version__}, numba {numba.__version__}, "
+          f"numba threads {numba.get_num_threads()}); repeat={args.repeat}; "
+          f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus")
+    print(f"JIT warm-up (import + first calls): {t_jit:.2f} s "
+          f"({'loaded from numba disk cache' if cached else 'compiled from scratch'})")
+    if args.cold_jit:
+        print(f"JIT compile from scratch (subprocess, empty cache): {cold_jit_seconds():.2f} s")
+    hdr = (f"{'scene':<19} {'D':>4} {'blk':>3} {'core ms':>8} {'cv2 ms':>8} {'ratio':>6} "
+           f"{'core G/s':>8} {'cv2 G/s':>8} {'bad2.0':>7} {'bitexact':>8} {'peak MiB':>8} "
+           f"{'scratch MiB':>11}")
+    print(hdr)
+    print("-" * len(hdr))
+    for name, left, right, gt in scenes:
+        h, w = left.shape
+        for nd, bs in cases:
+            p = MatchParams(num_disparities=nd, block_size=bs)
+            m = Matcher(left.shape, p)
+            bm = opencv_stereobm(p)
+            ours = m.match(left, right)
+            ref = bm.compute(left, right)
+            same = bool(np.array_equal(ours, ref))
+            t_core, t_cv = [], []
+            for _ in range(args.repeat):  # interleave so both see the same machine state
+                t_core.append(_median_ms(lambda: m.match(left, right), 1))
+                t_cv.append(_median_ms(lambda: bm.compute(left, right), 1))
+            mc, mcv = statistics.median(t_core), statistics.median(t_cv)
+            tracemalloc.start()
+            m.match(left, right)
+            peak = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+            scratch = m.scratch_bytes()
+            bad = bad_rate(ours, gt, p.invalid_value)
+            evals = w * h * nd
+            print(f"{name:<19} {nd:>4} {bs:>3} {mc:>8.2f} {mcv:>8.2f} {mc / mcv:>6.2f} "
+                  f"{evals / mc / 1e6:>8.2f} {evals / mcv / 1e6:>8.2f} "
+                  f"{f'{100 * bad:.1f}%':>7} {'yes' if same else 'NO':>8} "
+                  f"{peak / 2**20:>8.2f} {scratch / 2**20:>11.2f}")
+            if args.profile:
+                prof = profile_stages(m, left, right, args.repeat)
+                print("    profile (ms): " + ", ".join(f"{k} {v:.2f}" for k, v in prof.items()))
+    print(f"load average at the end: {os.getloadavg()[0]:.2f}")
+    return 0
+

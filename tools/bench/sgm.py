@@ -1,0 +1,219 @@
+"""``stereocam bench matching --algorithm sgm``: our SGM against every cv2.StereoSGBM mode and
+cv2.StereoBM, side by side in one run.
+
+Scenes: Middlebury Motorcycle (scikit-image) and the simulator's ground-truth scenes (lab and
+wall, rendered, rectified and fetched over sim:// with SimulatedCamera.ground_truth) at 640x480
+and 1280x960. Per method: median ms of interleaved runs, G disparity evaluations/s (W*H*D/t),
+bad-2.0 and bad-1.0 over pixels with known truth (invalid output counts as bad), and peak memory
+(growth of the process's peak resident set over constructing the matcher and its first call).
+"""
+from __future__ import annotations
+
+import os
+import statistics
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .matching import bad_rate, motorcycle
+
+SGBM_MODES = {"SGBM": 0, "HH": 1, "SGBM_3WAY": 2, "HH4": 3}  # cv2.STEREO_SGBM_MODE_*
+
+
+@dataclass
+class Method:
+    name: str
+    make: Callable[[tuple[int, int]], Callable[[np.ndarray, np.ndarray], np.ndarray]]
+    invalid: int
+
+
+def methods(nd: int, variants: dict[str, dict]) -> list[Method]:
+    """Our SGM per variant, cv2.StereoSGBM in each mode (block 5, P1 = 8*25, P2 = 32*25,
+    uniqueness 10, speckle 100 / 2, as in REFERENCE.md section 5) and cv2.StereoBM 9x9."""
+    import cv2
+
+    from stereocam.stereo import SGMMatcher, SGMParams
+
+    out = []
+    for label, kw in variants.items():
+        p = SGMParams(num_disparities=nd, **kw)
+        out.append(Method(label, lambda shape, p=p: SGMMatcher(shape, p).match, p.invalid_value))
+    for mode, code in SGBM_MODES.items():
+        def make(shape, code=code):
+            return cv2.StereoSGBM_create(0, nd, 5, 8 * 25, 32 * 25, 0, 0, 10, 100, 2,
+                                         code).compute
+        out.append(Method(f"cv2 {mode}", make, -16))
+
+    def make_bm(shape):
+        bm = cv2.StereoBM_create(nd, 9)
+        bm.setSpeckleWindowSize(100)
+        bm.setSpeckleRange(32)
+        return bm.compute
+    out.append(Method("cv2 StereoBM 9x9", make_bm, -16))
+    return out
+
+
+def sim_scene(width: int, height: int, scene: str, seed: int = 3):
+    """(left, right, truth disparity with NaN where unknown) of one simulator capture."""
+    from stereocam.camera import Camera
+    from stereocam.device_sim import SimulatedCamera
+    from stereocam.device_sim.links.inprocess import InProcessTransport
+    from stereocam.protocol.params import Output
+
+    sim = SimulatedCamera(seed=seed, scene=scene)  # a simulator setting, never a device parameter
+    try:
+        with Camera(InProcessTransport(sim, f"sim://?seed={seed}")) as cam:
+            cam.configure(width=width, height=height, outputs=int(Output.LEFT | Output.RIGHT))
+            cam.start()
+            frame = cam.get_frame(timeout=120.0)
+            cam.stop()
+            truth = sim.ground_truth(frame.sequence)
+    finally:
+        sim.close()
+    gt = np.where(truth.disparity_px > 0, truth.disparity_px, np.nan).astype(np.float32)
+    return frame.left, frame.right, gt
+
+
+def _status_kib(field: str) -> int:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith(field + ":"):
+                return int(line.split()[1])
+    raise KeyError(field)
+
+
+def peak_growth_mib(fn: Callable[[], object]) -> float:
+    """MiB by which the process's peak resident set exceeds its current one while fn runs
+    (Linux: /proc/self/clear_refs resets the peak); NaN where that is unavailable."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        base = _status_kib("VmRSS")
+        fn()
+        return (_status_kib("VmHWM") - base) / 1024
+    except OSError:
+        return float("nan")
+
+
+def run(scenes, nd: int, repeat: int, variants: dict[str, dict]) -> None:
+    hdr = (f"{'scene':<22} {'method':<18} {'ms':>8} {'x3WAY':>6} {'GDE/s':>6} {'bad2.0':>7} "
+           f"{'bad1.0':>7} {'peak MiB':>8}")
+    print(hdr)
+    print("-" * len(hdr))
+    for name, left, right, gt in scenes:
+        h, w = left.shape
+        rows = []
+        fns = []
+        for meth in methods(nd, variants):
+            holder = {}
+
+            def first_call(meth=meth, holder=holder):
+                holder["fn"] = meth.make(left.shape)
+                holder["fn"](left, right)
+            mem = peak_growth_mib(first_call)
+            fn = holder["fn"]
+            disp = fn(left, right)
+            fns.append(fn)
+            rows.append([meth.name, [], bad_rate(disp, gt, meth.invalid, 2.0),
+                         bad_rate(disp, gt, meth.invalid, 1.0), mem])
+        for _ in range(repeat):  # interleaved, so every method sees the same machine state
+            for row, fn in zip(rows, fns):
+                t0 = time.perf_counter()
+                fn(left, right)
+                row[1].append((time.perf_counter() - t0) * 1e3)
+        ms = {row[0]: statistics.median(row[1]) for row in rows}
+        for label, _, b2, b1, mem in rows:
+            print(f"{name:<22} {label:<18} {ms[label]:>8.1f} "
+                  f"{ms[label] / ms['cv2 SGBM_3WAY']:>6.2f} {w * h * nd / ms[label] / 1e6:>6.2f} "
+                  f"{100 * b2:>6.1f}% {100 * b1:>6.1f}% {mem:>8.1f}")
+        print()
+
+
+def profile(left: np.ndarray, right: np.ndarray, nd: int, repeat: int, variants) -> None:
+    """Per-stage median ms of our SGM (stages as the matcher runs them; CPU ms on one thread,
+    process time, where marked: robust to a busy machine)."""
+    from stereocam.stereo import SGMMatcher, SGMParams
+    from stereocam.stereo.postfilter import filter_speckles
+
+    from .sgm_profile import cpu_ms, stage_ms
+
+    for label, kw in variants.items():
+        p = SGMParams(num_disparities=nd, **kw)
+        m = SGMMatcher(left.shape, p)
+        disp = m.match(left, right)
+
+        def med(fn):
+            ts = []
+            for _ in range(repeat):
+                t0 = time.perf_counter()
+                fn()
+                ts.append((time.perf_counter() - t0) * 1e3)
+            return statistics.median(ts)
+        out = {"census (2 threads)": med(lambda: m.run_census(left, right)),
+               "aggregate+select (2 threads)": med(lambda: m.run_sgm(left, disp))}
+        if p.use_speckle:
+            out["speckle (1 thread)"] = med(lambda: filter_speckles(
+                disp.copy(), p.invalid_value, p.speckle_window_size, p.speckle_range,
+                m.labels, m.stack, m.rtype))
+        stages = stage_ms(m, left, repeat)
+        out.update({f"{k} (CPU, 1 thread, both groups)": v for k, v in stages.items()})
+        out["total (2 threads)"] = med(lambda: m.match(left, right))
+        out["total (CPU, 1 thread)"] = cpu_ms(lambda: m.match(left, right), repeat)
+        print(f"profile {label} {left.shape[1]}x{left.shape[0]}x{nd} (ms): "
+              + ", ".join(f"{k} {v:.1f}" for k, v in out.items()))
+
+
+def cpu_table(scenes, nd: int, repeat: int, variants: dict[str, dict]) -> None:
+    """CPU ms per frame on one thread (process time, so other load on the machine does not
+    count), ours per variant vs cv2 SGBM_3WAY, per scene."""
+    import cv2
+
+    from stereocam.stereo import SGMMatcher, SGMParams
+
+    from .sgm_profile import cpu_ms
+
+    three_way = cv2.StereoSGBM_create(0, nd, 5, 8 * 25, 32 * 25, 0, 0, 10, 100, 2,
+                                      SGBM_MODES["SGBM_3WAY"])
+    print("CPU ms per frame on 1 thread (ours / cv2 SGBM_3WAY):")
+    for name, left, right, _ in scenes:
+        t3 = cpu_ms(lambda: three_way.compute(left, right), repeat)
+        cells = []
+        for label, kw in variants.items():
+            m = SGMMatcher(left.shape, SGMParams(num_disparities=nd, **kw))
+            t = cpu_ms(lambda: m.match(left, right), repeat)
+            cells.append(f"{label} {t:.1f} ({t / t3:.2f}x)")
+        print(f"  {name:<22} 3WAY {t3:.1f}; " + "; ".join(cells))
+    print()
+
+
+def main(args) -> int:
+    import cv2
+    import numba
+
+    cv2.setNumThreads(args.threads)
+    numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
+    from stereocam.stereo.engines import engine_named
+    t0 = time.perf_counter()
+    engine_named("sgm").warm_up()
+    print(f"threads={args.threads} (cv2 {cv2.__version__}, numba {numba.__version__}); "
+          f"repeat={args.repeat}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus;"
+          f" SGM JIT warm-up {time.perf_counter() - t0:.2f} s")
+    variants = {"ours SGM 8 paths": {}, "ours SGM 4 paths": {"paths": 4}}
+    scenes = []
+    try:
+        scenes.append(("Motorcycle 741x500", *motorcycle()))
+    except Exception as exc:  # skimage missing or data unavailable
+        print(f"(Motorcycle skipped: {exc})")
+    sizes = [(640, 480)] if args.quick else [(640, 480), (1280, 960)]
+    for w, h in sizes:
+        for scene in ("lab", "wall"):
+            scenes.append((f"sim {scene} {w}x{h}", *sim_scene(w, h, scene)))
+    nd = 128
+    if args.profile:
+        profile(*scenes[0][1:3], nd, args.repeat, variants)
+        cpu_table(scenes, nd, args.repeat, variants)
+    run(scenes, nd, args.repeat, variants)
+    print(f"load average at the end: {os.getloadavg()[0]:.2f}")
+    return 0

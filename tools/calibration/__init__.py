@@ -1,0 +1,1 @@
+"""Stereo calibration: board detection, solving, gating, outputs, writing to a unit, ROS export."""

@@ -1,0 +1,183 @@
+"""Fitting a stereo head to matched board points: outlier removal, lens-model choice, metrics, gate.
+
+Per-pair residuals (px) of a fit, the quantities outliers are judged by:
+  reproj_left / reproj_right   RMS reprojection error of that view in its camera's own solve;
+  stereo                       the larger of the pair's two RMS errors in the stereo solve (one board
+                               pose per pair, the right camera through R, T);
+  epipolar                     RMS of y_left_rect − y_right_rect over the pair's corners, points
+                               undistorted to convergence and rectified (protocol/rectification.py).
+A pair is an outlier when one of them exceeds max(median + k·1.4826·MAD, ratio·median) over the pairs
+still in (k = outlier_k, ratio = outlier_ratio); the fit is redone without them, up to
+outlier_rounds times, never dropping more than max_drop_fraction of the pairs (the worst go first).
+A left and right frame not taken at the same instant shows as a stereo/epipolar outlier.
+
+Lens model: each candidate is fitted on the training pairs (all but every holdout_every-th) and
+scored on the held-out pairs by sqrt(mean(reproj_left², reproj_right², epipolar²)), reprojection
+with the board pose of each held-out view solved with the intrinsics fixed. The simplest model whose
+score is within model_tie (relative) of the best one wins. The final head is fitted on every pair
+kept; its held-out epipolar RMS is the chosen model's on the held-out pairs.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.calibration_limits import check_rectifiable
+from stereocam.protocol.rectification import RectifiedGeometry, stereo_rectify
+from stereocam.tools.calibration.lens import (
+    LensSolveError, MonoFit, StereoFit, calibrate_mono, calibrate_stereo, project, rectify_map, solve_pose,
+    undistort,
+)
+
+METRICS = ("reproj_left", "reproj_right", "stereo", "epipolar")
+
+
+@dataclass
+class PairPoints:
+    """One usable pair: object points (N, 3), left and right image points (N, 2), its index."""
+
+    index: int
+    label: str
+    obj: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+
+
+@dataclass
+class HeadFit:
+    """A fitted stereo head and its rectification."""
+
+    left: MonoFit
+    right: MonoFit
+    stereo: StereoFit
+    calibration: StereoCalibration
+    geometry: RectifiedGeometry
+
+    @property
+    def model(self) -> str:
+        return self.calibration.lens_model
+
+
+@dataclass(frozen=True)
+class OutlierRules:
+    """Thresholds of the outlier rule (see the module docstring)."""
+
+    k: float = 5.0
+    ratio: float = 2.5
+    rounds: int = 3
+    max_drop_fraction: float = 0.3
+
+
+def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], start: HeadFit | None = None
+             ) -> HeadFit:
+    """Per-camera solves, then stereo with fixed intrinsics. Raises LensSolveError."""
+    obj = [p.obj for p in pairs]
+    fl = calibrate_mono(model, obj, [p.left for p in pairs], size, start.left if start else None)
+    fr = calibrate_mono(model, obj, [p.right for p in pairs], size, start.right if start else None)
+    st = calibrate_stereo(model, obj, [p.left for p in pairs], [p.right for p in pairs], size, fl, fr)
+    try:
+        calib = StereoCalibration(size, fl.K, fl.D, fr.K, fr.D, st.R, st.T, model)
+        # the rule a camera applies before it stores a calibration (SPEC §12.4 step 4): a usable
+        # rectification, and no folding — a fit can match every corner and still fold where none was seen
+        check_rectifiable(calib, rectify_map)
+    except ValueError as exc:  # CalibrationImplausible is one
+        raise LensSolveError(f"{model}: {exc}") from exc
+    return HeadFit(fl, fr, st, calib, stereo_rectify(calib))
+
+
+def epipolar_dy(fit: HeadFit, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """y_left_rect − y_right_rect per corner."""
+    c, g = fit.calibration, fit.geometry
+    yl = undistort(c.lens_model, left, c.K_left, c.D_left, g.R1, g.P1)[:, 1]
+    yr = undistort(c.lens_model, right, c.K_right, c.D_right, g.R2, g.P2)[:, 1]
+    return yl - yr
+
+
+def rms(values: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(values))))
+
+
+def in_sample_errors(fit: HeadFit, pairs: Sequence[PairPoints]) -> dict[str, np.ndarray]:
+    """The per-pair residuals of the module docstring for the pairs `fit` was solved on."""
+    return {"reproj_left": fit.left.per_view, "reproj_right": fit.right.per_view,
+            "stereo": fit.stereo.per_view.max(axis=1),
+            "epipolar": np.array([rms(epipolar_dy(fit, p.left, p.right)) for p in pairs])}
+
+
+def _held_reproj(fit: HeadFit, obj: np.ndarray, pts: np.ndarray, mono: MonoFit) -> float:
+    rvec, tvec = solve_pose(fit.model, obj, pts, mono.K, mono.D)
+    return rms(np.linalg.norm(project(fit.model, obj, rvec, tvec, mono.K, mono.D) - pts, axis=1))
+
+
+def held_out_errors(fit: HeadFit, pairs: Sequence[PairPoints]) -> dict[str, np.ndarray]:
+    """Per held-out pair: reprojection RMS per camera (pose solved, intrinsics fixed) and epipolar RMS."""
+    return {"reproj_left": np.array([_held_reproj(fit, p.obj, p.left, fit.left) for p in pairs]),
+            "reproj_right": np.array([_held_reproj(fit, p.obj, p.right, fit.right) for p in pairs]),
+            "epipolar": np.array([rms(epipolar_dy(fit, p.left, p.right)) for p in pairs])}
+
+
+def score(errors: dict[str, np.ndarray]) -> float:
+    """Model-choice score of held-out errors (px)."""
+    return float(np.sqrt(np.mean([np.mean(errors[k] ** 2) for k in ("reproj_left", "reproj_right", "epipolar")])))
+
+
+def _limits(values: np.ndarray, rules: OutlierRules) -> float:
+    med = float(np.median(values))
+    mad = float(np.median(np.abs(values - med)))
+    return max(med + rules.k * 1.4826 * mad, rules.ratio * med)
+
+
+def robust_fit(model: str, pairs: list[PairPoints], size: tuple[int, int], rules: OutlierRules,
+               start_model: str | None = None) -> tuple[HeadFit, list[PairPoints], dict[int, str]]:
+    """Fit, drop outlier pairs, refit; returns (fit, pairs kept, {index: reason} of those dropped)."""
+    kept, dropped = list(pairs), {}
+    budget = int(rules.max_drop_fraction * len(pairs))
+    for round_ in range(rules.rounds + 1):
+        start = fit_head(start_model, kept, size) if start_model else None
+        fit = fit_head(model, kept, size, start)
+        if round_ == rules.rounds or budget == 0:
+            break
+        errors = in_sample_errors(fit, kept)
+        worst: dict[int, tuple[float, str]] = {}
+        for name in METRICS:
+            limit = _limits(errors[name], rules)
+            for i in np.flatnonzero(errors[name] > limit):
+                severity = errors[name][i] / limit
+                if severity > worst.get(i, (0.0, ""))[0]:
+                    worst[i] = (severity, f"{name.replace('_', ' ')} {errors[name][i]:.3f} px > {limit:.3f} px "
+                                          f"(median {np.median(errors[name]):.3f} px)")
+        if not worst:
+            break
+        chosen = sorted(worst, key=lambda i: -worst[i][0])[:budget]
+        budget -= len(chosen)
+        for i in chosen:
+            dropped[kept[i].index] = worst[i][1]
+        kept = [p for i, p in enumerate(kept) if i not in set(chosen)]
+    return fit, kept, dropped
+
+
+def choose_model(models: Sequence[str], train: list[PairPoints], held: list[PairPoints],
+                 size: tuple[int, int], tie: float) -> tuple[str, dict[str, float], dict[str, np.ndarray]]:
+    """(chosen model, held-out score per model tried, chosen model's held-out errors)."""
+    scores: dict[str, float] = {}
+    errors: dict[str, dict[str, np.ndarray]] = {}
+    base: HeadFit | None = None
+    failures = []
+    for model in models:
+        try:
+            if model != "plumb_bob" and base is None:
+                base = fit_head("plumb_bob", train, size)
+            fit = base if model == "plumb_bob" and base is not None else fit_head(model, train, size, base)
+            base = fit if model == "plumb_bob" else base
+            errors[model] = held_out_errors(fit, held)
+            scores[model] = score(errors[model])
+        except LensSolveError as exc:
+            failures.append(str(exc))
+    if not scores:
+        raise LensSolveError("no lens model could be fitted: " + "; ".join(failures))
+    best = min(scores.values())
+    chosen = next(m for m in models if m in scores and scores[m] <= best * (1 + tie))
+    return chosen, scores, errors[chosen]

@@ -1,0 +1,304 @@
+"""Factory stereo calibration engine: detect, collect pairs, drop outliers, choose the lens model,
+solve, measure, gate.
+
+calibrate_pairs() consumes an iterator of raw (left, right) u8 image pairs — files in offline mode,
+the device's raw stream in device mode — and returns a CalibrationResult.
+
+  1. Detect (tools/calibration/boards.py): chessboards with both OpenCV detectors, corner order made
+     consistent between left and right; ChArUco boards with partial views (common ids).
+  2. Collect. Offline (select=False): every pair with the board in both images. Live capture
+     (select=True, ROS camera_calibration style): the left view gives p = (X, Y, size, skew) in
+     [0,1]^4 (X, Y = mean corner position, the image shrunk by half the board's apparent size;
+     size = sqrt(board quad area / image area); skew = min(1, 2·|π/2 − angle at the top-right
+     corner|)); a view is kept only if its L1 distance to every kept view is > min_distance,
+     every holdout_every-th pair with the board is kept regardless; coverage per parameter =
+     min(1, (max − min) / range), ranges (0.7, 0.7, 0.4, 0.5). It stops reading once max_views
+     views and min_holdout held-out pairs are in, so an endless stream is fine.
+  3. Outliers, lens model, final fit: tools/calibration/fit.py (residual-based outlier removal, model
+     chosen on held-out pairs — every holdout_every-th pair kept — final fit on every pair kept).
+     A fit whose lens model folds the image, or whose rectified views miss the sensors, counts as
+     no fit (the rule a camera applies before storing, SPEC §12.4): the next model is chosen.
+  4. Metrics (px of the raw image, N = number of corners):
+       rms_left / rms_right = sqrt( Σ_views Σ_corners |x_obs − x_proj|² / N ) of that camera's own
+         solve on every pair kept; rms_stereo = the stereo solve's RMS over both cameras;
+       epipolar_rms_px = sqrt( Σ_held-out Σ_corners (y_left_rect − y_right_rect)² / N ) of the chosen
+         model fitted without the held-out pairs; epipolar_all_rms_px the same over every pair kept,
+         with the final fit.
+  5. Gate (CalibrationResult.failures lists every failed rule; passed = none failed): rms_stereo ≤
+     max_stereo_rms_px; epipolar_rms_px ≤ max_epipolar_rms_px; plausibility: principal points
+     inside the image, fy/fx within [1/max_pixel_aspect, max_pixel_aspect], baseline within
+     [min_baseline_m, max_baseline_m].
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from stereocam.stereo.calibration_board import BoardSpec
+from stereocam.protocol.rectification import RectifiedGeometry
+from stereocam.tools.calibration.boards import CharucoSpec, Detection, describe, detect_all, gray, match_pair
+from stereocam.tools.calibration.coverage import CoverageSelector, view_params
+from stereocam.tools.calibration.fit import (
+    OutlierRules, PairPoints, choose_model, epipolar_dy, fit_head, rms, robust_fit,
+)
+from stereocam.tools.calibration.lens import MODELS, LensSolveError, calibrate_mono
+from stereocam.protocol.calibration import CalibrationQuality, StereoCalibration
+from stereocam.protocol.errors import StereoCamError
+
+ViewStatus = Literal["used", "dropped", "redundant", "no_board"]
+
+
+class CalibrationError(StereoCamError):
+    """Calibration could not produce a solution at all."""
+
+
+class BoardNotFoundError(CalibrationError):
+    """No pair showed the board in both images."""
+
+
+class UnusableImagesError(CalibrationError, ValueError):
+    """No pair of the set could be used at all: every image unreadable, or no two of one size."""
+
+
+class TooFewViewsError(CalibrationError):
+    """Not enough distinct views (or held-out views) to solve and measure."""
+
+
+@dataclass(frozen=True)
+class SolveConfig:
+    """Tunables of calibrate_pairs (see the module docstring and tools/calibration/fit.py)."""
+
+    max_stereo_rms_px: float = 1.0
+    max_epipolar_rms_px: float = 0.8
+    min_views: int = 8            # live: distinct views needed
+    max_views: int = 40           # live: stop after this many kept views
+    min_pairs: int = 5            # offline: pairs with the board needed (after outliers)
+    holdout_every: int = 5
+    min_holdout: int = 1
+    min_distance: float = 0.2
+    lens_model: str = "auto"
+    model_tie: float = 0.05
+    outliers: OutlierRules = OutlierRules()
+    max_pixel_aspect: float = 1.5
+    min_baseline_m: float = 1e-4
+    max_baseline_m: float = 100.0
+
+
+@dataclass
+class ViewRecord:
+    """What happened to one input pair; errors are RMS in px where they apply."""
+
+    index: int
+    label: str
+    status: ViewStatus
+    held_out: bool = False
+    params: tuple[float, float, float, float] | None = None
+    rms_left: float | None = None
+    rms_right: float | None = None
+    rms_stereo: tuple[float, float] | None = None
+    epipolar_rms_px: float | None = None
+    reason: str | None = None
+
+
+@dataclass
+class CalibrationResult:
+    """Everything the tool writes and reports."""
+
+    calibration: StereoCalibration
+    quality: CalibrationQuality
+    rectification: RectifiedGeometry
+    views: list[ViewRecord]
+    coverage: tuple[float, ...]
+    failures: list[str] = field(default_factory=list)
+    sample_pair: tuple[np.ndarray, np.ndarray] | None = None
+    model_scores: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def passed(self) -> bool:
+        return not self.failures
+
+    @property
+    def dropped(self) -> list[ViewRecord]:
+        return [v for v in self.views if v.status == "dropped"]
+
+
+@dataclass(frozen=True)
+class Progress:
+    """Reported after each input pair."""
+
+    view: ViewRecord
+    kept: int
+    held_out: int
+    coverage: tuple[float, ...]
+
+
+def _gate(calib: StereoCalibration, q: CalibrationQuality, config: SolveConfig) -> list[str]:
+    failures = []
+    if q.rms_stereo > config.max_stereo_rms_px:
+        failures.append(f"stereo RMS {q.rms_stereo:.3f} px > {config.max_stereo_rms_px} px")
+    if q.epipolar_rms_px > config.max_epipolar_rms_px:
+        failures.append(f"held-out epipolar RMS {q.epipolar_rms_px:.3f} px > {config.max_epipolar_rms_px} px")
+    w, h = calib.image_size
+    for side, K in (("left", calib.K_left), ("right", calib.K_right)):
+        if not (0 <= K[0, 2] < w and 0 <= K[1, 2] < h):
+            failures.append(f"{side} principal point ({K[0, 2]:.1f}, {K[1, 2]:.1f}) outside the image")
+        aspect = K[1, 1] / K[0, 0]
+        if not 1 / config.max_pixel_aspect <= aspect <= config.max_pixel_aspect:
+            failures.append(f"{side} pixel aspect fy/fx = {aspect:.3f} outside "
+                            f"[{1 / config.max_pixel_aspect:.3f}, {config.max_pixel_aspect:.3f}]")
+    if not config.min_baseline_m <= calib.baseline_m <= config.max_baseline_m:
+        failures.append(f"baseline {calib.baseline_m:.6g} m outside [{config.min_baseline_m:g}, "
+                        f"{config.max_baseline_m:g}] m")
+    return failures
+
+
+def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: BoardSpec | CharucoSpec,
+                    config: SolveConfig = SolveConfig(), labels: Sequence[str] | None = None,
+                    progress: Callable[[Progress], None] | None = None, select: bool = True) -> CalibrationResult:
+    """Calibrate a stereo head from raw image pairs of `board` (see the module docstring).
+
+    A pair given as None (an image that could not be read) or whose sizes differ from each other or
+    from the first pair's is dropped with its reason. Raises BoardNotFoundError / TooFewViewsError
+    when no solution can be computed; a solution that fails the gate is returned with `failures` set.
+    """
+    selector = CoverageSelector(config.min_distance)
+    views: list[ViewRecord] = []
+    found: list[tuple[int, str, dict[str, Detection], dict[str, Detection]]] = []
+    sample: tuple[np.ndarray, np.ndarray] | None = None
+    size: tuple[int, int] | None = None
+    found_left = found_right = both = held = 0
+    for index, (left, right) in enumerate(pairs):
+        label = labels[index] if labels is not None else f"pair {index}"
+        why = _unusable(left, right, size)
+        if why is not None:  # one bad file or odd size does not sink the set: dropped, named, said why
+            views.append(ViewRecord(index, label, "dropped", reason=why))
+            if progress is not None:
+                progress(Progress(views[-1], len(found) - held, held, selector.coverage()))
+            continue
+        left, right = gray(left), gray(right)
+        size = (left.shape[1], left.shape[0])
+        dl, dr = detect_all(left, board), detect_all(right, board)
+        found_left, found_right = found_left + bool(dl), found_right + bool(dr)
+        view = ViewRecord(index, label, "no_board")
+        matched = match_detections(dl, dr, board, ())
+        if matched is not None:
+            both += 1
+            view.params = view_params(matched[1], board, size)
+            held_here = both % config.holdout_every == 0
+            if not select:
+                selector.kept.append(view.params)
+            if not select or held_here or selector.offer(view.params):
+                view.status = "used"
+                held += held_here
+                found.append((index, label, dl, dr))
+                sample = sample or (left, right)
+            else:
+                view.status = "redundant"
+        views.append(view)
+        if progress is not None:
+            progress(Progress(view, len(found) - held, held, selector.coverage()))
+        if select and len(found) - held >= config.max_views and held >= config.min_holdout:
+            break
+    if views and all(v.status == "dropped" for v in views):
+        reasons = "; ".join(f"{v.label}: {v.reason}" for v in views[:3]) + ("; ..." if len(views) > 3 else "")
+        raise UnusableImagesError(f"none of the {len(views)} pairs could be used ({reasons})")
+    if both == 0:
+        raise BoardNotFoundError(
+            f"the {describe(board)} board was not found in both images of any of the "
+            f"{len(views)} pairs (left found {found_left}, right found {found_right})")
+    need = config.min_views if select else config.min_pairs
+    if len(found) < need:
+        what = "distinct views" if select else "pairs with the board in both images"
+        raise TooFewViewsError(f"{len(found)} {what} from {both} pairs with the board; need {need} — "
+                               f"move the board to new positions, distances and tilts")
+    order = (choose_detector(found, size),)
+    kept = [PairPoints(i, label, *match_detections(dl, dr, board, order)) for i, label, dl, dr in found]
+    return _solve(kept, views, size, selector.coverage(), sample, config)
+
+
+def _unusable(left: np.ndarray | None, right: np.ndarray | None, size: tuple[int, int] | None) -> str | None:
+    """Why a pair cannot be used (an image that could not be read, sizes that differ), or None."""
+    if left is None or right is None:
+        return f"cannot read the {'left' if left is None else 'right'} image"
+    (lh, lw), (rh, rw) = left.shape[:2], right.shape[:2]
+    if (lw, lh) != (rw, rh):
+        return f"left {lw}x{lh} and right {rw}x{rh} differ"
+    if size is not None and (lw, lh) != size:
+        return f"{lw}x{lh}, not the set's {size[0]}x{size[1]}"
+    return None
+
+
+def match_detections(dl: dict[str, Detection], dr: dict[str, Detection], board: BoardSpec | CharucoSpec,
+           order: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Matched points of a pair, each image's corners from the first detector in `order` that found them."""
+    if not dl or not dr:
+        return None
+    pick = [next((d[n] for n in order if n in d), next(iter(d.values()))) for d in (dl, dr)]
+    return match_pair(pick[0], pick[1], board)
+
+
+def choose_detector(found: Sequence[tuple[int, str, dict[str, Detection], dict[str, Detection]]],
+                    size: tuple[int, int]) -> str:
+    """The detector whose corners fit a plumb_bob camera best on the left images all detectors found
+    (fewer than 4 such images: the one that found the most)."""
+    names = sorted({n for _, _, dl, dr in found for n in (*dl, *dr)})
+    if len(names) == 1:
+        return names[0]
+    common = [dl for _, _, dl, _ in found if all(n in dl for n in names)]
+    if len(common) < 4:
+        return max(names, key=lambda n: sum(n in dl for _, _, dl, _ in found))
+    fits = {}
+    for n in names:
+        try:
+            fits[n] = calibrate_mono("plumb_bob", [d[n].object_points for d in common],
+                                     [d[n].image_points for d in common], size).rms
+        except LensSolveError:
+            continue
+    return min(fits, key=fits.get) if fits else names[0]
+
+
+def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, int], coverage: tuple[float, ...],
+           sample: tuple[np.ndarray, np.ndarray] | None, config: SolveConfig) -> CalibrationResult:
+    models = MODELS if config.lens_model == "auto" else (config.lens_model,)
+    try:
+        screen = "rational_polynomial" if config.lens_model == "auto" else config.lens_model
+        try:
+            _, kept, dropped = robust_fit(screen, pairs, size, config.outliers,
+                                          "plumb_bob" if screen != "plumb_bob" else None)
+        except LensSolveError:
+            _, kept, dropped = robust_fit("plumb_bob", pairs, size, config.outliers)
+        held = kept[config.holdout_every - 1::config.holdout_every]
+        held_ids = {p.index for p in held}
+        train = [p for p in kept if p.index not in held_ids]
+        if len(held) < config.min_holdout or len(train) < 3:
+            raise TooFewViewsError(f"{len(kept)} pairs left after removing outliers: too few to hold "
+                                   f"{config.min_holdout} out and solve")
+        model, scores, held_errors = choose_model(models, train, held, size, config.model_tie)
+        start = fit_head("plumb_bob", kept, size) if model != "plumb_bob" else None
+        fit = fit_head(model, kept, size, start)
+    except LensSolveError as exc:
+        raise CalibrationError(f"the solver failed on {len(pairs)} pairs: {exc}") from exc
+    by_index = {v.index: v for v in views}
+    for index, reason in dropped.items():
+        by_index[index].status, by_index[index].reason = "dropped", reason
+    epi_all = []
+    for i, p in enumerate(kept):
+        v = by_index[p.index]
+        v.rms_left, v.rms_right = float(fit.left.per_view[i]), float(fit.right.per_view[i])
+        v.rms_stereo = tuple(float(e) for e in fit.stereo.per_view[i])
+        epi_all.append(epipolar_dy(fit, p.left, p.right))
+        v.epipolar_rms_px = rms(epi_all[-1])
+    for p, e in zip(held, held_errors["epipolar"]):
+        by_index[p.index].held_out = True
+        by_index[p.index].epipolar_rms_px = float(e)
+    quality = CalibrationQuality(
+        rms_left=fit.left.rms, rms_right=fit.right.rms, rms_stereo=fit.stereo.rms,
+        epipolar_rms_px=float(np.sqrt(np.mean(held_errors["epipolar"] ** 2))),
+        epipolar_all_rms_px=rms(np.concatenate(epi_all)), views_used=len(kept), views_dropped=len(dropped),
+        written=False, verified=False)
+    failures = _gate(fit.calibration, quality, config)
+    quality.passed = not failures
+    return CalibrationResult(fit.calibration, quality, fit.geometry, views, coverage, failures, sample, scores)

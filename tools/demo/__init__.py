@@ -1,0 +1,1 @@
+"""stereocam demo: a simulator (or a group of them) streamed, with outputs and a summary."""

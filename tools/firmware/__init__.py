@@ -1,0 +1,1 @@
+"""stereocam firmware: signed firmware images (keygen, sign, update a camera, slot status)."""

@@ -1,0 +1,1 @@
+"""Recordings: stereocam record, stereocam recording (info, repair, export) and stereocam rematch."""
