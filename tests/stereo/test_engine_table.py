@@ -15,7 +15,7 @@ from stereocam.protocol.params import BY_NAME, Algorithm, defaults
 from stereocam.recording.reader import Recording
 from stereocam.stereo import MatchParams, SGMParams, engines
 from stereocam.stereo.config_map import config_of
-from stereocam.tools import rematch_tasks
+from stereocam.tools.recording import rematch_tasks
 from stereocam.tools.bench.record import synthetic_recording
 
 from . import sad_engine
