@@ -136,8 +136,7 @@ def robust_fit(model: str, pairs: list[PairPoints], size: tuple[int, int], rules
     kept, dropped = list(pairs), {}
     budget = int(rules.max_drop_fraction * len(pairs))
     for round_ in range(rules.rounds + 1):
-        start = fit_head(start_model, kept, size) if start_model else None
-        fit = fit_head(model, kept, size, start)
+        fit = fit_head(model, kept, size, try_fit(start_model, kept, size) if start_model else None)
         if round_ == rules.rounds or budget == 0:
             break
         errors = in_sample_errors(fit, kept)
@@ -159,25 +158,44 @@ def robust_fit(model: str, pairs: list[PairPoints], size: tuple[int, int], rules
     return fit, kept, dropped
 
 
+def try_fit(model: str, pairs: Sequence[PairPoints], size: tuple[int, int]) -> HeadFit | None:
+    """fit_head, or None where the model does not fit (a start for another model, never required)."""
+    try:
+        return fit_head(model, pairs, size)
+    except LensSolveError:
+        return None
+
+
+@dataclass
+class ModelChoice:
+    """The lens model chosen, the held-out score of each model that fitted, why the others failed."""
+
+    model: str
+    scores: dict[str, float]
+    failures: dict[str, str]
+    held_errors: dict[str, np.ndarray]
+    fit: HeadFit
+
+
 def choose_model(models: Sequence[str], train: list[PairPoints], held: list[PairPoints],
-                 size: tuple[int, int], tie: float) -> tuple[str, dict[str, float], dict[str, np.ndarray]]:
-    """(chosen model, held-out score per model tried, chosen model's held-out errors)."""
+                 size: tuple[int, int], tie: float) -> ModelChoice:
+    """Fit each model on `train` on its own terms (a plumb_bob fit, where there is one, is one more
+    start for the others) and score it on `held`; a model that fails is listed, never fatal while
+    another one fits. Raises LensSolveError when none fits."""
     scores: dict[str, float] = {}
     errors: dict[str, dict[str, np.ndarray]] = {}
-    base: HeadFit | None = None
-    failures = []
+    fits: dict[str, HeadFit] = {}
+    failures: dict[str, str] = {}
     for model in models:
         try:
-            if model != "plumb_bob" and base is None:
-                base = fit_head("plumb_bob", train, size)
-            fit = base if model == "plumb_bob" and base is not None else fit_head(model, train, size, base)
-            base = fit if model == "plumb_bob" else base
-            errors[model] = held_out_errors(fit, held)
+            fits[model] = fit_head(model, train, size, fits.get("plumb_bob"))
+            errors[model] = held_out_errors(fits[model], held)
             scores[model] = score(errors[model])
         except LensSolveError as exc:
-            failures.append(str(exc))
+            fits.pop(model, None)
+            failures[model] = str(exc)
     if not scores:
-        raise LensSolveError("no lens model could be fitted: " + "; ".join(failures))
+        raise LensSolveError("no lens model could be fitted: " + "; ".join(failures.values()))
     best = min(scores.values())
     chosen = next(m for m in models if m in scores and scores[m] <= best * (1 + tie))
-    return chosen, scores, errors[chosen]
+    return ModelChoice(chosen, scores, failures, errors[chosen], fits[chosen])

@@ -115,6 +115,7 @@ class CalibrationResult:
     failures: list[str] = field(default_factory=list)
     sample_pair: tuple[np.ndarray, np.ndarray] | None = None
     model_scores: dict[str, float] = field(default_factory=dict)
+    model_failures: dict[str, str] = field(default_factory=dict)
 
     @property
     def passed(self) -> bool:
@@ -264,21 +265,16 @@ def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, in
            sample: tuple[np.ndarray, np.ndarray] | None, config: SolveConfig) -> CalibrationResult:
     models = MODELS if config.lens_model == "auto" else (config.lens_model,)
     try:
-        screen = "rational_polynomial" if config.lens_model == "auto" else config.lens_model
-        try:
-            _, kept, dropped = robust_fit(screen, pairs, size, config.outliers,
-                                          "plumb_bob" if screen != "plumb_bob" else None)
-        except LensSolveError:
-            _, kept, dropped = robust_fit("plumb_bob", pairs, size, config.outliers)
+        kept, dropped = _screen(models, pairs, size, config)
         held = kept[config.holdout_every - 1::config.holdout_every]
         held_ids = {p.index for p in held}
         train = [p for p in kept if p.index not in held_ids]
         if len(held) < config.min_holdout or len(train) < 3:
             raise TooFewViewsError(f"{len(kept)} pairs left after removing outliers: too few to hold "
                                    f"{config.min_holdout} out and solve")
-        model, scores, held_errors = choose_model(models, train, held, size, config.model_tie)
-        start = fit_head("plumb_bob", kept, size) if model != "plumb_bob" else None
-        fit = fit_head(model, kept, size, start)
+        choice = choose_model(models, train, held, size, config.model_tie)
+        model, held_errors = choice.model, choice.held_errors
+        fit = fit_head(model, kept, size, choice.fit)
     except LensSolveError as exc:
         raise CalibrationError(f"the solver failed on {len(pairs)} pairs: {exc}") from exc
     by_index = {v.index: v for v in views}
@@ -301,4 +297,20 @@ def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, in
         written=False, verified=False)
     failures = _gate(fit.calibration, quality, config)
     quality.passed = not failures
-    return CalibrationResult(fit.calibration, quality, fit.geometry, views, coverage, failures, sample, scores)
+    return CalibrationResult(fit.calibration, quality, fit.geometry, views, coverage, failures, sample,
+                             choice.scores, choice.failures)
+
+
+def _screen(models: Sequence[str], pairs: list[PairPoints], size: tuple[int, int], config: SolveConfig
+            ) -> tuple[list[PairPoints], dict[int, str]]:
+    """Outlier removal with the first model that fits (the most flexible pinhole model first:
+    rational, then equidistant, then plumb_bob; or the one model asked for)."""
+    order = [m for m in ("rational_polynomial", "equidistant", "plumb_bob") if m in models]
+    failures = []
+    for model in order:
+        try:
+            _, kept, dropped = robust_fit(model, pairs, size, config.outliers)
+            return kept, dropped
+        except LensSolveError as exc:
+            failures.append(str(exc))
+    raise LensSolveError("; ".join(failures))
