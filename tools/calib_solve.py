@@ -28,6 +28,8 @@ the device's raw stream in device mode — and returns a CalibrationResult.
      max_stereo_rms_px; epipolar_rms_px ≤ max_epipolar_rms_px; plausibility: principal points
      inside the image, fy/fx within [1/max_pixel_aspect, max_pixel_aspect], baseline within
      [min_baseline_m, max_baseline_m].
+  6. Synchronisation (tools/calib_sync.py): every pair with the board, kept or dropped, is checked
+     for a left and right frame not taken at the same instant; the result says which and by how much.
 """
 from __future__ import annotations
 
@@ -39,12 +41,13 @@ import numpy as np
 
 from stereocam.device_sim.calibration.board import BoardSpec
 from stereocam.protocol.rectification import RectifiedGeometry
-from stereocam.tools.calib_boards import CharucoSpec, Detection, describe, detect_all, gray, match_pair
+from stereocam.tools.calib_boards import Board, Detection, describe, detect_all, gray, match_pair
 from stereocam.tools.calib_coverage import CoverageSelector, view_params
 from stereocam.tools.calib_fit import (
     OutlierRules, PairPoints, choose_model, epipolar_dy, fit_head, rms, robust_fit,
 )
 from stereocam.tools.calib_lens import MODELS, LensSolveError, calibrate_mono
+from stereocam.tools.calib_sync import SyncReport, check_sync
 from stereocam.protocol.calibration import CalibrationQuality, StereoCalibration
 from stereocam.protocol.errors import StereoCamError
 
@@ -116,6 +119,7 @@ class CalibrationResult:
     sample_pair: tuple[np.ndarray, np.ndarray] | None = None
     model_scores: dict[str, float] = field(default_factory=dict)
     model_failures: dict[str, str] = field(default_factory=dict)
+    sync: SyncReport | None = None
 
     @property
     def passed(self) -> bool:
@@ -156,7 +160,7 @@ def _gate(calib: StereoCalibration, q: CalibrationQuality, config: SolveConfig) 
     return failures
 
 
-def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: BoardSpec | CharucoSpec,
+def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board,
                     config: SolveConfig = SolveConfig(), labels: Sequence[str] | None = None,
                     progress: Callable[[Progress], None] | None = None, select: bool = True) -> CalibrationResult:
     """Calibrate a stereo head from raw image pairs of `board` (see the module docstring).
@@ -232,7 +236,7 @@ def _unusable(left: np.ndarray | None, right: np.ndarray | None, size: tuple[int
     return None
 
 
-def match_detections(dl: dict[str, Detection], dr: dict[str, Detection], board: BoardSpec | CharucoSpec,
+def match_detections(dl: dict[str, Detection], dr: dict[str, Detection], board: Board,
            order: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Matched points of a pair, each image's corners from the first detector in `order` that found them."""
     if not dl or not dr:
@@ -298,7 +302,7 @@ def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, in
     failures = _gate(fit.calibration, quality, config)
     quality.passed = not failures
     return CalibrationResult(fit.calibration, quality, fit.geometry, views, coverage, failures, sample,
-                             choice.scores, choice.failures)
+                             choice.scores, choice.failures, check_sync(fit, pairs))
 
 
 def _screen(models: Sequence[str], pairs: list[PairPoints], size: tuple[int, int], config: SolveConfig

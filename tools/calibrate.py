@@ -3,6 +3,7 @@
     stereocam calibrate URL --out OUTDIR [--target user|factory]          (device mode)
     stereocam calibrate --images DIR --board 9x6 --square-size 0.025 --out OUTDIR   (offline)
     stereocam calibrate --images DIR --board charuco:19x26:0.005:0.004:DICT_4X4_250 --out OUTDIR
+    stereocam calibrate --images DIR --board aprilgrid:6x6:0.088:0.3 --out OUTDIR   (or --board target.yaml)
 
 Device mode (tools/calibrate_device.py) captures raw pairs of the calibration board, solves, gates,
 writes the result to the camera, reads it back and compares it byte for byte before it reports
@@ -97,7 +98,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--images", type=Path,
                     help="folder of left<N>/right<N> (or L<N>/R<N>) images, or of left/ and right/ folders (offline mode)")
     ap.add_argument("--board", default="9x6",
-                    help="COLSxROWS inner corners of a chessboard, or charuco:COLSxROWS:SQUARE:MARKER:DICT "
+                    help="COLSxROWS inner corners of a chessboard, charuco:COLSxROWS:SQUARE:MARKER:DICT, "
+                         "aprilgrid:COLSxROWS:TAG_SIZE:SPACING_RATIO (Kalibr) or a Kalibr target .yaml "
                          "(squares; lengths in metres)")
     ap.add_argument("--square-size", type=float, default=None,
                     help="chessboard square side in metres (required offline; device default 0.03)")
@@ -176,8 +178,9 @@ def main(argv: list[str] | None = None) -> int:
         return _fail(EXIT_USAGE, "nothing to calibrate: give a camera URL (device mode) or --images DIR (offline)")
     if args.url is not None and args.images is not None:
         return _fail(EXIT_USAGE, "give a camera URL (device mode) or --images DIR (offline), not both")
-    charuco = args.board.lower().startswith("charuco:")
-    if args.square_size is None and not charuco:
+    board_sized = args.board.lower().startswith(("charuco:", "aprilgrid:")) or args.board.lower().endswith(
+        (".yaml", ".yml"))  # the board text gives its own lengths
+    if args.square_size is None and not board_sized:
         if args.images is not None:
             return _fail(EXIT_USAGE, "--square-size is required with --images and a chessboard")
         args.square_size = 0.03

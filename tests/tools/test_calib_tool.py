@@ -167,9 +167,10 @@ def test_bad_arguments(image_dir: Path, tmp_path: Path, capsys) -> None:
     assert "metres" in capsys.readouterr().err
     assert calibrate.main(["--images", str(image_dir), "--board", "9by6", "--square-size", "0.03",
                            "--out", "x"]) == calibrate.EXIT_USAGE
-    assert calibrate.main(["--images", str(image_dir), "--board", "6x6", "--square-size", "0.03",
+    capsys.readouterr()
+    assert calibrate.main(["--images", str(image_dir), "--board", "aprilgrid:6x6:0.05",
                            "--out", str(tmp_path)]) == calibrate.EXIT_USAGE
-    assert "cols != rows" in capsys.readouterr().err
+    assert "aprilgrid:COLSxROWS:TAG_SIZE:SPACING" in capsys.readouterr().err
 
 
 def test_find_pairs_rules(tmp_path: Path) -> None:
@@ -206,8 +207,20 @@ def test_solver_failure_is_a_calibration_error(pairs, monkeypatch) -> None:
         raise cv2.error("simulated solver breakdown")
 
     monkeypatch.setattr(cv2, "calibrateCameraExtended", broken)
+    monkeypatch.setattr(cv2.fisheye, "calibrate", broken)
     with pytest.raises(CalibrationError, match="solver failed on .* pairs: .*simulated"):
         calibrate_pairs(iter(pairs), BOARD)
+
+
+def test_a_failed_lens_model_is_listed_and_another_one_fits(pairs, monkeypatch) -> None:
+    def broken(*args, **kwargs):
+        raise cv2.error("simulated solver breakdown")
+
+    monkeypatch.setattr(cv2, "calibrateCameraExtended", broken)  # plumb_bob and rational: no fit at all
+    res = calibrate_pairs(iter(pairs), BOARD, select=False)
+    assert res.calibration.lens_model == "equidistant" and list(res.model_scores) == ["equidistant"]
+    assert set(res.model_failures) == {"plumb_bob", "rational_polynomial"}
+    assert "simulated" in res.model_failures["plumb_bob"]
 
 
 def test_offline_run_shows_pairs_done_of_total_even_when_quiet(tmp_path):
