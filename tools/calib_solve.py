@@ -21,7 +21,8 @@ the device's raw stream in device mode — and returns a CalibrationResult.
   4. Metrics (px of the raw image, N = number of corners):
        rms_left / rms_right = sqrt( Σ_views Σ_corners |x_obs − x_proj|² / N ) of that camera's own
          solve on every pair kept; rms_stereo = the stereo solve's RMS over both cameras;
-       epipolar_rms_px = sqrt( Σ_held-out Σ_corners (y_left_rect − y_right_rect)² / N ) of the chosen
+       epipolar_rms_px = sqrt( Σ_held-out Σ_corners dy² / N ), dy the epipolar error of calib_fit.epipolar_dy
+         (y_left_rect − y_right_rect at the raw focal length near the centre), of the chosen
          model fitted without the held-out pairs; epipolar_all_rms_px the same over every pair kept,
          with the final fit.
   5. Gate (CalibrationResult.failures lists every failed rule; passed = none failed): rms_stereo ≤

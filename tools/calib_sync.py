@@ -3,13 +3,14 @@
 With the final fit, per pair with the board (kept or dropped as an outlier):
   mono_px      the larger of the two views' reprojection RMS, each with its own board pose;
   stereo_px    the right view's RMS when its board pose is the left view's carried through (R, T);
-  epipolar_px  RMS of y_left_rect − y_right_rect;
+  epipolar_px  RMS of the epipolar error (calib_fit.epipolar_dy);
   motion       how far the board moved between the two frames: the board pose seen by the right
                camera, carried back through (R, T), against the left camera's (centre shift in mm,
                rotation in degrees).
 A synchronised pair's one pose serves both views (stereo_px ≈ mono_px, epipolar_px ≈ mono_px); a
 pair is reported unsynchronised when stereo_px > max(STEREO_FACTOR · mono_px, mono_px + MIN_EXCESS_PX)
-and epipolar_px > max(EPIPOLAR_FACTOR · mono_px, MIN_EPIPOLAR_PX).
+(the board moved in any direction) or epipolar_px > max(EPIPOLAR_FACTOR · mono_px, MIN_EPIPOLAR_PX)
+(it moved across the epipolar lines).
 """
 from __future__ import annotations
 
@@ -43,7 +44,7 @@ class PairSync:
     @property
     def unsynchronised(self) -> bool:
         return (self.stereo_px > max(STEREO_FACTOR * self.mono_px, self.mono_px + MIN_EXCESS_PX)
-                and self.epipolar_px > max(EPIPOLAR_FACTOR * self.mono_px, MIN_EPIPOLAR_PX))
+                or self.epipolar_px > max(EPIPOLAR_FACTOR * self.mono_px, MIN_EPIPOLAR_PX))
 
 
 @dataclass(frozen=True)
