@@ -26,7 +26,8 @@ CASES = {
     "plumb_bob 70deg chessboard 9x6": ("plumb_bob", 70, "9x6", lambda: synth.chessboard(9, 6, 0.03), {}),
     "plumb_bob 60deg square chessboard 7x7 any roll": (
         "plumb_bob", 60, "7x7", lambda: synth.chessboard(7, 7, 0.03), {"roll": np.pi}),
-    "rational 120deg chessboard 9x6": ("rational_polynomial", 120, "9x6", lambda: synth.chessboard(9, 6, 0.03), {}),
+    "rational 130deg chessboard 9x6": ("rational_polynomial", 130, "9x6", lambda: synth.chessboard(9, 6, 0.03),
+                                       {"reach": 0.9}),
     "equidistant 150deg chessboard 9x6": ("equidistant", 150, "9x6", lambda: synth.chessboard(9, 6, 0.03), {}),
     "plumb_bob 70deg charuco legacy": (
         "plumb_bob", 70, "charuco:8x6:0.04:0.03:DICT_4X4_250",
@@ -34,8 +35,8 @@ CASES = {
     "plumb_bob 70deg charuco current inverted": (
         "plumb_bob", 70, "charuco:8x6:0.04:0.03:DICT_4X4_250",
         lambda: synth.charuco(8, 6, 0.04, 0.03, "DICT_4X4_250", legacy=False, inverted=True), {}),
-    "rational 110deg aprilgrid 4x3": (
-        "rational_polynomial", 110, "aprilgrid:4x3:0.05:0.3", lambda: synth.aprilgrid(4, 3, 0.05, 0.3), {}),
+    "equidistant 160deg aprilgrid 4x3": (
+        "equidistant", 160, "aprilgrid:4x3:0.05:0.3", lambda: synth.aprilgrid(4, 3, 0.05, 0.3), {}),
 }
 
 
@@ -70,7 +71,7 @@ def test_each_lens_and_board_class_gives_the_right_model_and_the_truth(case: str
     result = _result(case)
     assert result.calibration.lens_model == head.left.model, (result.model_scores, result.model_failures)
     _assert_truth(result, head)
-    assert result.passed and result.quality.views_dropped <= 2
+    assert result.passed and result.quality.views_used >= 10
     assert result.sync is not None and not result.sync.suspects
 
 
@@ -178,7 +179,7 @@ def test_exports_of_a_fisheye_head_load_in_opencv_ros_and_kalibr(tmp_path: Path)
 
 @pytest.mark.slow
 def test_a_rational_head_exports_ros_rational_polynomial_and_no_camchain(tmp_path: Path) -> None:
-    result = _result("rational 120deg chessboard 9x6")
+    result = _result("rational 130deg chessboard 9x6")
     write_outputs(result, tmp_path)
     right = (tmp_path / "right.yaml").read_text()
     assert "distortion_model: rational_polynomial" in right
