@@ -47,6 +47,7 @@ from stereocam.device_sim.calibration.board import BoardSpec
 
 _SUBPIX = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
 MIN_CHARUCO_CORNERS = 8
+MIN_TAG_PX = 16  # AprilGrid tags seen smaller (side, px) give no sub-pixel corners
 
 
 @dataclass(frozen=True)
@@ -135,29 +136,38 @@ class AprilGridSpec:
     def detect(self, gray: np.ndarray) -> Detection | None:
         """Tags found on the image and on it with the white grown by 1 and 2 px (which parts the tags
         from the black squares that touch their corners once the print is blurred); each tag corner
-        is then refined on the image itself, where it is the saddle point of a tag and a square."""
+        is then refined on the image itself, where it is the saddle point of a tag and a square. A
+        tag under MIN_TAG_PX, or one whose refinement jumps off its corner, is left out."""
         if self._detector is None:
             params = cv2.aruco.DetectorParameters()
             params.markerBorderBits = 2
+            params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_CONTOUR  # edge lines, then the saddle
             dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
             self._detector = cv2.aruco.ArucoDetector(dictionary, params)
-        quads: dict[int, np.ndarray] = {}
+        quads: dict[int, tuple[np.ndarray, int]] = {}
         for grow in (0, 1, 2):
             img = gray if grow == 0 else cv2.dilate(gray, np.ones((2 * grow + 1, 2 * grow + 1), np.uint8))
             corners, ids, _ = self._detector.detectMarkers(img)
             for tag, quad in zip(() if ids is None else ids.ravel(), corners):
                 if tag < self.cols * self.rows:
-                    quads.setdefault(int(tag), quad.reshape(4, 2))
-        if 4 * len(quads) < MIN_CHARUCO_CORNERS:
-            return None
+                    quads.setdefault(int(tag), (quad.reshape(4, 2), grow))
         point_ids, points = [], []
-        for tag, quad in sorted(quads.items()):
+        for tag, (quad, grow) in sorted(quads.items()):
             side = float(np.mean(np.linalg.norm(quad - np.roll(quad, 1, axis=0), axis=1)))
-            half = int(np.clip(0.45 * self.spacing * side, 2, 12))
+            gap = self.spacing * side  # the black squares' side at this tag, px
+            if side < MIN_TAG_PX:
+                continue
+            out = quad - quad.mean(axis=0)  # growing the white shrank the tag by `grow` px a side
+            quad = quad + grow * np.sqrt(2) * out / np.linalg.norm(out, axis=1, keepdims=True)
+            half = int(np.clip(0.4 * gap, 1, 12))
             refined = cv2.cornerSubPix(gray, quad.astype(np.float32).reshape(-1, 1, 2), (half, half), (-1, -1),
-                                       _SUBPIX)
+                                       _SUBPIX).reshape(4, 2)
+            if np.max(np.linalg.norm(refined - quad, axis=1)) > 1.0 + 0.4 * gap:
+                continue  # drawn to another saddle (the far corner of a small black square): not this corner
             point_ids += self.point_ids(tag)
-            points.append(refined.reshape(4, 2))
+            points.append(refined)
+        if len(point_ids) < MIN_CHARUCO_CORNERS:
+            return None
         ids_arr = np.array(point_ids, np.int64)
         return Detection(ids_arr, np.concatenate(points).astype(np.float32), self.object_points()[ids_arr])
 

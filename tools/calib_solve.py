@@ -45,7 +45,8 @@ from stereocam.protocol.rectification import RectifiedGeometry
 from stereocam.tools.calib_boards import Board, Detection, describe, detect_all, gray, match_pair
 from stereocam.tools.calib_coverage import CoverageSelector, view_params
 from stereocam.tools.calib_fit import (
-    OutlierRules, PairPoints, choose_model, epipolar_dy, fit_head, rms, robust_fit,
+    HeadFit, ModelChoice, OutlierRules, PairPoints, choose_model, epipolar_dy, fit_head, held_out_errors, rms,
+    robust_fit,
 )
 from stereocam.tools.calib_lens import MODELS, LensSolveError, calibrate_mono
 from stereocam.tools.calib_sync import SyncReport, check_sync
@@ -278,8 +279,8 @@ def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, in
             raise TooFewViewsError(f"{len(kept)} pairs left after removing outliers: too few to hold "
                                    f"{config.min_holdout} out and solve")
         choice = choose_model(models, train, held, size, config.model_tie)
-        model, held_errors = choice.model, choice.held_errors
-        fit = fit_head(model, kept, size, choice.fit)
+        fit = _final_fit(choice, train, held, kept, size)
+        held_errors = choice.held_errors
     except LensSolveError as exc:
         raise CalibrationError(f"the solver failed on {len(pairs)} pairs: {exc}") from exc
     by_index = {v.index: v for v in views}
@@ -304,6 +305,26 @@ def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, in
     quality.passed = not failures
     return CalibrationResult(fit.calibration, quality, fit.geometry, views, coverage, failures, sample,
                              choice.scores, choice.failures, check_sync(fit, pairs))
+
+
+def _final_fit(choice: ModelChoice, train: list[PairPoints], held: list[PairPoints], kept: list[PairPoints],
+               size: tuple[int, int]) -> HeadFit:
+    """The chosen model fitted on every pair kept; should that fit fail, the next model by held-out
+    score (`choice` is updated to it, the failure listed)."""
+    failures = []
+    for model in sorted(choice.scores, key=lambda m: (m != choice.model, choice.scores[m])):
+        try:
+            start = choice.fit if model == choice.model else None
+            fit = fit_head(model, kept, size, start)
+        except LensSolveError as exc:
+            choice.failures[model] = f"fitted without the held-out pairs, but not with them: {exc}"
+            failures.append(str(exc))
+            continue
+        if model != choice.model:
+            choice.held_errors = held_out_errors(fit_head(model, train, size), held)
+            choice.model = model
+        return fit
+    raise LensSolveError("; ".join(failures))
 
 
 def _screen(models: Sequence[str], pairs: list[PairPoints], size: tuple[int, int], config: SolveConfig

@@ -21,7 +21,8 @@ from tests.support import calib_synth as synth
 SIZE = (640, 400)
 TRUTH_TOLERANCE = 0.002  # the 0.2 %
 
-# (lens model, field of view across the width in degrees, board --board text, texture, pose options)
+# (lens model, field of view across the width in degrees, --board text, texture, view options:
+# n pairs (14), distance range (0.2 to 0.5 m) and those of synth.board_poses)
 CASES = {
     "plumb_bob 70deg chessboard 9x6": ("plumb_bob", 70, "9x6", lambda: synth.chessboard(9, 6, 0.03), {}),
     "plumb_bob 60deg square chessboard 7x7 any roll": (
@@ -36,15 +37,17 @@ CASES = {
         "plumb_bob", 70, "charuco:8x6:0.04:0.03:DICT_4X4_250",
         lambda: synth.charuco(8, 6, 0.04, 0.03, "DICT_4X4_250", legacy=False, inverted=True), {}),
     "equidistant 160deg aprilgrid 4x3": (
-        "equidistant", 160, "aprilgrid:4x3:0.05:0.3", lambda: synth.aprilgrid(4, 3, 0.05, 0.3), {}),
+        "equidistant", 160, "aprilgrid:4x3:0.05:0.3", lambda: synth.aprilgrid(4, 3, 0.05, 0.3),
+        {"n": 20, "distance": (0.15, 0.45)}),
 }
 
 
 @cache
-def _views(case: str, n: int = 14) -> tuple[synth.Rig, list[tuple[np.ndarray, np.ndarray]]]:
+def _views(case: str) -> tuple[synth.Rig, list[tuple[np.ndarray, np.ndarray]]]:
     model, fov, _, texture, options = CASES[case]
     head = synth.rig(model, fov, SIZE)
-    return head, synth.stereo_views(head, texture(), n, seed=3, distance=(0.2, 0.5), **options)
+    options = {"n": 14, "distance": (0.2, 0.5)} | options
+    return head, synth.stereo_views(head, texture(), seed=3, **options)
 
 
 @cache
