@@ -171,6 +171,9 @@ def test_bad_arguments(image_dir: Path, tmp_path: Path, capsys) -> None:
     assert calibrate.main(["--images", str(image_dir), "--board", "aprilgrid:6x6:0.05",
                            "--out", str(tmp_path)]) == calibrate.EXIT_USAGE
     assert "aprilgrid:COLSxROWS:TAG_SIZE:SPACING" in capsys.readouterr().err
+    assert calibrate.main(["--images", str(image_dir), "--board", str(tmp_path / "target.yaml"),
+                           "--out", str(tmp_path)]) == calibrate.EXIT_USAGE  # no --square-size needed: its own
+    assert "cannot read the target yaml" in capsys.readouterr().err
 
 
 def test_find_pairs_rules(tmp_path: Path) -> None:
