@@ -30,7 +30,7 @@ _Args = ParamSpec("_Args")
 _Result = TypeVar("_Result")
 SOLVE = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
 UNDISTORT = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
-MODELS = ("plumb_bob", "rational_polynomial", "equidistant")  # simplest first: ties go to the earlier
+MODELS = ("plumb_bob", "equidistant", "rational_polynomial")  # simplest first (8 coefficients last): ties go to the earlier
 ALIASES = {"standard": "plumb_bob", "plumb_bob": "plumb_bob", "rational": "rational_polynomial",
            "rational_polynomial": "rational_polynomial", "fisheye": "equidistant", "equidistant": "equidistant"}
 
@@ -202,8 +202,9 @@ def calibrate_stereo(model: str, obj: list[np.ndarray], left: list[np.ndarray], 
             o, l, r = _fisheye_pts(obj, 3), _fisheye_pts(left, 2), _fisheye_pts(right, 2)
             out = cv2.fisheye.stereoCalibrate(o, l, r, fl.K, fl.D, fr.K, fr.D, size, None, None,
                                               flags=_fisheye_flag("CALIB_FIX_INTRINSIC"), criteria=SOLVE)
-            rms, R, T = out[0], out[5], out[6]
+            R, T = refine_stereo(model, obj, left, right, fl, fr, out[5], out[6])
             per_view = _stereo_per_view(model, o, l, r, fl, fr, R, T)
+            rms = float(np.sqrt(np.mean(per_view ** 2)))
         else:
             o = [np.asarray(p, np.float32).reshape(-1, 3) for p in obj]
             l = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in left]
@@ -211,14 +212,16 @@ def calibrate_stereo(model: str, obj: list[np.ndarray], left: list[np.ndarray], 
             flags = cv2.CALIB_FIX_INTRINSIC | (cv2.CALIB_RATIONAL_MODEL if model == "rational_polynomial" else 0)
             rms, *_, R, T, _, _, _, _, per_view = cv2.stereoCalibrateExtended(
                 o, l, r, fl.K, fl.D, fr.K, fr.D, size, None, None, flags=flags, criteria=SOLVE)
-    except cv2.error:  # OpenCV's own start failed: the relative pose from the views' poses
+    except cv2.error:  # OpenCV's own solve failed: the relative pose from the views' poses
         return _stereo_from_poses(model, obj, left, right, fl, fr)
     return StereoFit(float(rms), np.asarray(R, np.float64), np.asarray(T, np.float64).ravel(), np.asarray(per_view))
 
 
 def _stereo_from_poses(model: str, obj: list[np.ndarray], left: list[np.ndarray], right: list[np.ndarray],
                        fl: MonoFit, fr: MonoFit) -> StereoFit:
-    """Left -> right transform as the mean (chordal for R, median for T) of the per-pair ones."""
+    """Left -> right transform started from the mean (chordal for R, median for T) of the per-pair
+    ones, refined (refine_stereo). OpenCV 5's cv2.fisheye.stereoCalibrate needs this for views with
+    different corner counts (ChArUco, AprilGrid): it fails on them."""
     Rs, Ts = [], []
     for o, l, r in zip(obj, left, right):
         rl, tl = solve_pose(model, o, l, fl.K, fl.D)
@@ -228,7 +231,7 @@ def _stereo_from_poses(model: str, obj: list[np.ndarray], left: list[np.ndarray]
         Ts.append(tr.ravel() - Ri @ tl.ravel())
     u, _, vt = np.linalg.svd(np.sum(Rs, axis=0))
     R = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
-    T = np.median(np.array(Ts), axis=0)
+    R, T = refine_stereo(model, obj, left, right, fl, fr, R, np.median(np.array(Ts), axis=0))
     per_view = _stereo_per_view(model, *(_fisheye_pts(x, d) for x, d in ((obj, 3), (left, 2), (right, 2))),
                                 fl, fr, R, T)
     if not np.all(np.isfinite(per_view)):
@@ -277,10 +280,72 @@ def project(model: str, obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: 
 
 def solve_pose(model: str, obj: np.ndarray, img: np.ndarray, K: np.ndarray, D: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray]:
-    """Board pose from one view with the intrinsics fixed (on converged undistorted points)."""
-    norm = undistort(model, img, K, D)
-    ok, rvec, tvec = cv2.solvePnP(np.asarray(obj, np.float64).reshape(-1, 3), norm, np.eye(3), None,
-                                  flags=cv2.SOLVEPNP_ITERATIVE)
+    """Board pose from one view with the intrinsics fixed: solvePnP on converged undistorted points,
+    then refined on the pixel reprojection error through the lens (Levenberg-Marquardt), so a wide
+    lens's far-off-axis corners are not overweighted."""
+    o = np.asarray(obj, np.float64).reshape(-1, 3)
+    pts = np.asarray(img, np.float64).reshape(-1, 2)
+    ok, rvec, tvec = cv2.solvePnP(o, undistort(model, pts, K, D), np.eye(3), None, flags=cv2.SOLVEPNP_ITERATIVE)
     if not ok:
         raise LensSolveError("no board pose for a view")
-    return rvec, tvec
+    if model != "equidistant":
+        return cv2.solvePnPRefineLM(o, pts, K, D, rvec, tvec, SOLVE)
+    return _refine_pose(model, o, pts, K, D, rvec, tvec)
+
+
+def _refine_pose(model: str, obj: np.ndarray, img: np.ndarray, K: np.ndarray, D: np.ndarray, rvec: np.ndarray,
+                 tvec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rvec, tvec) minimising the pixel error of project()."""
+    x = _levenberg_marquardt(np.concatenate([np.ravel(rvec), np.ravel(tvec)]),
+                             lambda p: (project(model, obj, p[:3], p[3:], K, D) - img).ravel())
+    return x[:3].reshape(3, 1), x[3:].reshape(3, 1)
+
+
+def _levenberg_marquardt(x0: np.ndarray, residual: Callable[[np.ndarray], np.ndarray], steps: int = 20
+                         ) -> np.ndarray:
+    """A few-parameter least-squares solve (forward-difference Jacobian)."""
+    x = np.asarray(x0, np.float64).copy()
+    r = residual(x)
+    cost, damping = float(r @ r), 1e-3
+    for _ in range(steps):
+        J = np.empty((r.size, x.size))
+        for k in range(x.size):
+            h = 1e-7 * max(1.0, abs(x[k]))
+            moved = x.copy()
+            moved[k] += h
+            J[:, k] = (residual(moved) - r) / h
+        A = J.T @ J
+        step = np.linalg.solve(A + damping * np.diag(np.diag(A) + 1e-12), -(J.T @ r))
+        r_new = residual(x + step)
+        if float(r_new @ r_new) < cost:
+            x, r, cost, damping = x + step, r_new, float(r_new @ r_new), damping * 0.3
+            if np.linalg.norm(step) < 1e-12:
+                break
+        else:
+            damping *= 10
+    return x
+
+
+def refine_stereo(model: str, obj: list[np.ndarray], left: list[np.ndarray], right: list[np.ndarray],
+                  fl: MonoFit, fr: MonoFit, R: np.ndarray, T: np.ndarray, rounds: int = 4
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(R, T) minimising both views' pixel errors with one board pose per pair, intrinsics fixed
+    (cv2.fisheye.stereoCalibrate stops short of it): alternately each pair's pose, then (R, T)."""
+    o = [np.asarray(p, np.float64).reshape(-1, 3) for p in obj]
+    l = [np.asarray(p, np.float64).reshape(-1, 2) for p in left]
+    r = [np.asarray(p, np.float64).reshape(-1, 2) for p in right]
+    rt = np.concatenate([cv2.Rodrigues(np.asarray(R, np.float64))[0].ravel(), np.ravel(T)])
+    poses = [np.concatenate([np.ravel(v) for v in solve_pose(model, oo, ll, fl.K, fl.D)]) for oo, ll in zip(o, l)]
+
+    def right_error(pose: np.ndarray, ext: np.ndarray, oo: np.ndarray, rr: np.ndarray) -> np.ndarray:
+        Rr = cv2.Rodrigues(ext[:3])[0] @ cv2.Rodrigues(pose[:3])[0]
+        tr = cv2.Rodrigues(ext[:3])[0] @ pose[3:] + ext[3:]
+        return (project(model, oo, cv2.Rodrigues(Rr)[0], tr, fr.K, fr.D) - rr).ravel()
+
+    for _ in range(rounds):
+        poses = [_levenberg_marquardt(pose, lambda p, oo=oo, ll=ll, rr=rr: np.concatenate([
+            (project(model, oo, p[:3], p[3:], fl.K, fl.D) - ll).ravel(), right_error(p, rt, oo, rr)]), steps=8)
+            for pose, oo, ll, rr in zip(poses, o, l, r)]
+        rt = _levenberg_marquardt(rt, lambda e: np.concatenate(
+            [right_error(p, e, oo, rr) for p, oo, rr in zip(poses, o, r)]), steps=8)
+    return cv2.Rodrigues(rt[:3])[0], rt[3:]

@@ -36,8 +36,8 @@ CASES = {
     "plumb_bob 70deg charuco current inverted": (
         "plumb_bob", 70, "charuco:8x6:0.04:0.03:DICT_4X4_250",
         lambda: synth.charuco(8, 6, 0.04, 0.03, "DICT_4X4_250", legacy=False, inverted=True), {}),
-    "equidistant 160deg aprilgrid 4x3": (
-        "equidistant", 160, "aprilgrid:4x3:0.05:0.3", lambda: synth.aprilgrid(4, 3, 0.05, 0.3),
+    "equidistant 150deg aprilgrid 4x3": (
+        "equidistant", 150, "aprilgrid:4x3:0.05:0.3", lambda: synth.aprilgrid(4, 3, 0.05, 0.3),
         {"n": 20, "distance": (0.15, 0.45)}),
 }
 
