@@ -223,16 +223,22 @@ def board_poses(head: Rig, tex: Texture, n: int, seed: int, distance: tuple[floa
 
 
 def stereo_views(head: Rig, tex: Texture, n: int, seed: int = 0, distance: tuple[float, float] = (0.4, 0.9),
-                 late: tuple[int, ...] = (), **pose_options: float) -> list[tuple[np.ndarray, np.ndarray]]:
+                 late: tuple[int, ...] = (), free_running: bool = False, **pose_options: float
+                 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """n (left, right) u8 images of the board; in the pairs `late` the right frame sees the board
-    moved 3 mm and 0.4 degrees on, obliquely (a pair whose frames are not from the same instant)."""
+    moved 3 mm and 0.4 degrees on, obliquely (a pair whose frames are not from the same instant);
+    free_running: in every pair, by 3.5 mm and 0.4 degrees in a random direction (free-running cameras)."""
     rng = np.random.default_rng(seed + 1000)
     rays_l, rays_r = head.left.rays(), head.right.rays()
     moved = cv2.Rodrigues(np.array([0.005, 0.005, 0.0]))[0]
     pairs = []
     for k, (R, t) in enumerate(board_poses(head, tex, n, seed, distance, **pose_options)):
         Rr, tr = head.R @ R, head.R @ t + head.T
-        if k in late:
+        if free_running:
+            axis, shift = rng.normal(size=3), rng.normal(size=3)
+            Rr = Rr @ cv2.Rodrigues(0.007 * axis / np.linalg.norm(axis))[0]
+            tr = tr + head.R @ (0.0035 * shift / np.linalg.norm(shift))
+        elif k in late:
             Rr, tr = Rr @ moved, tr + head.R @ np.array([0.002, 0.002, 0.001])
         pairs.append((render(head.left, rays_l, tex, R, t, rng), render(head.right, rays_r, tex, Rr, tr, rng)))
     return pairs

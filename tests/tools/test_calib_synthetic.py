@@ -188,3 +188,27 @@ def test_a_rational_head_exports_ros_rational_polynomial_and_no_camchain(tmp_pat
     assert "distortion_model: rational_polynomial" in right
     np.testing.assert_allclose(_ros_matrix(right, "distortion_coefficients").ravel(), result.calibration.D_right)
     assert not (tmp_path / "camchain.yaml").exists()  # Kalibr has no rational model
+
+
+@pytest.mark.slow
+def test_free_running_cameras_are_told_their_pairs_are_not_simultaneous(tmp_path: Path, capsys) -> None:
+    """Every pair's right frame a moment late (webcams without sync): the gate fails, and the user
+    reads why, with the evidence, on stdout and in calibration.json."""
+    from stereocam.tools import calibrate
+
+    head = synth.rig("plumb_bob", 70, SIZE)
+    pairs = synth.stereo_views(head, synth.chessboard(9, 6, 0.03), 14, seed=3, distance=(0.2, 0.5),
+                               free_running=True)
+    for i, (left, right) in enumerate(pairs):
+        cv2.imwrite(str(tmp_path / f"left_{i:02d}.png"), left)
+        cv2.imwrite(str(tmp_path / f"right_{i:02d}.png"), right)
+    out = tmp_path / "out"
+    code = calibrate.main(["-q", "--images", str(tmp_path), "--board", "9x6", "--square-size", "0.03",
+                           "--out", str(out), "--db", str(tmp_path / "f.sqlite")])
+    assert code == calibrate.EXIT_GATE
+    text = capsys.readouterr().out
+    assert "14 of 14 pairs look unsynchronised" in text and "left_07.png" in text and "synchronised" in text
+    doc = yaml.safe_load((out / "calibration.json").read_text())
+    assert len(doc["unsynchronised_pairs"]) == 14
+    motion = [p["board_motion_mm"] for p in doc["unsynchronised_pairs"]]  # 3.5 mm shift + 0.4 deg turn
+    assert 2.0 < np.median(motion) < 6.0 and max(motion) < 10.0
