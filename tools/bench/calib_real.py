@@ -3,8 +3,9 @@
 For each set: `stereocam calibrate --images DIR --board ... --square-size ...` with no other option
 (in-process, its factory record in a temporary file), and OpenCV's solution on every pair where both boards are found —
 cv2.calibrateCamera per camera and cv2.stereoCalibrate with fixed intrinsics, with the lens model
-the tool chose and the same corner detections. Reported: model chosen, pairs used/dropped (with
-the reasons), focal (left, right) and baseline relative error, and epipolar RMS of both solutions
+the tool chose and the same corner detections. Reported: model chosen and every model tried (its
+held-out score, or why it failed), pairs used/dropped (with the reasons), pairs that look
+unsynchronised, focal (left, right) and baseline relative error, and epipolar RMS of both solutions
 over all those pairs (converged undistortion, each solution's own rectification).
 
     stereocam bench calib-real [--sets DIR] [--only NAME]
@@ -123,6 +124,11 @@ def command(**params: Any) -> int:
         print(f"{name:<20} {r['exit']:>4} {d['lens_model']:<20} {d['views_used']:>4} {d['views_dropped']:>4} "
               f"{100 * r['fx_left']:>7.3f} {100 * r['fx_right']:>7.3f} {100 * r['baseline']:>7.3f} "
               f"{r['epi_mine']:>7.3f} {r['epi_opencv']:>7.3f} {time.perf_counter() - t0:>6.1f}")
+        tried = [f"{m} {score:.3f}" for m, score in d["lens_model_scores"].items()]
+        tried += [f"{m} failed ({why})" for m, why in d.get("lens_model_failures", {}).items()]
+        print(f"{'':<20} models tried (held-out score px): {'; '.join(tried)}")
+        if d.get("unsynchronised_pairs"):
+            print(f"{'':<20} unsynchronised: {', '.join(u['pair'] for u in d['unsynchronised_pairs'])}")
         for drop in d["dropped"]:
             print(f"{'':<20} dropped {drop['pair']}: {drop['reason']}")
         ok &= r["exit"] == 0 and max(abs(r[k]) for k in ("fx_left", "fx_right", "baseline")) <= 0.005 \

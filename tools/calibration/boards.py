@@ -2,29 +2,43 @@
 image and the matching of a left/right pair into common object/image points.
 
 Board syntax (``--board``):
-  COLSxROWS                               chessboard, inner corners (square side from --square-size)
+  COLSxROWS                               chessboard, inner corners (square side from --square-size);
+                                          square boards (N x N) too
   charuco:COLSxROWS:SQUARE:MARKER:DICT    ChArUco, squares (not corners), SQUARE and MARKER in metres,
                                           DICT an OpenCV dictionary name, e.g. DICT_4X4_250; a
                                           --square-size given with it rescales both lengths
+  aprilgrid:COLSxROWS:TAG_SIZE:SPACING    Kalibr's AprilGrid: COLS x ROWS tags of tag36h11 (2-bit black
+                                          border), TAG_SIZE in metres, SPACING the gap / TAG_SIZE
+  FILE.yaml                               a Kalibr target yaml (target_type aprilgrid or checkerboard)
 
 Chessboards are looked for with both OpenCV detectors: cv2.findChessboardCorners (adaptive
 threshold, normalised; then cv2.cornerSubPix with a half-window of 0.4 × the smallest corner
 spacing, 2..15 px) and, where that finds nothing (no white margin, strong distortion, dot-coded
 squares), the sector-based cv2.findChessboardCornersSB (plain, then exhaustive). Both run on
 every image; the solver uses, for the whole set, the detector whose corners fit a camera model
-best (tools/calibration/solve.py), and the other one for the images only it finds. A grid whose two sizes are both odd or both
-even looks the same turned by 180 degrees, so the detectors may number it from either end: the
-right view's order is reversed when its first→last corner direction opposes the left view's.
+best (tools/calibration/solve.py), and the other one for the images only it finds. A chessboard looks
+the same turned by 180 degrees (a square one also turned by 90 degrees or mirrored), so the
+detectors may number it from any of those ends. Only the left/right agreement matters (each pair
+has its own board pose, and a plane's points numbered mirrored are still a plane seen from the
+other side): the right view is renumbered by the grid symmetry whose row and column directions
+agree best with the left view's, the relative rotation of a stereo head being far below 45 degrees.
 
 ChArUco boards: cv2.aruco.CharucoDetector; each corner has its board id, so partial views are
 fine and a pair keeps the ids seen in both images. The board's layout (OpenCV >= 4.6, or the
-legacy one of older OpenCV that boards with an even number of rows were printed with) is settled
-by the first image with the board in it: whichever layout finds more corners there.
+legacy one of older OpenCV that boards with an even number of rows were printed with) and its
+polarity (black markers on white, or printed inverted: white on black) are settled by the first
+image with the board in it: whichever of the four finds more corners there.
+
+AprilGrid (Kalibr): cv2.aruco's DICT_APRILTAG_36h11 (the apriltag library's tag36h11 codes) with a
+2-bit marker border, corners refined to sub-pixel (AprilGridSpec.detect). Tag id = row·COLS + col, row 0 at the bottom of
+the printed board; the tag corners are Kalibr's points: a (2·ROWS) x (2·COLS) grid, point
+(2·row + top, 2·col + right) at ((col·(1+SPACING) + right)·TAG_SIZE, (row·(1+SPACING) + top)·TAG_SIZE).
 """
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -33,6 +47,7 @@ from stereocam.stereo.calibration_board import BoardSpec
 
 _SUBPIX = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
 MIN_CHARUCO_CORNERS = 8
+MIN_TAG_PX = 16  # AprilGrid tags seen smaller (side, px) give no sub-pixel corners
 
 
 @dataclass(frozen=True)
@@ -54,6 +69,7 @@ class CharucoSpec:
     marker_m: float
     dictionary: str
     legacy: bool | None = None  # None: decided on the first images
+    inverted: bool | None = None  # white markers on black; None: decided on the first images
     _detectors: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
@@ -73,9 +89,9 @@ class CharucoSpec:
             self._detectors[legacy] = cv2.aruco.CharucoDetector(board)
         return self._detectors[legacy]
 
-    def detect_with(self, gray: np.ndarray, legacy: bool) -> Detection | None:
+    def detect_with(self, gray: np.ndarray, legacy: bool, inverted: bool = False) -> Detection | None:
         det = self._detector(legacy)
-        corners, ids, *_ = det.detectBoard(gray)
+        corners, ids, *_ = det.detectBoard(255 - gray if inverted else gray)
         if ids is None or len(ids) < MIN_CHARUCO_CORNERS:
             return None
         ids = ids.ravel().astype(np.int64)
@@ -83,31 +99,135 @@ class CharucoSpec:
         return Detection(ids, corners.reshape(-1, 2).astype(np.float32), obj)
 
 
-def describe(board: BoardSpec | CharucoSpec) -> str:
+@dataclass
+class AprilGridSpec:
+    """Kalibr's AprilGrid: cols x rows tag36h11 tags of tag_m metres, gaps of spacing·tag_m."""
+
+    cols: int
+    rows: int
+    tag_m: float
+    spacing: float
+    _detector: "cv2.aruco.ArucoDetector | None" = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.cols < 1 or self.rows < 1 or self.cols * self.rows < 2 or self.tag_m <= 0 or not 0 < self.spacing < 5:
+            raise ValueError(f"bad AprilGrid {self.cols}x{self.rows} tag {self.tag_m} spacing {self.spacing}")
+        if self.cols * self.rows > 587:
+            raise ValueError(f"an AprilGrid of tag36h11 has at most 587 tags, not {self.cols * self.rows}")
+
+    def describe(self) -> str:
+        return f"aprilgrid:{self.cols}x{self.rows}:{self.tag_m:g}:{self.spacing:g}"
+
+    def object_points(self) -> np.ndarray:
+        """Kalibr's points (see the module docstring), (4·cols·rows, 3), point id = index."""
+        r2, c2 = np.mgrid[0:2 * self.rows, 0:2 * self.cols]
+        x = ((c2 // 2) * (1 + self.spacing) + c2 % 2) * self.tag_m
+        y = ((r2 // 2) * (1 + self.spacing) + r2 % 2) * self.tag_m
+        return np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)]).astype(np.float32)
+
+    def point_ids(self, tag_id: int) -> list[int]:
+        """Point ids of a tag's corners in OpenCV's order (top-left, top-right, bottom-right,
+        bottom-left of the printed tag; Kalibr's y points up the board)."""
+        row, col = divmod(tag_id, self.cols)
+        w = 2 * self.cols
+        bottom, top = 2 * row * w, (2 * row + 1) * w
+        return [top + 2 * col, top + 2 * col + 1, bottom + 2 * col + 1, bottom + 2 * col]
+
+    def detect(self, gray: np.ndarray) -> Detection | None:
+        """Tags found on the image and on it with the white grown by 1 and 2 px (which parts the tags
+        from the black squares that touch their corners once the print is blurred); each tag corner
+        is then refined on the image itself, where it is the saddle point of a tag and a square. A
+        tag under MIN_TAG_PX, or one whose refinement jumps off its corner, is left out."""
+        if self._detector is None:
+            params = cv2.aruco.DetectorParameters()
+            params.markerBorderBits = 2
+            params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_CONTOUR  # edge lines, then the saddle
+            dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
+            self._detector = cv2.aruco.ArucoDetector(dictionary, params)
+        quads: dict[int, tuple[np.ndarray, int]] = {}
+        for grow in (0, 1, 2):
+            img = gray if grow == 0 else cv2.dilate(gray, np.ones((2 * grow + 1, 2 * grow + 1), np.uint8))
+            corners, ids, _ = self._detector.detectMarkers(img)
+            for tag, quad in zip(() if ids is None else ids.ravel(), corners):
+                if tag < self.cols * self.rows:
+                    quads.setdefault(int(tag), (quad.reshape(4, 2), grow))
+        point_ids, points = [], []
+        for tag_id, (quad, grow) in sorted(quads.items()):
+            side = float(np.mean(np.linalg.norm(quad - np.roll(quad, 1, axis=0), axis=1)))
+            gap = self.spacing * side  # the black squares' side at this tag, px
+            if side < MIN_TAG_PX:
+                continue
+            out = quad - quad.mean(axis=0)  # growing the white shrank the tag by `grow` px a side
+            quad = quad + grow * np.sqrt(2) * out / np.linalg.norm(out, axis=1, keepdims=True)
+            half = int(np.clip(0.4 * gap, 1, 12))
+            refined = cv2.cornerSubPix(gray, quad.astype(np.float32).reshape(-1, 1, 2), (half, half), (-1, -1),
+                                       _SUBPIX).reshape(4, 2)
+            if np.max(np.linalg.norm(refined - quad, axis=1)) > 1.0 + 0.4 * gap:
+                continue  # drawn to another saddle (the far corner of a small black square): not this corner
+            point_ids += self.point_ids(tag_id)
+            points.append(refined)
+        if len(point_ids) < MIN_CHARUCO_CORNERS:
+            return None
+        ids_arr = np.array(point_ids, np.int64)
+        return Detection(ids_arr, np.concatenate(points).astype(np.float32), self.object_points()[ids_arr])
+
+
+Board = BoardSpec | CharucoSpec | AprilGridSpec
+
+
+def describe(board: Board) -> str:
     """The --board text of a board (for records and reports)."""
-    if isinstance(board, CharucoSpec):
-        return board.describe()
-    return f"{board.cols}x{board.rows}:{board.square_m:g}"
+    if isinstance(board, BoardSpec):
+        return f"{board.cols}x{board.rows}:{board.square_m:g}"
+    return board.describe()
 
 
-def parse_board(text: str, square_size: float | None) -> BoardSpec | CharucoSpec:
+def parse_board(text: str, square_size: float | None) -> Board:
     """Parse the --board syntax of the module docstring; raises ValueError."""
     m = re.fullmatch(r"(\d+)[xX](\d+)", text)
     if m:
         if square_size is None:
             raise ValueError("--square-size is required with a chessboard")
-        cols, rows = int(m.group(1)), int(m.group(2))
-        if cols == rows:
-            raise ValueError("use a board with cols != rows so its orientation is unambiguous")
-        return BoardSpec(cols, rows, square_size)
+        return BoardSpec(int(m.group(1)), int(m.group(2)), square_size)
     m = re.fullmatch(r"charuco:(\d+)[xX](\d+):([0-9.eE+-]+):([0-9.eE+-]+):(\w+)", text, re.IGNORECASE)
     if m:
         square, marker = float(m.group(3)), float(m.group(4))
         if square_size is not None and square_size != square:  # --square-size rescales the board
             marker, square = marker * square_size / square, square_size
         return CharucoSpec(int(m.group(1)), int(m.group(2)), square, marker, m.group(5).upper())
-    raise ValueError(f"board must be COLSxROWS inner corners (e.g. 9x6) or "
-                     f"charuco:COLSxROWS:SQUARE:MARKER:DICT, got {text!r}")
+    m = re.fullmatch(r"aprilgrid:(\d+)[xX](\d+):([0-9.eE+-]+):([0-9.eE+-]+)", text, re.IGNORECASE)
+    if m:
+        return AprilGridSpec(int(m.group(1)), int(m.group(2)), float(m.group(3)), float(m.group(4)))
+    if text.lower().endswith((".yaml", ".yml")):
+        return read_kalibr_target(Path(text))
+    raise ValueError(f"board must be COLSxROWS inner corners (e.g. 9x6), charuco:COLSxROWS:SQUARE:MARKER:DICT, "
+                     f"aprilgrid:COLSxROWS:TAG_SIZE:SPACING or a Kalibr target .yaml, got {text!r}")
+
+
+def read_kalibr_target(path: Path) -> Board:
+    """The board of a Kalibr target yaml (aprilgrid: tagCols, tagRows, tagSize, tagSpacing;
+    checkerboard: targetCols, targetRows inner corners, rowSpacingMeters, colSpacingMeters)."""
+    import yaml
+
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ValueError(f"cannot read the target yaml {path}: {exc}") from exc
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: not a Kalibr target yaml")
+    kind = str(doc.get("target_type", "")).strip("'\"")
+    try:
+        if kind == "aprilgrid":
+            return AprilGridSpec(int(doc["tagCols"]), int(doc["tagRows"]), float(doc["tagSize"]),
+                                 float(doc["tagSpacing"]))
+        if kind == "checkerboard":
+            row, col = float(doc["rowSpacingMeters"]), float(doc["colSpacingMeters"])
+            if abs(row - col) > 1e-9 * max(row, col):
+                raise ValueError(f"{path}: only square checkerboard cells are supported ({col} x {row} m)")
+            return BoardSpec(int(doc["targetCols"]), int(doc["targetRows"]), col)
+    except KeyError as exc:
+        raise ValueError(f"{path}: {kind} target without {exc.args[0]}") from None
+    raise ValueError(f"{path}: target_type {kind!r} is not supported (aprilgrid or checkerboard)")
 
 
 def gray(img: np.ndarray) -> np.ndarray:
@@ -144,12 +264,15 @@ def _sector_based(g: np.ndarray, board: BoardSpec) -> np.ndarray | None:
 CHESSBOARD_DETECTORS = {"classic": _classic, "sector": _sector_based}
 
 
-def detect_all(img: np.ndarray, board: BoardSpec | CharucoSpec) -> dict[str, Detection]:
+def detect_all(img: np.ndarray, board: Board) -> dict[str, Detection]:
     """The board's corners in one image by each detector that finds it ({} when none does)."""
     g = gray(img)
     if isinstance(board, CharucoSpec):
         found = detect_charuco(g, board)
         return {} if found is None else {"charuco": found}
+    if isinstance(board, AprilGridSpec):
+        found = board.detect(g)
+        return {} if found is None else {"aprilgrid": found}
     out = {}
     for name, detector in CHESSBOARD_DETECTORS.items():
         corners = detector(g, board)
@@ -160,25 +283,42 @@ def detect_all(img: np.ndarray, board: BoardSpec | CharucoSpec) -> dict[str, Det
 
 
 def detect_charuco(g: np.ndarray, board: CharucoSpec) -> Detection | None:
-    """ChArUco corners of one grey image; the first image with the board settles the layout."""
-    if board.legacy is not None:
-        return board.detect_with(g, board.legacy)
-    found = {legacy: board.detect_with(g, legacy) for legacy in (False, True)}
-    counts = {legacy: 0 if d is None else len(d.ids) for legacy, d in found.items()}
-    if max(counts.values()) > 0:
-        board.legacy = counts[True] > counts[False]
-        return found[board.legacy]
+    """ChArUco corners of one grey image; the first image with the board settles layout and polarity."""
+    if board.legacy is not None and board.inverted is not None:
+        return board.detect_with(g, board.legacy, board.inverted)
+    found = {(legacy, inv): board.detect_with(g, legacy, inv) for inv in (False, True) for legacy in (False, True)}
+    counts = {key: 0 if d is None else len(d.ids) for key, d in found.items()}
+    best = max(counts, key=lambda key: counts[key])  # ties: the current layout, normal polarity
+    if counts[best] > 0:
+        board.legacy, board.inverted = best
+        return found[best]
     return None
 
 
-def match_pair(left: Detection, right: Detection, board: BoardSpec | CharucoSpec
+def grid_orders(cols: int, rows: int) -> list[np.ndarray]:
+    """Index arrays renumbering a cols x rows grid by each symmetry that maps it onto itself."""
+    grid = np.arange(cols * rows).reshape(rows, cols)
+    out = [grid, grid[::-1, ::-1], grid[::-1], grid[:, ::-1]]
+    if cols == rows:
+        out += [np.rot90(grid, 1), np.rot90(grid, 3), grid.T, grid.T[::-1, ::-1]]
+    return [o.ravel() for o in out]
+
+
+def _axes(points: np.ndarray, cols: int, rows: int) -> np.ndarray:
+    """Mean unit direction along the rows and along the columns of a detected grid, (2, 2)."""
+    g = points.reshape(rows, cols, 2).astype(np.float64)
+    along = [np.diff(g, axis=1).reshape(-1, 2).sum(0), np.diff(g, axis=0).reshape(-1, 2).sum(0)]
+    return np.array([a / max(np.linalg.norm(a), 1e-12) for a in along])
+
+
+def match_pair(left: Detection, right: Detection, board: Board
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """(object points, left points, right points) of the corners seen in both images, or None."""
     if isinstance(board, BoardSpec):
-        r = right.image_points
-        if np.dot(left.image_points[-1] - left.image_points[0], r[-1] - r[0]) < 0:
-            r = r[::-1].copy()
-        return left.object_points, left.image_points, r
+        axes = _axes(left.image_points, board.cols, board.rows)
+        r = max((right.image_points[o] for o in grid_orders(board.cols, board.rows)),
+                key=lambda pts: float(np.sum(axes * _axes(pts, board.cols, board.rows))))
+        return left.object_points, left.image_points, r.copy()
     common, li, ri = np.intersect1d(left.ids, right.ids, return_indices=True)
     if len(common) < MIN_CHARUCO_CORNERS:
         return None

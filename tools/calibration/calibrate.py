@@ -3,6 +3,7 @@
     stereocam calibrate URL --out OUTDIR [--target user|factory]          (device mode)
     stereocam calibrate --images DIR --board 9x6 --square-size 0.025 --out OUTDIR   (offline)
     stereocam calibrate --images DIR --board charuco:19x26:0.005:0.004:DICT_4X4_250 --out OUTDIR
+    stereocam calibrate --images DIR --board aprilgrid:6x6:0.088:0.3 --out OUTDIR   (or --board target.yaml)
 
 Device mode (tools/calibration/device.py) captures raw pairs of the calibration board, solves, gates,
 writes the result to the camera, reads it back and compares it byte for byte before it reports
@@ -24,9 +25,13 @@ Outputs in OUTDIR:
   calibration.json   geometry + lens_model + rms_left, rms_right, rms_stereo, epipolar_rms_px,
                      epipolar_all_rms_px, views_used, views_dropped, passed, written, verified
                      (written/verified are false in offline mode), dropped (file and reason),
-                     lens_model_scores (held-out score per model tried)
+                     lens_model_scores (held-out score per model tried), lens_model_failures (why a
+                     model failed), unsynchronised_pairs (pairs whose left and right frames are not
+                     from the same instant, with the evidence: tools/calib_sync.py; also printed)
   calibration.yaml   OpenCV FileStorage: lens_model K1 D1 K2 D2 R T R1 R2 P1 P2 Q + metrics  (if passed)
   left.yaml, right.yaml   ROS camera_info (plumb_bob, rational_polynomial or equidistant) (if passed)
+  camchain.yaml      Kalibr camchain (cam0 left, cam1 right, T_cn_cnm1; equidistant or radtan): for the
+                     equidistant model and a plumb_bob one whose k3 is negligible  (if passed)
   camera_info/left_WxH.yaml, right_WxH.yaml   device mode: camera_info for every stream size the
                      unit offers (tools/calibration/camera_info.py)                              (if passed)
   report.png         per-view errors named by file (worst views called out), coverage, rectified pair
@@ -109,7 +114,8 @@ _D, _O = SolveConfig(), OutlierRules()
 @click.option("--images", type=click.Path(path_type=Path), default=None,
               help="Folder of left<N>/right<N> (or L<N>/R<N>) images, or of left/ and right/ folders (offline mode).")
 @click.option("--board", default="9x6", show_default=True,
-              help="COLSxROWS inner corners of a chessboard, or charuco:COLSxROWS:SQUARE:MARKER:DICT "
+              help="COLSxROWS inner corners of a chessboard, charuco:COLSxROWS:SQUARE:MARKER:DICT, "
+                   "aprilgrid:COLSxROWS:TAG_SIZE:SPACING_RATIO (Kalibr) or a Kalibr target .yaml "
                    "(squares; lengths in metres).")
 @click.option("--square-size", type=float, default=None,
               help="Chessboard square side in metres (required offline).  [default: 0.03 in device mode]")
@@ -197,8 +203,9 @@ def calibrate(args: SimpleNamespace) -> int:
         return _fail(EXIT_USAGE, "nothing to calibrate: give a camera URL (device mode) or --images DIR (offline)")
     if args.url is not None and args.images is not None:
         return _fail(EXIT_USAGE, "give a camera URL (device mode) or --images DIR (offline), not both")
-    charuco = args.board.lower().startswith("charuco:")
-    if args.square_size is None and not charuco:
+    board_sized = args.board.lower().startswith(("charuco:", "aprilgrid:")) or args.board.lower().endswith(
+        (".yaml", ".yml"))  # the board text gives its own lengths
+    if args.square_size is None and not board_sized:
         if args.images is not None:
             return _fail(EXIT_USAGE, "--square-size is required with --images and a chessboard")
         args.square_size = 0.03

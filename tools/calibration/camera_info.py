@@ -30,6 +30,46 @@ def ros_camera_info(name: str, size: tuple[int, int], K: np.ndarray, D: np.ndarr
     return "\n".join(lines) + "\n"
 
 
+KALIBR_MODELS = {"plumb_bob": "radtan", "equidistant": "equidistant"}  # Kalibr has no rational model
+K3_LIMIT_PX = 0.05
+
+
+def _k3_shift_px(K: np.ndarray, D: np.ndarray, size: tuple[int, int]) -> float:
+    """How far k3 moves the farthest image corner (px): |k3| r^7 fx, r its normalised radius."""
+    w, h = size
+    r = max(np.hypot((x - K[0, 2]) / K[0, 0], (y - K[1, 2]) / K[1, 1]) for x in (0, w) for y in (0, h))
+    return float(abs(D[4]) * r ** 7 * K[0, 0])
+
+
+def kalibr_camchain(calib: StereoCalibration, topics: tuple[str, str] = ("/cam0/image_raw", "/cam1/image_raw")
+                    ) -> str | None:
+    """A Kalibr camchain yaml (cam0 = left, cam1 = right, T_cn_cnm1 = [R T; 0 1], X_cam1 = R X_cam0 + T),
+    or None for a lens model Kalibr cannot hold: rational_polynomial, or plumb_bob whose k3 moves an
+    image corner by more than K3_LIMIT_PX (Kalibr's radtan has k1, k2, p1, p2 only)."""
+    model = KALIBR_MODELS.get(calib.lens_model)
+    if model is None or (calib.lens_model == "plumb_bob" and max(
+            _k3_shift_px(K, D, calib.image_size) for K, D in ((calib.K_left, calib.D_left),
+                                                              (calib.K_right, calib.D_right))) > K3_LIMIT_PX):
+        return None
+
+    def row(values: np.ndarray) -> str:
+        return "[" + ", ".join(repr(float(v)) for v in values) + "]"
+
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = calib.R, np.ravel(calib.T)
+    lines = []
+    for n, (K, D, topic) in enumerate(((calib.K_left, calib.D_left, topics[0]),
+                                       (calib.K_right, calib.D_right, topics[1]))):
+        lines.append(f"cam{n}:")
+        if n:
+            lines += ["  T_cn_cnm1:"] + [f"  - {row(r)}" for r in T]
+        lines += ["  cam_overlaps: [" + str(1 - n) + "]", "  camera_model: pinhole",
+                  f"  distortion_coeffs: {row(np.ravel(D)[:4])}", f"  distortion_model: {model}",
+                  f"  intrinsics: {row(np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]]))}",
+                  f"  resolution: [{calib.image_size[0]}, {calib.image_size[1]}]", f"  rostopic: {topic}"]
+    return "\n".join(lines) + "\n"
+
+
 def stream_sizes(sensor: tuple[int, int]) -> list[tuple[int, int]]:
     """Output sizes a unit offers for whole-frame streams: the sensor size divided by 1, 2, 4 and 8
     where the width/height parameters (SPEC §5.1) accept the result, and the default size."""

@@ -9,18 +9,18 @@ import cv2
 import numpy as np
 
 from stereocam.stereo.calibration_board import BoardSpec
-from stereocam.tools.calibration.boards import CharucoSpec
+from stereocam.tools.calibration.boards import Board
 
 PARAM_NAMES = ("X", "Y", "Size", "Skew")
 PARAM_RANGES = (0.7, 0.7, 0.4, 0.5)
 
 
-def view_params(corners: np.ndarray, board: BoardSpec | CharucoSpec, image_size: tuple[int, int]
+def view_params(corners: np.ndarray, board: Board, image_size: tuple[int, int]
                 ) -> tuple[float, ...]:
-    """ROS-style (X, Y, size, skew) of one view, each in [0, 1] (ChArUco: hull area, skew 0)."""
+    """ROS-style (X, Y, size, skew) of one view, each in [0, 1] (ChArUco, AprilGrid: hull area, skew 0)."""
     w, h = image_size
     c = corners.reshape(-1, 2).astype(np.float64)
-    if isinstance(board, CharucoSpec):
+    if not isinstance(board, BoardSpec):
         area = float(cv2.contourArea(cv2.convexHull(c.astype(np.float32))))
         border = math.sqrt(area)
         x = min(1.0, max(0.0, (c[:, 0].mean() - border / 2) / max(w - border, 1.0)))

@@ -4,10 +4,14 @@ Per-pair residuals (px) of a fit, the quantities outliers are judged by:
   reproj_left / reproj_right   RMS reprojection error of that view in its camera's own solve;
   stereo                       the larger of the pair's two RMS errors in the stereo solve (one board
                                pose per pair, the right camera through R, T);
-  epipolar                     RMS of y_left_rect − y_right_rect over the pair's corners, points
-                               undistorted to convergence and rectified (protocol/rectification.py).
-A pair is an outlier when one of them exceeds max(median + k·1.4826·MAD, ratio·median) over the pairs
-still in (k = outlier_k, ratio = outlier_ratio); the fit is redone without them, up to
+  epipolar                     RMS over the pair's corners of fy_left · (atan(y_l/z_l) − atan(y_r/z_r)),
+                               (x, y, z) the corner's ray undistorted to convergence and rotated by
+                               the rectification (protocol/rectification.py): y_left_rect − y_right_rect
+                               near the centre (at the raw focal length), the epipolar planes' angle
+                               in raw px anywhere.
+A pair is an outlier when one of them exceeds max(median + k·1.4826·MAD, ratio·median, floor_px) over
+the pairs still in (k = outlier_k, ratio = outlier_ratio; an error within floor_px is never an outlier,
+however clean the others); the fit is redone without them, up to
 outlier_rounds times, never dropping more than max_drop_fraction of the pairs (the worst go first).
 A left and right frame not taken at the same instant shows as a stereo/epipolar outlier.
 
@@ -69,6 +73,7 @@ class OutlierRules:
     ratio: float = 2.5
     rounds: int = 3
     max_drop_fraction: float = 0.3
+    floor_px: float = 0.1
 
 
 def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], start: HeadFit | None = None
@@ -89,11 +94,15 @@ def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], sta
 
 
 def epipolar_dy(fit: HeadFit, left: np.ndarray, right: np.ndarray) -> np.ndarray:
-    """y_left_rect − y_right_rect per corner."""
+    """Epipolar error per corner (px of the raw image): the angle between the corner's epipolar
+    planes seen from the left and from the right (atan of the rectified y/z) times the left camera's
+    focal length fy. Near the image centre it is y_left_rect − y_right_rect at the raw image's scale;
+    it stays a fair measure far off axis (a wide or fisheye lens), where rectified pinhole
+    coordinates, and the rectification's zoom, grow without bound."""
     c, g = fit.calibration, fit.geometry
-    yl = undistort(c.lens_model, left, c.K_left, c.D_left, g.R1, g.P1)[:, 1]
-    yr = undistort(c.lens_model, right, c.K_right, c.D_right, g.R2, g.P2)[:, 1]
-    return yl - yr
+    yl = undistort(c.lens_model, left, c.K_left, c.D_left, g.R1)[:, 1]
+    yr = undistort(c.lens_model, right, c.K_right, c.D_right, g.R2)[:, 1]
+    return c.K_left[1, 1] * (np.arctan(yl) - np.arctan(yr))
 
 
 def rms(values: np.ndarray) -> float:
@@ -127,7 +136,7 @@ def score(errors: dict[str, np.ndarray]) -> float:
 def _limits(values: np.ndarray, rules: OutlierRules) -> float:
     med = float(np.median(values))
     mad = float(np.median(np.abs(values - med)))
-    return max(med + rules.k * 1.4826 * mad, rules.ratio * med)
+    return max(med + rules.k * 1.4826 * mad, rules.ratio * med, rules.floor_px)
 
 
 def robust_fit(model: str, pairs: list[PairPoints], size: tuple[int, int], rules: OutlierRules,
@@ -136,8 +145,7 @@ def robust_fit(model: str, pairs: list[PairPoints], size: tuple[int, int], rules
     kept, dropped = list(pairs), {}
     budget = int(rules.max_drop_fraction * len(pairs))
     for round_ in range(rules.rounds + 1):
-        start = fit_head(start_model, kept, size) if start_model else None
-        fit = fit_head(model, kept, size, start)
+        fit = fit_head(model, kept, size, try_fit(start_model, kept, size) if start_model else None)
         if round_ == rules.rounds or budget == 0:
             break
         errors = in_sample_errors(fit, kept)
@@ -159,25 +167,44 @@ def robust_fit(model: str, pairs: list[PairPoints], size: tuple[int, int], rules
     return fit, kept, dropped
 
 
+def try_fit(model: str, pairs: Sequence[PairPoints], size: tuple[int, int]) -> HeadFit | None:
+    """fit_head, or None where the model does not fit (a start for another model, never required)."""
+    try:
+        return fit_head(model, pairs, size)
+    except LensSolveError:
+        return None
+
+
+@dataclass
+class ModelChoice:
+    """The lens model chosen, the held-out score of each model that fitted, why the others failed."""
+
+    model: str
+    scores: dict[str, float]
+    failures: dict[str, str]
+    held_errors: dict[str, np.ndarray]
+    fit: HeadFit
+
+
 def choose_model(models: Sequence[str], train: list[PairPoints], held: list[PairPoints],
-                 size: tuple[int, int], tie: float) -> tuple[str, dict[str, float], dict[str, np.ndarray]]:
-    """(chosen model, held-out score per model tried, chosen model's held-out errors)."""
+                 size: tuple[int, int], tie: float) -> ModelChoice:
+    """Fit each model on `train` on its own terms (a plumb_bob fit, where there is one, is one more
+    start for the others) and score it on `held`; a model that fails is listed, never fatal while
+    another one fits. Raises LensSolveError when none fits."""
     scores: dict[str, float] = {}
     errors: dict[str, dict[str, np.ndarray]] = {}
-    base: HeadFit | None = None
-    failures = []
+    fits: dict[str, HeadFit] = {}
+    failures: dict[str, str] = {}
     for model in models:
         try:
-            if model != "plumb_bob" and base is None:
-                base = fit_head("plumb_bob", train, size)
-            fit = base if model == "plumb_bob" and base is not None else fit_head(model, train, size, base)
-            base = fit if model == "plumb_bob" else base
-            errors[model] = held_out_errors(fit, held)
+            fits[model] = fit_head(model, train, size, fits.get("plumb_bob"))
+            errors[model] = held_out_errors(fits[model], held)
             scores[model] = score(errors[model])
         except LensSolveError as exc:
-            failures.append(str(exc))
+            fits.pop(model, None)
+            failures[model] = str(exc)
     if not scores:
-        raise LensSolveError("no lens model could be fitted: " + "; ".join(failures))
+        raise LensSolveError("no lens model could be fitted: " + "; ".join(failures.values()))
     best = min(scores.values())
     chosen = next(m for m in models if m in scores and scores[m] <= best * (1 + tie))
-    return chosen, scores, errors[chosen]
+    return ModelChoice(chosen, scores, failures, errors[chosen], fits[chosen])

@@ -1,10 +1,16 @@
 """Lens models for the calibration tool: one interface over OpenCV's pinhole and fisheye solvers.
 
   plumb_bob            cv2.calibrateCamera, 5 coefficients (k1, k2, p1, p2, k3)
-  rational_polynomial  cv2.calibrateCamera with CALIB_RATIONAL_MODEL, 8 coefficients, started from
-                       the plumb_bob fit (started cold it diverges on wide-angle lenses)
-  equidistant          cv2.fisheye.calibrate, 4 coefficients, started from the plumb_bob focal
-                       length and principal point
+  rational_polynomial  cv2.calibrateCamera with CALIB_RATIONAL_MODEL, 8 coefficients
+  equidistant          cv2.fisheye.calibrate, 4 coefficients
+Each model is fitted on its own terms, from several starts, and the start with the lowest RMS wins
+(a start that fails or diverges is skipped; the model fails only when every start does):
+  plumb_bob            OpenCV's own start (focal from the board homographies);
+  rational_polynomial  the caller's fit (any model) as guess, OpenCV's cold start, and the
+                       K of an equidistant fit of the same views (the start that holds on
+                       strongly distorted wide-angle lenses, where a 5-coefficient fit fails);
+  equidistant          the caller's K, OpenCV's fisheye start (f = max(W, H) / pi, a ~180 degree
+                       lens) and the focal length of the board homographies (narrow lenses).
 Stereo: cv2.stereoCalibrate / cv2.fisheye.stereoCalibrate with fixed intrinsics. Points are
 undistorted to convergence (100 iterations or 1e-12), never with OpenCV's default few steps.
 """
@@ -24,7 +30,7 @@ _Args = ParamSpec("_Args")
 _Result = TypeVar("_Result")
 SOLVE = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
 UNDISTORT = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
-MODELS = ("plumb_bob", "rational_polynomial", "equidistant")  # simplest first: ties go to the earlier
+MODELS = ("plumb_bob", "equidistant", "rational_polynomial")  # simplest first (8 coefficients last): ties go to the earlier
 ALIASES = {"standard": "plumb_bob", "plumb_bob": "plumb_bob", "rational": "rational_polynomial",
            "rational_polynomial": "rational_polynomial", "fisheye": "equidistant", "equidistant": "equidistant"}
 
@@ -77,40 +83,114 @@ def _fisheye_pts(pts: list[np.ndarray], dim: int) -> list[np.ndarray]:
     return [np.asarray(p, np.float64).reshape(1, -1, dim) for p in pts]
 
 
+def _per_view_fisheye(o: list[np.ndarray], i: list[np.ndarray], rvecs, tvecs, K: np.ndarray, D: np.ndarray
+                      ) -> np.ndarray:
+    return np.array([np.sqrt(np.mean(np.sum(
+        (cv2.fisheye.projectPoints(oo, rv, tv, K, D)[0] - ii).reshape(-1, 2) ** 2, axis=1)))
+        for oo, ii, rv, tv in zip(o, i, rvecs, tvecs)])
+
+
+def homography_K(obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int]) -> np.ndarray:
+    """Pinhole K from the board homographies (cv2.initCameraMatrix2D), the image centre as principal point."""
+    o = [np.asarray(p, np.float32).reshape(-1, 3) for p in obj]
+    i = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in img]
+    K = cv2.initCameraMatrix2D(o, i, size)
+    if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise LensSolveError("no focal length from the board homographies")
+    return K
+
+
+def _fisheye_once(obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int], K0: np.ndarray | None
+                  ) -> MonoFit:
+    flags = _fisheye_flag("CALIB_RECOMPUTE_EXTRINSIC") | _fisheye_flag("CALIB_FIX_SKEW")
+    if K0 is not None:
+        flags |= _fisheye_flag("CALIB_USE_INTRINSIC_GUESS")
+        K0 = np.array(K0, np.float64)
+    o, i = _fisheye_pts(obj, 3), _fisheye_pts(img, 2)
+    rms, K, D, rvecs, tvecs = cv2.fisheye.calibrate(o, i, size, K0, np.zeros(4), flags=flags, criteria=SOLVE)
+    return MonoFit(float(rms), K, D.ravel(), _per_view_fisheye(o, i, rvecs, tvecs, K, D))
+
+
+def _pinhole_once(model: str, obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int],
+                  K0: np.ndarray | None, D0: np.ndarray | None) -> MonoFit:
+    o = [np.asarray(p, np.float32).reshape(-1, 3) for p in obj]
+    i = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in img]
+    flags = cv2.CALIB_RATIONAL_MODEL if model == "rational_polynomial" else 0
+    if K0 is not None:
+        flags |= cv2.CALIB_USE_INTRINSIC_GUESS
+        d = np.zeros(8)
+        if D0 is not None:
+            d[:min(5, len(D0))] = np.asarray(D0).ravel()[:5]
+        K0, D0 = np.array(K0, np.float64), d
+    rms, K, D, *_, err = cv2.calibrateCameraExtended(o, i, size, K0, D0, flags=flags, criteria=SOLVE)
+    return MonoFit(float(rms), K, D.ravel()[:N_DIST[model]], err.ravel())
+
+
+def _plausible(fit: MonoFit, size: tuple[int, int]) -> bool:
+    """Finite, positive focal lengths, principal point within the image grown by half on each side."""
+    K, (w, h) = fit.K, size
+    return bool(np.all(np.isfinite(fit.K)) and np.all(np.isfinite(fit.D)) and np.isfinite(fit.rms)
+                and K[0, 0] > 0 and K[1, 1] > 0 and -w / 2 < K[0, 2] < 1.5 * w and -h / 2 < K[1, 2] < 1.5 * h)
+
+
+def folds(model: str, fit: MonoFit, size: tuple[int, int]) -> bool:
+    """Whether the radial distortion turns back before it reaches the farthest image corner: the
+    distorted radius (or fisheye angle) must grow with the undistorted one over the whole image."""
+    K, D, (w, h) = fit.K, np.asarray(fit.D, np.float64), size
+    corners = np.array([[0, 0], [w, 0], [0, h], [w, h]], np.float64)
+    reach = float(np.max(np.hypot((corners[:, 0] - K[0, 2]) / K[0, 0], (corners[:, 1] - K[1, 2]) / K[1, 1])))
+    if model == "equidistant":
+        t = np.linspace(0.0, np.pi, 4000)
+        rd = t * (1 + D[0] * t ** 2 + D[1] * t ** 4 + D[2] * t ** 6 + D[3] * t ** 8)
+    else:
+        r = np.linspace(0.0, 50.0 * max(reach, 1.0), 20000)
+        k = np.zeros(8)
+        k[:len(D)] = D
+        r2 = r * r
+        rd = r * (1 + k[0] * r2 + k[1] * r2 ** 2 + k[4] * r2 ** 3) / (1 + k[5] * r2 + k[6] * r2 ** 2 + k[7] * r2 ** 3)
+    rising = np.diff(rd) > 0
+    turn = int(np.argmin(rising)) if not rising.all() else len(rising)
+    return bool(np.max(rd[:turn + 1]) < reach)
+
+
 @_one_thread
 def calibrate_mono(model: str, obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int],
                    start: MonoFit | None = None) -> MonoFit:
-    """Fit one camera; `start` (a plumb_bob fit) seeds the rational and fisheye models."""
-    try:
-        if model == "equidistant":
-            K0 = start.K.copy() if start is not None else None
-            flags = _fisheye_flag("CALIB_RECOMPUTE_EXTRINSIC") | _fisheye_flag("CALIB_FIX_SKEW")
-            if K0 is not None:
-                flags |= _fisheye_flag("CALIB_USE_INTRINSIC_GUESS")
-            o, i = _fisheye_pts(obj, 3), _fisheye_pts(img, 2)
-            rms, K, D, rvecs, tvecs = cv2.fisheye.calibrate(o, i, size, K0, np.zeros(4), flags=flags, criteria=SOLVE)
-            per_view = np.array([np.sqrt(np.mean(np.sum(
-                (cv2.fisheye.projectPoints(oo, rv, tv, K, D)[0] - ii).reshape(-1, 2) ** 2, axis=1)))
-                for oo, ii, rv, tv in zip(o, i, rvecs, tvecs)])
-            return MonoFit(float(rms), K, D.ravel(), per_view)
-        o = [np.asarray(p, np.float32).reshape(-1, 3) for p in obj]
-        i = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in img]
-        if model == "plumb_bob":
-            rms, K, D, *_, err = cv2.calibrateCameraExtended(o, i, size, None, None, criteria=SOLVE)
-        else:
-            if start is None:
-                start = calibrate_mono("plumb_bob", obj, img, size)
-            D0 = np.zeros(8)
-            D0[:5] = start.D[:5]
-            flags = cv2.CALIB_RATIONAL_MODEL | cv2.CALIB_USE_INTRINSIC_GUESS
-            rms, K, D, *_, err = cv2.calibrateCameraExtended(o, i, size, start.K.copy(), D0, flags=flags,
-                                                             criteria=SOLVE)
-    except cv2.error as exc:
-        raise LensSolveError(f"{model}: {exc}") from exc
-    D = D.ravel()[:N_DIST[model]]
-    if not (np.all(np.isfinite(K)) and np.all(np.isfinite(D)) and np.isfinite(rms)):
-        raise LensSolveError(f"{model}: the fit diverged")
-    return MonoFit(float(rms), K, D, err.ravel())
+    """Fit one camera from the starts of the module docstring; `start` (a fit of any model) is one of them."""
+    starts: list[Callable[[], MonoFit]] = []
+    if model == "plumb_bob":
+        starts.append(lambda: _pinhole_once(model, obj, img, size, None, None))
+    elif model == "rational_polynomial":
+        if start is not None:
+            d0 = start.D if len(start.D) >= 5 else None  # a fisheye start's D means nothing here
+            starts.append(lambda: _pinhole_once(model, obj, img, size, start.K, d0))
+        starts.append(lambda: _pinhole_once(model, obj, img, size, None, None))
+        starts.append(lambda: _pinhole_once(model, obj, img, size, calibrate_mono("equidistant", obj, img, size).K,
+                                            None))
+    elif model == "equidistant":
+        if start is not None:
+            starts.append(lambda: _fisheye_once(obj, img, size, start.K))
+        starts.append(lambda: _fisheye_once(obj, img, size, None))
+        starts.append(lambda: _fisheye_once(obj, img, size, homography_K(obj, img, size)))
+    else:
+        raise LensSolveError(f"unknown lens model {model!r}")
+    best: tuple[tuple[bool, float], MonoFit] | None = None
+    failures: list[str] = []
+    for attempt in starts:
+        try:
+            fit = attempt()
+        except (cv2.error, LensSolveError) as exc:
+            failures.append(str(exc).strip().splitlines()[-1])
+            continue
+        if not _plausible(fit, size):
+            failures.append("the fit diverged")
+            continue
+        rank = (folds(model, fit, size), fit.rms)  # a start whose lens folds the image loses to any other
+        if best is None or rank < best[0]:
+            best = (rank, fit)
+    if best is None:
+        raise LensSolveError(f"{model}: every start failed ({'; '.join(dict.fromkeys(failures))})")
+    return best[1]
 
 
 @_one_thread
@@ -122,8 +202,9 @@ def calibrate_stereo(model: str, obj: list[np.ndarray], left: list[np.ndarray], 
             o, l, r = _fisheye_pts(obj, 3), _fisheye_pts(left, 2), _fisheye_pts(right, 2)
             out = cv2.fisheye.stereoCalibrate(o, l, r, fl.K, fl.D, fr.K, fr.D, size, None, None,
                                               flags=_fisheye_flag("CALIB_FIX_INTRINSIC"), criteria=SOLVE)
-            rms, R, T = out[0], out[5], out[6]
+            R, T = refine_stereo(model, obj, left, right, fl, fr, out[5], out[6])
             per_view = _stereo_per_view(model, o, l, r, fl, fr, R, T)
+            rms = float(np.sqrt(np.mean(per_view ** 2)))
         else:
             o = [np.asarray(p, np.float32).reshape(-1, 3) for p in obj]
             l = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in left]
@@ -131,9 +212,31 @@ def calibrate_stereo(model: str, obj: list[np.ndarray], left: list[np.ndarray], 
             flags = cv2.CALIB_FIX_INTRINSIC | (cv2.CALIB_RATIONAL_MODEL if model == "rational_polynomial" else 0)
             rms, *_, R, T, _, _, _, _, per_view = cv2.stereoCalibrateExtended(
                 o, l, r, fl.K, fl.D, fr.K, fr.D, size, None, None, flags=flags, criteria=SOLVE)
-    except cv2.error as exc:
-        raise LensSolveError(f"{model} stereo: {exc}") from exc
+    except cv2.error:  # OpenCV's own solve failed: the relative pose from the views' poses
+        return _stereo_from_poses(model, obj, left, right, fl, fr)
     return StereoFit(float(rms), np.asarray(R, np.float64), np.asarray(T, np.float64).ravel(), np.asarray(per_view))
+
+
+def _stereo_from_poses(model: str, obj: list[np.ndarray], left: list[np.ndarray], right: list[np.ndarray],
+                       fl: MonoFit, fr: MonoFit) -> StereoFit:
+    """Left -> right transform started from the mean (chordal for R, median for T) of the per-pair
+    ones, refined (refine_stereo). OpenCV 5's cv2.fisheye.stereoCalibrate needs this for views with
+    different corner counts (ChArUco, AprilGrid): it fails on them."""
+    Rs, Ts = [], []
+    for o, l, r in zip(obj, left, right):
+        rl, tl = solve_pose(model, o, l, fl.K, fl.D)
+        rr, tr = solve_pose(model, o, r, fr.K, fr.D)
+        Ri = cv2.Rodrigues(rr)[0] @ cv2.Rodrigues(rl)[0].T
+        Rs.append(Ri)
+        Ts.append(tr.ravel() - Ri @ tl.ravel())
+    u, _, vt = np.linalg.svd(np.sum(Rs, axis=0))
+    R = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
+    R, T = refine_stereo(model, obj, left, right, fl, fr, R, np.median(np.array(Ts), axis=0))
+    per_view = _stereo_per_view(model, *(_fisheye_pts(x, d) for x, d in ((obj, 3), (left, 2), (right, 2))),
+                                fl, fr, R, T)
+    if not np.all(np.isfinite(per_view)):
+        raise LensSolveError(f"{model} stereo: no relative pose")
+    return StereoFit(float(np.sqrt(np.mean(per_view ** 2))), R, T, per_view)
 
 
 def _stereo_per_view(model, o, l, r, fl, fr, R, T) -> np.ndarray:
@@ -177,10 +280,72 @@ def project(model: str, obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: 
 
 def solve_pose(model: str, obj: np.ndarray, img: np.ndarray, K: np.ndarray, D: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray]:
-    """Board pose from one view with the intrinsics fixed (on converged undistorted points)."""
-    norm = undistort(model, img, K, D)
-    ok, rvec, tvec = cv2.solvePnP(np.asarray(obj, np.float64).reshape(-1, 3), norm, np.eye(3), None,
-                                  flags=cv2.SOLVEPNP_ITERATIVE)
+    """Board pose from one view with the intrinsics fixed: solvePnP on converged undistorted points,
+    then refined on the pixel reprojection error through the lens (Levenberg-Marquardt), so a wide
+    lens's far-off-axis corners are not overweighted."""
+    o = np.asarray(obj, np.float64).reshape(-1, 3)
+    pts = np.asarray(img, np.float64).reshape(-1, 2)
+    ok, rvec, tvec = cv2.solvePnP(o, undistort(model, pts, K, D), np.eye(3), None, flags=cv2.SOLVEPNP_ITERATIVE)
     if not ok:
         raise LensSolveError("no board pose for a view")
-    return rvec, tvec
+    if model != "equidistant":
+        return cv2.solvePnPRefineLM(o, pts, K, D, rvec, tvec, SOLVE)
+    return _refine_pose(model, o, pts, K, D, rvec, tvec)
+
+
+def _refine_pose(model: str, obj: np.ndarray, img: np.ndarray, K: np.ndarray, D: np.ndarray, rvec: np.ndarray,
+                 tvec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rvec, tvec) minimising the pixel error of project()."""
+    x = _levenberg_marquardt(np.concatenate([np.ravel(rvec), np.ravel(tvec)]),
+                             lambda p: (project(model, obj, p[:3], p[3:], K, D) - img).ravel())
+    return x[:3].reshape(3, 1), x[3:].reshape(3, 1)
+
+
+def _levenberg_marquardt(x0: np.ndarray, residual: Callable[[np.ndarray], np.ndarray], steps: int = 20
+                         ) -> np.ndarray:
+    """A few-parameter least-squares solve (forward-difference Jacobian)."""
+    x = np.asarray(x0, np.float64).copy()
+    r = residual(x)
+    cost, damping = float(r @ r), 1e-3
+    for _ in range(steps):
+        J = np.empty((r.size, x.size))
+        for k in range(x.size):
+            h = 1e-7 * max(1.0, abs(x[k]))
+            moved = x.copy()
+            moved[k] += h
+            J[:, k] = (residual(moved) - r) / h
+        A = J.T @ J
+        step = np.linalg.solve(A + damping * np.diag(np.diag(A) + 1e-12), -(J.T @ r))
+        r_new = residual(x + step)
+        if float(r_new @ r_new) < cost:
+            x, r, cost, damping = x + step, r_new, float(r_new @ r_new), damping * 0.3
+            if np.linalg.norm(step) < 1e-12:
+                break
+        else:
+            damping *= 10
+    return x
+
+
+def refine_stereo(model: str, obj: list[np.ndarray], left: list[np.ndarray], right: list[np.ndarray],
+                  fl: MonoFit, fr: MonoFit, R: np.ndarray, T: np.ndarray, rounds: int = 4
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(R, T) minimising both views' pixel errors with one board pose per pair, intrinsics fixed
+    (cv2.fisheye.stereoCalibrate stops short of it): alternately each pair's pose, then (R, T)."""
+    o = [np.asarray(p, np.float64).reshape(-1, 3) for p in obj]
+    l = [np.asarray(p, np.float64).reshape(-1, 2) for p in left]
+    r = [np.asarray(p, np.float64).reshape(-1, 2) for p in right]
+    rt = np.concatenate([cv2.Rodrigues(np.asarray(R, np.float64))[0].ravel(), np.ravel(T)])
+    poses = [np.concatenate([np.ravel(v) for v in solve_pose(model, oo, ll, fl.K, fl.D)]) for oo, ll in zip(o, l)]
+
+    def right_error(pose: np.ndarray, ext: np.ndarray, oo: np.ndarray, rr: np.ndarray) -> np.ndarray:
+        Rr = cv2.Rodrigues(ext[:3])[0] @ cv2.Rodrigues(pose[:3])[0]
+        tr = cv2.Rodrigues(ext[:3])[0] @ pose[3:] + ext[3:]
+        return (project(model, oo, cv2.Rodrigues(Rr)[0], tr, fr.K, fr.D) - rr).ravel()
+
+    for _ in range(rounds):
+        poses = [_levenberg_marquardt(pose, lambda p, oo=oo, ll=ll, rr=rr, rt=rt: np.concatenate([
+            (project(model, oo, p[:3], p[3:], fl.K, fl.D) - ll).ravel(), right_error(p, rt, oo, rr)]), steps=8)
+            for pose, oo, ll, rr in zip(poses, o, l, r)]
+        rt = _levenberg_marquardt(rt, lambda e, poses=poses: np.concatenate(
+            [right_error(p, e, oo, rr) for p, oo, rr in zip(poses, o, r)]), steps=8)
+    return cv2.Rodrigues(rt[:3])[0], rt[3:]

@@ -15,10 +15,10 @@ from tqdm import tqdm
 from stereocam.tools.calibration.report import write_html, write_report
 from stereocam.tools.calibration.coverage import PARAM_NAMES
 from stereocam.tools.calibration.solve import CalibrationResult, Progress
-from stereocam.tools.calibration.camera_info import ros_camera_info, write_camera_info
+from stereocam.tools.calibration.camera_info import kalibr_camchain, ros_camera_info, write_camera_info
 from stereocam.tools.progress import progress_wanted
 
-_PASS_ONLY = ("calibration.yaml", "left.yaml", "right.yaml")
+_PASS_ONLY = ("calibration.yaml", "left.yaml", "right.yaml", "camchain.yaml")
 
 
 def _bar(value: float, width: int = 10) -> str:
@@ -69,6 +69,11 @@ def print_summary(result: CalibrationResult) -> None:
     q, c = result.quality, result.calibration
     scores = "  ".join(f"{m} {s:.3f}" for m, s in result.model_scores.items())
     print(f"lens model {c.lens_model} (held-out score px: {scores})")
+    for model, why in result.model_failures.items():
+        print(f"lens model {model} failed: {why}")
+    note = result.sync.message() if result.sync is not None else None
+    if note:
+        print(f"warning: {note}")
     print(f"rms left {q.rms_left:.3f} px  right {q.rms_right:.3f} px  stereo {q.rms_stereo:.3f} px  "
           f"held-out epipolar {q.epipolar_rms_px:.3f} px  all-pairs epipolar {q.epipolar_all_rms_px:.3f} px  "
           f"pairs used {q.views_used} dropped {q.views_dropped}  fx {c.K_left[0, 0]:.2f} px  "
@@ -84,6 +89,12 @@ def write_outputs(result: CalibrationResult, outdir: Path,
     doc = c.to_json_dict(q)
     doc["dropped"] = [{"pair": v.label, "reason": v.reason} for v in result.dropped]
     doc["lens_model_scores"] = result.model_scores
+    doc["lens_model_failures"] = result.model_failures
+    if result.sync is not None:
+        doc["unsynchronised_pairs"] = [
+            {"pair": p.label, "epipolar_px": round(p.epipolar_px, 4), "stereo_px": round(p.stereo_px, 4),
+             "reprojection_px": round(p.mono_px, 4), "board_motion_mm": round(p.motion_mm, 3),
+             "board_motion_deg": round(p.motion_deg, 4)} for p in result.sync.suspects]
     written[0].write_text(json.dumps(doc, indent=2) + "\n")
     write_report(result, written[1])
     write_html(result, written[2], written[1].name)
@@ -105,5 +116,8 @@ def write_outputs(result: CalibrationResult, outdir: Path,
     fs.release()
     (outdir / "left.yaml").write_text(ros_camera_info("left", c.image_size, c.K_left, c.D_left, r.R1, r.P1, c.lens_model))
     (outdir / "right.yaml").write_text(ros_camera_info("right", c.image_size, c.K_right, c.D_right, r.R2, r.P2, c.lens_model))
+    camchain = kalibr_camchain(c)
+    if camchain is not None:
+        (outdir / "camchain.yaml").write_text(camchain)
     extra = [p for size in sizes or () for p in write_camera_info(c, outdir / "camera_info", size)]
-    return written + [outdir / n for n in _PASS_ONLY] + extra
+    return written + [outdir / n for n in _PASS_ONLY if (outdir / n).exists()] + extra

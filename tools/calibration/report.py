@@ -139,16 +139,20 @@ def write_html(result: CalibrationResult, path: Path, picture: str = "report.png
                     for v, name, value in worst_views(result))
     scores = "".join(f"<li>{esc(m)}: {s:.4f} px{' (chosen)' if m == result.calibration.lens_model else ''}</li>"
                      for m, s in result.model_scores.items())
+    scores += "".join(f"<li>{esc(m)}: failed ({esc(why)})</li>" for m, why in result.model_failures.items())
+    note = result.sync.message() if result.sync is not None else None
+    sync = f'<h2>Synchronisation</h2><p class="warning">{esc(note)}</p>' if note else ""
     colour = "green" if result.passed else "firebrick"
     path.write_text(f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>stereo calibration report</title>
 <style>body{{font-family:sans-serif;margin:1.5em}} td,th{{padding:2px 8px;text-align:left}}
-tr:nth-child(even){{background:#f3f3f3}} .verdict{{color:{colour};font-weight:bold;font-size:1.3em}}</style>
+tr:nth-child(even){{background:#f3f3f3}} .verdict{{color:{colour};font-weight:bold;font-size:1.3em}} .warning{{color:firebrick}}</style>
 </head><body>
 <p class="verdict">{esc(verdict)}</p>
 <p>{esc(line)}</p>
 <h2>Worst views</h2><ul>{worst}</ul>
 <h2>Lens models (held-out score)</h2><ul>{scores}</ul>
+{sync}
 <h2>Every pair</h2>
 <table><tr><th>pair</th><th>status</th>{''.join(f'<th>{esc(k)} (px)</th>' for k in COLOURS)}<th>why dropped</th></tr>
 {''.join(rows)}

@@ -21,13 +21,16 @@ the device's raw stream in device mode — and returns a CalibrationResult.
   4. Metrics (px of the raw image, N = number of corners):
        rms_left / rms_right = sqrt( Σ_views Σ_corners |x_obs − x_proj|² / N ) of that camera's own
          solve on every pair kept; rms_stereo = the stereo solve's RMS over both cameras;
-       epipolar_rms_px = sqrt( Σ_held-out Σ_corners (y_left_rect − y_right_rect)² / N ) of the chosen
+       epipolar_rms_px = sqrt( Σ_held-out Σ_corners dy² / N ), dy the epipolar error of calib_fit.epipolar_dy
+         (y_left_rect − y_right_rect at the raw focal length near the centre), of the chosen
          model fitted without the held-out pairs; epipolar_all_rms_px the same over every pair kept,
          with the final fit.
   5. Gate (CalibrationResult.failures lists every failed rule; passed = none failed): rms_stereo ≤
      max_stereo_rms_px; epipolar_rms_px ≤ max_epipolar_rms_px; plausibility: principal points
      inside the image, fy/fx within [1/max_pixel_aspect, max_pixel_aspect], baseline within
      [min_baseline_m, max_baseline_m].
+  6. Synchronisation (tools/calib_sync.py): every pair with the board, kept or dropped, is checked
+     for a left and right frame not taken at the same instant; the result says which and by how much.
 """
 from __future__ import annotations
 
@@ -37,14 +40,15 @@ from typing import Literal
 
 import numpy as np
 
-from stereocam.stereo.calibration_board import BoardSpec
 from stereocam.protocol.rectification import RectifiedGeometry
-from stereocam.tools.calibration.boards import CharucoSpec, Detection, describe, detect_all, gray, match_pair
+from stereocam.tools.calibration.boards import Board, Detection, describe, detect_all, gray, match_pair
 from stereocam.tools.calibration.coverage import CoverageSelector, view_params
 from stereocam.tools.calibration.fit import (
-    OutlierRules, PairPoints, choose_model, epipolar_dy, fit_head, rms, robust_fit,
+    HeadFit, ModelChoice, OutlierRules, PairPoints, choose_model, epipolar_dy, fit_head, held_out_errors, rms,
+    robust_fit,
 )
 from stereocam.tools.calibration.lens import MODELS, LensSolveError, calibrate_mono
+from stereocam.tools.calibration.sync import SyncReport, check_sync
 from stereocam.protocol.calibration import CalibrationQuality, StereoCalibration
 from stereocam.protocol.errors import StereoCamError
 
@@ -115,6 +119,8 @@ class CalibrationResult:
     failures: list[str] = field(default_factory=list)
     sample_pair: tuple[np.ndarray, np.ndarray] | None = None
     model_scores: dict[str, float] = field(default_factory=dict)
+    model_failures: dict[str, str] = field(default_factory=dict)
+    sync: SyncReport | None = None
 
     @property
     def passed(self) -> bool:
@@ -155,7 +161,7 @@ def _gate(calib: StereoCalibration, q: CalibrationQuality, config: SolveConfig) 
     return failures
 
 
-def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: BoardSpec | CharucoSpec,
+def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board,
                     config: SolveConfig = SolveConfig(), labels: Sequence[str] | None = None,
                     progress: Callable[[Progress], None] | None = None, select: bool = True) -> CalibrationResult:
     """Calibrate a stereo head from raw image pairs of `board` (see the module docstring).
@@ -231,7 +237,7 @@ def _unusable(left: np.ndarray | None, right: np.ndarray | None, size: tuple[int
     return None
 
 
-def match_detections(dl: dict[str, Detection], dr: dict[str, Detection], board: BoardSpec | CharucoSpec,
+def match_detections(dl: dict[str, Detection], dr: dict[str, Detection], board: Board,
            order: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Matched points of a pair, each image's corners from the first detector in `order` that found them."""
     if not dl or not dr:
@@ -264,21 +270,16 @@ def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, in
            sample: tuple[np.ndarray, np.ndarray] | None, config: SolveConfig) -> CalibrationResult:
     models = MODELS if config.lens_model == "auto" else (config.lens_model,)
     try:
-        screen = "rational_polynomial" if config.lens_model == "auto" else config.lens_model
-        try:
-            _, kept, dropped = robust_fit(screen, pairs, size, config.outliers,
-                                          "plumb_bob" if screen != "plumb_bob" else None)
-        except LensSolveError:
-            _, kept, dropped = robust_fit("plumb_bob", pairs, size, config.outliers)
+        kept, dropped = _screen(models, pairs, size, config)
         held = kept[config.holdout_every - 1::config.holdout_every]
         held_ids = {p.index for p in held}
         train = [p for p in kept if p.index not in held_ids]
         if len(held) < config.min_holdout or len(train) < 3:
             raise TooFewViewsError(f"{len(kept)} pairs left after removing outliers: too few to hold "
                                    f"{config.min_holdout} out and solve")
-        model, scores, held_errors = choose_model(models, train, held, size, config.model_tie)
-        start = fit_head("plumb_bob", kept, size) if model != "plumb_bob" else None
-        fit = fit_head(model, kept, size, start)
+        choice = choose_model(models, train, held, size, config.model_tie)
+        fit = _final_fit(choice, train, held, kept, size)
+        held_errors = choice.held_errors
     except LensSolveError as exc:
         raise CalibrationError(f"the solver failed on {len(pairs)} pairs: {exc}") from exc
     by_index = {v.index: v for v in views}
@@ -301,4 +302,40 @@ def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, in
         written=False, verified=False)
     failures = _gate(fit.calibration, quality, config)
     quality.passed = not failures
-    return CalibrationResult(fit.calibration, quality, fit.geometry, views, coverage, failures, sample, scores)
+    return CalibrationResult(fit.calibration, quality, fit.geometry, views, coverage, failures, sample,
+                             choice.scores, choice.failures, check_sync(fit, pairs))
+
+
+def _final_fit(choice: ModelChoice, train: list[PairPoints], held: list[PairPoints], kept: list[PairPoints],
+               size: tuple[int, int]) -> HeadFit:
+    """The chosen model fitted on every pair kept; should that fit fail, the next model by held-out
+    score (`choice` is updated to it, the failure listed)."""
+    failures = []
+    for model in sorted(choice.scores, key=lambda m: (m != choice.model, choice.scores[m])):
+        try:
+            start = choice.fit if model == choice.model else None
+            fit = fit_head(model, kept, size, start)
+        except LensSolveError as exc:
+            choice.failures[model] = f"fitted without the held-out pairs, but not with them: {exc}"
+            failures.append(str(exc))
+            continue
+        if model != choice.model:
+            choice.held_errors = held_out_errors(fit_head(model, train, size), held)
+            choice.model = model
+        return fit
+    raise LensSolveError("; ".join(failures))
+
+
+def _screen(models: Sequence[str], pairs: list[PairPoints], size: tuple[int, int], config: SolveConfig
+            ) -> tuple[list[PairPoints], dict[int, str]]:
+    """Outlier removal with the first model that fits (the most flexible pinhole model first:
+    rational, then equidistant, then plumb_bob; or the one model asked for)."""
+    order = [m for m in ("rational_polynomial", "equidistant", "plumb_bob") if m in models]
+    failures = []
+    for model in order:
+        try:
+            _, kept, dropped = robust_fit(model, pairs, size, config.outliers)
+            return kept, dropped
+        except LensSolveError as exc:
+            failures.append(str(exc))
+    raise LensSolveError("; ".join(failures))

@@ -82,10 +82,10 @@ def test_metric_definitions(pairs) -> None:
             cr = cr[::-1]
         crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
         yl = cv2.undistortPoints(cl.reshape(-1, 1, 2).astype(float), c.K_left, c.D_left,
-                                 R=r.R1, P=r.P1, criteria=crit)[:, 0, 1]
+                                 R=r.R1, criteria=crit)[:, 0, 1]
         yr = cv2.undistortPoints(cr.reshape(-1, 1, 2).astype(float), c.K_right, c.D_right,
-                                 R=r.R2, P=r.P2, criteria=crit)[:, 0, 1]
-        dy.append(yl - yr)
+                                 R=r.R2, criteria=crit)[:, 0, 1]
+        dy.append(c.K_left[1, 1] * (np.arctan(yl) - np.arctan(yr)))  # the epipolar planes' angle, raw px
     assert res.quality.epipolar_all_rms_px == pytest.approx(np.sqrt(np.mean(np.concatenate(dy) ** 2)), rel=1e-6)
     assert res.calibration.lens_model == "plumb_bob"  # the simulated lenses are plumb_bob: simpler wins
 
@@ -169,9 +169,13 @@ def test_bad_arguments(image_dir: Path, tmp_path: Path, capsys) -> None:
     assert "metres" in capsys.readouterr().err
     assert cli.main(["calibrate", "--images", str(image_dir), "--board", "9by6", "--square-size", "0.03",
                            "--out", "x"]) == calibrate.EXIT_USAGE
-    assert cli.main(["calibrate", "--images", str(image_dir), "--board", "6x6", "--square-size", "0.03",
+    capsys.readouterr()
+    assert cli.main(["calibrate", "--images", str(image_dir), "--board", "aprilgrid:6x6:0.05",
                            "--out", str(tmp_path)]) == calibrate.EXIT_USAGE
-    assert "cols != rows" in capsys.readouterr().err
+    assert "aprilgrid:COLSxROWS:TAG_SIZE:SPACING" in capsys.readouterr().err
+    assert cli.main(["calibrate", "--images", str(image_dir), "--board", str(tmp_path / "target.yaml"),
+                           "--out", str(tmp_path)]) == calibrate.EXIT_USAGE  # no --square-size needed: its own
+    assert "cannot read the target yaml" in capsys.readouterr().err
 
 
 def test_find_pairs_rules(tmp_path: Path) -> None:
@@ -208,8 +212,20 @@ def test_solver_failure_is_a_calibration_error(pairs, monkeypatch) -> None:
         raise cv2.error("simulated solver breakdown")
 
     monkeypatch.setattr(cv2, "calibrateCameraExtended", broken)
+    monkeypatch.setattr(cv2.fisheye, "calibrate", broken)
     with pytest.raises(CalibrationError, match="solver failed on .* pairs: .*simulated"):
         calibrate_pairs(iter(pairs), BOARD)
+
+
+def test_a_failed_lens_model_is_listed_and_another_one_fits(pairs, monkeypatch) -> None:
+    def broken(*args, **kwargs):
+        raise cv2.error("simulated solver breakdown")
+
+    monkeypatch.setattr(cv2, "calibrateCameraExtended", broken)  # plumb_bob and rational: no fit at all
+    res = calibrate_pairs(iter(pairs), BOARD, select=False)
+    assert res.calibration.lens_model == "equidistant" and list(res.model_scores) == ["equidistant"]
+    assert set(res.model_failures) == {"plumb_bob", "rational_polynomial"}
+    assert "simulated" in res.model_failures["plumb_bob"]
 
 
 def test_offline_run_shows_pairs_done_of_total_even_when_quiet(tmp_path):
