@@ -76,11 +76,11 @@ from stereocam.tools.calibration.solve import (
     calibrate_pairs,
 )
 from stereocam.tools.camera.session import writable_dir
+from stereocam.tools.exit_codes import EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_SAVE, EXIT_USAGE
 from stereocam.tools.factory.db import FactoryDB, FactoryDBError, default_url
 from stereocam.tools.factory.record import make_attempt, now_utc
 from stereocam.tools.options import CONTEXT, SIZE, epilog
 
-EXIT_OK, EXIT_USAGE, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_SAVE = 0, 2, 3, 4, 6
 
 
 def _load(pairs: list[tuple[int, Path, Path]]) -> Iterator[tuple[np.ndarray | None, np.ndarray | None]]:

@@ -21,8 +21,8 @@ import numpy as np
 import stereocam
 from stereocam.protocol import messages as m
 from stereocam.tools.calibration.solve import CalibrationError, CalibrationResult, SolveConfig, calibrate_pairs
+from stereocam.tools.exit_codes import EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_UNSUPPORTED, EXIT_WRITE
 
-EXIT_OK, EXIT_NO_SOLUTION, EXIT_GATE, EXIT_WRITE, EXIT_UNSUPPORTED = 0, 3, 4, 5, 7
 
 
 def raw_pairs(cam: stereocam.Camera, count: int, timeout: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:

@@ -13,9 +13,9 @@ import click
 
 import stereocam
 from stereocam.tools.calibration.camera_info import stream_sizes, write_camera_info
+from stereocam.tools.exit_codes import EXIT_NO_CALIBRATION
 from stereocam.tools.options import CONTEXT, SIZE, epilog
 
-EXIT_NO_CALIBRATION = 3
 
 
 @click.group("calibration", epilog=epilog(), context_settings=CONTEXT)
