@@ -95,6 +95,9 @@ class Camera:
         _log.warning("%s: reconnected to serial %s; re-applying %d parameters%s", self.url, self.connection.info.serial,
                      len(self._applied), ", resuming the stream" if self._streaming else "")
         self._resolve_geometry()
+        # the unit may not have noticed the lost link yet and still stream for it (SPEC §4.6: STOP is
+        # always answered, streaming or not); a stream must be stopped before its format changes
+        self.request(m.Stop())
         if self._applied:
             self.request(m.SetConfig({BY_NAME[k].pid: v for k, v in self._applied.items()}))
         if self._streaming:
