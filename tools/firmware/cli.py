@@ -200,15 +200,15 @@ def keygen_command(**params: object) -> int:
 
 
 @command.command("sign", epilog=epilog())
-@click.argument("build", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--key", type=click.Path(dir_okay=False, path_type=Path), required=True, help="The private key (PEM).")
+@click.argument("build", type=click.Path(path_type=Path))
+@click.option("--key", type=click.Path(path_type=Path), required=True, help="The private key (PEM).")
 @click.option("--version", required=True, help="Version of the image, e.g. 1.4.0.")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True, help="The image file to write.")
 @click.option("--security-counter", type=int, default=None,
               help="Anti-rollback counter; a rollback image sets one >= the unit's.  [default: the version as a number]")
 @click.option("--target", default=DEFAULT_TARGET, show_default=True,
               help=f"Model the image is for (printable ASCII, at most {TARGET_LEN} characters).")
-@click.option("--code", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--code", type=click.Path(path_type=Path), default=None,
               help="The firmware's code (opaque bytes).  [default: none]")
 def sign_command(**params: object) -> int:
     """Build a signed image from a firmware build (BUILD: JSON)."""
@@ -217,7 +217,7 @@ def sign_command(**params: object) -> int:
 
 @command.command("update", epilog=epilog())
 @click.argument("url")
-@click.argument("image", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("image", type=click.Path(path_type=Path))
 @click.option("--replace", is_flag=True, help="Abandon another image's transfer in progress.")
 @_TIMEOUT
 def update_command(**params: object) -> int:
