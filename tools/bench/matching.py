@@ -1,7 +1,7 @@
 """Benchmark the device matching core against cv2.StereoBM in one process.
 
-    python -m tools.bench_matching [--threads 2] [--repeat 15] [--quick] [--profile]
-                                   [--cold-jit] [--algorithm bm|sgm]
+    stereocam bench matching [--threads 2] [--repeat 15] [--quick] [--profile]
+                             [--cold-jit] [--algorithm bm|sgm]
 
 Prints per case: median ms of each (runs interleaved), ratio core/cv2, G disparity
 evaluations/s (W*H*D/time), bad-2.0 against ground truth (Middlebury Motorcycle from

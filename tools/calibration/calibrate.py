@@ -27,7 +27,7 @@ Outputs in OUTDIR:
                      (written/verified are false in offline mode), dropped (file and reason),
                      lens_model_scores (held-out score per model tried), lens_model_failures (why a
                      model failed), unsynchronised_pairs (pairs whose left and right frames are not
-                     from the same instant, with the evidence: tools/calib_sync.py; also printed)
+                     from the same instant, with the evidence: tools/calibration/sync.py; also printed)
   calibration.yaml   OpenCV FileStorage: lens_model K1 D1 K2 D2 R T R1 R2 P1 P2 Q + metrics  (if passed)
   left.yaml, right.yaml   ROS camera_info (plumb_bob, rational_polynomial or equidistant) (if passed)
   camchain.yaml      Kalibr camchain (cam0 left, cam1 right, T_cn_cnm1; equidistant or radtan): for the

@@ -29,7 +29,7 @@ the device's raw stream in device mode — and returns a CalibrationResult.
      max_stereo_rms_px; epipolar_rms_px ≤ max_epipolar_rms_px; plausibility: principal points
      inside the image, fy/fx within [1/max_pixel_aspect, max_pixel_aspect], baseline within
      [min_baseline_m, max_baseline_m].
-  6. Synchronisation (tools/calib_sync.py): every pair with the board, kept or dropped, is checked
+  6. Synchronisation (tools/calibration/sync.py): every pair with the board, kept or dropped, is checked
      for a left and right frame not taken at the same instant; the result says which and by how much.
 """
 from __future__ import annotations
