@@ -8,11 +8,12 @@ from __future__ import annotations
 import collections
 import logging
 import threading
-import time
 from dataclasses import dataclass
 from typing import Callable
 
 from stereocam.protocol.params import TriggerMode
+
+from ..clock import REAL_CLOCK, Clock
 
 TRIGGER_QUEUE_DEPTH = 2
 log = logging.getLogger(__name__)
@@ -27,10 +28,11 @@ class CaptureRequest:
 
 
 class CaptureEngine:
-    """Decides when exposures happen and hands each to ``produce`` on the worker thread."""
+    """Decides when exposures happen (on ``timebase``) and hands each to ``produce`` on the worker thread."""
 
-    def __init__(self, produce: Callable[[CaptureRequest], None]):
+    def __init__(self, produce: Callable[[CaptureRequest], None], timebase: Clock = REAL_CLOCK):
         self._produce = produce
+        self._timebase = timebase
         self._cond = threading.Condition()
         self._queue: collections.deque[CaptureRequest] = collections.deque()
         self._streaming = False
@@ -56,7 +58,7 @@ class CaptureEngine:
                 self._thread.start()
             self._mode = TriggerMode(mode)
             self._period = 1.0 / fps
-            self._next = time.monotonic()
+            self._next = self._timebase.monotonic()
             self._queue.clear()
             self._streaming = True
             self.epoch += 1
@@ -100,7 +102,8 @@ class CaptureEngine:
                     self.dropped += 1
                 return None
             self.sequence += 1
-            req = CaptureRequest(self.sequence, trigger_id, time.monotonic() if at is None else at, self.epoch)
+            instant = self._timebase.monotonic() if at is None else at
+            req = CaptureRequest(self.sequence, trigger_id, instant, self.epoch)
             self._queue.append(req)
             self._cond.notify_all()
             return req
@@ -116,7 +119,7 @@ class CaptureEngine:
                 if not self._queue:
                     self._cond.wait(0.05)
                 return self._queue.popleft() if self._queue else None
-            now = time.monotonic()
+            now = self._timebase.monotonic()
             if now < self._next:
                 self._cond.wait(min(self._next - now, 0.05))
                 return None
