@@ -153,6 +153,7 @@ class TriggerOutput:
 
     @property
     def driving(self) -> bool:
+        """Whether the line may still pulse (False only once the master's thread has ended)."""
         return self._master is not None
 
     def drive(self) -> None:
@@ -162,8 +163,8 @@ class TriggerOutput:
                 self._master = TriggerMaster(self.line, self._fps, self._clock)
 
     def release(self) -> None:
-        """Stop pulsing: the line is left low."""
+        """Stop pulsing: the line is left low once this returns."""
         with self._lock:
-            master, self._master = self._master, None
-        if master is not None:
-            master.close()
+            if self._master is not None:
+                self._master.close()
+                self._master = None

@@ -8,6 +8,7 @@ from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode
 from stereocam.protocol.params import BY_NAME, TriggerMode
 
+from ..budget import budget
 from ..context import Context
 from ..registry import check
 from ..results import expect
@@ -36,10 +37,10 @@ def software(ctx: Context) -> str:
             r = ctx.s.call(m.Trigger())
             assert isinstance(r, m.Triggered)
             got.append(r)
-            deadline = time.monotonic() + FRAME_WAIT_S
+            deadline = time.monotonic() + budget(FRAME_WAIT_S)
             while (c := ctx.s.captures.find(r.sequence)) is None or c.end is None:
                 expect(time.monotonic() < deadline, f"no whole capture of sequence {r.sequence} (trigger {r.trigger_id}) "
-                                                    f"within {FRAME_WAIT_S} s")
+                                                    f"within {budget(FRAME_WAIT_S):.3g} s")
                 time.sleep(0.01)
             expect(c.begin.trigger_id == r.trigger_id,
                    f"capture {r.sequence} carries trigger id {c.begin.trigger_id}, TRIGGERED said {r.trigger_id}")
