@@ -279,6 +279,12 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         else:
             self.trigger_output.release()
 
+    @property
+    def capture_idle(self) -> bool:
+        """No capture in flight: none being exposed, none being delivered (after a stop: the
+        counters are final)."""
+        return self.engine.idle and self.pipeline.idle
+
     def status_counters(self) -> dict[str, int]:
         """The counters a STATUS reply carries."""
         return self.heartbeat.status_counters()

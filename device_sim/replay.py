@@ -211,4 +211,4 @@ class ReplayEngine(CaptureEngine):
             return None
         with self._cond:  # numbers go on rising across streams and modes (SPEC §8.4)
             self.sequence = max(self.sequence, recorded.sequence)
-        return trigger or recorded
+            return self._taken(trigger or recorded)

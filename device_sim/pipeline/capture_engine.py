@@ -44,6 +44,7 @@ class CaptureEngine:
         self.sequence = 0
         self.dropped = 0
         self.captured = 0
+        self._producing = False  # an exposure is being produced on the worker thread
         self._thread: threading.Thread | None = None  # started by the first start()
         self.on_streaming: Callable[[bool], None] = lambda streaming: None  # told after every start/stop
 
@@ -118,7 +119,7 @@ class CaptureEngine:
             if self._mode != TriggerMode.FREE_RUN:
                 if not self._queue:
                     self._cond.wait(0.05)
-                return self._queue.popleft() if self._queue else None
+                return self._taken(self._queue.popleft()) if self._queue else None
             now = self._timebase.monotonic()
             if now < self._next:
                 self._cond.wait(min(self._next - now, 0.05))
@@ -129,12 +130,23 @@ class CaptureEngine:
             t = self._next + missed * self._period
             self._next = t + self._period
             self.sequence += 1
-            return CaptureRequest(self.sequence, 0, t, self.epoch)
+            return self._taken(CaptureRequest(self.sequence, 0, t, self.epoch))
+
+    def _taken(self, req: CaptureRequest) -> CaptureRequest:
+        """Under ``_cond``: ``req`` leaves the queue (or the timer) for the worker, which is busy
+        from this moment until ``produce`` returns."""
+        self._producing = True
+        return req
 
     def count_drop(self) -> None:
         """A later pipeline stage failed on a capture: it counts as dropped."""
         with self._cond:
             self.dropped += 1
+
+    @property
+    def idle(self) -> bool:
+        """Not producing an exposure now (stopped, or between two)."""
+        return not self._producing
 
     def current(self, req: CaptureRequest) -> bool:
         """Whether ``req`` still belongs to the running stream (not stopped or restarted since)."""
@@ -151,3 +163,5 @@ class CaptureEngine:
             except Exception:  # a firmware bug must not kill the capture thread: log, count, go on
                 log.exception("capture %d failed", req.sequence)
                 self.dropped += 1
+            finally:
+                self._producing = False
