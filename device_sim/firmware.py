@@ -68,9 +68,8 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         streams raw images until calibrated). ``vendor_key``: the firmware-signing key whose public half
         the factory line provisions into a blank unit (and signs its shipped image with). ``source``: a
         recording that stands in for the sensor rig (replay.py); the unit is then the recorded one:
-        identity, calibration, configuration. ``timebase``: the host-monotonic clock every timed part
-        of the unit reads and waits on (watchdog, capture timing, trigger output, its crystal); default
-        the real one (a replay's: its source's), a FakeClock in tests that move time themselves."""
+        identity, calibration, configuration. ``timebase``: the clock every timed part of the unit reads and
+        waits on (clock.py; default the real one, a replay's its source's; a FakeClock in tests)."""
         self.seed = seed
         self._source = source
         self.serial = source.serial if source else serial or f"SIM{seed:05d}"
@@ -101,7 +100,8 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
 
         # the engine's callback reaches the pipeline, which itself needs the engine
         self.dispatcher = Dispatcher(self.counters)
-        self.engine = ReplayEngine(source, self._produce) if source else CaptureEngine(self._produce, self.timebase)
+        produce = lambda req: self.pipeline.produce(req)  # noqa: E731 - the pipeline is made below
+        self.engine = ReplayEngine(source, produce) if source else CaptureEngine(produce, self.timebase)
         self.repair = FrameRepair(lambda wire: self.link.send(wire, lambda: True))
         self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset,
                                timebase=self.timebase)
@@ -113,9 +113,8 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         self.streaming = StreamingHandlers(self.config, self.engine, self.counters)
         self._boot(recovery=False)
         self.trigger_input = TriggerInput(seed, self.streaming.on_pulse)  # its own latency after an edge
-        # unwired: its own line; its input still hears its own output
-        self.trigger_line = trigger_line if trigger_line is not None else TriggerLine(self.timebase)
-        self.trigger_line.attach(self.trigger_input.on_pulse)
+        self.trigger_line = trigger_line if trigger_line is not None else TriggerLine(self.timebase)  # unwired
+        self.trigger_line.attach(self.trigger_input.on_pulse)  # input still hears its own output
         self.trigger_output = TriggerOutput(self.trigger_line, self.clock, lambda: self.config.snapshot()["fps"])
         self.engine.on_streaming = self._drive_trigger_output
         self.pipeline.warm_up()
@@ -234,10 +233,6 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         if self.powered:
             self.link.receive(data)
 
-    def _produce(self, req: CaptureRequest) -> None:
-        """The engine's callback: the pipeline takes the exposure from here."""
-        self.pipeline.produce(req)
-
     def _send_capture_part(self, req: CaptureRequest, wire: bytes) -> bool:
         """A capture whose stream was stopped meanwhile is cut off (the host counts it incomplete)."""
         return self.link.send(wire, lambda: self.engine.current(req))
@@ -278,12 +273,6 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
             self.trigger_output.drive()
         else:
             self.trigger_output.release()
-
-    @property
-    def capture_idle(self) -> bool:
-        """No capture in flight: none being exposed, none being delivered (after a stop: the
-        counters are final)."""
-        return self.engine.idle and self.pipeline.idle
 
     def status_counters(self) -> dict[str, int]:
         """The counters a STATUS reply carries."""
