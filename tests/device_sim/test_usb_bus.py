@@ -347,7 +347,7 @@ def test_unplug_wakes_a_pending_read_at_once(bus):
 
     thread = threading.Thread(target=reader)
     thread.start()
-    time.sleep(0.1)
+    wait_until(lambda: device.in_pipe.waiting, what="the read waits for data")
     start = time.monotonic()
     device.unplug()
     thread.join(2)
@@ -369,7 +369,7 @@ def test_unplug_unblocks_a_firmware_writer_with_broken_pipe(bus):
 
     thread = threading.Thread(target=writer)
     thread.start()
-    time.sleep(0.1)
+    wait_until(lambda: device.in_pipe.waiting, what="the firmware's push waits for room")
     assert thread.is_alive()
     device.unplug()
     thread.join(2)

@@ -14,6 +14,7 @@ from stereocam.transports import open_transport
 from stereocam.transports import usb as usbt
 from stereocam.protocol.errors import DisconnectedError, StereoCamError, TransportError
 from stereocam.tools.conformance.budget import budget
+from tests.support.waiting import wait_until
 
 
 pytestmark = pytest.mark.sim_only("drives the simulated USB bus")
@@ -142,7 +143,7 @@ def test_unplug_mid_read_raises_disconnected_within_the_timeout(echo):
 
     thread = threading.Thread(target=reader)
     thread.start()
-    time.sleep(0.2)
+    wait_until(lambda: device.in_pipe.waiting, what="the read waits for data")
     start = time.monotonic()
     device.unplug()
     thread.join(5.0)
@@ -168,7 +169,7 @@ def test_close_from_another_thread_ends_a_pending_read(echo):
 
     thread = threading.Thread(target=reader)
     thread.start()
-    time.sleep(0.1)
+    wait_until(lambda: simusb.plugged_devices()[0].in_pipe.waiting, what="the read waits for data")
     start = time.monotonic()
     t.close()
     thread.join(3.0)
