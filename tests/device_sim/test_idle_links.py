@@ -186,7 +186,7 @@ def test_a_pty_host_that_dies_mid_stream_blocks_nothing_and_leaves_nothing(pty) 
     assert not sim.engine.streaming, "the watchdog must stop the stream even while a send is blocked"
     assert sim.counters["heartbeat_timeouts"] + sim.counters["link_send_timeouts"] >= 1
     dead.close()
-    time.sleep(0.3)
+    wait_until(lambda: not sim.attached, what="the silent host's link is dropped (twice the heartbeat timeout)")
     with serial.Serial(server.url, timeout=0.5) as host:
         host.write(m.encode(m.GetInfo(), 9))
         decoder, got = Decoder(), []
