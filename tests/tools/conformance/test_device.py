@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import pytest
 
-from stereocam.tools.conformance.budget import budget
 from stereocam.tools.conformance.registry import CHECKS
 from stereocam.tools.conformance.results import Outcome
 from stereocam.tools.conformance.runner import run_suite
@@ -17,7 +16,7 @@ pytestmark = pytest.mark.slow
 
 @pytest.mark.parametrize("name", [c.name for c in CHECKS])
 def test_conformance_check(device_url, name):
-    suite = run_suite(device_url, timeout=budget(1.0), only=lambda n: n == name or n.startswith(name + "."))
+    suite = run_suite(device_url, timeout=1.0, only=lambda n: n == name or n.startswith(name + "."))
     mine = [r for r in suite.results if r.name == name or r.name.startswith(name + ".")]
     bad = [f"{r.name}: {r.detail}" for r in suite.results if r.outcome in (Outcome.FAIL, Outcome.ERROR)]
     assert not bad, "\n".join(bad)
