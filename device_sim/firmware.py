@@ -10,7 +10,6 @@ from __future__ import annotations
 import collections
 import logging
 import threading
-from functools import partial
 from pathlib import Path
 from typing import Callable
 
@@ -29,7 +28,7 @@ from .boot.slots import Slots
 from .boot.update_service import UpdateService
 from .calibration.flash import NorFlash, PowerLossError
 from .calibration.truth import true_calibration
-from .clock import DeviceClock
+from .clock import REAL_CLOCK, Clock, DeviceClock
 from .ground_truth import GroundTruth, TruthLog
 from .handlers.calibration import CalibrationService
 from .handlers.config import ConfigHandlers
@@ -60,7 +59,7 @@ class SimulatedCamera:
     def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: Line | None = None,
                  flash_path: str | Path | None = None, factory_calibrated: bool = True,
                  scene: Scene | str = Scene.LAB, vendor_key: Ed25519PrivateKey = DEV_SIGNING_KEY,
-                 flash_size: int = FLASH_SIZE, source: ReplaySource | None = None):
+                 flash_size: int = FLASH_SIZE, source: ReplaySource | None = None, timebase: Clock | None = None):
         """``scene``: what the rig looks at ("lab", "wall", "board"; a simulator setting, changeable
         at run time through ``scene``, never a device parameter). ``flash_path``: the file behind
         this unit's flash (kept across runs); None: a private file removed at close (scratch_flash.py:
@@ -69,12 +68,14 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         streams raw images until calibrated). ``vendor_key``: the firmware-signing key whose public half
         the factory line provisions into a blank unit (and signs its shipped image with). ``source``: a
         recording that stands in for the sensor rig (replay.py); the unit is then the recorded one:
-        identity, calibration, configuration."""
+        identity, calibration, configuration. ``timebase``: the clock every timed part of the unit reads and
+        waits on (clock.py; default the real one, a replay's its source's; a FakeClock in tests)."""
         self.seed = seed
         self._source = source
         self.serial = source.serial if source else serial or f"SIM{seed:05d}"
         self.model = source.model if source else MODEL
-        self.clock = source.clock if source else DeviceClock(seed)
+        self.clock = source.clock if source else DeviceClock(seed, timebase=timebase or REAL_CLOCK)
+        self.timebase: Clock = self.clock.timebase
         self.config = ConfigStore()
         self.counters: collections.Counter[str] = collections.Counter()
         self.usb_speed = m.UsbSpeed.NOT_USB  # set by the simulated USB bus while plugged (INFO reports it)
@@ -99,10 +100,11 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
 
         # the engine's callback reaches the pipeline, which itself needs the engine
         self.dispatcher = Dispatcher(self.counters)
-        self.engine = (partial(ReplayEngine, source) if source else CaptureEngine)(
-            lambda req: self.pipeline.produce(req))
+        produce = lambda req: self.pipeline.produce(req)  # noqa: E731 - the pipeline is made below
+        self.engine = ReplayEngine(source, produce) if source else CaptureEngine(produce, self.timebase)
         self.repair = FrameRepair(lambda wire: self.link.send(wire, lambda: True))
-        self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset)
+        self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset,
+                               timebase=self.timebase)
         self.pipeline = CapturePipeline(seed, self.rig, self.config, self.calibration, self.clock, self.truth,
                                         self._send_capture_part, self.counters, self.repair,
                                         self.engine.count_drop, source)
@@ -111,12 +113,12 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         self.streaming = StreamingHandlers(self.config, self.engine, self.counters)
         self._boot(recovery=False)
         self.trigger_input = TriggerInput(seed, self.streaming.on_pulse)  # its own latency after an edge
-        self.trigger_line = trigger_line if trigger_line is not None else TriggerLine()  # unwired: its own
+        self.trigger_line = trigger_line if trigger_line is not None else TriggerLine(self.timebase)  # unwired
         self.trigger_line.attach(self.trigger_input.on_pulse)  # input still hears its own output
         self.trigger_output = TriggerOutput(self.trigger_line, self.clock, lambda: self.config.snapshot()["fps"])
         self.engine.on_streaming = self._drive_trigger_output
         self.pipeline.warm_up()
-        self.watchdog = WatchdogThread(self.heartbeat.watchdog, name=f"watchdog-{self.serial}")
+        self.watchdog = WatchdogThread(self.heartbeat.watchdog, name=f"watchdog-{self.serial}", timebase=self.timebase)
         registry.register(self)
 
     # -- boot, reboot, power --------------------------------------------------------------------

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterator
@@ -34,6 +33,7 @@ from stereocam.protocol.frame_messages import DISPARITY_SUBPIXEL, invalid_dispar
 from stereocam.protocol.params import BY_NAME, Output, TriggerMode, defaults
 from stereocam.stereo.engines import params_from_config
 
+from .clock import REAL_CLOCK, Clock
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
 
 if TYPE_CHECKING:
@@ -56,29 +56,32 @@ class ReplayedCapture:
 
 class ReplayClock:
     """The device clock of a replay: it reads the recorded device time of the start frame when the
-    replay opens and runs at real speed from there (what TIME_SYNC answers)."""
+    replay opens and runs at the speed of ``timebase`` from there (what TIME_SYNC answers)."""
 
-    def __init__(self, start_us: int):
-        self.boot = time.monotonic()
+    def __init__(self, start_us: int, timebase: Clock = REAL_CLOCK):
+        self.timebase = timebase
+        self.boot = timebase.monotonic()
         self.epoch_us = start_us
 
     def now_us(self) -> int:
-        return self.at(time.monotonic())
+        return self.at(self.timebase.monotonic())
 
     def at(self, host_monotonic: float) -> int:
         return int((host_monotonic - self.boot) * 1e6) + self.epoch_us
 
     def uptime_us(self) -> int:
-        return int((time.monotonic() - self.boot) * 1e6)
+        return int((self.timebase.monotonic() - self.boot) * 1e6)
 
 
 class ReplaySource:
-    """Captures of a recording, in order from ``start``, for the firmware to send."""
+    """Captures of a recording, in order from ``start``, for the firmware to send, paced on ``timebase``."""
 
-    def __init__(self, path: str | Path, *, realtime: bool = True, loop: bool = False, start: int = 0):
+    def __init__(self, path: str | Path, *, realtime: bool = True, loop: bool = False, start: int = 0,
+                 timebase: Clock = REAL_CLOCK):
         from stereocam.recording.reader import Recording  # the recording extra, needed only here
 
         self.recording = Recording(path)
+        self.timebase = timebase
         try:
             self._open(path, start)
         except BaseException:
@@ -110,7 +113,7 @@ class ReplaySource:
         self.config = self.recording.config
         stored = self.recording.calibration
         self.calibration: StereoCalibration | None = stored.calibration if stored else None
-        self.clock = ReplayClock(self.recording.capture(start).info.device_time_us)
+        self.clock = ReplayClock(self.recording.capture(start).info.device_time_us, self.timebase)
 
     def boot_config(self) -> dict[str, int]:
         """The recorded configuration a replayed unit boots with, less how the recorded unit was
@@ -140,13 +143,13 @@ class ReplaySource:
             self._pending = cap
         if cap is None:
             return None
-        now, t_us = time.monotonic(), cap.info.device_time_us
+        now, t_us = self.timebase.monotonic(), cap.info.device_time_us
         step_us = None if self._last_us is None else t_us - self._last_us
         if self._t0 is None or step_us is None or not 0 <= step_us <= MAX_PACE_GAP_S * 1e6:
             self._t0 = (now, t_us)
         self._last_us = t_us
         due = self._t0[0] + (t_us - self._t0[1]) / 1e6 if self.realtime and paced else now
-        if due > now and self._closed.wait(due - now):
+        if due > now and self.timebase.wait(self._closed, due - now):
             return None
         return CaptureRequest(cap.info.sequence, cap.info.trigger_id, max(due, now), epoch)
 
@@ -206,8 +209,8 @@ class ReplayEngine(CaptureEngine):
     numbers, at its pace or as fast as the link takes them) instead of a frame-rate timer; each
     software trigger (or pulse) takes the next recorded capture at once, numbered as TRIGGERED said."""
 
-    def __init__(self, source: ReplaySource, produce):
-        super().__init__(produce)
+    def __init__(self, source: ReplaySource, produce: Callable[[CaptureRequest], None]):
+        super().__init__(produce, source.timebase)
         self.source = source
 
     def start(self, mode: TriggerMode, fps: int) -> None:
@@ -234,4 +237,4 @@ class ReplayEngine(CaptureEngine):
             return None
         with self._cond:  # numbers go on rising across streams and modes (SPEC §8.4)
             self.sequence = max(self.sequence, recorded.sequence)
-        return trigger or recorded
+            return self._taken(trigger or recorded)

@@ -13,10 +13,9 @@ from __future__ import annotations
 import collections
 import random
 import threading
-import time
 from typing import Callable, Protocol
 
-from .clock import DeviceClock
+from .clock import REAL_CLOCK, Clock, DeviceClock
 
 OnPulse = Callable[[int, float], None]  # (trigger id, host monotonic instant of the edge)
 LATENCY_RANGE_S = (2e-6, 8e-6)  # exposure start after the edge, fixed per unit
@@ -30,9 +29,11 @@ class Line(Protocol):
 
 
 class TriggerLine:
-    """In-process: every pulse reaches every head attached to the line with the same trigger id."""
+    """In-process: every pulse reaches every head attached to the line with the same trigger id
+    (a pulse without an instant is stamped on ``timebase``)."""
 
-    def __init__(self) -> None:
+    def __init__(self, timebase: Clock = REAL_CLOCK) -> None:
+        self._timebase = timebase
         self._lock = threading.Lock()
         self._heads: list[OnPulse] = []
         self.pulses = 0
@@ -48,7 +49,7 @@ class TriggerLine:
 
     def pulse(self, instant: float | None = None) -> int:
         """Raise the line once (at ``instant``, host monotonic; default now); returns the trigger id."""
-        instant = time.monotonic() if instant is None else instant
+        instant = self._timebase.monotonic() if instant is None else instant
         with self._lock:
             self.pulses += 1
             tid = self.pulses
@@ -101,17 +102,19 @@ class TriggerInput:
 
 class TriggerMaster:
     """Pulses ``line`` at ``fps`` until closed, the period counted on ``clock`` (the master unit's
-    crystal; None: the host's). Each pulse carries its scheduled instant, not the (later) moment
-    this thread got to send it. ``fps`` may be a function, read for every period (a unit's frame
-    rate is a live parameter)."""
+    crystal, on its time base; None: the host's, on ``timebase``). Each pulse carries its scheduled
+    instant, not the (later) moment this thread got to send it. ``fps`` may be a function, read for
+    every period (a unit's frame rate is a live parameter)."""
 
-    def __init__(self, line: Line, fps: float | Callable[[], float], clock: DeviceClock | None = None):
+    def __init__(self, line: Line, fps: float | Callable[[], float], clock: DeviceClock | None = None,
+                 timebase: Clock = REAL_CLOCK):
         rate = fps if callable(fps) else (lambda: fps)
         if not rate() > 0:
             raise ValueError(f"trigger master fps must be > 0, got {rate()}")
         self.line = line
         self._rate = rate
         self._clock = clock
+        self._timebase = clock.timebase if clock is not None else timebase
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="trigger-master", daemon=True)
         self._thread.start()
@@ -122,8 +125,8 @@ class TriggerMaster:
         return self._clock.host_period(nominal) if self._clock is not None else nominal
 
     def _run(self) -> None:
-        t = time.monotonic() + self.period
-        while not self._stop.wait(max(t - time.monotonic(), 0.0)):
+        t = self._timebase.monotonic() + self.period
+        while not self._timebase.wait(self._stop, t - self._timebase.monotonic()):
             self.line.pulse(t)
             t += self.period  # a starved thread catches up: every edge happened, each at its instant
 
@@ -153,6 +156,7 @@ class TriggerOutput:
 
     @property
     def driving(self) -> bool:
+        """Whether the line may still pulse (False only once the master's thread has ended)."""
         return self._master is not None
 
     def drive(self) -> None:
@@ -162,8 +166,8 @@ class TriggerOutput:
                 self._master = TriggerMaster(self.line, self._fps, self._clock)
 
     def release(self) -> None:
-        """Stop pulsing: the line is left low."""
+        """Stop pulsing: the line is left low once this returns."""
         with self._lock:
-            master, self._master = self._master, None
-        if master is not None:
-            master.close()
+            if self._master is not None:
+                self._master.close()
+                self._master = None

@@ -6,21 +6,24 @@ import logging
 import threading
 from typing import Callable
 
+from .clock import REAL_CLOCK, Clock
+
 PERIOD_S = 0.05
 log = logging.getLogger(__name__)
 
 
 class WatchdogThread:
-    """Runs ``check`` every PERIOD_S until ``close``."""
+    """Runs ``check`` every PERIOD_S of ``timebase`` until ``close``."""
 
-    def __init__(self, check: Callable[[], None], name: str = "watchdog"):
+    def __init__(self, check: Callable[[], None], name: str = "watchdog", timebase: Clock = REAL_CLOCK):
         self._check = check
+        self._timebase = timebase
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
     def _run(self) -> None:
-        while not self._stop.wait(PERIOD_S):
+        while not self._timebase.wait(self._stop, PERIOD_S):
             try:
                 self._check()
             except Exception:  # a firmware bug must not end the watchdog: log and keep watching

@@ -3,7 +3,6 @@ stream and then drops the link when the host goes silent (§9)."""
 from __future__ import annotations
 
 import collections
-import time
 
 from stereocam.protocol import messages as m
 
@@ -47,7 +46,7 @@ class HeartbeatHandlers:
         """Called by the watchdog thread (SPEC §9): stop streaming once the host has been silent for
         the heartbeat timeout; drop the link once it has been silent for the link timeout."""
         timeout_ms = self._store.snapshot()["heartbeat_timeout_ms"]
-        if self._engine.streaming and timeout_ms and time.monotonic() - self._link.last_rx > timeout_ms / 1000:
+        if self._engine.streaming and timeout_ms and self._link.silent_for() > timeout_ms / 1000:
             self._counters["heartbeat_timeouts"] += 1
             self._engine.stop()
         if self._link.drop_if_silent(timeout_ms):

@@ -4,11 +4,11 @@ drives this one object."""
 from __future__ import annotations
 
 import threading
-import time
 from typing import Callable
 
 from stereocam.protocol.framing import DEVICE_MESSAGE_TIMEOUT, Decoder, DecoderStats
 
+from ..clock import REAL_CLOCK, Clock
 from .dispatcher import Dispatcher
 
 Sink = Callable[[bytes], None]
@@ -40,13 +40,15 @@ def link_timeout(spoken: bool, heartbeat_timeout_ms: int, contested: bool = Fals
 class DeviceLink:
     """One host at a time. ``on_lost`` runs when the host goes (detach, drop, or a sink that fails);
     ``on_attach`` when a new host comes (per-link state such as the frame-repair chunk size resets).
-    A request whose bytes stop arriving is abandoned after DEVICE_MESSAGE_TIMEOUT (SPEC §3)."""
+    A request whose bytes stop arriving is abandoned after DEVICE_MESSAGE_TIMEOUT (SPEC §3).
+    ``timebase``: the clock the silence is measured on."""
 
     def __init__(self, dispatcher: Dispatcher, on_lost: Callable[[], None],
-                 on_attach: Callable[[], None] = lambda: None):
+                 on_attach: Callable[[], None] = lambda: None, timebase: Clock = REAL_CLOCK):
         self.decoder = Decoder(message_timeout=DEVICE_MESSAGE_TIMEOUT)
         self._on_attach = on_attach
-        self.last_rx = time.monotonic()  # when the host last sent a whole frame (the watchdog's clock)
+        self._timebase = timebase
+        self.last_rx = timebase.monotonic()  # when the host last sent a whole frame (the watchdog's clock)
         self.spoken = False  # whether this link delivered a frame since it was attached
         self.drops = 0  # links dropped for silence
         self._dispatcher = dispatcher
@@ -76,7 +78,7 @@ class DeviceLink:
             self._on_attach()
             self.decoder = Decoder(stats=self.decoder.stats, message_timeout=DEVICE_MESSAGE_TIMEOUT)
             self.spoken = False
-        self.last_rx = time.monotonic()
+        self.last_rx = self._timebase.monotonic()
 
     def detach(self) -> None:
         """The host link is gone: output is discarded."""
@@ -84,12 +86,16 @@ class DeviceLink:
             self._sink = None
         self._on_lost()
 
+    def silent_for(self) -> float:
+        """Seconds since the host last sent a whole frame (or since it attached)."""
+        return self._timebase.monotonic() - self.last_rx
+
     def drop_if_silent(self, heartbeat_timeout_ms: int, contested: bool = False) -> bool:
         """SPEC §9: end a link silent for longer than its link timeout (from the watchdog thread,
         never blocked by a sender stuck in the sink; ``contested``: another host is waiting for the
         unit). True if it was dropped."""
         limit = link_timeout(self.spoken, heartbeat_timeout_ms, contested)
-        if self._sink is None or limit is None or time.monotonic() - self.last_rx <= limit:
+        if self._sink is None or limit is None or self.silent_for() <= limit:
             return False
         hang_up = self._hang_up
         self._sink, self._hang_up = None, None  # no lock: a sender may hold it, blocked in the sink
@@ -103,7 +109,7 @@ class DeviceLink:
         """Bytes from the host; replies go to the sink before this returns."""
         with self._rx_lock:
             for packet in self.decoder.feed(data):
-                self.last_rx = time.monotonic()
+                self.last_rx = self._timebase.monotonic()
                 self.spoken = True
                 wire = self._dispatcher.answer(packet)
                 with self._sink_lock:

@@ -8,11 +8,12 @@ from __future__ import annotations
 import collections
 import logging
 import threading
-import time
 from dataclasses import dataclass
 from typing import Callable
 
 from stereocam.protocol.params import TriggerMode
+
+from ..clock import REAL_CLOCK, Clock
 
 TRIGGER_QUEUE_DEPTH = 2
 log = logging.getLogger(__name__)
@@ -27,10 +28,11 @@ class CaptureRequest:
 
 
 class CaptureEngine:
-    """Decides when exposures happen and hands each to ``produce`` on the worker thread."""
+    """Decides when exposures happen (on ``timebase``) and hands each to ``produce`` on the worker thread."""
 
-    def __init__(self, produce: Callable[[CaptureRequest], None]):
+    def __init__(self, produce: Callable[[CaptureRequest], None], timebase: Clock = REAL_CLOCK):
         self._produce = produce
+        self._timebase = timebase
         self._cond = threading.Condition()
         self._queue: collections.deque[CaptureRequest] = collections.deque()
         self._streaming = False
@@ -42,6 +44,7 @@ class CaptureEngine:
         self.sequence = 0
         self.dropped = 0
         self.captured = 0
+        self._producing = False  # an exposure is being produced on the worker thread
         self._thread: threading.Thread | None = None  # started by the first start()
         self.on_streaming: Callable[[bool], None] = lambda streaming: None  # told after every start/stop
 
@@ -56,7 +59,7 @@ class CaptureEngine:
                 self._thread.start()
             self._mode = TriggerMode(mode)
             self._period = 1.0 / fps
-            self._next = time.monotonic()
+            self._next = self._timebase.monotonic()
             self._queue.clear()
             self._streaming = True
             self.epoch += 1
@@ -100,7 +103,8 @@ class CaptureEngine:
                     self.dropped += 1
                 return None
             self.sequence += 1
-            req = CaptureRequest(self.sequence, trigger_id, time.monotonic() if at is None else at, self.epoch)
+            instant = self._timebase.monotonic() if at is None else at
+            req = CaptureRequest(self.sequence, trigger_id, instant, self.epoch)
             self._queue.append(req)
             self._cond.notify_all()
             return req
@@ -115,8 +119,8 @@ class CaptureEngine:
             if self._mode != TriggerMode.FREE_RUN:
                 if not self._queue:
                     self._cond.wait(0.05)
-                return self._queue.popleft() if self._queue else None
-            now = time.monotonic()
+                return self._taken(self._queue.popleft()) if self._queue else None
+            now = self._timebase.monotonic()
             if now < self._next:
                 self._cond.wait(min(self._next - now, 0.05))
                 return None
@@ -126,12 +130,23 @@ class CaptureEngine:
             t = self._next + missed * self._period
             self._next = t + self._period
             self.sequence += 1
-            return CaptureRequest(self.sequence, 0, t, self.epoch)
+            return self._taken(CaptureRequest(self.sequence, 0, t, self.epoch))
+
+    def _taken(self, req: CaptureRequest) -> CaptureRequest:
+        """Under ``_cond``: ``req`` leaves the queue (or the timer) for the worker, which is busy
+        from this moment until ``produce`` returns."""
+        self._producing = True
+        return req
 
     def count_drop(self) -> None:
         """A later pipeline stage failed on a capture: it counts as dropped."""
         with self._cond:
             self.dropped += 1
+
+    @property
+    def idle(self) -> bool:
+        """Not producing an exposure now (stopped, or between two)."""
+        return not self._producing
 
     def current(self, req: CaptureRequest) -> bool:
         """Whether ``req`` still belongs to the running stream (not stopped or restarted since)."""
@@ -148,3 +163,5 @@ class CaptureEngine:
             except Exception:  # a firmware bug must not kill the capture thread: log, count, go on
                 log.exception("capture %d failed", req.sequence)
                 self.dropped += 1
+            finally:
+                self._producing = False

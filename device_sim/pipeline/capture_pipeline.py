@@ -98,6 +98,11 @@ class CapturePipeline:
         if maps is not None:
             maps.rectify(left, right)
 
+    @property
+    def idle(self) -> bool:
+        """No capture on its way through the delivery stage."""
+        return self._delivery.idle
+
     def close(self) -> None:
         """Stop the delivery thread (after the capture engine has stopped producing)."""
         self._delivery.close()

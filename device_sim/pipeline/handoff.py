@@ -24,6 +24,7 @@ class Handoff(Generic[T]):
         self._on_error = on_error
         self._cond = threading.Condition()
         self._item: T | None = None
+        self._working = False
         self._closed = False
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
@@ -35,6 +36,12 @@ class Handoff(Generic[T]):
             self._cond.notify_all()
             while self._item is not None and not self._closed:
                 self._cond.wait()
+
+    @property
+    def idle(self) -> bool:
+        """Nothing handed over and nothing being worked on."""
+        with self._cond:
+            return self._item is None and not self._working
 
     def close(self) -> None:
         """Stop the worker after the item in hand (a waiting one is discarded)."""
@@ -54,9 +61,13 @@ class Handoff(Generic[T]):
                     return
                 item, self._item = self._item, None
                 assert item is not None  # the wait ends with an item or closed
+                self._working = True
                 self._cond.notify_all()
             try:
                 self._work(item)
             except Exception:  # a firmware bug must not kill the stage: log, count, go on
                 log.exception("pipeline stage %s failed", self._thread.name)
                 self._on_error(item)
+            finally:
+                with self._cond:
+                    self._working = False

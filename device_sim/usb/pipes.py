@@ -47,13 +47,23 @@ def _remaining(deadline: float | None) -> float | None:
 
 
 class _Endpoint:
-    """State shared by both directions: lock, halt (STALL) flag, closed flag."""
+    """State shared by both directions: lock, halt (STALL) flag, closed flag, and how many
+    transfers are blocked on it (``waiting``: a host read waiting for data, a write or push for room)."""
 
     def __init__(self, address: int) -> None:
         self.address = address
         self.cond = threading.Condition()
         self.halted = False
         self.closed = False
+        self.waiting = 0
+
+    def _wait(self, timeout: float | None = None) -> None:
+        """``cond.wait`` (``cond`` held), counted in ``waiting`` while it blocks."""
+        self.waiting += 1
+        try:
+            self.cond.wait(timeout)
+        finally:
+            self.waiting -= 1
 
     def halt(self) -> None:
         """STALL the endpoint: transfers fail with EPIPE until clear_halt()."""
@@ -113,7 +123,7 @@ class InPipe(_Endpoint):
             flushes = self._flushes
             while (not self.closed and self._queued and flushes == self._flushes
                    and self._queued + len(data) > self.capacity):
-                self.cond.wait()
+                self._wait()
             if self.closed:
                 raise BrokenPipeError("USB device unplugged")
             if flushes != self._flushes:  # flushed while it waited: it belonged to what was dropped
@@ -153,7 +163,7 @@ class InPipe(_Endpoint):
                     if got:
                         return self._on_the_wire(first, got)
                     raise usb_error(LibusbError.TIMEOUT)
-                self.cond.wait(left)
+                self._wait(left)
 
     def _on_the_wire(self, first: float | None, got: int) -> int:
         """Hold the transfer (lock released) until the bus has carried its ``got`` bytes."""
@@ -240,7 +250,7 @@ class OutPipe(_Endpoint):
                     if sent:
                         return sent
                     raise usb_error(LibusbError.TIMEOUT)
-                self.cond.wait(left)
+                self._wait(left)
         return sent
 
     def take(self) -> bytes | None:

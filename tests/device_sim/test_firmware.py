@@ -8,9 +8,11 @@ import pytest
 
 import stereocam
 from stereocam.device_sim import SimulatedCamera, TriggerLine
+from stereocam.device_sim.clock import FakeClock
 from stereocam.device_sim.rig.scene import WALL_DISTANCE_M
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
+from tests.support.waiting import wait_until
 
 SMALL = dict(width=320, height=240, num_disparities=32, block_size=11)
 
@@ -22,23 +24,36 @@ def open_sim(sim: SimulatedCamera, **kw) -> Camera:
 
 
 def test_device_stops_streaming_when_host_goes_silent():
-    sim = SimulatedCamera(seed=21)
+    clock = FakeClock()
+    sim = SimulatedCamera(seed=21, timebase=clock)
     with open_sim(sim, heartbeat_interval=3600) as cam:
         cam.configure(heartbeat_timeout_ms=300, fps=5)
         cam.start()
-        time.sleep(0.45)  # no heartbeat, no command: the watchdog stops the stream at 300 ms ...
-        assert not sim.engine.streaming and sim.counters["heartbeat_timeouts"] == 1
-        time.sleep(0.6)  # ... and drops the link at twice that (SPEC §9)
-        assert not sim.attached and sim.counters["links_dropped"] == 1
+        clock.advance(0.29)  # no heartbeat, no command: at 290 ms the stream still runs ...
+        sim.heartbeat.watchdog()
+        assert sim.engine.streaming and sim.counters["heartbeat_timeouts"] == 0
+        clock.advance(0.02)  # ... the watchdog stops it past 300 ms ...
+        wait_until(lambda: not sim.engine.streaming, what="the watchdog stops the stream")
+        assert sim.counters["heartbeat_timeouts"] == 1 and sim.attached
+        clock.advance(0.28)  # ... and drops the link past twice that (SPEC §9)
+        sim.heartbeat.watchdog()
+        assert sim.attached
+        clock.advance(0.02)
+        wait_until(lambda: not sim.attached, what="the watchdog drops the link")
+        assert sim.counters["links_dropped"] == 1
         with pytest.raises(stereocam.DisconnectedError):
             cam.status()
 
 
 def test_heartbeats_keep_the_stream_alive():
-    with open_sim(SimulatedCamera(seed=22), heartbeat_interval=0.1) as cam:
+    clock = FakeClock()
+    sim = SimulatedCamera(seed=22, timebase=clock)
+    with open_sim(sim, heartbeat_interval=0.05) as cam:
         cam.configure(heartbeat_timeout_ms=400, fps=5)
         cam.start()
-        time.sleep(1.2)
+        for _ in range(4):  # 1.2 s of device time, never 400 ms without hearing the host
+            clock.advance(0.3)
+            wait_until(lambda: sim.link.silent_for() == 0, what="the host's next heartbeat")
         st = cam.status()
         assert st.streaming is True and st.counters["heartbeat_timeouts"] == 0
 

@@ -15,13 +15,17 @@ import serial
 
 import stereocam.device_sim.usb as simusb
 from stereocam.device_sim import SimulatedCamera
+from stereocam.device_sim.clock import FakeClock
+from stereocam.device_sim.link_layer.device_link import FIRST_MESSAGE_TIMEOUT_S
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.device_sim.links.servers import WAIT_FOR_SLOT_S, PtyServer, TcpServer
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import DisconnectedError, ErrorCode
 from stereocam.protocol.framing import Decoder
 from stereocam.protocol.params import BY_NAME
+from stereocam.tools.conformance.budget import budget
 from stereocam.transports import open_transport
+from tests.support.waiting import wait_until
 
 SMALL = {"width": 320, "height": 240, "num_disparities": 32, "block_size": 11, "fps": 30}
 
@@ -74,8 +78,13 @@ class RawTcp:
 
 
 @pytest.fixture
-def tcp():
-    sim = SimulatedCamera(seed=91)
+def clock() -> FakeClock:
+    return FakeClock()
+
+
+@pytest.fixture
+def tcp(clock):
+    sim = SimulatedCamera(seed=91, timebase=clock)  # the link timeouts run on the test's clock
     server = TcpServer(sim)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
@@ -85,25 +94,31 @@ def tcp():
     sim.close()
 
 
-def test_a_connection_that_never_speaks_is_dropped(tcp) -> None:
+def test_a_connection_that_never_speaks_is_dropped(tcp, clock) -> None:
     server, sim = tcp
     silent = RawTcp(server.url)
-    took = silent.wait_closed(within=10)
-    assert took < 5
+    wait_until(lambda: sim.attached, what="the server takes the connection")
+    clock.advance(FIRST_MESSAGE_TIMEOUT_S - 0.01)
+    sim.heartbeat.watchdog()
+    assert sim.attached
+    clock.advance(0.02)
+    silent.wait_closed(within=budget(5))
     host = RawTcp(server.url)  # the slot is free again
     host.send(m.encode(m.GetInfo(), 1))
     assert any(isinstance(x, m.Info) for x in host.messages(1.0) or [])
     host.close()
 
 
-def test_a_host_that_goes_silent_is_dropped_after_the_link_timeout(tcp) -> None:
+def test_a_host_that_goes_silent_is_dropped_after_the_link_timeout(tcp, clock) -> None:
     server, sim = tcp
     host = RawTcp(server.url)
-    sent = time.monotonic()
     host.send(set_config(1, heartbeat_timeout_ms=300))
-    assert isinstance(host.messages(0.2)[0], m.ConfigApplied)
-    host.wait_closed(within=5)
-    assert 0.55 < time.monotonic() - sent < 1.5  # twice the heartbeat timeout (§9), checked every 50 ms
+    assert isinstance(host.messages(budget(0.2))[0], m.ConfigApplied)
+    clock.advance(0.59)  # twice the heartbeat timeout (§9) ...
+    sim.heartbeat.watchdog()
+    assert sim.attached
+    clock.advance(0.02)  # ... and past it
+    host.wait_closed(within=budget(5))
     assert not sim.attached
 
 
@@ -122,7 +137,7 @@ def test_a_second_client_is_refused_and_nothing_it_sent_runs(tcp) -> None:
     first.send(m.encode(m.Heartbeat(), 2))
     assert isinstance(first.messages(0.5)[0], m.Status)
     first.close()
-    time.sleep(0.5)  # the server takes the next connection
+    wait_until(lambda: not sim.attached, what="the server lets the first host go")
     third = RawTcp(server.url)
     third.send(m.encode(m.GetConfig(), 3))
     cfg = third.messages(1.0)[0]
@@ -171,7 +186,7 @@ def test_a_pty_host_that_dies_mid_stream_blocks_nothing_and_leaves_nothing(pty) 
     assert not sim.engine.streaming, "the watchdog must stop the stream even while a send is blocked"
     assert sim.counters["heartbeat_timeouts"] + sim.counters["link_send_timeouts"] >= 1
     dead.close()
-    time.sleep(0.3)
+    wait_until(lambda: not sim.attached, what="the silent host's link is dropped (twice the heartbeat timeout)")
     with serial.Serial(server.url, timeout=0.5) as host:
         host.write(m.encode(m.GetInfo(), 9))
         decoder, got = Decoder(), []

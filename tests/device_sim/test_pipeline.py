@@ -7,6 +7,7 @@ import time
 from stereocam.camera import Camera
 from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.links.inprocess import InProcessTransport
+from tests.support.waiting import wait_until
 
 SMALL = dict(width=320, height=240, num_disparities=32, block_size=11)
 
@@ -24,6 +25,11 @@ def slow_camera(sim: SimulatedCamera, per_message_s: float) -> Camera:
     return Camera(transport, timeout=2.0)
 
 
+def capture_idle(sim: SimulatedCamera) -> bool:
+    """No capture in flight: none being exposed, none being delivered (after a stop: the counters are final)."""
+    return sim.engine.idle and sim.pipeline.idle
+
+
 def test_a_slow_pipeline_drops_counts_and_numbers_every_exposure():
     sim = SimulatedCamera(seed=41)
     with slow_camera(sim, 0.01) as cam:  # 5 messages a capture: ~50 ms each, 60 fps asked
@@ -38,7 +44,7 @@ def test_a_slow_pipeline_drops_counts_and_numbers_every_exposure():
             cam.status()
             replies.append(time.monotonic() - t)
         cam.stop()
-        time.sleep(0.3)  # the captures in flight finish (cut off) before the counters are read
+        wait_until(lambda: capture_idle(sim), what="the captures in flight finish (cut off)")
         c = cam.status().counters
     assert all(b > a for a, b in zip(seqs, seqs[1:]))
     assert c["frames_dropped"] > 0  # 60 fps asked of a ~20 fps link
@@ -68,7 +74,7 @@ def test_a_failing_delivery_counts_a_drop_and_the_stream_goes_on():
         cam.start()
         seqs = [cam.get_frame(timeout=30).sequence for _ in range(4)]
         cam.stop()
-        time.sleep(0.3)
+        wait_until(lambda: capture_idle(sim), what="the captures in flight finish")
         c = cam.status().counters
     assert seqs[1] - seqs[0] >= 2  # the failed capture is a gap
     assert c["frames_dropped"] >= 1 and sim.engine.sequence == c["frames_captured"] + c["frames_dropped"] - 1

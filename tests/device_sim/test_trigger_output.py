@@ -4,7 +4,6 @@ build without the capability refuses the value, changing nothing."""
 from __future__ import annotations
 
 import dataclasses
-import time
 
 import pytest
 
@@ -15,6 +14,7 @@ from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode
 from stereocam.protocol.firmware_image import build_image
 from tests.support.firmware import build
+from tests.support.waiting import stays, wait_until
 
 from .test_firmware import open_sim
 
@@ -46,8 +46,8 @@ def test_the_master_captures_on_its_own_pulses_at_its_rate_and_every_head_gets_t
         assert sims[0].trigger_output.driving and not sims[1].trigger_output.driving
         master.stop()
         stopped_at = line.pulses
-        time.sleep(0.3)  # six periods: a line still driven would have pulsed again
-        assert line.pulses == stopped_at and not sims[0].trigger_output.driving
+        assert not sims[0].trigger_output.driving
+        assert stays(lambda: line.pulses == stopped_at, 0.3)  # six periods: a driven line would pulse again
     finally:
         for cam in (master, other):
             cam.close()
@@ -56,7 +56,7 @@ def test_the_master_captures_on_its_own_pulses_at_its_rate_and_every_head_gets_t
 
 
 STOPS = {
-    "watchdog": lambda sim, cam: time.sleep(0.6),  # no heartbeat: the watchdog stops the stream at 400 ms
+    "watchdog": lambda sim, cam: None,  # no heartbeat: the watchdog stops the stream at 400 ms
     "reboot": lambda sim, cam: sim.reboot(),
     "power cut": lambda sim, cam: sim.power_cut(),
     "link lost": lambda sim, cam: sim.detach(),
@@ -71,10 +71,9 @@ def test_the_output_falls_silent_whenever_the_stream_stops(how):
         cam.start()
         assert cam.get_frame(timeout=20).trigger_id >= 1 and sim.trigger_output.driving
         STOPS[how](sim, cam)
-        assert not sim.engine.streaming and not sim.trigger_output.driving
+        wait_until(lambda: not sim.engine.streaming and not sim.trigger_output.driving, what="the output released")
         pulses = sim.trigger_line.pulses
-        time.sleep(0.2)
-        assert sim.trigger_line.pulses == pulses
+        assert stays(lambda: sim.trigger_line.pulses == pulses, 0.2)
 
 
 @pytest.mark.parametrize("update, blamed", [

@@ -7,6 +7,8 @@ import pytest
 
 import stereocam
 from stereocam.device_sim.process import ServedSimulator
+from stereocam.tools.conformance.budget import budget
+from tests.support.waiting import wait_until
 
 pytestmark = pytest.mark.sim_only("kills and restarts the simulator process")
 
@@ -25,7 +27,7 @@ def test_device_killed_mid_stream(spec):
         with pytest.raises(stereocam.DisconnectedError):
             for _ in range(100):
                 cam.get_frame(timeout=1.0)
-        assert time.monotonic() - t0 < 3.0
+        assert time.monotonic() - t0 < budget(3.0)
         with pytest.raises(stereocam.DisconnectedError):
             cam.config()
         cam.close()  # closing a dead camera is quiet
@@ -50,8 +52,9 @@ def test_a_client_that_stops_reading_does_not_wedge_the_device():
         wedged = socket.create_connection(server.address)
         wedged.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
         wedged.sendall(m.encode(m.Start(), 1))  # starts 640x480 streaming, then never reads a byte
-        time.sleep(2.0)
-        assert not sim.engine.streaming  # the stalled send dropped that host and stopped the stream
+        # it streams; then the stalled send (0.5 s) drops that host and stops the stream
+        wait_until(lambda: sim.engine.captured >= 1 and not sim.engine.streaming and not sim.attached,
+                   timeout=10, what="the stalled host is dropped")
         with stereocam.open(server.url, timeout=2.0) as cam:  # the next host gets the camera
             assert cam.info().serial == sim.serial
         wedged.close()

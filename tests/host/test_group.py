@@ -18,6 +18,7 @@ from stereocam.frame_sets import MatchedSet, sync_problems
 from stereocam.protocol import messages as m
 from stereocam.protocol.firmware_image import build_image
 from tests.support.firmware import build
+from tests.support.waiting import stays
 
 pytestmark = pytest.mark.sim_only("checks capture times against the simulator's truth")
 
@@ -90,8 +91,8 @@ def test_the_group_makes_the_chosen_head_the_master_and_puts_the_line_down_at_cl
             for a, b in zip(sets, sets[1:])]
     assert all(abs(g - 1e6 / 15) < 500 for g in gaps)  # at the master's rate, on its crystal
     pulses = line.pulses
-    time.sleep(0.3)
-    assert line.pulses == pulses and not any(sim.trigger_output.driving for sim in sims)  # closed: line quiet
+    assert not any(sim.trigger_output.driving for sim in sims)
+    assert stays(lambda: line.pulses == pulses, 0.3)  # closed: line quiet
 
 
 def test_a_master_that_cannot_drive_the_line_or_is_not_in_the_group_is_refused(heads):

@@ -16,6 +16,7 @@ from stereocam.protocol import messages as m
 
 from stereocam.device_sim.link_layer.refusal import Refusal
 from tests.support.faults import FaultyTransport
+from tests.support.waiting import stays
 
 
 def _begin(width: int, height: int, planes: int = 7, sequence: int = 1) -> m.FrameBegin:
@@ -159,8 +160,7 @@ def test_a_stop_by_the_user_is_not_undone(streaming):
         time.sleep(0.03)
         cam.start()
     cam.stop()
-    time.sleep(0.5)
-    assert not sim.engine.streaming and cam.stream_restarts == 0
+    assert stays(lambda: not sim.engine.streaming and cam.stream_restarts == 0, 0.5)
 
 
 def test_auto_reconnect_rides_through_a_failed_event_path():

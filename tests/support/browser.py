@@ -4,8 +4,10 @@ from __future__ import annotations
 import base64
 import itertools
 import json
+import os
 import re
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -29,7 +31,8 @@ class Chromium:
             [binary, "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
              "--no-first-run", "--remote-debugging-port=0", f"--user-data-dir={self._profile.name}",
              f"--window-size={width},{height}", "about:blank"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+            start_new_session=True)  # its own process group: close() ends the helpers it forks too
         deadline = time.monotonic() + timeout
         ws_url = None
         while ws_url is None:
@@ -86,12 +89,37 @@ class Chromium:
         return base64.b64decode(self.send("Page.captureScreenshot", {"format": "png"}, session)["data"])
 
     def close(self) -> None:
+        """End the browser and every helper process it started, then remove its profile. The
+        helpers (zygote, renderers, crashpad) outlive the main process by a moment and write into
+        the profile as they go, so the group is killed and the removal retried until it holds."""
         try:
             self._ws.close()
         finally:
-            self.proc.terminate()
+            self._signal_group(signal.SIGTERM)
             try:
                 self.proc.wait(timeout=10)
             except subprocess.TimeoutExpired:
-                self.proc.kill()
-            self._profile.cleanup()
+                pass
+            self._signal_group(signal.SIGKILL)
+            self.proc.wait()
+            self._remove_profile()
+
+    def _signal_group(self, sig: signal.Signals) -> None:
+        try:
+            os.killpg(self.proc.pid, sig)
+        except ProcessLookupError:  # every process of the group is gone already
+            pass
+
+    def _remove_profile(self, timeout: float = 10.0) -> None:
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                shutil.rmtree(self._profile.name)
+                break
+            except FileNotFoundError:
+                break
+            except OSError:  # a dying helper just wrote a file into a folder being removed
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.05)
+        self._profile.cleanup()  # nothing left to remove: only marks the directory as done

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from stereocam.protocol import messages as m
 from stereocam.protocol.params import BY_ID, BY_NAME, Param
 
+from .budget import budget
 from .captures import Capture
 from .results import CheckSkipped, expect
 from .wire import Reply, WireSession
@@ -146,6 +147,11 @@ class Context:
         return reply
 
     def wait_captures(self, count: int, seconds: float) -> list[Capture]:
+        """Keep the link alive until ``count`` captures have ended or the budget of ``seconds``
+        (stretched by STEREOCAM_TIME_FACTOR, budget.py) has passed."""
+        return self._collect(count, budget(seconds))
+
+    def _collect(self, count: int, seconds: float) -> list[Capture]:
         """Keep the link alive until ``count`` captures have ended or ``seconds`` have passed."""
         deadline = time.monotonic() + seconds
         alive = time.monotonic()
@@ -160,12 +166,13 @@ class Context:
             time.sleep(min(deadline - now, 0.02))
 
     def stream(self, seconds: float, frames: int | None = None) -> StreamRun:
-        """START, collect captures for ``seconds`` (or until ``frames`` ended), STOP, listen for late ones."""
+        """START, collect captures for ``seconds`` (or until ``frames`` ended: then ``seconds`` is a
+        budget, stretched like every other), STOP, listen for late ones."""
         before = self.status()
         self.s.captures.clear()
         self.s.call(m.Start())
         t0 = time.monotonic()
-        self.wait_captures(frames or 1 << 30, seconds)
+        self._collect(frames, budget(seconds)) if frames else self._collect(1 << 30, seconds)
         stopped = self.stop()
         t1 = time.monotonic()
         time.sleep(LATE_WINDOW_S)

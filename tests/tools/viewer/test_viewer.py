@@ -23,6 +23,7 @@ from stereocam.tools.viewer.session import ViewerSession
 from tests.support.browser import Chromium, find_chromium
 from tests.support.device import SMALL
 from tests.support.hangs import returns_within
+from tests.support.waiting import wait_until
 
 CHROMIUM = find_chromium()
 needs_browser = pytest.mark.skipif(CHROMIUM is None, reason="no Chromium on this machine (apt-get install chromium; "
@@ -49,9 +50,21 @@ def _get(url: str) -> tuple[dict[str, str], bytes]:
         return dict(r.headers), r.read()
 
 
+def _frames_pass(url: str, after: int, count: int) -> None:
+    """Wait until the viewer at ``url`` has had ``count`` frames newer than sequence ``after``."""
+    wait_until(lambda: (json.loads(_get(url + f"api/frame?after={after}")[1]) or {}).get("sequence", -1)
+               >= after + count, timeout=20, what=f"{count} frames after {after}")
+
+
+def _recorded(url: str, frames: int) -> None:
+    """Wait until the recording of the viewer at ``url`` holds ``frames`` frames."""
+    wait_until(lambda: (json.loads(_get(url + "api/state")[1])["recording"] or {}).get("frames", 0) >= frames,
+               timeout=20, what=f"{frames} frames recorded")
+
+
 def test_images_are_always_the_newest_frame(viewer):
     first = json.loads(_get(viewer.url + "api/frame")[1])
-    time.sleep(1.5)  # nobody looks: frames are replaced, not queued
+    _frames_pass(viewer.url, first["sequence"], 10)  # nobody looks: more frames than a queue holds are replaced
     headers, body = _get(viewer.url + "image/left.jpg")
     assert int(headers["X-Sequence"]) > first["sequence"]
     img = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_GRAYSCALE)
@@ -76,7 +89,7 @@ def test_record_button_records_every_frame_while_the_page_shows_the_newest(viewe
     status, doc = _post(viewer.url + "api/record/start")
     assert status == 200 and not doc["recording"]["done"]
     assert _post(viewer.url + "api/record/start")[0] == 400  # one recording at a time, said so
-    time.sleep(1.5)
+    _recorded(viewer.url, 5)
     status, doc = _post(viewer.url + "api/record/stop")
     rec = doc["recording"]
     assert status == 200 and rec["done"] and rec["frames"] >= 5 and rec["recorder_dropped"] == 0
@@ -84,7 +97,9 @@ def test_record_button_records_every_frame_while_the_page_shows_the_newest(viewe
     with Recording(rec["path"]) as r:  # a finished file: summary, index, every frame in order
         assert len(r) == rec["frames"] and r.device["serial"] == "SIM00006"
         sequences = [c.info.sequence for c in r.captures()]
-    assert sequences == list(range(sequences[0], sequences[0] + len(sequences)))  # none skipped
+    assert sequences == sorted(set(sequences))
+    dropped = viewer.session.cam.status().counters["frames_dropped"]
+    assert sequences[-1] - sequences[0] + 1 - len(sequences) <= dropped  # the recorder skipped none the device sent
 
 
 def test_actions_from_another_web_page_are_refused_and_change_nothing(viewer):
@@ -156,12 +171,12 @@ def test_viewer_page_in_a_headless_browser(viewer, tmp_path):
         viewer.session.record_dir.mkdir()
         browser.evaluate(page, "document.getElementById('record').click()")
         browser.wait_for(page, "document.getElementById('record').textContent === 'Stop recording'")
-        time.sleep(1.0)
+        _recorded(viewer.url, 3)
         browser.evaluate(page, "document.getElementById('record').click()")
         saved = browser.wait_for(page, "document.getElementById('recording').textContent.startsWith('saved') && "
                                        "document.getElementById('recording').textContent")
         assert ".mcap" in saved and list(viewer.session.record_dir.glob("*.mcap"))
-        time.sleep(1.0)
+        browser.wait_for(page, "[...document.images].every(i => i.complete)")  # the picture, fully drawn
         out = Path(os.environ.get("STEREOCAM_SCREENSHOT", tmp_path / "viewer.png"))
         out.write_bytes(browser.screenshot(page))
     finally:
@@ -261,6 +276,13 @@ def test_group_view_page_in_a_headless_browser(group_viewer, tmp_path):
         browser.close()
 
 
+def _complete_set(url: str) -> dict | None:
+    """The newest matched set of the group viewer at ``url`` if every head is in it (a head still
+    starting, or one that missed an edge under load, leaves a set incomplete: wait for the next)."""
+    s = json.loads(_get(url + "api/group/set")[1])
+    return s if s and s["complete"] else None
+
+
 def test_view_command_with_several_urls_shows_a_group_and_puts_each_head_back():
     from stereocam.device_sim.process import ServedSimulator
 
@@ -272,7 +294,7 @@ def test_view_command_with_several_urls_shows_a_group_and_puts_each_head_back():
         try:
             url = proc.stdout.readline().strip()
             assert url.startswith("http://127.0.0.1:"), proc.stderr.read()
-            s = json.loads(_get(url + "api/group/set")[1])
+            s = wait_until(lambda: _complete_set(url), timeout=30, what="a complete matched set")
             assert set(s["frames"]) == {"SIM00040", "SIM00041"} and s["complete"]
         finally:
             proc.terminate()

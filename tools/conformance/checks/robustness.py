@@ -11,6 +11,7 @@ from stereocam.protocol import messages as m
 from stereocam.protocol.framing import DEVICE_MESSAGE_TIMEOUT, FLAG_RESEND, MAGIC, header_crc
 from stereocam.protocol.params import BY_NAME
 
+from ..budget import budget
 from ..context import Context
 from ..registry import check
 from ..results import expect
@@ -127,10 +128,11 @@ def large_length(ctx: Context) -> str:
     t0 = time.monotonic()
     rid = s.send(m.GetInfo())
     answered = None
+    allowed = budget(LARGE_LENGTH_BUDGET_S)
     try:
-        while answered is None and time.monotonic() - t0 < LARGE_LENGTH_BUDGET_S:
+        while answered is None and time.monotonic() - t0 < allowed:
             try:
-                answered = s.wait_reply(rid, min(s.timeout, LARGE_LENGTH_BUDGET_S - (time.monotonic() - t0)))
+                answered = s.wait_reply(rid, min(s.timeout, allowed - (time.monotonic() - t0)))
             except TimeoutError:
                 s.send(m.GetInfo(), rid, FLAG_RESEND)
     finally:
@@ -138,6 +140,6 @@ def large_length(ctx: Context) -> str:
             s.send_bytes(bytes(n + 4))  # completes the announced frame (bad CRC): the decoder resynchronises
     took = time.monotonic() - t0
     expect(answered is not None,
-           f"DEAF: no answer within {LARGE_LENGTH_BUDGET_S} s after a CRC-valid header announcing {n} payload bytes "
+           f"DEAF: no answer within {allowed:.3g} s after a CRC-valid header announcing {n} payload bytes "
            f"(the device waits for the payload; it must bound that wait, issue 9)")
     return f"answered within {took * 1e3:.0f} ms after a header announcing {n} bytes"
