@@ -56,6 +56,6 @@ def test_a_trigger_master_pulses_once_per_period_of_its_clock():
         assert stays(lambda: not edges, 0.1)  # no time has passed: no edge
         for n in range(1, 4):
             clock.advance(0.1)
-            wait_until(lambda: len(edges) >= n, what=f"edge {n}")
+            wait_until(lambda n=n: len(edges) >= n, what=f"edge {n}")
     assert [tid for tid, _ in edges[:3]] == [1, 2, 3]
     assert [round(at - start, 6) for _, at in edges[:3]] == [0.1, 0.2, 0.3]

@@ -166,7 +166,8 @@ def test_a_socket_url_asks_for_repair_chunks_when_it_says_so():
     thread.start()
     try:
         with stereocam.open(server.url, timeout=2.0) as cam:
-            assert cam.connection.link.transport.frame_chunk is None and sim.repair.chunk == m.MAX_FRAME_CHUNK  # TCP default
+            link = cam.connection.link
+            assert link.transport.frame_chunk is None and sim.repair.chunk == m.MAX_FRAME_CHUNK  # TCP default
         deadline = time.monotonic() + 5
         while sim.attached and time.monotonic() < deadline:
             time.sleep(0.02)
