@@ -118,7 +118,9 @@ def streaming():
     sim = SimulatedCamera(seed=23)
     t = FaultyTransport(InProcessTransport(sim))
     cam = Camera(t, timeout=0.3, retries=1, heartbeat_interval=0.1)
-    cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=20, heartbeat_timeout_ms=400)
+    # the device stops the stream after 1.5 s of silence and drops the link after 3 s: room for a
+    # loaded machine to heal the link in between (_watchdog_stop)
+    cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=20, heartbeat_timeout_ms=1500)
     cam.start()
     cam.get_frame(timeout=10)
     yield cam, t, sim

@@ -24,6 +24,7 @@ import hmac
 import ipaddress
 import json
 import logging
+import socket
 import tempfile
 import threading
 from http.cookies import SimpleCookie
@@ -54,6 +55,7 @@ LOOPBACK_NAMES = ("localhost", "127.0.0.1", "[::1]")
 TOKEN_COOKIE = "stereocam_viewer_token"
 CONNECTION_TIMEOUT_S = 15.0  # a connection silent this long (half-sent request, idle keep-alive) is closed
 MAX_CONNECTIONS = 32  # connections served at once; more are answered 503 and closed
+REFUSAL_LINGER_S = 0.2  # how long a refused connection's request is read before it is closed
 
 
 def _no_constant(name: str) -> None:
@@ -88,6 +90,12 @@ class ViewerServer(ThreadingHTTPServer):
         if not self._slots.acquire(blocking=False):
             try:
                 request.sendall(b"HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0\r\nConnection: close\r\n\r\n")
+                request.shutdown(socket.SHUT_WR)
+                # read what the client sent (briefly): closing over unread bytes would reset the
+                # connection, and the client might lose the answer
+                request.settimeout(REFUSAL_LINGER_S)
+                while request.recv(65536):
+                    pass
             except OSError:
                 pass
             self.shutdown_request(request)
