@@ -8,7 +8,7 @@ LINKED := $(VENV)/.linked
 # it links files, so adding or removing a source file (a folder's mtime changes) relinks it.
 SOURCE_DIRS := $(shell find host protocol device_sim tools -type d -not -name __pycache__)
 
-.PHONY: demo test lint bench soak clean
+.PHONY: demo test lint bench soak stability clean
 
 $(STAMP): pyproject.toml setup.py
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -34,6 +34,18 @@ TEST_WORKERS ?= auto
 
 test: lint
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist load
+
+# The suite's stability on a busy machine: RUNS full runs of `make test`, one after another, with two
+# busy-loop processes beside them; each run's output in out/stability-N.log, a line per run.
+RUNS ?= 5
+stability: $(LINKED)
+	@mkdir -p out; $(PY) -c 'while True: pass' & b1=$$!; $(PY) -c 'while True: pass' & b2=$$!; \
+	trap 'kill $$b1 $$b2' EXIT; failed=0; \
+	for i in $$(seq $(RUNS)); do \
+	  start=$$(date +%s); load=$$(cut -d' ' -f1-3 /proc/loadavg); \
+	  $(MAKE) --no-print-directory test > out/stability-$$i.log 2>&1 || failed=$$((failed + 1)); \
+	  echo "run $$i: $$(( $$(date +%s) - start )) s, load $$load at start: $$(grep -E '[0-9]+ (passed|failed)' out/stability-$$i.log | tail -1)"; \
+	done; echo "$$failed of $(RUNS) runs failed"; test $$failed = 0
 
 bench: $(LINKED)
 	$(VENV)/bin/stereocam bench

@@ -77,6 +77,16 @@ class RawTcp:
         self.sock.close()
 
 
+def _serving(server, sim: SimulatedCamera):
+    """A fixture's body: ``server`` serving ``sim`` on a thread until the test ends."""
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield server, sim
+    server.close()
+    thread.join(5)
+    sim.close()
+
+
 @pytest.fixture
 def clock() -> FakeClock:
     return FakeClock()
@@ -85,13 +95,7 @@ def clock() -> FakeClock:
 @pytest.fixture
 def tcp(clock):
     sim = SimulatedCamera(seed=91, timebase=clock)  # the link timeouts run on the test's clock
-    server = TcpServer(sim)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    yield server, sim
-    server.close()
-    thread.join(5)
-    sim.close()
+    yield from _serving(TcpServer(sim), sim)
 
 
 def test_a_connection_that_never_speaks_is_dropped(tcp, clock) -> None:
@@ -162,13 +166,7 @@ def test_an_in_process_link_that_goes_silent_is_dropped() -> None:
 @pytest.fixture
 def pty():
     sim = SimulatedCamera(seed=93)
-    server = PtyServer(sim, send_timeout=0.5)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    yield server, sim
-    server.close()
-    thread.join(5)
-    sim.close()
+    yield from _serving(PtyServer(sim, send_timeout=0.5), sim)
 
 
 def test_a_pty_host_that_dies_mid_stream_blocks_nothing_and_leaves_nothing(pty) -> None:
@@ -252,13 +250,7 @@ def test_a_silent_host_with_the_watchdog_off_yields_the_tcp_slot_to_the_next_hos
 @pytest.fixture
 def default_pty():
     sim = SimulatedCamera(seed=94)
-    server = PtyServer(sim)  # the default send timeout (5 s): longer than the watchdog's
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    yield server, sim
-    server.close()
-    thread.join(5)
-    sim.close()
+    yield from _serving(PtyServer(sim), sim)  # the default send timeout (5 s): longer than the watchdog's
 
 
 def test_the_next_pty_host_after_one_killed_mid_stream_gets_no_stale_output_and_a_prompt_answer(default_pty) -> None:
