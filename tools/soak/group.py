@@ -7,15 +7,13 @@ while the honest heads stream) and the process's peak resident memory before and
 """
 from __future__ import annotations
 
-import resource
-import sys
 import time
 
 import stereocam
 from stereocam.device_sim import SimulatedCamera, TriggerLine
 from stereocam.device_sim.trigger import TriggerMaster
 
-from .parts import Report
+from .parts import Report, peak_memory_mib, reset_peak_memory, resident_mib
 
 JUMPS = (10**6, 10**7, 2**31, 2**32 - 7)  # the offsets the lying head adds (ids are 32-bit on the wire)
 HEADS = 3
@@ -24,19 +22,14 @@ SMALL = dict(width=160, height=120, outputs=int(stereocam.Output.LEFT))
 MEMORY_GOAL_MB = 256  # peak-memory growth over the stage that fails the soak
 
 
-def _peak_rss_mb() -> float:
-    """This process's peak resident memory so far (MB)."""
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return peak / 2**20 if sys.platform == "darwin" else peak / 1024
-
-
 def lying_head_group(seconds: float, hang_s: float = 5.0, seed: int = 0) -> Report:
     """``seconds`` of group streaming, split over the JUMPS, with head 1 lying about trigger ids."""
     rep = Report("lying-head group")
     line = TriggerLine()
     sims = [SimulatedCamera(serial=f"LIAR{seed}-{i}", seed=seed + i, trigger_line=line) for i in range(HEADS)]
     liar = sims[1]
-    before = _peak_rss_mb()
+    reset_peak_memory()  # this stage's peak, not the process's history
+    before = resident_mib()
     slowest = 0.0
     sets = 0
     try:
@@ -64,7 +57,7 @@ def lying_head_group(seconds: float, hang_s: float = 5.0, seed: int = 0) -> Repo
     finally:
         for s in sims:
             s.close()
-    after = _peak_rss_mb()
+    after = peak_memory_mib()
     rep.figures.update({
         "jumps": ", ".join(str(j) for j in JUMPS),
         "sets": sets,

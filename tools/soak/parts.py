@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import random
+import resource
+import sys
 import time
 import zlib
 from dataclasses import dataclass, field
@@ -12,6 +14,41 @@ from stereocam.protocol.framing import HEADER_LEN, MAX_HEADER_LEN, TRAILER_LEN, 
 
 from stereocam.tools.bench.decoder import valid_header
 from .fault_link import FaultyTransport, LineNoise
+
+
+def reset_peak_memory() -> None:
+    """Start a new peak-memory measurement: on Linux the process's peak resident size (VmHWM) is
+    reset, so a stage's figure is its own and not that of whatever ran before it in this process."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:  # not Linux: peak_memory_mib() is then the process's peak so far
+        pass
+
+
+def peak_memory_mib() -> float:
+    """Peak resident memory since reset_peak_memory() (Linux VmHWM), else the process's peak so far."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**20 if sys.platform == "darwin" else peak / 1024
+
+
+def resident_mib() -> float:
+    """Resident memory now (Linux VmRSS), else the process's peak so far."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return peak_memory_mib()
 
 SAMPLES: list[m.Message] = [
     m.GetInfo(), m.SetConfig({1: 640, 2: 480, 14: 5}), m.Trigger(), m.Heartbeat(), m.TimeSync(), m.GetConfig(),

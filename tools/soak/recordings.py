@@ -13,7 +13,6 @@ import hashlib
 import io
 import logging
 import random
-import resource
 import shutil
 import struct
 import tempfile
@@ -29,7 +28,7 @@ from mcap.stream_reader import StreamReader
 from stereocam.protocol.errors import StereoCamError
 from stereocam.recording.mcapwriter import ChunkedWriter
 
-from .parts import Report, mutate
+from .parts import Report, mutate, peak_memory_mib, reset_peak_memory
 
 BOMBS = ("declares 1 GiB", "zstd header claims 4 GiB", "zstd header claims 1 TiB")
 
@@ -149,6 +148,7 @@ def fuzz_recordings(files: int, seed: int = 0, hang_s: float = 60.0) -> Report:
 
     rng = random.Random(seed)
     rep = Report("hostile recordings")
+    reset_peak_memory()  # this stage's peak, not the process's history
     refused = changed = 0
     dask_log = logging.getLogger("distributed")
     level = dask_log.level
@@ -198,5 +198,5 @@ def fuzz_recordings(files: int, seed: int = 0, hang_s: float = 60.0) -> Report:
     rep.figures["files"] = files
     rep.figures["operations refused (damaged, exit 1/2)"] = refused
     rep.figures["files changed outside the output"] = changed
-    rep.figures["peak memory MiB"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+    rep.figures["peak memory MiB"] = round(peak_memory_mib())
     return rep
