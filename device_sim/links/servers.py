@@ -73,17 +73,17 @@ class PtyServer:
     def _hang_up(self) -> None:
         self._session += 1
 
-    def _flush(self) -> None:
-        """Discard what the pty holds in both directions."""
+    def _flush(self, queue: int = termios.TCIOFLUSH) -> None:
+        """Discard what the pty holds: both directions, or one (termios.TCOFLUSH: the output)."""
         try:
-            termios.tcflush(self._master, termios.TCIOFLUSH)
+            termios.tcflush(self._master, queue)
         except termios.error:
             pass
 
-    def _attach(self) -> None:
+    def _attach(self, queue: int = termios.TCIOFLUSH) -> None:
         """A new host: discard what the pty still holds for the last one, then link up."""
         self._session += 1
-        self._flush()
+        self._flush(queue)
         self.sim.attach(self._write, self._hang_up)
 
     def _host_left(self) -> None:
@@ -109,8 +109,8 @@ class PtyServer:
                 self._stop.wait(0.05)
                 continue
             if data:
-                if not self.sim.attached:
-                    self._attach()
+                if not self.sim.attached:  # a new host's first bytes: keep the rest of what it sent
+                    self._attach(termios.TCOFLUSH)
                 self.sim.receive(data)
 
     def shutdown(self) -> None:
