@@ -14,18 +14,9 @@ from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.protocol import messages as m
 from stereocam.recording.reader import Recording
 from tests.support.device import SMALL
-from tests.support.faults import FaultyTransport, PacketFilter
+from tests.support.faults import FaultyTransport, PacketFilter, as_v1_1_info
 
 CAMERA_THREADS = ("stereocam-link", "stereocam-heartbeat", "stereocam-repair", "stereocam-callbacks")
-
-
-def _without_repair(p) -> bytes | None:
-    """INFO as a protocol 1.1 device sends it: no FRAME_REPAIR capability."""
-    if p.msg_type != m.MsgType.INFO:
-        return None
-    info = m.decode_packet(p)
-    return m.encode(dataclasses.replace(info, protocol_version=(1, 1),
-                                        capabilities=info.capabilities & ~m.Capability.FRAME_REPAIR), p.request_id)
 
 
 def _camera_threads() -> list[str]:
@@ -43,7 +34,7 @@ def test_an_open_camera_without_repair_runs_two_threads():
     before = _camera_threads()
     sim = SimulatedCamera(seed=31)
     t = FaultyTransport(InProcessTransport(sim))
-    t.set_manipulator(read=PacketFilter(_without_repair))
+    t.set_manipulator(read=PacketFilter(as_v1_1_info))
     cam = Camera(t, timeout=2.0)
     try:
         assert not cam.connection.repairing and not cam.connection.info.capabilities & m.Capability.FRAME_REPAIR

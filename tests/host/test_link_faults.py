@@ -14,16 +14,7 @@ from stereocam.protocol.framing import FLAG_RESEND, Decoder
 from stereocam.protocol.params import defaults
 from stereocam.transports import open_transport
 from tests.support.device import SMALL
-from tests.support.faults import FaultyTransport, PacketFilter
-
-
-def as_v1_1_info(p) -> bytes | None:
-    """Rewrite INFO as a protocol 1.1 device sends it: no FRAME_REPAIR capability."""
-    if p.msg_type != m.MsgType.INFO:
-        return None
-    info = m.decode_packet(p)
-    return m.encode(dataclasses.replace(info, protocol_version=(1, 1),
-                                        capabilities=info.capabilities & ~m.Capability.FRAME_REPAIR), p.request_id)
+from tests.support.faults import FaultyTransport, PacketFilter, as_v1_1_info
 
 
 @pytest.fixture

@@ -2,8 +2,10 @@
 (``stereocam.tools.soak.fault_link``, shared with ``stereocam soak``); packet-level rules live here."""
 from __future__ import annotations
 
+import dataclasses
 from typing import Callable
 
+from stereocam.protocol import messages as m
 from stereocam.protocol.framing import Decoder, encode_frame
 from stereocam.tools.soak.fault_link import FaultyTransport, LineNoise, Manipulator
 
@@ -23,3 +25,12 @@ class PacketFilter:
             replaced = self.rule(p)
             out.append(encode_frame(p.msg_type, p.request_id, p.payload, p.flags) if replaced is None else replaced)
         return b"".join(out)
+
+
+def as_v1_1_info(p) -> bytes | None:
+    """Rewrite INFO as a protocol 1.1 device sends it: no FRAME_REPAIR capability."""
+    if p.msg_type != m.MsgType.INFO:
+        return None
+    info = m.decode_packet(p)
+    return m.encode(dataclasses.replace(info, protocol_version=(1, 1),
+                                        capabilities=info.capabilities & ~m.Capability.FRAME_REPAIR), p.request_id)
