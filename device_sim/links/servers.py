@@ -32,7 +32,8 @@ class PtyServer:
     bytes that arrive start a new link, and the output still queued for the old host is discarded.
     The server does not hold the slave open itself, so a host that closes it (or dies) shows at
     once (the master reads EIO while nobody holds the slave): the device detaches, which stops the
-    stream, and what the pty still holds is discarded.
+    stream, and the output the pty still holds is discarded. The device links up on a host's first
+    bytes, so a host that opens the port the moment the server starts loses nothing it sent.
     """
 
     def __init__(self, sim: SimulatedCamera, send_timeout: float = SEND_TIMEOUT_S):
@@ -73,17 +74,19 @@ class PtyServer:
     def _hang_up(self) -> None:
         self._session += 1
 
-    def _flush(self, queue: int = termios.TCIOFLUSH) -> None:
-        """Discard what the pty holds: both directions, or one (termios.TCOFLUSH: the output)."""
+    def _flush_output(self) -> None:
+        """Discard the output the pty still holds for the last host. Never its input: a next host's
+        first bytes may already be in it."""
         try:
-            termios.tcflush(self._master, queue)
+            termios.tcflush(self._master, termios.TCOFLUSH)
         except termios.error:
             pass
 
-    def _attach(self, queue: int = termios.TCIOFLUSH) -> None:
-        """A new host: discard what the pty still holds for the last one, then link up."""
+    def _attach(self) -> None:
+        """A new host (its first bytes arrived): discard what the pty still holds for the last one,
+        then link up."""
         self._session += 1
-        self._flush(queue)
+        self._flush_output()
         self.sim.attach(self._write, self._hang_up)
 
     def _host_left(self) -> None:
@@ -91,11 +94,10 @@ class PtyServer:
         if self.sim.attached:
             self._session += 1
             self.sim.detach()
-            self._flush()
+            self._flush_output()
 
     def serve_forever(self) -> None:
         os.set_blocking(self._master, False)
-        self._attach()
         while not self._stop.is_set():
             ready, _, _ = select.select([self._master], [], [], 0.1)
             if not ready:
@@ -110,7 +112,7 @@ class PtyServer:
                 continue
             if data:
                 if not self.sim.attached:  # a new host's first bytes: keep the rest of what it sent
-                    self._attach(termios.TCOFLUSH)
+                    self._attach()
                 self.sim.receive(data)
 
     def shutdown(self) -> None:
