@@ -1,4 +1,4 @@
-"""Point clouds to PLY (binary little-endian, x y z float32 + grey as r g b uchar)."""
+"""Point clouds to PLY (binary little-endian, x y z float32 + colour (or grey) as r g b uchar)."""
 from __future__ import annotations
 
 import os
@@ -9,10 +9,11 @@ import numpy as np
 from stereocam.protocol.errors import ConfigError
 
 
-def write_ply(path: str | Path, points: np.ndarray, grey: np.ndarray | None = None) -> int:
-    """Write ``points`` (N x 3, metres) with optional grey levels (N values, 0..255); returns the
-    vertex count. ConfigError naming the argument for points or grey of another shape or kind, or a
-    path that cannot be written."""
+def write_ply(path: str | Path, points: np.ndarray, grey: np.ndarray | None = None,
+              rgb: np.ndarray | None = None) -> int:
+    """Write ``points`` (N x 3, metres) with optional grey levels (N values, 0..255) or colours
+    (``rgb``: N x 3 uint8); returns the vertex count. ConfigError naming the argument for points,
+    grey or rgb of another shape or kind, or a path that cannot be written."""
     try:
         pts = np.asarray(points, dtype="<f4")
     except (TypeError, ValueError) as exc:
@@ -37,6 +38,11 @@ def write_ply(path: str | Path, points: np.ndarray, grey: np.ndarray | None = No
     rec = np.empty(n, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("r", "u1"), ("g", "u1"), ("b", "u1")])
     rec["x"], rec["y"], rec["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
     rec["r"] = rec["g"] = rec["b"] = g
+    if rgb is not None:
+        colours = np.asarray(rgb)
+        if colours.shape != (n, 3) or colours.dtype != np.uint8:
+            raise ConfigError(f"rgb must be {n} x 3 uint8 colours (one per point), got {colours.shape} {colours.dtype}")
+        rec["r"], rec["g"], rec["b"] = colours[:, 0], colours[:, 1], colours[:, 2]
     header = ("ply\nformat binary_little_endian 1.0\ncomment stereocam point cloud, metres, left camera frame\n"
               f"element vertex {n}\nproperty float x\nproperty float y\nproperty float z\n"
               "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n")

@@ -15,20 +15,23 @@ def disparity_range(frame: stereocam.Frame) -> tuple[float, float]:
     return float(fmt.min_disparity), float(fmt.min_disparity + fmt.num_disparities)
 
 
-def colorize(frame: stereocam.Frame) -> np.ndarray:
-    """Disparity as a TURBO colour map (near = warm), BGR uint8, invalid pixels black."""
+def colorize(frame: stereocam.Frame, span: tuple[float, float] | None = None) -> np.ndarray:
+    """Disparity as a TURBO colour map (near = warm), BGR uint8, invalid pixels black; ``span``:
+    the disparities (px) at the map's ends, else the searched range."""
     d = frame.disparity_px()
-    lo, hi = disparity_range(frame)
+    lo, hi = span or disparity_range(frame)
     norm = np.nan_to_num((d - lo) / max(hi - lo, 1), nan=0.0)
     img = cv2.applyColorMap((np.clip(norm, 0, 1) * 255).astype(np.uint8), cv2.COLORMAP_TURBO)
     img[np.isnan(d)] = 0
     return img
 
 
-def depth_ticks(frame: stereocam.Frame, count: int = 7) -> list[tuple[float, float]]:
+def depth_ticks(frame: stereocam.Frame, count: int = 7,
+                span: tuple[float, float] | None = None) -> list[tuple[float, float]]:
     """(disparity px, depth m) pairs for a colour bar labelled in metres: round depths whose
-    disparities fall inside the searched range, near to far, at least 1/``count`` of the bar apart."""
-    lo, hi = disparity_range(frame)
+    disparities fall inside ``span`` (default: the searched range), near to far, at least
+    1/``count`` of the bar apart."""
+    lo, hi = span or disparity_range(frame)
     fb = frame.geometry.focal_px * frame.geometry.baseline_m
     if fb <= 0:
         return []

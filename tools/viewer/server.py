@@ -5,12 +5,19 @@ GET  /api/state             identity, rates, host and device counters, configura
 GET  /api/frame?after=SEQ   the newest frame's metadata (waits up to 1 s for one newer than SEQ)
 GET  /image/PLANE.jpg       the newest frame's left, right or colour-mapped disparity as JPEG
 GET  /api/point?x=&y=       disparity, depth and 3-D point under the cursor
+GET  /api/points.bin?step=&colour=depth|left  the newest frame's point cloud for the 3-D view
+                            (u32 count, x y z float32 each, r g b bytes each)
 POST /api/config            {"name": value, ...}; a refusal answers 409 with the device's reason
+                            and the configuration the camera kept
                             (every POST: JSON, same origin, at most MAX_BODY bytes, else 415/403/413)
+POST /api/config/reset      every setting to its default
+POST /api/preset/save|load  {"name": NAME}: the configuration to/from --record-dir/NAME.preset.json
+POST /api/range             {"near_m": N, "far_m": F} (or nulls): the colour map's and histogram's range
 POST /api/start|stop|trigger
 POST /api/record/start|stop every frame to an MCAP file in the viewer's --record-dir (its path answered)
-GET  /snapshot/NAME         the newest frame as left.png, right.png, disparity.png (depth colour bar)
-                            or points.ply, as a download
+GET  /snapshot/NAME         the newest frame as left.png, right.png, disparity.png (depth colour bar),
+                            disparity.npy (raw int16), disparity16.png (uint16, 1/16 px, 0 invalid)
+                            or points.ply (?colour=depth|left), as a download
 
 A camera group (``GroupViewerSession``) has its own page instead:
 GET  /                      static/group.html (group.js, viewer.css)
@@ -25,29 +32,26 @@ import ipaddress
 import json
 import logging
 import socket
-import tempfile
 import threading
 from http.cookies import SimpleCookie
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
-from pathlib import Path
 from typing import Any, Iterable
 from urllib.parse import parse_qs, urlsplit
 
 import stereocam
 from stereocam.recording import RecordingError
-from stereocam.tools.camera.capture import save_frame
-
+from .cloud import cloud_bytes, sampled_points
 from .group_session import GroupViewerSession
 from .session import ViewerSession
+from .snapshots import MEDIA, SNAPSHOTS, MissingSnapshot, snapshot
 
 STATIC = {"/": ("index.html", "text/html; charset=utf-8"), "/viewer.js": ("viewer.js", "text/javascript"),
-          "/viewer.css": ("viewer.css", "text/css")}
+          "/cloud3d.js": ("cloud3d.js", "text/javascript"), "/viewer.css": ("viewer.css", "text/css")}
 GROUP_STATIC = {"/": ("group.html", "text/html; charset=utf-8"), "/group.js": ("group.js", "text/javascript"),
                 "/viewer.css": ("viewer.css", "text/css")}
 MAX_BODY = 64 * 1024  # bytes of a POST body: a configuration is a few hundred
-SNAPSHOTS = {"left.png": "left", "right.png": "right", "disparity.png": "disparity_png", "points.ply": "ply"}
 _log = logging.getLogger(__name__)
 
 
@@ -229,8 +233,10 @@ class _Handler(BaseHTTPRequestHandler):
                                                           "X-Stale": "1" if session.stale else "0"})
         elif path == "/api/point":
             self._json(session.point(int(query["x"]), int(query["y"])))
+        elif path == "/api/points.bin":
+            self._cloud(session, int(query.get("step", 2)), query.get("colour", "depth"))
         elif path.startswith("/snapshot/") and path[len("/snapshot/"):] in SNAPSHOTS:
-            self._snapshot(path[len("/snapshot/"):])
+            self._snapshot(session, path[len("/snapshot/"):], query.get("colour", "left"))
         else:
             self._json({"error": f"no such page {path}"}, HTTPStatus.NOT_FOUND)
 
@@ -252,21 +258,26 @@ class _Handler(BaseHTTPRequestHandler):
         else:
             self._json({"error": f"no such page {path}"}, HTTPStatus.NOT_FOUND)
 
-    def _snapshot(self, name: str) -> None:
-        frame = self.server.session.newest(wait=0)
+    def _snapshot(self, session: ViewerSession, name: str, colour: str) -> None:
+        frame = session.newest(wait=0)
         if frame is None:
             self._json({"error": "no frame yet"}, HTTPStatus.NOT_FOUND)
             return
-        with tempfile.TemporaryDirectory() as tmp:
-            paths = save_frame(frame, Path(tmp), "snapshot")
-            key = SNAPSHOTS[name]
-            if key not in paths:
-                self._json({"error": f"the newest frame has no {name}"}, HTTPStatus.NOT_FOUND)
-                return
-            body = paths[key].read_bytes()
-        ctype = "image/png" if name.endswith(".png") else "application/octet-stream"
-        self._send(body, ctype, headers={"Content-Disposition":
-                                         f'attachment; filename="frame{frame.sequence:06d}_{name}"'})
+        try:
+            body = snapshot(frame, name, colour, session.span(frame) if frame.disparity is not None else (0, 1))
+        except MissingSnapshot as exc:
+            self._json({"error": f"no {name}: {exc}"}, HTTPStatus.NOT_FOUND)
+            return
+        self._send(body, MEDIA[name[name.rindex("."):]], headers={
+            "Content-Disposition": f'attachment; filename="frame{frame.sequence:06d}_{name}"'})
+
+    def _cloud(self, session: ViewerSession, step: int, colour: str) -> None:
+        frame = session.newest(wait=0)
+        if frame is None or frame.disparity is None:
+            self._json({"error": "the newest frame has no disparity"}, HTTPStatus.NOT_FOUND)
+            return
+        body = cloud_bytes(*sampled_points(frame, step, colour, session.span(frame)))
+        self._send(body, "application/octet-stream", headers={"X-Sequence": str(frame.sequence)})
 
     def _refuse_action(self) -> bool:
         """Actions change the camera: only the viewer's own page may ask. A request another web page
@@ -303,6 +314,14 @@ class _Handler(BaseHTTPRequestHandler):
             raise ValueError(f"the body must be a JSON object, not {type(body).__name__}")
         return body
 
+    @staticmethod
+    def _kept(cam: stereocam.Camera) -> dict[str, Any]:
+        """The configuration the camera kept after a refusal (the page shows it, not the refused value)."""
+        try:
+            return {"config": cam.config()}
+        except stereocam.StereoCamError:
+            return {}
+
     def do_POST(self) -> None:  # noqa: N802 - http.server's name
         session = self.server.session
         try:
@@ -325,6 +344,14 @@ class _Handler(BaseHTTPRequestHandler):
         try:
             if path == "/api/config":
                 self._json({"config": cam.configure(**_settings(body))})
+            elif path == "/api/config/reset":
+                self._json({"config": session.reset()})
+            elif path == "/api/preset/save":
+                self._json(session.save_preset(body.get("name")))
+            elif path == "/api/preset/load":
+                self._json(session.load_preset(body.get("name")))
+            elif path == "/api/range":
+                self._json({"span": session.set_span(body.get("near_m"), body.get("far_m"))})
             elif path == "/api/start":
                 cam.start()
                 self._json({"streaming": True})
@@ -341,8 +368,8 @@ class _Handler(BaseHTTPRequestHandler):
                 self._json({"error": f"no such action {path}"}, HTTPStatus.NOT_FOUND)
         except stereocam.DeviceError as exc:
             self._json({"error": str(exc), "reason": exc.device_message, "param": exc.param,
-                        "code": getattr(exc.code, "name", exc.code)}, HTTPStatus.CONFLICT)
+                        "code": getattr(exc.code, "name", exc.code), **self._kept(cam)}, HTTPStatus.CONFLICT)
         except (stereocam.ConfigError, RecordingError, ValueError, TypeError, OSError) as exc:
-            self._json({"error": str(exc), "reason": str(exc)}, HTTPStatus.BAD_REQUEST)
+            self._json({"error": str(exc), "reason": str(exc), **self._kept(cam)}, HTTPStatus.BAD_REQUEST)
         except stereocam.StereoCamError as exc:
             self._json({"error": str(exc), "reason": str(exc)}, HTTPStatus.BAD_GATEWAY)

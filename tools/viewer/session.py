@@ -8,7 +8,6 @@ import itertools
 import re
 import threading
 import time
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -17,15 +16,22 @@ import numpy as np
 
 import stereocam
 from stereocam.dispatch import DropPolicy, FrameQueue
+from stereocam.presets import read_preset
 from stereocam.recording import Recorder, RecordingListener, describe
+from stereocam.protocol.params import Output, TriggerMode, defaults
 from stereocam.tools.camera.info import value_name
 from stereocam.tools.camera.pictures import colorize, depth_ticks, disparity_range
 
+from . import settings
 from .feed import Feed
 
 PLANES = ("left", "right", "disparity")
 JPEG_QUALITY = 85
 RECONNECT_S = 2.0  # one reconnection attempt of the grab thread (it tries again until the camera is back)
+WAITING_S = 1.5  # streaming without a frame this long (and two frame periods): the page says what it waits for
+HISTOGRAM_BINS = 48
+PRESET_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+PRESET_SUFFIX = ".preset.json"
 
 
 def turbo_stops(n: int = 16) -> list[str]:
@@ -49,6 +55,9 @@ class ViewerSession(Feed):
         self._jpegs: dict[tuple[int, str], bytes] = {}
         self._arrivals: collections.deque[float] = collections.deque(maxlen=60)
         self._unseen = 0  # frames taken from the slot but replaced before the page looked
+        self.span_m: tuple[float, float] | None = None  # the near/far range the page asked for (metres)
+        self._pulses: tuple[int, float] | None = None  # device trigger count and when it last changed
+        self._meta: tuple[int, dict[str, Any]] | None = None  # (sequence, frame_meta) of the newest frame
         self._start("stereocam-viewer-grab")
 
     # -- frames ---------------------------------------------------------------------------------
@@ -160,11 +169,56 @@ class ViewerSession(Feed):
                     self._jpegs[key] = cached
         return frame.sequence, cached
 
-    @staticmethod
-    def _image(frame: stereocam.Frame, plane: str) -> np.ndarray | None:
+    def _image(self, frame: stereocam.Frame, plane: str) -> np.ndarray | None:
         if plane == "disparity":
-            return colorize(frame) if frame.disparity is not None else None
+            return colorize(frame, self.span(frame)) if frame.disparity is not None else None
         return getattr(frame, plane)
+
+    # -- the near/far range of the colour map, the histogram and the 3-D view --------------------
+    def span(self, frame: stereocam.Frame) -> tuple[float, float]:
+        """The disparities (px) at the colour map's ends: the page's near/far range, else the
+        range the matcher searched."""
+        if self.span_m is None:
+            return disparity_range(frame)
+        fb = frame.geometry.focal_px * frame.geometry.baseline_m
+        near, far = self.span_m
+        return fb / far, fb / near
+
+    def set_span(self, near_m: float | None, far_m: float | None) -> dict[str, Any]:
+        """Colour (and histogram) from ``near_m`` to ``far_m`` metres; both None: the searched range."""
+        if near_m is None and far_m is None:
+            self.span_m = None
+        elif (isinstance(near_m, (int, float)) and isinstance(far_m, (int, float)) and not isinstance(near_m, bool)
+              and not isinstance(far_m, bool) and 0 < near_m < far_m <= 1e4):
+            self.span_m = (float(near_m), float(far_m))
+        else:
+            raise ValueError(f"near_m and far_m must be metres with 0 < near < far <= 10000, got {near_m!r}, {far_m!r}")
+        with self._cond:
+            self._jpegs.clear()
+            self._meta = None
+        return self.span_doc()
+
+    def span_doc(self) -> dict[str, float | None]:
+        near, far = self.span_m or (None, None)
+        return {"near_m": near, "far_m": far}
+
+    def histogram(self, frame: stereocam.Frame) -> dict[str, Any]:
+        """Valid pixels per depth bin across the colour map's range (near to far), with the pixels
+        nearer and farther than it and the invalid ones."""
+        lo, hi = self.span(frame)
+        fb = frame.geometry.focal_px * frame.geometry.baseline_m
+        d = frame.disparity_px()
+        valid = d[d > 0]
+        z = fb / valid
+        near_m = fb / hi
+        if self.span_m is not None:
+            far_m = fb / lo
+        else:  # the searched range may reach infinity (min_disparity 0): the farthest 1 % is left out
+            far_m = fb / lo if lo > 0 else max(float(np.percentile(z, 99)) if z.size else 2 * near_m, 1.01 * near_m)
+        counts, edges = np.histogram(z, bins=HISTOGRAM_BINS, range=(near_m, far_m))
+        return {"near_m": round(near_m, 3), "far_m": round(far_m, 3), "counts": counts.tolist(),
+                "nearer": int((z < near_m).sum()), "farther": int((z > far_m).sum()),
+                "invalid": int(d.size - valid.size)}
 
     def fps(self) -> float:
         with self._cond:
@@ -174,15 +228,22 @@ class ViewerSession(Feed):
 
     # -- what the page shows --------------------------------------------------------------------
     def frame_meta(self, frame: stereocam.Frame) -> dict[str, Any]:
+        """The frame's size, planes, colour bar (ticks in metres) and depth histogram."""
+        with self._cond:
+            if self._meta is not None and self._meta[0] == frame.sequence:
+                return {**self._meta[1], "stale": self.stale}
         meta: dict[str, Any] = {"sequence": frame.sequence, "width": frame.width, "height": frame.height,
                                 "rectified": frame.rectified, "status": frame.status.value,
-                                "planes": [p for p in PLANES if getattr(frame, p) is not None],
-                                "stale": self.stale}
+                                "planes": [p for p in PLANES if getattr(frame, p) is not None]}
         if frame.disparity is not None:
-            lo, hi = disparity_range(frame)
+            lo, hi = self.span(frame)
             meta["colorbar"] = {"near_to_far": turbo_stops(),
-                                "ticks": [{"at": (hi - d) / (hi - lo), "metres": z} for d, z in depth_ticks(frame)]}
-        return meta
+                                "ticks": [{"at": (hi - d) / (hi - lo), "metres": z}
+                                          for d, z in depth_ticks(frame, span=(lo, hi))]}
+            meta["histogram"] = self.histogram(frame)
+        with self._cond:
+            self._meta = (frame.sequence, meta)
+        return {**meta, "stale": self.stale}
 
     def point(self, x: int, y: int) -> dict[str, Any]:
         """Disparity, depth and the 3-D point (metres, left camera frame) at pixel (x, y) of the newest frame."""
@@ -197,19 +258,97 @@ class ViewerSession(Feed):
         return {"x": x, "y": y, "sequence": frame.sequence, "valid": True, "disparity_px": d, "depth_m": z,
                 "point_m": [(x - g.cx) * z / g.focal_px, (y - g.cy) * z / g.focal_px, z]}
 
+    def frame_age(self) -> float | None:
+        """Seconds since the newest frame came (None before the first)."""
+        with self._cond:
+            return time.monotonic() - self._arrivals[-1] if self._arrivals else None
+
+    def waiting(self, config: dict[str, int], counters: dict[str, int]) -> str | None:
+        """What a streaming camera without frames waits for: an external pulse (and whether the
+        device has seen one lately), a software trigger; None while frames come."""
+        pulses = counters.get("triggers")
+        now = time.monotonic()
+        if pulses is not None and (self._pulses is None or self._pulses[0] != pulses):
+            self._pulses = (pulses, now)
+        age = self.frame_age()
+        quiet = max(WAITING_S, 2.0 / max(config.get("fps", 1), 1))
+        if not self.cam.streaming or (age is not None and age < quiet):
+            return None
+        mode = config.get("trigger_mode")
+        if mode == TriggerMode.EXTERNAL:
+            if self._pulses is None or now - self._pulses[1] >= quiet:
+                return "waiting for external trigger: no pulse seen on the trigger input"
+            return "waiting for external trigger"
+        if mode == TriggerMode.SOFTWARE:
+            return "waiting for a software trigger (press Trigger)"
+        return None
+
+    def expected_planes(self, config: dict[str, int]) -> list[str]:
+        """The planes the configuration asks for (``outputs``; disparity only when rectified)."""
+        outputs = Output(config.get("outputs", 0))
+        return [p for p in PLANES if Output[p.upper()] in outputs and (p != "disparity" or config.get("rectify", 1))]
+
     def state(self) -> dict[str, Any]:
         cam = self.cam
         info = cam.info()
         config = cam.config()
         status = cam.last_status
+        device = dict(status.counters) if status else {}
+        age = self.frame_age()
         return {
             "url": cam.url, "model": info.model, "serial": info.serial, "firmware": info.firmware_version,
             "streaming": cam.streaming, "fps": round(self.fps(), 1), "viewer_skipped": self.skipped,
-            "stale": self.stale,
-            "error": self.error or self.recording_error, "recording": self.recording(), "host": cam.stats, "device": dict(status.counters) if status else {},
-            "config": config, "config_names": {k: value_name(k, v) for k, v in config.items()},
-            "options": [{**asdict(p), "value": config.get(p.name)} for p in cam.options() if p.name in config],
+            "stale": self.stale, "frame_age_s": None if age is None else round(age, 2),
+            "waiting": self.waiting(config, device), "expected_planes": self.expected_planes(config),
+            "error": self.error or self.recording_error, "recording": self.recording(), "host": cam.stats,
+            "device": device, "config": config, "config_names": {k: value_name(k, v) for k, v in config.items()},
+            "groups": [*settings.GROUPS, settings.OTHER],
+            "options": [settings.describe(p, config.get(p.name)) for p in cam.options() if p.name in config],
+            "presets": self.presets(), "span": self.span_doc(),
         }
+
+    # -- configuration: defaults and presets ---------------------------------------------------
+    def reset(self) -> dict[str, int]:
+        """Every setting to the table's default (stopping the stream for those only a stopped camera
+        takes, and starting it again); returns the new configuration."""
+        config = self.cam.config()
+        changed = {k: v for k, v in defaults().items() if k in config and config[k] != v}
+        return self._apply(changed)
+
+    def _apply(self, values: dict[str, int]) -> dict[str, int]:
+        """``values`` applied, around a stop and start if one of them is not live."""
+        restart = self.cam.streaming and any(not p.live for p in self.cam.options() if p.name in values)
+        if restart:
+            self.cam.stop()
+        try:
+            return self.cam.configure(**values)
+        finally:
+            if restart:
+                self.cam.start()
+
+    def _preset_path(self, name: str) -> Path:
+        if not isinstance(name, str) or not PRESET_NAME.match(name) or name.startswith("."):
+            raise ValueError(f"a preset name is 1..64 letters, digits, '_', '-' or '.', got {name!r}")
+        return self.record_dir / f"{name}{PRESET_SUFFIX}"
+
+    def presets(self) -> list[str]:
+        """The presets saved in ``record_dir``, by name."""
+        try:
+            return sorted(p.name[:-len(PRESET_SUFFIX)] for p in self.record_dir.glob(f"*{PRESET_SUFFIX}"))
+        except OSError:
+            return []
+
+    def save_preset(self, name: str) -> dict[str, Any]:
+        """The whole configuration to ``record_dir``/NAME.preset.json (the SDK's preset file)."""
+        path = self._preset_path(name)
+        return {"preset": name, "path": str(path), "config": self.cam.save_preset(path)}
+
+    def load_preset(self, name: str) -> dict[str, Any]:
+        """Apply a saved preset (all or nothing); returns the new configuration."""
+        path = self._preset_path(name)
+        if not path.exists():
+            raise ValueError(f"no preset {name!r} in {self.record_dir}")
+        return {"preset": name, "config": self._apply(read_preset(path))}
 
     def close(self) -> None:
         super().close()

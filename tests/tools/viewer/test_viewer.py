@@ -158,7 +158,7 @@ def test_viewer_page_in_a_headless_browser(viewer, tmp_path):
 
         browser.evaluate(page, "(() => { const i = document.getElementById('in-exposure_us'); i.value = 2500; "
                                "i.dispatchEvent(new Event('change')); })()")
-        browser.wait_for(page, "document.querySelector('#param-exposure_us .reason').textContent.includes('set to')")
+        browser.wait_for(page, "document.querySelector('#param-exposure_us .reason').textContent.includes('= 2500')")
         assert viewer.session.cam.config()["exposure_us"] == 2500
 
         box = browser.evaluate(page, "JSON.stringify(document.getElementById('disparity').getBoundingClientRect())")

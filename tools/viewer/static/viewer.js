@@ -1,14 +1,19 @@
-// stereocam viewer page: polls for the newest frame (never a backlog), edits the configuration.
+// stereocam viewer page: polls for the newest frame (never a backlog), shows the camera's real
+// configuration (a refused value snaps back, with the reason), counters with rates, the depth
+// histogram, the 3-D view and the state of planes and triggers.
 "use strict";
 const $ = (id) => document.getElementById(id);
+const PLANES = ["left", "right", "disparity"];
 let lastSeq = -1;
 let current = null; // the newest frame's metadata
+let state = null; // the newest /api/state
+const seenIn = {}; // plane -> the last frame that carried it
 
 async function api(path, body) {
   const init = body === undefined ? {} : {method: "POST", body: JSON.stringify(body),
                                            headers: {"Content-Type": "application/json"}};
   const r = await fetch(path, init);
-  return {ok: r.ok, doc: await r.json()};
+  return {ok: r.ok, status: r.status, doc: await r.json()};
 }
 
 function loadImage(img, src) {
@@ -24,15 +29,43 @@ async function frames() {
         current = doc;
         lastSeq = doc.sequence;
         $("sequence").textContent = doc.sequence;
-        const loads = ["left", "right", "disparity"].filter((p) => doc.planes.includes(p))
-          .map((p) => loadImage($(p), `/image/${p}.jpg?seq=${doc.sequence}`));
+        const loads = PLANES.filter((p) => doc.planes.includes(p))
+          .map((p) => { seenIn[p] = doc.sequence; return loadImage($(p), `/image/${p}.jpg?seq=${doc.sequence}`); });
         drawColorbar(doc.colorbar);
+        drawHistogram(doc.histogram);
+        markPlanes();
+        if (doc.planes.includes("disparity")) loads.push(cloud.load(doc.sequence));
         await Promise.all(loads);
       }
     } catch (e) {
       $("error").textContent = `viewer: ${e}`;
       await new Promise((r) => setTimeout(r, 500));
     }
+  }
+}
+
+function markPlanes() {
+  // A plane the newest frame lacks keeps its last image, dimmed and marked: off (the configuration
+  // does not ask for it), missing (asked for but not in the frame) or stale (the camera failed).
+  const expected = state ? state.expected_planes : PLANES;
+  for (const p of [...PLANES, "cloud"]) {
+    const plane = p === "cloud" ? "disparity" : p;
+    const fig = $(`fig-${p}`);
+    const inFrame = current && current.planes.includes(plane);
+    let mark = "", cls = "";
+    if (current && current.stale) { mark = `stale: camera lost, frame ${current.sequence}`; cls = "stale"; }
+    else if (!inFrame && !expected.includes(plane)) {
+      mark = `off (outputs=${state.config.outputs}, rectify=${state.config.rectify})` +
+        (seenIn[plane] !== undefined ? `, last seen in frame ${seenIn[plane]}` : "");
+      cls = seenIn[plane] !== undefined ? "absent" : "off";
+    } else if (current && !inFrame) {
+      mark = `missing from frame ${current.sequence}` +
+        (seenIn[plane] !== undefined ? `, last seen in frame ${seenIn[plane]}` : "");
+      cls = seenIn[plane] !== undefined ? "absent" : "off";
+    } else if (!current) { mark = "no frame yet"; cls = "off"; }
+    fig.classList.remove("absent", "stale", "off");
+    if (cls) fig.classList.add(cls);
+    $(`badge-${p}`).textContent = mark;
   }
 }
 
@@ -44,21 +77,62 @@ function drawColorbar(bar) {
     `<span style="top:${(100 * t.at).toFixed(1)}%">${t.metres} m</span>`).join("");
 }
 
+function drawHistogram(h) {
+  const c = $("histogram"), g = c.getContext("2d");
+  g.clearRect(0, 0, c.width, c.height);
+  if (!h) { $("hist-note").textContent = "no disparity in this frame"; return; }
+  const max = Math.max(1, ...h.counts), n = h.counts.length, w = c.width / n;
+  const stops = current && current.colorbar ? current.colorbar.near_to_far : ["#8cf"];
+  h.counts.forEach((v, i) => {
+    g.fillStyle = stops[Math.min(stops.length - 1, Math.floor(i * stops.length / n))];
+    const bh = (c.height - 16) * v / max;
+    g.fillRect(i * w, c.height - 14 - bh, w - 1, bh);
+  });
+  g.fillStyle = "#aaa"; g.font = "11px system-ui";
+  g.fillText(`${h.near_m} m`, 2, c.height - 2);
+  g.fillText(`${h.far_m} m`, c.width - 60, c.height - 2);
+  $("hist-note").textContent = `${h.nearer} nearer, ${h.farther} farther, ${h.invalid} without depth`;
+  if (document.activeElement !== $("near") && document.activeElement !== $("far")) {
+    $("near").value = h.near_m; $("far").value = h.far_m;
+  }
+}
+
+// -- counters as a table with rates -----------------------------------------------------------
+let lastCounters = null;
+function showCounters(doc) {
+  const h = doc.host;
+  const rows = [["frames", h.frames], ["dropped", h.frames_dropped], ["lost", h.lost],
+    ["queue overflow", h.queue_overflow], ["viewer skipped", doc.viewer_skipped],
+    ["CRC errors", h.header_crc_errors + h.payload_crc_errors], ["retries", h.retries], ["timeouts", h.timeouts],
+    ...Object.entries(doc.device).map(([k, v]) => [`device ${k.replaceAll("_", " ")}`, v])];
+  const now = performance.now();
+  const body = $("counters").tBodies[0];
+  body.innerHTML = "";
+  for (const [name, v] of rows) {
+    const prev = lastCounters ? lastCounters.values[name] : undefined;
+    const rate = prev === undefined ? "" : ((v - prev) * 1000 / (now - lastCounters.t)).toFixed(1);
+    const tr = body.insertRow();
+    tr.dataset.name = name;
+    if (/dropped|lost|overflow|CRC|timeouts|errors/.test(name) && v > 0) tr.className = "bad";
+    for (const cell of [name, v, rate]) tr.insertCell().textContent = cell;
+  }
+  lastCounters = {t: now, values: Object.fromEntries(rows)};
+}
+
 async function refreshState() {
   try {
     const {doc} = await api("/api/state");
+    state = doc;
     $("identity").textContent = `${doc.model} ${doc.serial} firmware ${doc.firmware} at ${doc.url}`;
     $("fps").textContent = doc.fps.toFixed(1);
     $("streaming").textContent = doc.streaming ? "yes" : "no";
+    $("waiting").textContent = doc.waiting || "";
     $("error").textContent = doc.error || "";
-    const h = doc.host;
-    $("counters").textContent =
-      `host: frames ${h.frames} dropped ${h.frames_dropped} lost ${h.lost} queue_overflow ${h.queue_overflow} ` +
-      `viewer_skipped ${doc.viewer_skipped} crc ${h.header_crc_errors + h.payload_crc_errors} ` +
-      `retries ${h.retries} timeouts ${h.timeouts}\n` +
-      `device: ${Object.entries(doc.device).map(([k, v]) => `${k} ${v}`).join(" ")}`;
+    showCounters(doc);
     if (doc.recording || recording) showRecording(doc.recording); // a saved file's line stays
     buildConfig(doc);
+    showPresets(doc.presets);
+    markPlanes();
   } catch (e) {
     $("error").textContent = `viewer: ${e}`;
   }
@@ -77,46 +151,139 @@ function showRecording(rec) {
 $("record").addEventListener("click", async () => {
   const {ok, doc} = await api(recording ? "/api/record/stop" : "/api/record/start", {});
   if (ok) showRecording(doc.recording);
-  else $("error").textContent = `recording refused: ${doc.reason || doc.error}`;
+  else $("action").innerHTML = `<span class="error">recording refused: ${escape(doc.reason || doc.error)}</span>`;
 });
+
+function escape(text) {
+  return String(text).replace(/[&<>"]/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;"})[c]);
+}
+
+// -- configuration: grouped, named choices as menus, the camera's values ---------------------
+function rangeText(p) {
+  if (p.choices) return p.live ? "" : "stopped only";
+  return `${p.lo}…${p.hi}${p.unit ? " " + p.unit : ""}${p.odd ? ", odd" : ""}` +
+    `${p.step > 1 ? `, step ${p.step}` : ""}${p.live ? "" : ", stopped only"}`;
+}
+
+function control(p) {
+  if (p.choices && p.choices.kind === "menu") {
+    return `<select id="in-${p.name}" name="${p.name}">` + Object.entries(p.choices.values)
+      .map(([v, name]) => `<option value="${v}">${name}${Number(v) === p.default ? " (default)" : ""}</option>`)
+      .join("") + "</select>";
+  }
+  if (p.choices && p.choices.kind === "flags") {
+    return `<span class="flags" id="in-${p.name}">` + Object.entries(p.choices.values)
+      .map(([bit, name]) => `<label><input type="checkbox" value="${bit}">${name}</label>`).join("") + "</span>";
+  }
+  const step = p.odd ? 2 : p.step;
+  return `<input id="in-${p.name}" name="${p.name}" type="number" min="${p.lo}" max="${p.hi}" step="${step}" ` +
+    `placeholder="${p.default}">`;
+}
+
+function readControl(p, el) {
+  if (p.choices && p.choices.kind === "flags") {
+    return [...el.querySelectorAll("input")].reduce((acc, i) => acc | (i.checked ? Number(i.value) : 0), 0);
+  }
+  return el.value.trim() === "" ? null : Number(el.value);
+}
+
+function showValue(p, el, value) {
+  if (p.choices && p.choices.kind === "flags") {
+    for (const i of el.querySelectorAll("input")) i.checked = (value & Number(i.value)) !== 0;
+  } else {
+    el.value = value;
+  }
+}
 
 function buildConfig(doc) {
   const form = $("config");
   for (const p of doc.options) {
-    let row = document.getElementById(`param-${p.name}`);
+    let row = $(`param-${p.name}`);
     if (!row) {
+      let group = $(`group-${p.group}`);
+      if (!group) {
+        group = document.createElement("fieldset");
+        group.id = `group-${p.group}`;
+        group.innerHTML = `<legend>${p.group}</legend>`;
+        const order = doc.groups.indexOf(p.group);
+        const after = [...form.children].find((f) => doc.groups.indexOf(f.id.slice(6)) > order);
+        form.insertBefore(group, after || null);
+      }
       row = document.createElement("div");
       row.className = "param";
       row.id = `param-${p.name}`;
-      row.title = p.description;
-      const step = p.odd ? 2 : p.step;
-      row.innerHTML = `<label for="in-${p.name}">${p.name}</label>` +
-        `<input id="in-${p.name}" name="${p.name}" type="number" min="${p.lo}" max="${p.hi}" step="${step}">` +
-        `<span class="range">${p.lo}…${p.hi}${p.unit ? " " + p.unit : ""}${p.odd ? ", odd" : ""}` +
-        `${p.live ? "" : ", stopped only"} (default ${p.default})</span><span class="reason"></span>`;
-      row.querySelector("input").addEventListener("change", (ev) => setParam(p.name, ev.target));
-      form.appendChild(row);
+      row.title = `${p.description} (default ${p.default})`;
+      row.innerHTML = `<label for="in-${p.name}">${p.name.replaceAll("_", " ")}</label>${control(p)}` +
+        `<span class="range">${rangeText(p)}</span><span class="reason"></span>`;
+      const el = row.querySelector(`#in-${p.name}`);
+      el.addEventListener("change", () => setParam(p, el));
+      el.addEventListener("keydown", (ev) => { if (ev.key === "Enter") { ev.preventDefault(); setParam(p, el); } });
+      group.appendChild(row);
     }
-    const input = row.querySelector("input");
-    if (document.activeElement !== input && !row.dataset.refused) input.value = p.value;
+    const el = row.querySelector(`#in-${p.name}`);
+    if (document.activeElement !== el || row.dataset.sent) showValue(p, el, p.value);
   }
 }
 
-async function setParam(name, input) {
-  const row = $(`param-${name}`);
+async function setParam(p, el) {
+  const row = $(`param-${p.name}`);
   const reason = row.querySelector(".reason");
-  const {ok, doc} = await api("/api/config", {[name]: Number(input.value)});
-  if (ok) {
-    delete row.dataset.refused;
-    reason.className = "reason ok";
-    reason.textContent = `set to ${doc.config[name]}`;
-  } else {
-    row.dataset.refused = "1";
+  const value = readControl(p, el);
+  if (value === null) {
     reason.className = "reason error";
-    reason.textContent = `refused: ${doc.reason || doc.error}`;
+    reason.textContent = `not sent: enter a value (${rangeText(p)}, default ${p.default})`;
+    showValue(p, el, state.config[p.name]);
+    return;
   }
+  row.dataset.sent = "1";
+  const {ok, doc} = await api("/api/config", {[p.name]: value});
+  if (doc.config) {
+    state.config = doc.config;
+    showValue(p, el, doc.config[p.name]); // the camera's value: a refused one snaps back
+  }
+  if (ok) {
+    reason.className = "reason ok";
+    reason.textContent = `${p.name} = ${doc.config[p.name]}`;
+    const shown = reason.textContent;
+    setTimeout(() => { if (reason.textContent === shown) reason.textContent = ""; }, 2000);
+  } else {
+    reason.className = "reason error";
+    reason.textContent = `refused ${value}: ${doc.reason || doc.error}`; // stays until the next change
+  }
+  delete row.dataset.sent;
+  if (document.activeElement === el) el.blur();
 }
 
+// -- defaults and presets ---------------------------------------------------------------------
+function showPresets(names) {
+  const list = $("preset-list");
+  const have = [...list.options].map((o) => o.value).join("\n");
+  if (have === names.join("\n")) return;
+  list.innerHTML = names.map((n) => `<option value="${escape(n)}">${escape(n)}</option>`).join("");
+}
+
+async function configAction(path, body, what) {
+  const {ok, doc} = await api(path, body);
+  $("preset-note").className = ok ? "ok" : "error";
+  $("preset-note").textContent = ok ? what : `${what} refused: ${doc.reason || doc.error}`;
+  await refreshState();
+}
+$("reset").addEventListener("click", () => configAction("/api/config/reset", {}, "every setting at its default"));
+$("preset-save").addEventListener("click", () =>
+  configAction("/api/preset/save", {name: $("preset-name").value.trim()}, `saved preset ${$("preset-name").value.trim()}`));
+$("preset-load").addEventListener("click", () =>
+  configAction("/api/preset/load", {name: $("preset-list").value}, `loaded preset ${$("preset-list").value}`));
+
+// -- near/far range ---------------------------------------------------------------------------
+async function setRange(body) {
+  const {ok, doc} = await api("/api/range", body);
+  $("range-reason").textContent = ok ? "" : doc.reason || doc.error;
+  lastSeq = -1; // the same frame again, coloured anew
+}
+$("range-apply").addEventListener("click", () => setRange({near_m: Number($("near").value), far_m: Number($("far").value)}));
+$("range-auto").addEventListener("click", () => setRange({near_m: null, far_m: null}));
+
+// -- the point under the cursor -----------------------------------------------------------------
 async function showPoint(ev) {
   if (!current) return;
   const img = ev.target;
@@ -130,19 +297,23 @@ async function showPoint(ev) {
 }
 
 let pointTimer = null;
-for (const id of ["left", "right", "disparity"]) {
+for (const id of PLANES) {
   $(id).addEventListener("mousemove", (ev) => {
     clearTimeout(pointTimer);
     pointTimer = setTimeout(() => showPoint(ev), 30);
   });
 }
+// An action's answer (a refused trigger's reason) stays until the next action.
 for (const action of ["start", "stop", "trigger"]) {
   $(action).addEventListener("click", async () => {
     const {ok, doc} = await api(`/api/${action}`, {});
-    $("error").textContent = ok ? "" : `${action} refused: ${doc.reason || doc.error}`;
+    $("action").innerHTML = ok ? `<span class="ok">${action}: done</span>`
+      : `<span class="error">${action} refused: ${escape(doc.reason || doc.error)}</span>`;
     refreshState();
   });
 }
+const cloud = new Cloud3D($("cloud"), () => $("cloud-colour").value);
+$("cloud-colour").addEventListener("change", () => cloud.load(lastSeq));
 refreshState();
 setInterval(refreshState, 1000);
 frames();
