@@ -14,9 +14,10 @@ import click
 
 import stereocam
 from stereocam.tools.camera.session import output_dir, preserved_configuration
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, SETTING, epilog
 
 from .group_session import GroupViewerSession
+from .rerun_bridge import RerunBridge, rerun_available
 from .server import ViewerServer
 from .session import ViewerSession
 
@@ -45,8 +46,19 @@ def _interrupt(signum: int, frame: object) -> None:  # noqa: ARG001
 @click.option("--token", default=None, metavar="TEXT|auto",
               help="Answer only requests that carry this token ('auto': a random one); the printed "
                    "address carries it. Advised with --host 0.0.0.0.")
+@click.option("--set", "settings", type=SETTING, multiple=True,
+              help="Configure every camera before viewing (repeatable), e.g. --set fps=5 --set gain=40.")
+@click.option("--rerun", "rerun_spawn", is_flag=True,
+              help="Also stream the images, depth with the pinhole model, point cloud and counters to Rerun "
+                   "(rerun-sdk): to a Rerun viewer it starts, unless --rerun-save or --rerun-connect.")
+@click.option("--rerun-save", type=click.Path(dir_okay=False, writable=True, path_type=Path), default=None,
+              metavar="FILE.rrd", help="Stream to Rerun into this .rrd file (implies --rerun).")
+@click.option("--rerun-connect", default=None, metavar="URL",
+              help="Stream to the Rerun viewer at URL, e.g. rerun+http://127.0.0.1:9876/proxy (implies --rerun).")
 def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_config: bool,
-            record_dir: Path, master: str, allow_hosts: tuple[str, ...], token: str | None) -> int:
+            record_dir: Path, master: str, allow_hosts: tuple[str, ...], token: str | None,
+            settings: tuple[tuple[str, int], ...], rerun_spawn: bool, rerun_save: Path | None,
+            rerun_connect: str | None) -> int:
     """Live viewer: left, right and disparity (colour bar in metres), depth and 3-D point under the
     cursor, frame rate, drops, link and device counters, the configuration with the device's ranges,
     trigger, start/stop, snapshots (PNG, PLY), recording to MCAP. With several URLs: a camera group on
@@ -55,13 +67,26 @@ def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_
     first line printed is the viewer's address. Runs until Ctrl-C; then each camera's configuration
     is put back as found unless --keep-config."""
     access = Access(allow_hosts, secrets.token_urlsafe(18) if token == "auto" else token)
+    rerun = rerun_spawn or rerun_save is not None or rerun_connect is not None
+    if rerun and len(urls) > 1:
+        raise click.UsageError("--rerun streams one camera; give one URL")
+    if rerun and not rerun_available():
+        raise click.UsageError("--rerun needs rerun-sdk: pip install 'stereocam[viewer]'")
     if len(urls) > 1:
         return _view_group(list(urls), port, host, no_browser, keep_config, _master_index(master, len(urls)),
-                           access)
+                           access, dict(settings))
     output_dir(record_dir, "--record-dir")  # made and written into now, not when Record is pressed
     with stereocam.open(urls[0], timeout=2.0) as cam, \
             (contextlib.nullcontext() if keep_config else preserved_configuration(cam)):
-        _serve(ViewerSession(cam, record_dir), host, port, no_browser, cam.start, access)
+        if settings:
+            cam.configure(**dict(settings))
+        session = ViewerSession(cam, record_dir)
+        bridge = RerunBridge(session, rerun_save, rerun_connect) if rerun else None
+        try:
+            _serve(session, host, port, no_browser, cam.start, access)
+        finally:
+            if bridge is not None:
+                bridge.close()
     return 0
 
 
@@ -75,14 +100,14 @@ def _master_index(text: str, cameras: int) -> int | None:
 
 
 def _view_group(urls: list[str], port: int, host: str, no_browser: bool, keep_config: bool,
-                master: int | None, access: Access) -> int:
+                master: int | None, access: Access, config: dict[str, int]) -> int:
     found = {}
     if not keep_config:
         for url in urls:
             with stereocam.open(url, timeout=2.0) as cam:
                 found[url] = cam.config()
     try:
-        with stereocam.CameraGroup(urls, master=master, timeout=5.0) as group:
+        with stereocam.CameraGroup(urls, config=config, master=master, timeout=5.0) as group:
             _serve(GroupViewerSession(group), host, port, no_browser, lambda: None, access)
     finally:
         for url, config in found.items():  # each head as found (the group put it on external trigger)

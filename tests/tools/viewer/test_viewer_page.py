@@ -228,3 +228,42 @@ def test_raw_snapshots_are_data(viewer):
     rec = np.frombuffer(body, dtype=[("xyz", "<f4", 3), ("rgb", "u1", 3)])
     assert len(rec) == n > 1000 and b"property uchar red" in header
     assert len({tuple(c) for c in rec["rgb"][::50]}) > 5 and np.any(rec["rgb"][:, 0] != rec["rgb"][:, 2])  # colour
+
+
+def _canvas_pixels(browser: Chromium, page: Page) -> np.ndarray:
+    """The 3-D view's canvas as it is on screen (RGB), cut from a screenshot of the page."""
+    box = json.loads(page.js("JSON.stringify(document.getElementById('cloud').getBoundingClientRect())"))
+    shot = cv2.imdecode(np.frombuffer(browser.screenshot(page.session), np.uint8), cv2.IMREAD_COLOR)[:, :, ::-1]
+    x, y = int(box["x"]) + 2, int(box["y"]) + 2
+    return shot[y:y + int(box["height"]) - 4, x:x + int(box["width"]) - 4]
+
+
+def _drawn(pixels: np.ndarray) -> np.ndarray:
+    return np.any(np.abs(pixels.astype(int) - 26) > 6, axis=2)  # not the background (#1a1a1a)
+
+
+def test_the_3d_view_draws_the_point_cloud_orbits_and_colours_by_the_left_image(browser, viewer, page):
+    page.wait("cloud.drawn > 1000")
+    before = _canvas_pixels(browser, page)
+    assert _drawn(before).mean() > 0.2  # a non-empty cloud on screen
+    assert np.abs(before[..., 0].astype(int) - before[..., 2]).max() > 60  # coloured by depth
+    viewer.session.cam.stop()  # one frame from here on: only the orbit changes the picture
+    page.wait(f"cloud.points !== null && lastSeq === {viewer.session.newest(wait=0).sequence}")
+    page.js("cloud.draw()")
+    still = _canvas_pixels(browser, page)
+    box = json.loads(page.js("JSON.stringify(document.getElementById('cloud').getBoundingClientRect())"))
+    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    for kind, dx in (("mousePressed", 0), ("mouseMoved", 80), ("mouseReleased", 80)):
+        browser.send("Input.dispatchMouseEvent", {"type": kind, "x": x + dx, "y": y, "button": "left",
+                                                  "buttons": 1 if kind != "mouseReleased" else 0, "clickCount": 1},
+                     page.session)
+    page.wait("cloud.yaw > 0.5")
+    turned = _canvas_pixels(browser, page)
+    assert _drawn(turned).mean() > 0.05 and np.abs(turned.astype(int) - still).mean() > 5  # seen from aside
+    page.js("(() => { const s = document.getElementById('cloud-colour'); s.value = 'left'; "
+            "s.dispatchEvent(new Event('change')); })()")
+    page.wait("cloud.rgb !== null && cloud.rgb[0] === cloud.rgb[1] && cloud.rgb[1] === cloud.rgb[2] && "
+              "cloud.rgb[30] === cloud.rgb[31]")
+    grey = _canvas_pixels(browser, page)
+    mask = _drawn(grey)
+    assert mask.mean() > 0.05 and np.abs(grey[mask][:, 0].astype(int) - grey[mask][:, 2]).max() <= 2
