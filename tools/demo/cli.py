@@ -16,7 +16,7 @@ from stereocam.device_sim.links.inprocess import InProcessTransport
 
 from stereocam.tools.camera.capture import save_frame
 from stereocam.tools.camera.session import output_dir
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, SETTING, epilog
 from stereocam.tools.progress import progress_wanted
 
 from . import group as demo_group
@@ -53,20 +53,24 @@ def keep_up_note(fps: float, asked: int, dropped: int) -> str:
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object instead of lines.")
 @click.option("--heads", type=click.IntRange(1, 8), default=1, show_default=True,
               help="Several heads on one trigger line, streamed as matched sets (CameraGroup).")
-def command(out: Path, seconds: float, fps: int, seed: int, as_json: bool, heads: int) -> int:
+@click.option("--set", "settings", type=SETTING, multiple=True,
+              help="Configure every camera after the demo's own settings (repeatable), e.g. --set gain=40.")
+def command(out: Path, seconds: float, fps: int, seed: int, as_json: bool, heads: int,
+            settings: tuple[tuple[str, int], ...]) -> int:
     """Stream from an in-process simulated camera at 640x480, save the last frame's outputs and print a
     summary: frame rate (and whether this machine kept up), drops, link errors, depth accuracy against
     the simulator's ground truth."""
     output_dir(out)
     if heads > 1:
-        return demo_group.run(heads, seconds, fps, seed, out)
+        return demo_group.run(heads, seconds, fps, seed, out, dict(settings))
     sim = SimulatedCamera(seed=seed)
     with Camera(InProcessTransport(sim, f"sim://?seed={seed}")) as cam:
         info = cam.info()
         if not as_json:
             click.echo(f"camera: {info.model} serial {info.serial} firmware {info.firmware_version} "
                        f"protocol {info.protocol_version[0]}.{info.protocol_version[1]}")
-        cam.configure(width=640, height=480, fps=fps, num_disparities=64, block_size=15)
+        cam.configure(**{"width": 640, "height": 480, "fps": fps, "num_disparities": 64, "block_size": 15,
+                         **dict(settings)})
         cam.start()
         cam.get_frame(timeout=30.0)  # first frame pays the JIT warm-up
         recent: list = []

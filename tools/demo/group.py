@@ -20,11 +20,12 @@ from stereocam.tools.camera.capture import save_frame
 SHOW_MISSING = 10  # incomplete sets printed one by one; the rest are counted
 
 
-def run(heads: int, seconds: float, fps: int, seed: int, out: Path) -> int:
+def run(heads: int, seconds: float, fps: int, seed: int, out: Path, settings: dict[str, int] | None = None) -> int:
     line = TriggerLine()
     sims = [SimulatedCamera(serial=f"HEAD{i + 1}", seed=seed + i, trigger_line=line) for i in range(heads)]
     try:
-        config = dict(width=320, height=240, num_disparities=32, block_size=11, fps=fps)  # N heads share this machine
+        config = {**dict(width=320, height=240, num_disparities=32, block_size=11, fps=fps),  # N heads share this machine
+                  **(settings or {})}
         with stereocam.CameraGroup([f"sim://?serial={s.serial}" for s in sims], config=config, master=0,
                                    timeout=30.0) as group:
             print(f"{heads} heads on one trigger line at {fps} fps, {sims[0].serial} drives it: "

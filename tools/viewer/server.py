@@ -23,7 +23,11 @@ A camera group (``GroupViewerSession``) has its own page instead:
 GET  /                      static/group.html (group.js, viewer.css)
 GET  /api/group/state       every head (name, URL, clock-map error), set counts, the sets a head missed
 GET  /api/group/set?after=T the newest matched set after trigger T: skew, each frame's offset
-GET  /image/CAMERA/PLANE.jpg  a head's left or colour-mapped disparity image in that set
+GET  /image/CAMERA/PLANE.jpg  a head's left or colour-mapped disparity image: its last frame (the
+                            newest set's, or the one it had before it missed)
+POST /api/group/config      {"name": value, ...} on every head (a refusal names the head, changes none)
+POST /api/group/start|stop  every head (the master last on start, first on stop)
+POST /api/group/trigger     one matched set from a stopped group (start, the master's first pulse, stop)
 """
 from __future__ import annotations
 
@@ -48,9 +52,10 @@ from .session import ViewerSession
 from .snapshots import MEDIA, SNAPSHOTS, MissingSnapshot, snapshot
 
 STATIC = {"/": ("index.html", "text/html; charset=utf-8"), "/viewer.js": ("viewer.js", "text/javascript"),
-          "/cloud3d.js": ("cloud3d.js", "text/javascript"), "/viewer.css": ("viewer.css", "text/css")}
+          "/cloud3d.js": ("cloud3d.js", "text/javascript"), "/settings.js": ("settings.js", "text/javascript"),
+          "/viewer.css": ("viewer.css", "text/css")}
 GROUP_STATIC = {"/": ("group.html", "text/html; charset=utf-8"), "/group.js": ("group.js", "text/javascript"),
-                "/viewer.css": ("viewer.css", "text/css")}
+                "/settings.js": ("settings.js", "text/javascript"), "/viewer.css": ("viewer.css", "text/css")}
 MAX_BODY = 64 * 1024  # bytes of a POST body: a configuration is a few hundred
 _log = logging.getLogger(__name__)
 
@@ -314,6 +319,29 @@ class _Handler(BaseHTTPRequestHandler):
             raise ValueError(f"the body must be a JSON object, not {type(body).__name__}")
         return body
 
+    def _group_post(self, session: GroupViewerSession, path: str, body: dict[str, Any]) -> None:
+        try:
+            if path == "/api/group/config":
+                self._json({"config": session.configure(_settings(body))})
+            elif path == "/api/group/start":
+                session.start()
+                self._json({"streaming": True})
+            elif path == "/api/group/stop":
+                session.stop()
+                self._json({"streaming": False})
+            elif path == "/api/group/trigger":
+                self._json(session.one_set())
+            else:
+                self._json({"error": f"no such action {path}"}, HTTPStatus.NOT_FOUND)
+        except stereocam.DeviceError as exc:
+            self._json({"error": str(exc), "reason": exc.device_message, "param": exc.param,
+                        "config": session.shared_config()}, HTTPStatus.CONFLICT)
+        except (stereocam.ConfigError, ValueError, TypeError) as exc:
+            self._json({"error": str(exc), "reason": str(exc), "config": session.shared_config()},
+                       HTTPStatus.BAD_REQUEST)
+        except stereocam.StereoCamError as exc:
+            self._json({"error": str(exc), "reason": str(exc)}, HTTPStatus.BAD_GATEWAY)
+
     @staticmethod
     def _kept(cam: stereocam.Camera) -> dict[str, Any]:
         """The configuration the camera kept after a refusal (the page shows it, not the refused value)."""
@@ -331,16 +359,16 @@ class _Handler(BaseHTTPRequestHandler):
             self._json({"error": "bad Content-Length"}, HTTPStatus.BAD_REQUEST)
             self.close_connection = True
             return
-        if isinstance(session, GroupViewerSession):
-            self._json({"error": "a group is viewed, not configured, here"}, HTTPStatus.NOT_FOUND)
-            return
-        cam = session.cam
         path = urlsplit(self.path).path
         try:
             body = self._body()
         except ValueError as exc:
             self._json({"error": f"bad request: {exc}", "reason": str(exc)}, HTTPStatus.BAD_REQUEST)
             return
+        if isinstance(session, GroupViewerSession):
+            self._group_post(session, path, body)
+            return
+        cam = session.cam
         try:
             if path == "/api/config":
                 self._json({"config": cam.configure(**_settings(body))})

@@ -44,7 +44,7 @@ def snapshot(frame: stereocam.Frame, name: str, colour: str, span: tuple[float, 
         return cv2.imencode(".png", disparity16(frame))[1].tobytes()
     if name == "disparity.npy":
         buf = io.BytesIO()
-        np.save(buf, frame.disparity)
+        np.save(buf, img)
         return buf.getvalue()
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / name

@@ -263,8 +263,8 @@ def test_group_view_page_in_a_headless_browser(group_viewer, tmp_path):
         page = browser.page(server.url)
         browser.wait_for(page, "document.querySelectorAll('img.head').length === 6 && "
                                "[...document.querySelectorAll('img.head')].every(i => i.naturalWidth > 0)")
-        t1 = int(browser.evaluate(page, "document.getElementById('trigger').textContent"))
-        browser.wait_for(page, f"Number(document.getElementById('trigger').textContent) > {t1 + 2}")
+        t1 = int(browser.evaluate(page, "document.getElementById('trigger-id').textContent"))
+        browser.wait_for(page, f"Number(document.getElementById('trigger-id').textContent) > {t1 + 2}")
         skew = float(browser.evaluate(page, "document.getElementById('skew').textContent"))
         assert 0 <= skew < 1000
         identity = browser.wait_for(page, "document.getElementById('identity').textContent.includes('clock map') && "

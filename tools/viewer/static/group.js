@@ -1,8 +1,11 @@
 // stereocam viewer for a camera group: the newest matched set (one frame per head per trigger),
-// its capture-time spread, each head's clock-map error, and the sets a head missed.
+// each head's last frame with its age (marked when the head missed the newest set), the colour
+// bar, the capture-time spread, each head's clock-map error, the sets a head missed; start, stop,
+// one set on demand and settings for every head.
 "use strict";
 const $ = (id) => document.getElementById(id);
 let lastTrigger = -1;
+Settings.path = "/api/group/config";
 
 async function get(path) {
   const r = await fetch(path);
@@ -15,8 +18,9 @@ function headFigure(name, plane) {
   if (!fig) {
     fig = document.createElement("figure");
     fig.id = `fig-${id}`;
-    fig.innerHTML = `<figcaption><b>${name}</b> ${plane} <span class="offset"></span></figcaption>` +
-      `<img class="head" data-camera="${name}" data-plane="${plane}" alt="${name} ${plane}">`;
+    fig.dataset.camera = name;
+    fig.innerHTML = `<figcaption><b>${name}</b> ${plane} <span class="offset"></span> <span class="badge"></span>` +
+      `</figcaption><img class="head" data-camera="${name}" data-plane="${plane}" alt="${name} ${plane}">`;
     $("heads").appendChild(fig);
   }
   return fig;
@@ -26,24 +30,37 @@ function loadImage(img, src) {
   return new Promise((resolve) => { img.onload = img.onerror = resolve; img.src = src; });
 }
 
+function drawColorbar(bar) {
+  $("colorbar").style.display = bar ? "flex" : "none";
+  if (!bar) return;
+  $("gradient").style.background = `linear-gradient(to bottom, ${bar.near_to_far.join(", ")})`;
+  $("ticks").innerHTML = bar.ticks.map((t) =>
+    `<span style="top:${(100 * t.at).toFixed(1)}%">${t.metres} m</span>`).join("");
+}
+
 async function sets() {
   for (;;) {
     try {
       const s = await get(`/api/group/set?after=${lastTrigger}`);
       if (s && s.trigger_id !== lastTrigger) {
         lastTrigger = s.trigger_id;
-        $("trigger").textContent = s.trigger_id;
+        $("trigger-id").textContent = s.trigger_id;
         $("skew").textContent = s.skew_us.toFixed(1);
+        drawColorbar(s.colorbar);
         const loads = [];
-        for (const [name, f] of Object.entries(s.frames)) {
-          for (const plane of f.planes) {
+        for (const [name, h] of Object.entries(s.heads)) { // every head: its last frame, kept if it missed
+          for (const plane of h.planes) {
             const fig = headFigure(name, plane);
-            fig.querySelector(".offset").textContent = `frame ${f.sequence}, +${f.offset_us.toFixed(1)} µs`;
-            loads.push(loadImage(fig.querySelector("img"), `/image/${name}/${plane}.jpg?t=${s.trigger_id}`));
+            fig.classList.toggle("missed", h.missed);
+            fig.querySelector(".offset").textContent = h.missed ? `frame ${h.sequence} of trigger ${h.trigger_id}`
+              : `frame ${h.sequence}, +${s.frames[name].offset_us.toFixed(1)} µs`;
+            fig.querySelector(".badge").textContent = h.missed
+              ? `missed trigger ${s.trigger_id}: last frame ${h.age_s.toFixed(1)} s old` : "";
+            if (fig.dataset.trigger !== String(h.trigger_id)) {
+              fig.dataset.trigger = h.trigger_id;
+              loads.push(loadImage(fig.querySelector("img"), `/image/${name}/${plane}.jpg?t=${h.trigger_id}`));
+            }
           }
-        }
-        for (const name of s.missing) {
-          headFigure(name, "left").querySelector(".offset").textContent = `missed trigger ${s.trigger_id}`;
         }
         await Promise.all(loads);
       }
@@ -61,13 +78,28 @@ async function refreshState() {
       .join(", ");
     $("complete").textContent = st.sets.complete;
     $("incomplete").textContent = st.sets.incomplete;
+    $("streaming").textContent = st.cameras.every((c) => c.streaming) ? "yes"
+      : st.cameras.some((c) => c.streaming) ? "some heads" : "no";
     $("error").textContent = st.error || "";
-    $("counters").textContent = st.missed.length
+    $("missed").textContent = st.missed.length
       ? "missed: " + st.missed.map((m) => `trigger ${m.trigger_id} from ${m.missing.join(", ")}`).join("; ")
       : "no set has missed a head";
+    Settings.build(st);
   } catch (e) {
     $("error").textContent = `viewer: ${e}`;
   }
+}
+
+// An action's answer (a refusal's reason) stays until the next action.
+for (const action of ["start", "stop", "trigger"]) {
+  $(action).addEventListener("click", async () => {
+    const r = await fetch(`/api/group/${action}`, {method: "POST", body: "{}", headers: {"Content-Type": "application/json"}});
+    const doc = await r.json();
+    $("action").className = r.ok ? "ok" : "error";
+    $("action").textContent = r.ok ? (action === "trigger" ? `one set: trigger ${doc.trigger_id}` : `${action}: done`)
+      : `${action} refused: ${doc.reason || doc.error}`;
+    refreshState();
+  });
 }
 refreshState();
 setInterval(refreshState, 1000);

@@ -130,7 +130,7 @@ async function refreshState() {
     $("error").textContent = doc.error || "";
     showCounters(doc);
     if (doc.recording || recording) showRecording(doc.recording); // a saved file's line stays
-    buildConfig(doc);
+    Settings.build(doc);
     showPresets(doc.presets);
     markPlanes();
   } catch (e) {
@@ -156,102 +156,6 @@ $("record").addEventListener("click", async () => {
 
 function escape(text) {
   return String(text).replace(/[&<>"]/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;"})[c]);
-}
-
-// -- configuration: grouped, named choices as menus, the camera's values ---------------------
-function rangeText(p) {
-  if (p.choices) return p.live ? "" : "stopped only";
-  return `${p.lo}…${p.hi}${p.unit ? " " + p.unit : ""}${p.odd ? ", odd" : ""}` +
-    `${p.step > 1 ? `, step ${p.step}` : ""}${p.live ? "" : ", stopped only"}`;
-}
-
-function control(p) {
-  if (p.choices && p.choices.kind === "menu") {
-    return `<select id="in-${p.name}" name="${p.name}">` + Object.entries(p.choices.values)
-      .map(([v, name]) => `<option value="${v}">${name}${Number(v) === p.default ? " (default)" : ""}</option>`)
-      .join("") + "</select>";
-  }
-  if (p.choices && p.choices.kind === "flags") {
-    return `<span class="flags" id="in-${p.name}">` + Object.entries(p.choices.values)
-      .map(([bit, name]) => `<label><input type="checkbox" value="${bit}">${name}</label>`).join("") + "</span>";
-  }
-  const step = p.odd ? 2 : p.step;
-  return `<input id="in-${p.name}" name="${p.name}" type="number" min="${p.lo}" max="${p.hi}" step="${step}" ` +
-    `placeholder="${p.default}">`;
-}
-
-function readControl(p, el) {
-  if (p.choices && p.choices.kind === "flags") {
-    return [...el.querySelectorAll("input")].reduce((acc, i) => acc | (i.checked ? Number(i.value) : 0), 0);
-  }
-  return el.value.trim() === "" ? null : Number(el.value);
-}
-
-function showValue(p, el, value) {
-  if (p.choices && p.choices.kind === "flags") {
-    for (const i of el.querySelectorAll("input")) i.checked = (value & Number(i.value)) !== 0;
-  } else {
-    el.value = value;
-  }
-}
-
-function buildConfig(doc) {
-  const form = $("config");
-  for (const p of doc.options) {
-    let row = $(`param-${p.name}`);
-    if (!row) {
-      let group = $(`group-${p.group}`);
-      if (!group) {
-        group = document.createElement("fieldset");
-        group.id = `group-${p.group}`;
-        group.innerHTML = `<legend>${p.group}</legend>`;
-        const order = doc.groups.indexOf(p.group);
-        const after = [...form.children].find((f) => doc.groups.indexOf(f.id.slice(6)) > order);
-        form.insertBefore(group, after || null);
-      }
-      row = document.createElement("div");
-      row.className = "param";
-      row.id = `param-${p.name}`;
-      row.title = `${p.description} (default ${p.default})`;
-      row.innerHTML = `<label for="in-${p.name}">${p.name.replaceAll("_", " ")}</label>${control(p)}` +
-        `<span class="range">${rangeText(p)}</span><span class="reason"></span>`;
-      const el = row.querySelector(`#in-${p.name}`);
-      el.addEventListener("change", () => setParam(p, el));
-      el.addEventListener("keydown", (ev) => { if (ev.key === "Enter") { ev.preventDefault(); setParam(p, el); } });
-      group.appendChild(row);
-    }
-    const el = row.querySelector(`#in-${p.name}`);
-    if (document.activeElement !== el || row.dataset.sent) showValue(p, el, p.value);
-  }
-}
-
-async function setParam(p, el) {
-  const row = $(`param-${p.name}`);
-  const reason = row.querySelector(".reason");
-  const value = readControl(p, el);
-  if (value === null) {
-    reason.className = "reason error";
-    reason.textContent = `not sent: enter a value (${rangeText(p)}, default ${p.default})`;
-    showValue(p, el, state.config[p.name]);
-    return;
-  }
-  row.dataset.sent = "1";
-  const {ok, doc} = await api("/api/config", {[p.name]: value});
-  if (doc.config) {
-    state.config = doc.config;
-    showValue(p, el, doc.config[p.name]); // the camera's value: a refused one snaps back
-  }
-  if (ok) {
-    reason.className = "reason ok";
-    reason.textContent = `${p.name} = ${doc.config[p.name]}`;
-    const shown = reason.textContent;
-    setTimeout(() => { if (reason.textContent === shown) reason.textContent = ""; }, 2000);
-  } else {
-    reason.className = "reason error";
-    reason.textContent = `refused ${value}: ${doc.reason || doc.error}`; // stays until the next change
-  }
-  delete row.dataset.sent;
-  if (document.activeElement === el) el.blur();
 }
 
 // -- defaults and presets ---------------------------------------------------------------------
