@@ -21,10 +21,11 @@ def sampled_points(frame: stereocam.Frame, step: int, colour: str,
         raise ValueError(f"colour must be one of {', '.join(COLOURINGS)}, got {colour!r}")
     if not 1 <= step <= 64:
         raise ValueError(f"step must be 1..64, got {step}")
-    d = frame.disparity_px()[::step, ::step]
+    raw = frame.disparity[::step, ::step]  # only the sampled pixels are converted
+    fmt = frame.disparity_format
+    ys, xs = np.nonzero((raw > 0) & (raw != fmt.invalid))
+    dd = raw[ys, xs].astype(np.float32) / fmt.subpixel
     g = frame.geometry
-    ys, xs = np.nonzero(d > 0)
-    dd = d[ys, xs]
     z = g.focal_px * g.baseline_m / dd
     u, v = xs * step, ys * step
     pts = np.stack([(u - g.cx) * z / g.focal_px, (v - g.cy) * z / g.focal_px, z], axis=1).astype(np.float32)

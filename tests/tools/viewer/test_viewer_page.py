@@ -196,8 +196,9 @@ def test_planes_that_stop_coming_are_marked(viewer, page):
             "f.querySelectorAll('input')[1].checked = false; f.querySelectorAll('input')[2].checked = false; "
             "f.dispatchEvent(new Event('change')); })()")
     wait_until(lambda: cam.config()["outputs"] == 1, timeout=10, what="outputs=1")
-    badge = page.wait("document.getElementById('fig-disparity').classList.contains('absent') && "
+    badge = page.wait("document.getElementById('badge-disparity').textContent.startsWith('off') && "
                       "document.getElementById('badge-disparity').textContent")
+    assert page.js("document.getElementById('fig-disparity').classList.contains('absent')")
     assert "off" in badge and "outputs=1" in badge and "last seen" in badge
     assert page.js("document.getElementById('fig-right').classList.contains('absent')")
     assert not page.js("document.getElementById('fig-left').className")

@@ -6,6 +6,7 @@
 const Settings = {
   path: "/api/config", // where a change is posted (a group page: every head)
   config: {}, // the configuration as last answered
+  changed: () => {}, // called after each answer (the page refreshes what depends on the configuration)
 
   rangeText(p) {
     const differs = p.value === null ? "heads differ; " : "";
@@ -105,5 +106,6 @@ const Settings = {
     }
     delete row.dataset.sent;
     if (document.activeElement === el) el.blur();
+    this.changed();
   },
 };

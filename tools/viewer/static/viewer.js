@@ -216,6 +216,7 @@ for (const action of ["start", "stop", "trigger"]) {
     refreshState();
   });
 }
+Settings.changed = refreshState;
 const cloud = new Cloud3D($("cloud"), () => $("cloud-colour").value);
 $("cloud-colour").addEventListener("change", () => cloud.load(lastSeq));
 refreshState();
