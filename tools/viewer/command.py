@@ -59,13 +59,16 @@ def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_
             record_dir: Path, master: str, allow_hosts: tuple[str, ...], token: str | None,
             settings: tuple[tuple[str, int], ...], rerun_spawn: bool, rerun_save: Path | None,
             rerun_connect: str | None) -> int:
-    """Live viewer: left, right and disparity (colour bar in metres), depth and 3-D point under the
-    cursor, frame rate, drops, link and device counters, the configuration with the device's ranges,
-    trigger, start/stop, snapshots (PNG, PLY), recording to MCAP. With several URLs: a camera group on
-    one external trigger line (the first camera drives it, see --master), shown as matched sets with
-    the spread of their capture times, each head's clock-map error and the sets a head missed. The
-    first line printed is the viewer's address. Runs until Ctrl-C; then each camera's configuration
-    is put back as found unless --keep-config."""
+    """Live viewer: left, right and disparity (colour bar in metres), a 3-D view of the point cloud,
+    a depth histogram with a near/far range, depth and 3-D point under the cursor, frame rate and
+    counters with rates, the configuration in groups with the device's ranges and named choices
+    (always the camera's values; a refused one snaps back with the reason), reset to defaults and
+    presets, trigger, start/stop, snapshots (PNG, 16-bit PNG, .npy, PLY), recording to MCAP;
+    --rerun also streams to Rerun. With several URLs: a camera group on one external trigger line
+    (the first camera drives it, see --master), shown as matched sets with the spread of their
+    capture times, each head's clock-map error and the sets a head missed, with start/stop, one
+    set on demand and settings for every head. The first line printed is the viewer's address.
+    Runs until Ctrl-C; then each camera's configuration is put back as found unless --keep-config."""
     access = Access(allow_hosts, secrets.token_urlsafe(18) if token == "auto" else token)
     rerun = rerun_spawn or rerun_save is not None or rerun_connect is not None
     if rerun and len(urls) > 1:

@@ -493,3 +493,24 @@ def test_the_viewer_marks_the_last_frame_stale_and_reconnects_after_the_camera_r
         server.session.close()
         cam.close()
         sim.stop()
+
+
+# -- issue 20 item 1: what the page's controls post ------------------------------------------------
+def test_a_refusal_answers_the_configuration_the_camera_kept(viewer):
+    code, doc = _post(viewer.url + "api/config", {"block_size": 10})
+    assert code == 409 and "must be odd" in doc["reason"] and doc["config"]["block_size"] == SMALL["block_size"]
+    code, doc = _post(viewer.url + "api/config", {"no_such_setting": 1})
+    assert code == 400 and "no_such_setting" in doc["reason"] and doc["config"] == viewer.session.cam.config()
+
+
+def test_bad_presets_and_ranges_are_refused_with_the_reason(viewer):
+    code, doc = _post(viewer.url + "api/preset/save", {"name": "../outside"})
+    assert code == 400 and "preset name" in doc["reason"]
+    code, doc = _post(viewer.url + "api/preset/load", {"name": "never-saved"})
+    assert code == 400 and "no preset 'never-saved'" in doc["reason"]
+    code, doc = _post(viewer.url + "api/range", {"near_m": 3, "far_m": 1})
+    assert code == 400 and "near" in doc["reason"] and viewer.session.span_m is None
+    code, doc = _post(viewer.url + "api/range", {"near_m": 0.5, "far_m": 4})
+    assert code == 200 and doc["span"] == {"near_m": 0.5, "far_m": 4.0}
+    code, doc = _post(viewer.url + "api/range", {"near_m": None, "far_m": None})
+    assert code == 200 and viewer.session.span_m is None
