@@ -16,11 +16,14 @@ COLOURINGS = ("depth", "left")
 def sampled_points(frame: stereocam.Frame, step: int, colour: str,
                    span: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
     """(N x 3 float32 points, N x 3 uint8 RGB) of the valid pixels on a ``step`` grid; ``span``:
-    the disparities (px) at the colour map's ends. ValueError for an unknown colouring or step."""
+    the disparities (px) at the colour map's ends. ValueError for an unknown colouring or step,
+    MissingPlaneError for a frame without disparity."""
     if colour not in COLOURINGS:
         raise ValueError(f"colour must be one of {', '.join(COLOURINGS)}, got {colour!r}")
     if not 1 <= step <= 64:
         raise ValueError(f"step must be 1..64, got {step}")
+    if frame.disparity is None:
+        raise stereocam.MissingPlaneError("this frame carries no disparity: no point cloud")
     raw = frame.disparity[::step, ::step]  # only the sampled pixels are converted
     fmt = frame.disparity_format
     ys, xs = np.nonzero((raw > 0) & (raw != fmt.invalid))
