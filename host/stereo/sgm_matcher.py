@@ -69,7 +69,7 @@ class SGMMatcher:
         self.acc = _aligned((2, cols * nd), np.int16)
         self.rmin = np.empty((2, cols + nd - 1), np.int16)
         self.rarg = np.zeros((2, cols + nd - 1), np.int16)
-        self.mins = np.empty((2, cols), np.int16)
+        self.karg = np.empty((2, cols), np.int16)  # winners of a row (left-right check)
         if p.use_speckle:
             self.labels = np.empty((h, w), np.int32)
             self.stack = np.empty((h * w, 2), np.int32)
@@ -111,7 +111,7 @@ class SGMMatcher:
         try:
             _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.p2tab, self.parked, self.locks,
                           self.done, disp, self.cost, self.lbuf, self.mv, self.meta, self.pm,
-                          self.acc, self.rmin, self.rarg, self.mins)
+                          self.acc, self.rmin, self.rarg, self.karg)
         finally:
             nb.set_parallel_chunksize(chunk)
 

@@ -32,16 +32,20 @@ def _i16(context, builder, sig, args, i):
 
 
 @intrinsic
-def add_min(typingctx, dst, di, src, si, nd):
-    """dst[di+k] += src[si+k] for k < nd; returns min_k of the new dst values."""
+def add_argmin(typingctx, dst, di, src, si, nd):
+    """dst[di+k] += src[si+k] for k < nd; returns (m, first k with dst[di+k] == m), m the
+    minimum of the new values, in one pass: per lane the first strict minimum and its index,
+    then the smallest index among the lanes holding the overall minimum."""
     if not _i16_arrays(dst, src):
         return None
+    ret = types.UniTuple(types.int64, 2)
 
     def codegen(context, builder, sig, args):
         st = sig.args
         div, siv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 3, 4))
-        best = cgutils.alloca_once_value(builder, _splat(builder, ir.Constant(_I16, 32767),
-                                              ir.VectorType(_I16, _TAIL)))
+        wide = ir.VectorType(_I16, 64)
+        best = cgutils.alloca_once_value(builder, ir.Constant(wide, [32767] * 64))
+        bidx = cgutils.alloca_once_value(builder, ir.Constant(wide, [32767] * 64))
 
         def body(j0, n):
             vty = ir.VectorType(_I16, n)
@@ -50,12 +54,53 @@ def add_min(typingctx, dst, di, src, si, nd):
                        vty)
             t = builder.add(_vload(builder, pd, vty), s)
             _vstore(builder, t, pd)
-            builder.store(_smin(builder, builder.load(best), _fold16(builder, t)), best)
+            ks = builder.add(_splat(builder, builder.trunc(j0, _I16), vty),
+                             ir.Constant(vty, list(range(n))))
+            if n < 64:  # pad to 64 lanes with values that never win
+                pad = ir.Constant(ir.VectorType(_I32, 64), list(range(n)) + [n] * (64 - n))
+                t = builder.shuffle_vector(t, ir.Constant(vty, [32767] * n), pad)
+                ks = builder.shuffle_vector(ks, ir.Constant(vty, [32767] * n), pad)
+            b = builder.load(best)
+            lt = builder.icmp_signed("<", t, b)
+            builder.store(builder.select(lt, t, b), best)
+            builder.store(builder.select(lt, ks, builder.load(bidx)), bidx)
 
         _chunked(builder, ndv, body)
-        return _reduce_min(builder, builder.load(best))
+        b = builder.load(best)
+        m = _reduce_min(builder, b)
+        hit = builder.icmp_signed("==", b, _splat(builder, m, wide))
+        k = _call(builder, "llvm.vector.reduce.umin.v64i16", _I16,
+                  [builder.select(hit, builder.load(bidx), ir.Constant(wide, [32767] * 64))])
+        i64 = ir.IntType(64)
+        return context.make_tuple(builder, ret, [builder.sext(m, i64), builder.zext(k, i64)])
 
-    return types.int16(dst, di, src, si, nd), codegen
+    return ret(dst, di, src, si, nd), codegen
+
+
+@intrinsic
+def count_le(typingctx, s, si, nd, thr):
+    """Number of k < nd with s[si+k] <= thr."""
+    if not (_i16_arrays(s) and isinstance(thr, types.Integer)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        siv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 2))
+        thv = _i16(context, builder, sig, args, 3)
+        i64 = ir.IntType(64)
+        count = cgutils.alloca_once_value(builder, ir.Constant(i64, 0))
+
+        def body(j0, n):
+            vty, mty = ir.VectorType(_I16, n), ir.IntType(n)
+            x = _vload(builder, _ptr(context, builder, sig.args[0], args[0],
+                                     [builder.add(siv, j0)]), vty)
+            le = builder.bitcast(builder.icmp_signed("<=", x, _splat(builder, thv, vty)), mty)
+            c = builder.zext(_call(builder, f"llvm.ctpop.i{n}", mty, [le]), i64)
+            builder.store(builder.add(builder.load(count), c), count)
+
+        _chunked(builder, ndv, body)
+        return builder.load(count)
+
+    return types.int64(s, si, nd, thr), codegen
 
 
 @intrinsic
