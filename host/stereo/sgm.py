@@ -117,7 +117,7 @@ def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray,
                 continue
         d16 = 16 * (md + k)
         if 0 < k < nd - 1:
-            den = max(a + b - 2 * m, 1)
+            den = max(max(a, b) - m, 1)  # equiangular (parabola: pixel-locking bias)
             d16 += ((a - b) * 16 + den) // (2 * den)
         out[x0 + x] = d16
     if lrdiff >= 0:
