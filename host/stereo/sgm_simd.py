@@ -11,7 +11,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-from .simd import _TAIL, _call, _chunked, _fold16, _ptr, _reduce_min, _smin, _splat, _vload, \
+from .simd import _call, _chunked, _ptr, _reduce_min, _splat, _vload, \
     _vstore
 
 _I16 = ir.IntType(16)

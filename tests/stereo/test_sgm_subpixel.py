@@ -7,8 +7,8 @@ import pytest
 
 pytest.importorskip("cv2")
 
-from stereocam.stereo import SGMMatcher, SGMParams  # noqa: E402
-from stereocam.tools.bench.sgm_scenes import fraction_bias, slanted_plane  # noqa: E402
+from stereocam.stereo import SGMMatcher, SGMParams
+from stereocam.tools.bench.sgm_scenes import fraction_bias, slanted_plane
 
 
 def test_no_pixel_locking_on_slanted_planes() -> None:
