@@ -20,7 +20,8 @@ import numba as nb
 import numpy as np
 
 from .lanes import uidx
-from .sgm_simd import add_argmin, cost_run, count_le, diag_update, pixel_paths, try_lock, unlock
+from .sgm_simd import add_argmin, cost_run, count_le, diag_update, pixel_paths, stream_copy, \
+    try_lock, unlock
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
@@ -144,9 +145,7 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
             pass
         first = done[y] == 0
         if first:
-            row = parked[y]
-            for i in range(acc.shape[0]):
-                row[i] = acc[i]
+            stream_copy(parked[y], acc, acc.shape[0])
             done[y] = 1
         unlock(locks, y)
         if not first:

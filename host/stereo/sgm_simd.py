@@ -7,6 +7,8 @@ pixel_paths reads.
 """
 from __future__ import annotations
 
+import platform
+
 from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
@@ -131,6 +133,36 @@ def diag_update(typingctx, s, si, rmin, rarg, ri, nd):
         return context.get_dummy_value()
 
     return types.none(s, si, rmin, rarg, ri, nd), codegen
+
+
+_X86 = platform.machine().lower() in ("x86_64", "amd64")
+
+
+@intrinsic
+def stream_copy(typingctx, dst, src, n):
+    """dst[k] = src[k] for k < n (int16; n a multiple of 16, dst 32-byte aligned). On x86 the
+    stores are non-temporal, then fenced: a parked row is read back much later or by the other
+    thread, so writing it around the cache saves each line's read-for-ownership from memory."""
+    if not _i16_arrays(dst, src):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        nv = _intp(context, builder, sig, args, 2)
+        vty = ir.VectorType(_I16, 16)
+        nt = builder.module.add_metadata([ir.Constant(_I32, 1)])
+        with cgutils.for_range_slice(builder, ir.Constant(nv.type, 0), nv,
+                                     ir.Constant(nv.type, 16)) as (i, _):
+            v = _vload(builder, _ptr(context, builder, st[1], args[1], [i]), vty)
+            pd = builder.bitcast(_ptr(context, builder, st[0], args[0], [i]), vty.as_pointer())
+            store = builder.store(v, pd, align=32)
+            if _X86:
+                store.set_metadata("nontemporal", nt)
+        if _X86:
+            _call(builder, "llvm.x86.sse.sfence", ir.VoidType(), [])
+        return context.get_dummy_value()
+
+    return types.none(dst, src, n), codegen
 
 
 def _lock_ptr(context, builder, sig, args):
