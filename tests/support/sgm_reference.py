@@ -15,8 +15,8 @@ x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k 
 5. uniqueness (ratio u > 0): invalid when some k with |k - k*| > 1 has S[k] <= m + m * u // 100.
 6. subpixel, equiangular (0 < k* < N-1, a = S[k*-1], b = S[k*+1]): den = max(max(a, b) - m, 1),
    out = 16 * (min_disparity + k*) + floor(((a - b) * 16 + den) / (2 * den)); else 16 * d.
-   (The parabola's den = a + b - 2m pulls estimates toward whole pixels by up to 0.065 px on
-   census costs; the equiangular fit by 0.017 px: tools/bench/sgm.py's subpixel table.)
+   (Not the parabola's den = a + b - 2m, which pulls estimates toward whole pixels:
+   tests/stereo/test_sgm_subpixel.py.)
 7. left-right (lr_max_diff >= 0): the right image's winner for right column j is the first
    argmin over k of S at the left pixel x = j + k (same row); invalid when it differs from k*
    by more than lr_max_diff.
