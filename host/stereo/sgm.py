@@ -26,16 +26,20 @@ from .sgm_simd import add_argmin, cost_run, count_le, diag_update, pixel_paths, 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 # layout of the int64 configuration vector passed to sgm_rows
-(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_LEN) = range(10)  # C_INV: params.invalid_value
+(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_MAXC,
+ C_LEN) = range(11)  # C_INV: params.invalid_value; C_MAXC: params.max_cost
 
 
 @nb.njit(**_JIT)
 def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int, cols: int,
-              out: np.ndarray) -> None:
-    """out[x * nd + k] = popcount(cl[y, x0 + x] ^ census_R[y, x0 + x - md - k])."""
+              maxc: int, out: np.ndarray) -> None:
+    """out[x * nd + k] = popcount(cl[y, x0 + x] ^ census_R[y, x0 + x - md - k]), or maxc where
+    that right pixel is left of the image (crr's rows run nd codes past it)."""
     w = cl.shape[1]
     for x in range(cols):
         cost_run(cl[y, uidx(x0 + x)], crr[y], w - 1 - x0 - x + md, out, x * nd, nd)
+    for x in range(min(cols, nd - 1 - x0 + md)):  # k > x0 + x - md is outside
+        out[x * nd + x0 + x - md + 1:(x + 1) * nd] = maxc
 
 
 @nb.njit(**_JIT)
@@ -139,7 +143,7 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
     nd, md, x0, cols = cfg[C_ND], cfg[C_MIND], cfg[C_X0], cfg[C_COLS]
     for step in range(h):
         y = step if g == 0 else h - 1 - step
-        _cost_row(cl, crr, y, x0, md, nd, cols, cost)
+        _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
         _aggregate_row(g, y, step, img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc)
         while not try_lock(locks, y):
             pass

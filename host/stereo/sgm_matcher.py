@@ -42,11 +42,12 @@ class SGMMatcher:
         self.census_byte = np.zeros((n, w + 64), np.uint8)
         self.census_code = np.empty((n, w), np.uint64)
         self.cl = np.empty((h, w), np.uint64)
-        self.crr = np.empty((h, w), np.uint64)
+        self.crr = np.zeros((h, w + nd), np.uint64)  # + codes left of the image (unused)
         cfg = np.zeros(_sgm.C_LEN, np.int64)
         cfg[[_sgm.C_ND, _sgm.C_MIND, _sgm.C_P1, _sgm.C_URATIO, _sgm.C_LRDIFF, _sgm.C_X0,
-             _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV]] = [
-            nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths, p.invalid_value]
+             _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV, _sgm.C_MAXC]] = [
+            nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths,
+            p.invalid_value, p.max_cost]
         self.cfg = cfg
         self.p2tab = np.full(256, p.p2, np.int64)  # effective P2 per intensity step |dI|
         if p.p2_adapt > 0:

@@ -5,7 +5,8 @@ x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k 
 
 1. census: per pixel one bit per window neighbour (width x height, centre excluded), set when
    the neighbour is darker than the centre; the image is extended by edge replication.
-2. cost C[y, x, k] = popcount(census_L[y, X] ^ census_R[y, X - d]) (Hamming distance).
+2. cost C[y, x, k] = popcount(census_L[y, X] ^ census_R[y, X - d]) (Hamming distance), or the
+   number of census bits (the largest cost) where X - d < 0, left of the right image.
 3. for each path direction r = (dy, dx): L_r(p) = C(p) where p - r leaves the matched
    rectangle, else L_r(p, k) = C(p, k) + min(L_r(q, k), L_r(q, k-1) + P1, L_r(q, k+1) + P1,
    m_q + P2') - m_q with q = p - r, m_q = min_k L_r(q, k) and P2' = P2, or with p2_adapt = a > 0
@@ -57,7 +58,9 @@ def cost_volume(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray
     xs = np.arange(g.x0, g.x1)
     for k in range(p.num_disparities):
         d = p.min_disparity + k
-        cost[:, :, k] = np.bitwise_count(cl[:, xs] ^ cr[:, xs - d])
+        inside = xs - d >= 0
+        cost[:, :, k] = np.where(inside, np.bitwise_count(cl[:, xs] ^ cr[:, np.maximum(xs - d, 0)]),
+                                 p.max_cost)
     return cost
 
 
