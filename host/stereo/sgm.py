@@ -20,22 +20,26 @@ import numba as nb
 import numpy as np
 
 from .lanes import uidx
-from .sgm_simd import add_min, cost_run, diag_update, pixel_paths, try_lock, unlock
-from .simd import wta_all
+from .sgm_simd import add_argmin, cost_run, count_le, diag_update, pixel_paths, stream_copy, \
+    try_lock, unlock
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 # layout of the int64 configuration vector passed to sgm_rows
-(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_LEN) = range(10)  # C_INV: params.invalid_value
+(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_MAXC,
+ C_LEN) = range(11)  # C_INV: params.invalid_value; C_MAXC: params.max_cost
 
 
 @nb.njit(**_JIT)
 def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int, cols: int,
-              out: np.ndarray) -> None:
-    """out[x * nd + k] = popcount(cl[y, x0 + x] ^ census_R[y, x0 + x - md - k])."""
+              maxc: int, out: np.ndarray) -> None:
+    """out[x * nd + k] = popcount(cl[y, x0 + x] ^ census_R[y, x0 + x - md - k]), or maxc where
+    that right pixel is left of the image (crr's rows run nd codes past it)."""
     w = cl.shape[1]
     for x in range(cols):
         cost_run(cl[y, uidx(x0 + x)], crr[y], w - 1 - x0 - x + md, out, x * nd, nd)
+    for x in range(min(cols, nd - 1 - x0 + md)):  # k > x0 + x - md is outside
+        out[x * nd + x0 + x - md + 1:(x + 1) * nd] = maxc
 
 
 @nb.njit(**_JIT)
@@ -87,44 +91,45 @@ def _aggregate_row(g: int, y: int, step: int, img: np.ndarray, cfg: np.ndarray,
 
 @nb.njit(**_JIT)
 def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray,
-                rmin: np.ndarray, rarg: np.ndarray, mins: np.ndarray,
+                rmin: np.ndarray, rarg: np.ndarray, karg: np.ndarray,
                 out: np.ndarray) -> None:
-    """acc += parked (the other group's sum), then winner-take-all, uniqueness, left-right
-    check and subpixel into the output row."""
+    """acc += parked (the other group's sum), then winner-take-all, uniqueness and subpixel
+    per pixel in one pass (the sum stays in L1), and the left-right check, which needs the
+    whole row's right-image winners, in a second pass over the kept winners karg."""
     nd, md, uratio, lrdiff = cfg[C_ND], cfg[C_MIND], cfg[C_URATIO], cfg[C_LRDIFF]
     x0, cols = cfg[C_X0], cfg[C_COLS]
     inv = np.int16(cfg[C_INV])
-    for i in range(rmin.shape[0]):
-        rmin[i] = 32767
-    for x in range(cols):
-        mins[x] = add_min(acc, x * nd, parked, x * nd, nd)
-        if lrdiff >= 0:
-            diag_update(acc, x * nd, rmin, rarg, cols - 1 - x, nd)
     for x in range(x0):
         out[x] = inv
     for x in range(x0 + cols, out.shape[0]):
         out[x] = inv
+    if lrdiff >= 0:
+        for i in range(rmin.shape[0]):
+            rmin[i] = 32767
     for x in range(cols):
-        s = acc[x * nd:(x + 1) * nd]
-        m = mins[x]
-        thr = np.int16(-1)
+        o = x * nd
+        m, k = add_argmin(acc, o, parked, o, nd)
+        if lrdiff >= 0:
+            diag_update(acc, o, rmin, rarg, cols - 1 - x, nd)
+            karg[x] = k
+        a = np.int64(acc[uidx(o + k - 1)]) if k > 0 else np.int64(0)
+        b = np.int64(acc[uidx(o + k + 1)]) if k < nd - 1 else np.int64(0)
         if uratio > 0:
-            thr = np.int16(min(m + np.int64(m) * uratio // 100, 32767))
-        k, cnt = wta_all(s, nd, m, thr)
-        a = np.int64(s[uidx(k - 1)]) if k > 0 else np.int64(0)
-        b = np.int64(s[uidx(k + 1)]) if k < nd - 1 else np.int64(0)
-        near = np.int64((k > 0) & (a <= thr)) + np.int64((k < nd - 1) & (b <= thr))
-        if uratio > 0 and cnt - 1 - near > 0:
-            out[x0 + x] = inv
-            continue
-        if lrdiff >= 0 and abs(np.int64(rarg[uidx(cols - 1 - x + k)]) - k) > lrdiff:
-            out[x0 + x] = inv
-            continue
+            thr = min(m + m * uratio // 100, 32767)
+            near = np.int64((k > 0) & (a <= thr)) + np.int64((k < nd - 1) & (b <= thr))
+            if count_le(acc, o, nd, thr) - 1 - near > 0:
+                out[x0 + x] = inv
+                continue
         d16 = 16 * (md + k)
         if 0 < k < nd - 1:
-            den = max(a + b - 2 * np.int64(m), 1)
+            den = max(max(a, b) - m, 1)  # equiangular (parabola: pixel-locking bias)
             d16 += ((a - b) * 16 + den) // (2 * den)
         out[x0 + x] = d16
+    if lrdiff >= 0:
+        for x in range(cols):
+            k = np.int64(karg[x])
+            if out[x0 + x] != inv and abs(np.int64(rarg[uidx(cols - 1 - x + k)]) - k) > lrdiff:
+                out[x0 + x] = inv
 
 
 @nb.njit(**_JIT)
@@ -132,25 +137,23 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
            p2tab: np.ndarray, parked: np.ndarray, locks: np.ndarray, done: np.ndarray,
            disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
            meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
-           rarg: np.ndarray, mins: np.ndarray) -> None:
+           rarg: np.ndarray, karg: np.ndarray) -> None:
     """Every row of group g (see the module docstring)."""
     h = img.shape[0]
     nd, md, x0, cols = cfg[C_ND], cfg[C_MIND], cfg[C_X0], cfg[C_COLS]
     for step in range(h):
         y = step if g == 0 else h - 1 - step
-        _cost_row(cl, crr, y, x0, md, nd, cols, cost)
+        _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
         _aggregate_row(g, y, step, img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc)
         while not try_lock(locks, y):
             pass
         first = done[y] == 0
         if first:
-            row = parked[y]
-            for i in range(acc.shape[0]):
-                row[i] = acc[i]
+            stream_copy(parked[y], acc, acc.shape[0])
             done[y] = 1
         unlock(locks, y)
         if not first:
-            _finish_row(y, cfg, acc, parked[y], rmin, rarg, mins, disp[y])
+            _finish_row(y, cfg, acc, parked[y], rmin, rarg, karg, disp[y])
 
 
 @nb.njit(parallel=True, **_JIT)
@@ -158,10 +161,10 @@ def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
              p2tab: np.ndarray, parked: np.ndarray, locks: np.ndarray, done: np.ndarray,
              disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
              pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
-             mins: np.ndarray) -> None:
+             karg: np.ndarray) -> None:
     """Disparity rows (before the speckle filter) of the census pair (cl, crr mirrored).
 
     Scratch has one slice per group (leading axis 2); locks and done must be zero."""
     for g in nb.prange(2):
         _group(g, img, cl, crr, cfg, p2tab, parked, locks, done, disp, cost[g], lbuf[g], mv[g],
-               meta[g], pm[g], acc[g], rmin[g], rarg[g], mins[g])
+               meta[g], pm[g], acc[g], rmin[g], rarg[g], karg[g])

@@ -42,11 +42,12 @@ class SGMMatcher:
         self.census_byte = np.zeros((n, w + 64), np.uint8)
         self.census_code = np.empty((n, w), np.uint64)
         self.cl = np.empty((h, w), np.uint64)
-        self.crr = np.empty((h, w), np.uint64)
+        self.crr = np.zeros((h, w + nd), np.uint64)  # + codes left of the image (unused)
         cfg = np.zeros(_sgm.C_LEN, np.int64)
         cfg[[_sgm.C_ND, _sgm.C_MIND, _sgm.C_P1, _sgm.C_URATIO, _sgm.C_LRDIFF, _sgm.C_X0,
-             _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV]] = [
-            nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths, p.invalid_value]
+             _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV, _sgm.C_MAXC]] = [
+            nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths,
+            p.invalid_value, p.max_cost]
         self.cfg = cfg
         self.p2tab = np.full(256, p.p2, np.int64)  # effective P2 per intensity step |dI|
         if p.p2_adapt > 0:
@@ -69,7 +70,7 @@ class SGMMatcher:
         self.acc = _aligned((2, cols * nd), np.int16)
         self.rmin = np.empty((2, cols + nd - 1), np.int16)
         self.rarg = np.zeros((2, cols + nd - 1), np.int16)
-        self.mins = np.empty((2, cols), np.int16)
+        self.karg = np.empty((2, cols), np.int16)  # winners of a row (left-right check)
         if p.use_speckle:
             self.labels = np.empty((h, w), np.int32)
             self.stack = np.empty((h * w, 2), np.int32)
@@ -111,7 +112,7 @@ class SGMMatcher:
         try:
             _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.p2tab, self.parked, self.locks,
                           self.done, disp, self.cost, self.lbuf, self.mv, self.meta, self.pm,
-                          self.acc, self.rmin, self.rarg, self.mins)
+                          self.acc, self.rmin, self.rarg, self.karg)
         finally:
             nb.set_parallel_chunksize(chunk)
 

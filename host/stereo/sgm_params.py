@@ -82,8 +82,10 @@ class SGMParams:
 
 @dataclass(frozen=True)
 class SGMGeometry:
-    """Columns [x0, x1) where every disparity of the range has its right pixel in the image;
-    only these are matched (the path rectangle), the rest of each row is invalid."""
+    """Columns [x0, x1) that are matched (the path rectangle): those where the smallest
+    disparity has its right pixel in the image and, on the right, every disparity does; the
+    rest of each row is invalid. Near the left edge the larger disparities point left of the
+    right image; their cost is the largest (census bits) and the paths carry the scene in."""
 
     height: int
     width: int
@@ -101,6 +103,6 @@ def sgm_geometry(height: int, width: int, p: SGMParams) -> SGMGeometry:
         raise ConfigError(f"image {width}x{height} has no rows")
     check_rule("sgm_disparity_range_vs_width", {"width": width, "algorithm": Algorithm.SEMI_GLOBAL,
                                                 "min_disparity": p.min_disparity, "num_disparities": p.num_disparities})
-    x0 = max(p.min_disparity + p.num_disparities - 1, 0)
+    x0 = max(p.min_disparity, 0)
     x1 = min(width, width + p.min_disparity)
     return SGMGeometry(height, width, x0, x1)

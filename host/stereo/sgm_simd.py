@@ -7,11 +7,13 @@ pixel_paths reads.
 """
 from __future__ import annotations
 
+import platform
+
 from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-from .simd import _TAIL, _call, _chunked, _fold16, _ptr, _reduce_min, _smin, _splat, _vload, \
+from .simd import _call, _chunked, _ptr, _reduce_min, _splat, _vload, \
     _vstore
 
 _I16 = ir.IntType(16)
@@ -32,16 +34,20 @@ def _i16(context, builder, sig, args, i):
 
 
 @intrinsic
-def add_min(typingctx, dst, di, src, si, nd):
-    """dst[di+k] += src[si+k] for k < nd; returns min_k of the new dst values."""
+def add_argmin(typingctx, dst, di, src, si, nd):
+    """dst[di+k] += src[si+k] for k < nd; returns (m, first k with dst[di+k] == m), m the
+    minimum of the new values, in one pass: per lane the first strict minimum and its index,
+    then the smallest index among the lanes holding the overall minimum."""
     if not _i16_arrays(dst, src):
         return None
+    ret = types.UniTuple(types.int64, 2)
 
     def codegen(context, builder, sig, args):
         st = sig.args
         div, siv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 3, 4))
-        best = cgutils.alloca_once_value(builder, _splat(builder, ir.Constant(_I16, 32767),
-                                              ir.VectorType(_I16, _TAIL)))
+        wide = ir.VectorType(_I16, 64)
+        best = cgutils.alloca_once_value(builder, ir.Constant(wide, [32767] * 64))
+        bidx = cgutils.alloca_once_value(builder, ir.Constant(wide, [32767] * 64))
 
         def body(j0, n):
             vty = ir.VectorType(_I16, n)
@@ -50,12 +56,53 @@ def add_min(typingctx, dst, di, src, si, nd):
                        vty)
             t = builder.add(_vload(builder, pd, vty), s)
             _vstore(builder, t, pd)
-            builder.store(_smin(builder, builder.load(best), _fold16(builder, t)), best)
+            ks = builder.add(_splat(builder, builder.trunc(j0, _I16), vty),
+                             ir.Constant(vty, list(range(n))))
+            if n < 64:  # pad to 64 lanes with values that never win
+                pad = ir.Constant(ir.VectorType(_I32, 64), list(range(n)) + [n] * (64 - n))
+                t = builder.shuffle_vector(t, ir.Constant(vty, [32767] * n), pad)
+                ks = builder.shuffle_vector(ks, ir.Constant(vty, [32767] * n), pad)
+            b = builder.load(best)
+            lt = builder.icmp_signed("<", t, b)
+            builder.store(builder.select(lt, t, b), best)
+            builder.store(builder.select(lt, ks, builder.load(bidx)), bidx)
 
         _chunked(builder, ndv, body)
-        return _reduce_min(builder, builder.load(best))
+        b = builder.load(best)
+        m = _reduce_min(builder, b)
+        hit = builder.icmp_signed("==", b, _splat(builder, m, wide))
+        k = _call(builder, "llvm.vector.reduce.umin.v64i16", _I16,
+                  [builder.select(hit, builder.load(bidx), ir.Constant(wide, [32767] * 64))])
+        i64 = ir.IntType(64)
+        return context.make_tuple(builder, ret, [builder.sext(m, i64), builder.zext(k, i64)])
 
-    return types.int16(dst, di, src, si, nd), codegen
+    return ret(dst, di, src, si, nd), codegen
+
+
+@intrinsic
+def count_le(typingctx, s, si, nd, thr):
+    """Number of k < nd with s[si+k] <= thr."""
+    if not (_i16_arrays(s) and isinstance(thr, types.Integer)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        siv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 2))
+        thv = _i16(context, builder, sig, args, 3)
+        i64 = ir.IntType(64)
+        count = cgutils.alloca_once_value(builder, ir.Constant(i64, 0))
+
+        def body(j0, n):
+            vty, mty = ir.VectorType(_I16, n), ir.IntType(n)
+            x = _vload(builder, _ptr(context, builder, sig.args[0], args[0],
+                                     [builder.add(siv, j0)]), vty)
+            le = builder.bitcast(builder.icmp_signed("<=", x, _splat(builder, thv, vty)), mty)
+            c = builder.zext(_call(builder, f"llvm.ctpop.i{n}", mty, [le]), i64)
+            builder.store(builder.add(builder.load(count), c), count)
+
+        _chunked(builder, ndv, body)
+        return builder.load(count)
+
+    return types.int64(s, si, nd, thr), codegen
 
 
 @intrinsic
@@ -86,6 +133,36 @@ def diag_update(typingctx, s, si, rmin, rarg, ri, nd):
         return context.get_dummy_value()
 
     return types.none(s, si, rmin, rarg, ri, nd), codegen
+
+
+_X86 = platform.machine().lower() in ("x86_64", "amd64")
+
+
+@intrinsic
+def stream_copy(typingctx, dst, src, n):
+    """dst[k] = src[k] for k < n (int16; n a multiple of 16, dst 32-byte aligned). On x86 the
+    stores are non-temporal, then fenced: a parked row is read back much later or by the other
+    thread, so writing it around the cache saves each line's read-for-ownership from memory."""
+    if not _i16_arrays(dst, src):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        nv = _intp(context, builder, sig, args, 2)
+        vty = ir.VectorType(_I16, 16)
+        nt = builder.module.add_metadata([ir.Constant(_I32, 1)])
+        with cgutils.for_range_slice(builder, ir.Constant(nv.type, 0), nv,
+                                     ir.Constant(nv.type, 16)) as (i, _):
+            v = _vload(builder, _ptr(context, builder, st[1], args[1], [i]), vty)
+            pd = builder.bitcast(_ptr(context, builder, st[0], args[0], [i]), vty.as_pointer())
+            store = builder.store(v, pd, align=32)
+            if _X86:
+                store.set_metadata("nontemporal", nt)
+        if _X86:
+            _call(builder, "llvm.x86.sse.sfence", ir.VoidType(), [])
+        return context.get_dummy_value()
+
+    return types.none(dst, src, n), codegen
 
 
 def _lock_ptr(context, builder, sig, args):

@@ -150,6 +150,16 @@ def test_output_contract_and_match_api() -> None:
     assert not np.array_equal(bm, out)  # the block matcher still answers MatchParams
 
 
+def test_left_border_is_matched() -> None:
+    """The columns left of num_disparities - 1, where the larger disparities point outside the
+    right image, get the scene's disparity (cv2.StereoSGBM leaves them invalid)."""
+    left, right = pair(40, 200, 6, seed=4)
+    p = SGMParams(num_disparities=32)
+    out = SGMMatcher(left.shape, p).match(left, right)
+    border = out[2:-2, 8:p.num_disparities - 1] / 16.0  # right pixel in the image from x = 6
+    assert np.mean(np.abs(border - 6) <= 1) > 0.9
+
+
 def test_thread_count_and_reuse_do_not_change_output() -> None:
     a = pair(45, 150, 5, seed=11)
     b = pair(45, 150, 9, seed=12)

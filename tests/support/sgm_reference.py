@@ -5,7 +5,8 @@ x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k 
 
 1. census: per pixel one bit per window neighbour (width x height, centre excluded), set when
    the neighbour is darker than the centre; the image is extended by edge replication.
-2. cost C[y, x, k] = popcount(census_L[y, X] ^ census_R[y, X - d]) (Hamming distance).
+2. cost C[y, x, k] = popcount(census_L[y, X] ^ census_R[y, X - d]) (Hamming distance), or the
+   number of census bits (the largest cost) where X - d < 0, left of the right image.
 3. for each path direction r = (dy, dx): L_r(p) = C(p) where p - r leaves the matched
    rectangle, else L_r(p, k) = C(p, k) + min(L_r(q, k), L_r(q, k-1) + P1, L_r(q, k+1) + P1,
    m_q + P2') - m_q with q = p - r, m_q = min_k L_r(q, k) and P2' = P2, or with p2_adapt = a > 0
@@ -13,8 +14,10 @@ x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k 
    vertical) or 8 (plus diagonal) paths. (L <= census bits + P2 <= 255, as SGMParams demands.)
 4. winner-take-all: k* = first argmin_k S; m = S[k*].
 5. uniqueness (ratio u > 0): invalid when some k with |k - k*| > 1 has S[k] <= m + m * u // 100.
-6. subpixel (0 < k* < N-1, a = S[k*-1], b = S[k*+1]): den = max(a + b - 2m, 1),
+6. subpixel, equiangular (0 < k* < N-1, a = S[k*-1], b = S[k*+1]): den = max(max(a, b) - m, 1),
    out = 16 * (min_disparity + k*) + floor(((a - b) * 16 + den) / (2 * den)); else 16 * d.
+   (Not the parabola's den = a + b - 2m, which pulls estimates toward whole pixels:
+   tests/stereo/test_sgm_subpixel.py.)
 7. left-right (lr_max_diff >= 0): the right image's winner for right column j is the first
    argmin over k of S at the left pixel x = j + k (same row); invalid when it differs from k*
    by more than lr_max_diff.
@@ -55,7 +58,9 @@ def cost_volume(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray
     xs = np.arange(g.x0, g.x1)
     for k in range(p.num_disparities):
         d = p.min_disparity + k
-        cost[:, :, k] = np.bitwise_count(cl[:, xs] ^ cr[:, xs - d])
+        inside = xs - d >= 0
+        cost[:, :, k] = np.where(inside, np.bitwise_count(cl[:, xs] ^ cr[:, np.maximum(xs - d, 0)]),
+                                 p.max_cost)
     return cost
 
 
@@ -127,7 +132,7 @@ def select(total: np.ndarray, p: SGMParams) -> np.ndarray:
         inner = (k > 0) & (k < nd - 1)
         a = s[xs, np.clip(k - 1, 0, nd - 1)]
         b = s[xs, np.clip(k + 1, 0, nd - 1)]
-        den = np.maximum(a + b - 2 * m, 1)
+        den = np.maximum(np.maximum(a, b) - m, 1)
         frac = np.where(inner, ((a - b) * 16 + den) // (2 * den), 0)
         out[y] = np.where(ok, 16 * (p.min_disparity + k) + frac, p.invalid_value)
     return out

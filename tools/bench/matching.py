@@ -125,6 +125,7 @@ def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
 @click.option("--repeat", type=click.IntRange(min=1), default=15, show_default=True, help="Timed runs per case.")
 @click.option("--quick", is_flag=True, help="Only 640x480, D=64, block 9.")
 @click.option("--profile", is_flag=True, help="Per-stage timings of the core.")
+@click.option("--busy", is_flag=True, help="sgm: time beside one busy process (a spinning Python).")
 @click.option("--cold-jit", is_flag=True, help="Also time a from-scratch compile (subprocess, empty numba cache).")
 @click.option("--algorithm", type=click.Choice(engines.names()), default="bm", show_default=True,
               help="bm: the block matcher vs cv2.StereoBM; sgm: our SGM vs every cv2.StereoSGBM mode and StereoBM.")

@@ -3,17 +3,22 @@ cv2.StereoBM, side by side in one run.
 
 Scenes: Middlebury Motorcycle (scikit-image) and the simulator's ground-truth scenes (lab and
 wall, rendered, rectified and fetched over sim:// with SimulatedCamera.ground_truth) at 640x480
-and 1280x960. Per method: median ms of interleaved runs, G disparity evaluations/s (W*H*D/t),
-bad-2.0 and bad-1.0 over pixels with known truth (invalid output counts as bad), and peak memory
-(growth of the process's peak resident set over constructing the matcher and its first call).
+and 1280x960. Per method: median ms of interleaved runs, the median and range of its time over
+SGBM_3WAY's in the same round, G disparity evaluations/s (W*H*D/t), bad-2.0 and bad-1.0 over
+pixels with known truth (invalid output counts as bad), and peak memory (growth of the process's
+peak resident set over constructing the matcher and its first call). ``--busy`` times beside one
+spinning process. First a subpixel table: pixel-locking bias on slanted planes with exact truth.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import statistics
+import subprocess
+import sys
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -98,8 +103,8 @@ def peak_growth_mib(fn: Callable[[], object]) -> float:
 
 
 def run(scenes, nd: int, repeat: int, variants: dict[str, dict]) -> None:
-    hdr = (f"{'scene':<22} {'method':<18} {'ms':>8} {'x3WAY':>6} {'GDE/s':>6} {'bad2.0':>7} "
-           f"{'bad1.0':>7} {'peak MiB':>8}")
+    hdr = (f"{'scene':<22} {'method':<18} {'ms':>8} {'x3WAY':>6} {'spread':>11} {'GDE/s':>6} "
+           f"{'bad2.0':>7} {'bad1.0':>7} {'peak MiB':>8}")
     print(hdr)
     print("-" * len(hdr))
     for name, left, right, gt in scenes:
@@ -124,9 +129,11 @@ def run(scenes, nd: int, repeat: int, variants: dict[str, dict]) -> None:
                 fn(left, right)
                 row[1].append((time.perf_counter() - t0) * 1e3)
         ms = {row[0]: statistics.median(row[1]) for row in rows}
-        for label, _, b2, b1, mem in rows:
-            print(f"{name:<22} {label:<18} {ms[label]:>8.1f} "
-                  f"{ms[label] / ms['cv2 SGBM_3WAY']:>6.2f} {w * h * nd / ms[label] / 1e6:>6.2f} "
+        three_way = next(row[1] for row in rows if row[0] == "cv2 SGBM_3WAY")
+        for label, times, b2, b1, mem in rows:
+            ratios = [t / t3 for t, t3 in zip(times, three_way)]  # per interleaved round
+            print(f"{name:<22} {label:<18} {ms[label]:>8.1f} {statistics.median(ratios):>6.2f} "
+                  f"{min(ratios):>5.2f}-{max(ratios):<5.2f} {w * h * nd / ms[label] / 1e6:>6.2f} "
                   f"{100 * b2:>6.1f}% {100 * b1:>6.1f}% {mem:>8.1f}")
         print()
 
@@ -188,6 +195,50 @@ def cpu_table(scenes, nd: int, repeat: int, variants: dict[str, dict]) -> None:
     print()
 
 
+@contextlib.contextmanager
+def busy_process(on: bool) -> Iterator[None]:
+    """While the block runs, one other process spins on a CPU (the issue's "beside one busy
+    process" setting); nothing when off."""
+    if not on:
+        yield
+        return
+    proc = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        yield
+    finally:
+        proc.terminate()
+        proc.wait()
+
+
+def subpixel_table(variants: dict[str, dict]) -> None:
+    """Mean error per bin of the truth's offset from the nearest whole pixel (pixel locking:
+    + in the low bins, - in the high ones) and RMS error, on slanted textured planes with exact
+    truth (tools/bench/sgm_scenes.py), ours vs cv2 SGBM_3WAY (parabola fit)."""
+    import cv2
+
+    from stereocam.stereo import SGMMatcher, SGMParams
+
+    from .sgm_scenes import fraction_bias, slanted_plane
+
+    nd = 48
+    pairs = [slanted_plane(96, 320, d0 + 0.37 * seed, slope, seed)
+             for slope, d0 in ((0.05, 10.3), (0.1, 11.1), (-0.09, 36.4)) for seed in range(2)]
+    three_way = cv2.StereoSGBM_create(0, nd, 5, 8 * 25, 32 * 25, 0, 0, 10, 100, 2,
+                                      SGBM_MODES["SGBM_3WAY"])
+    meths = [(label, lambda l, r, kw=kw: SGMMatcher(l.shape, SGMParams(num_disparities=nd, **kw))
+              .match(l, r), SGMParams(num_disparities=nd, **kw).invalid_value)
+             for label, kw in variants.items()]
+    meths.append(("cv2 SGBM_3WAY", three_way.compute, -16))
+    print("subpixel on slanted planes 320x96, 48 disp (mean error px per truth-fraction bin "
+          "-0.5..0.5; RMS):")
+    for label, fn, invalid in meths:
+        disp = np.concatenate([fn(l, r)[8:-8, nd + 4:-8] for l, r, _ in pairs])
+        gt = np.concatenate([g[8:-8, nd + 4:-8] for _, _, g in pairs])
+        bias, rms = fraction_bias(disp, gt, invalid)
+        print(f"  {label:<18} " + " ".join(f"{b:+.3f}" for b in bias) + f"; RMS {rms:.3f} px")
+    print()
+
+
 def main(args) -> int:
     import cv2
     import numba
@@ -201,6 +252,7 @@ def main(args) -> int:
           f"repeat={args.repeat}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus;"
           f" SGM JIT warm-up {time.perf_counter() - t0:.2f} s")
     variants = {"ours SGM 8 paths": {}, "ours SGM 4 paths": {"paths": 4}}
+    subpixel_table(variants)
     scenes = []
     try:
         scenes.append(("Motorcycle 741x500", *motorcycle()))
@@ -214,6 +266,9 @@ def main(args) -> int:
     if args.profile:
         profile(*scenes[0][1:3], nd, args.repeat, variants)
         cpu_table(scenes, nd, args.repeat, variants)
-    run(scenes, nd, args.repeat, variants)
+    busy = getattr(args, "busy", False)
+    print(f"timed beside one busy process: {'yes' if busy else 'no'}")
+    with busy_process(busy):
+        run(scenes, nd, args.repeat, variants)
     print(f"load average at the end: {os.getloadavg()[0]:.2f}")
     return 0

@@ -17,7 +17,7 @@ def _costs(cl, crr, cfg, cost):
     for _ in range(2):
         for y in range(cl.shape[0]):
             _sgm._cost_row(cl, crr, y, cfg[_sgm.C_X0], cfg[_sgm.C_MIND], cfg[_sgm.C_ND],
-                           cfg[_sgm.C_COLS], cost)
+                           cfg[_sgm.C_COLS], cfg[_sgm.C_MAXC], cost)
 
 
 @nb.njit(cache=True)
@@ -30,9 +30,9 @@ def _aggregate(img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc):
 
 
 @nb.njit(cache=True)
-def _select(cfg, acc, parked, rmin, rarg, mins, disp):
+def _select(cfg, acc, parked, rmin, rarg, karg, disp):
     for y in range(disp.shape[0]):
-        _sgm._finish_row(y, cfg, acc, parked[y], rmin, rarg, mins, disp[y])
+        _sgm._finish_row(y, cfg, acc, parked[y], rmin, rarg, karg, disp[y])
 
 
 def cpu_ms(fn, repeat: int) -> float:
@@ -64,6 +64,6 @@ def stage_ms(m, left: np.ndarray, repeat: int) -> dict[str, float]:
         "path aggregation": lambda: _aggregate(left, m.cfg, m.p2tab, m.cost[0], m.lbuf[0],
                                                m.mv[0], m.meta[0], m.pm[0], m.acc[0]),
         "sum+wta+uniq+subpix+lr": lambda: _select(m.cfg, acc, m.parked, m.rmin[0], m.rarg[0],
-                                                  m.mins[0], disp),
+                                                  m.karg[0], disp),
     }
     return {name: cpu_ms(fn, repeat) for name, fn in stages.items()}

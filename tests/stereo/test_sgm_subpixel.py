@@ -1,0 +1,25 @@
+"""SGM's subpixel estimate is unbiased on slanted planes with exact truth: no pull toward whole
+pixels (the parabola fit on census costs pulls by about 0.06 px; equiangular by under 0.02)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("cv2")
+
+from stereocam.stereo import SGMMatcher, SGMParams
+from stereocam.tools.bench.sgm_scenes import fraction_bias, slanted_plane
+
+
+def test_no_pixel_locking_on_slanted_planes() -> None:
+    p = SGMParams(num_disparities=48)
+    est, truth = [], []
+    for slope, d0 in ((0.05, 10.3), (0.13, 11.1), (-0.09, 36.4)):
+        for seed in range(2):
+            left, right, gt = slanted_plane(48, 200, d0 + 0.37 * seed, slope, seed)
+            disp = SGMMatcher(left.shape, p).match(left, right)
+            est.append(disp[4:-4, 52:-4])  # matched columns, away from the borders
+            truth.append(gt[4:-4, 52:-4])
+    bias, rms = fraction_bias(np.concatenate(est), np.concatenate(truth), p.invalid_value)
+    assert np.all(np.abs(bias) < 0.035), f"bias per fraction bin {np.round(bias, 3)}"
+    assert rms < 0.2, rms
