@@ -71,8 +71,8 @@ def _hash(k: np.uint64) -> np.uint64:
 
 
 @nb.njit(cache=True, parallel=True, nogil=True)
-def expose(radiance, scale, seed, out):
-    """Radiance → 8-bit pixels with shot and read noise.
+def expose(radiance, scale, seed, out, noise=1.0):
+    """Radiance → 8-bit pixels with shot and read noise (both times ``noise``).
 
     The unit Gaussian is the Irwin–Hall sum of the four 16-bit quarters of one 64-bit hash
     (mean 2, variance 4/12), rescaled: no transcendental per pixel, tails cut at ±3.5 σ.
@@ -87,7 +87,7 @@ def expose(radiance, scale, seed, out):
                 + float(r >> np.uint64(48))
             g = (s4 / 65536.0 - 2.0) * 1.7320508075688772
             s = radiance[y, x] * scale
-            v = s + g * math.sqrt(READ_NOISE_DN * READ_NOISE_DN + max(s, 0.0) / CONVERSION)
+            v = s + g * noise * math.sqrt(READ_NOISE_DN * READ_NOISE_DN + max(s, 0.0) / CONVERSION)
             v = math.floor(v + 0.5)
             out[y, x] = 0 if v < 0 else (255 if v > 255 else np.uint8(v))
 
@@ -140,17 +140,23 @@ class SensorRig:
         """Raw left and right images (uint8) exposed at the same instant ``t``."""
         if view == scene.Scene.BOARD:
             return self._board_view(t, frame_seed)
-        prims = scene.primitives(view, t)
         moving = scene.moving_primitives(view)
+        photo = scene.photometry(view)
         scale = 255.0 * exposure_us / EXPOSURE_REF_US * 10.0 ** (gain / 200.0)
         images = []
         for eye, (origin, rot) in enumerate(self._poses):
-            layer = self._static_layer(eye, view, prims, moving)
-            rad = np.empty(layer.rad.shape, np.float32)
-            render.render_over(self._rays[eye], self._cones[eye], origin, rot, prims, moving, layer.rad, layer.t,
-                               layer.hit, self.texture, self.tex_offsets, self.tex_side, LIGHT, rad)
+            rad = np.zeros(self._rays[eye].shape[:2], np.float32)
+            instants = photo.instants(t)  # a blurred exposure averages the moving primitives' path
+            for ti in instants:
+                prims = scene.primitives(view, ti)
+                layer = self._static_layer(eye, view, prims, moving)
+                sub = np.empty(layer.rad.shape, np.float32)
+                render.render_over(self._rays[eye], self._cones[eye], origin, rot, prims, moving, layer.rad,
+                                   layer.t, layer.hit, self.texture, self.tex_offsets, self.tex_side, LIGHT, sub)
+                rad += sub
+            rad = photo.apply(rad / np.float32(len(instants)), self._rays[eye], eye)
             img = np.empty(rad.shape, np.uint8)
-            expose(rad, scale, (frame_seed * 2 + eye) ^ (self.seed << 32), img)
+            expose(rad, scale, (frame_seed * 2 + eye) ^ (self.seed << 32), img, photo.noise)
             images.append(img)
         return images[0], images[1]
 
