@@ -5,7 +5,7 @@ slanted      planes at steep angles: disparity changes across every support wind
 curved       spheres near and far: no window is fronto-parallel
 thin         a fence of slats, poles and wires a few pixels wide in front of a far wall
 low-texture  large walls printed at 2 % contrast: the sensor noise is most of the signal
-repetitive   walls and a panel whose print repeats every 18-30 pixels: many equally good matches
+repetitive   a brick wall (a 22 px lattice) and a panel whose print repeats every 31 px
 exposure     the right eye 30 % brighter with a 10 DN black-level offset
 vignetting   60 % of the light lost in the image corners, in both eyes
 noise        a dim scene with 2.5 times the sensor's noise
@@ -94,16 +94,25 @@ def _low_texture(t: float, rng: np.random.Generator) -> Rows:
     ]
 
 
-REPEAT_TEXSCALE = 6144.0  # the 512-texel print repeats every 8.3 cm: 18 px at 2.2 m, 31 px at 1.3 m
+REPEAT_TEXSCALE = 6144.0  # the 512-texel print repeats every 8.3 cm: 31 px at 1.3 m
+BRICK_M = (0.09, 0.04)  # brick length and height; 1 cm mortar joints: a 22 x 11 px lattice at 2.2 m
+BRICKS = (12, 14)  # columns, rows
 
 
 def _repetitive(t: float, rng: np.random.Generator) -> Rows:
-    return _backdrop(rng) + [
-        rect((0.0, -0.3, 2.2), X, Y, 3.0, 0.9, albedo=0.5, contrast=0.6, texscale=REPEAT_TEXSCALE,
-             texoff=rng.uniform(0, 512)),
-        rect((0.35, 0.1, 1.3), X, Y, 0.35, 0.3, albedo=0.55, contrast=0.6, texscale=REPEAT_TEXSCALE,
-             texoff=rng.uniform(0, 512)),
-    ]
+    """A brick wall (bricks alike but for a faint print and a few % of albedo) and a panel whose
+    print repeats exactly."""
+    z, (bw, bh) = 2.2, BRICK_M
+    rows = _backdrop(rng) + [rect((0.0, -0.3, z + 0.01), X, Y, 0.7, 0.4, albedo=0.25, contrast=0.1,
+                                  texoff=rng.uniform(0, 512))]  # the mortar behind
+    for j in range(BRICKS[1]):
+        for i in range(BRICKS[0]):
+            x = -0.6 + (i + 0.5 * (j % 2)) * (bw + 0.01)  # every other row offset by half a brick
+            rows.append(rect((x, -0.62 + j * (bh + 0.01), z), X, Y, bw / 2, bh / 2,
+                             albedo=0.6 * (1 + rng.uniform(-0.04, 0.04)), contrast=0.12, texoff=rng.uniform(0, 512)))
+    rows.append(rect((0.35, 0.1, 1.3), X, Y, 0.3, 0.25, albedo=0.55, contrast=0.6, texscale=REPEAT_TEXSCALE,
+                     texoff=rng.uniform(0, 512)))
+    return rows
 
 
 def _clutter(t: float, rng: np.random.Generator) -> Rows:
@@ -132,7 +141,7 @@ CLASSES: dict[str, SceneClass] = {c.name: c for c in (
     SceneClass("curved", "spheres near and far", _curved),
     SceneClass("thin", "fence slats, poles and wires a few pixels wide", _thin),
     SceneClass("low-texture", "large walls at 2 % print contrast", _low_texture),
-    SceneClass("repetitive", "a print repeating every 18-30 px", _repetitive),
+    SceneClass("repetitive", "a brick wall and a print repeating every 31 px", _repetitive),
     SceneClass("exposure", "right eye +30 % gain, +10 DN black level", _clutter,
                photometry=Photometry(right_gain=1.3, right_offset=10 / 255)),
     SceneClass("vignetting", "60 % light loss in the corners", _clutter, photometry=Photometry(vignetting=0.6)),
