@@ -143,18 +143,17 @@ class SensorRig:
         moving = scene.moving_primitives(view)
         photo = scene.photometry(view)
         scale = 255.0 * exposure_us / EXPOSURE_REF_US * 10.0 ** (gain / 200.0)
+        tables = [scene.primitives(view, ti) for ti in photo.instants(t)]  # blur: the path over the exposure
         images = []
         for eye, (origin, rot) in enumerate(self._poses):
             rad = np.zeros(self._rays[eye].shape[:2], np.float32)
-            instants = photo.instants(t)  # a blurred exposure averages the moving primitives' path
-            for ti in instants:
-                prims = scene.primitives(view, ti)
+            for prims in tables:
                 layer = self._static_layer(eye, view, prims, moving)
                 sub = np.empty(layer.rad.shape, np.float32)
                 render.render_over(self._rays[eye], self._cones[eye], origin, rot, prims, moving, layer.rad,
                                    layer.t, layer.hit, self.texture, self.tex_offsets, self.tex_side, LIGHT, sub)
                 rad += sub
-            rad = photo.apply(rad / np.float32(len(instants)), self._rays[eye], eye)
+            rad = photo.apply(rad / np.float32(len(tables)), self._rays[eye], eye)
             img = np.empty(rad.shape, np.uint8)
             expose(rad, scale, (frame_seed * 2 + eye) ^ (self.seed << 32), img, photo.noise)
             images.append(img)

@@ -32,7 +32,7 @@ from stereocam.stereo import engines
 from stereocam.tools.bench.stereobm_oracle import opencv_stereobm
 from stereocam.tools.options import CONTEXT, epilog
 
-from .matching_report import MOTORCYCLE, BenchScene, motorcycle_scene, report, sim_scene
+from .matching_report import MOTORCYCLE, BenchScene, class_scene, motorcycle_scene, report
 
 
 def synthetic_scene(h: int = 480, w: int = 640, seed: int = 0):
@@ -145,7 +145,7 @@ def sgm_report(args: SimpleNamespace) -> int:
                 continue
             scenes.append(motorcycle_scene)
         else:
-            scenes.append(lambda name=name: sim_scene(name, w, h, args.seed))
+            scenes.append(lambda name=name: class_scene(name, w, h, args.seed))
     report(scenes, args.threads, args.repeat, args.busy)
     return 0
 

@@ -83,7 +83,7 @@ def score(disp: np.ndarray, invalid: int, truth: np.ndarray) -> tuple[float, flo
             100.0 * float((reported & bad).sum()) / n_rep, float(err[reported].sum()) / n_rep)
 
 
-def sim_scene(name: str, width: int, height: int, seed: int) -> BenchScene:
+def class_scene(name: str, width: int, height: int, seed: int) -> BenchScene:
     """A scene class rendered by the ideal rig (device_sim/rig/stereo_pair.py)."""
     from stereocam.device_sim.rig.stereo_pair import render_pair
 

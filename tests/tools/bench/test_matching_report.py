@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from stereocam.tools.bench.matching_report import (CV2_INVALID, COLUMNS, REFERENCE, SGBM_MODES, report, score,
-                                                   sim_scene)
+                                                   class_scene)
 from tests.tools.test_cli import stereocam as run
 
 NAME_W, CELL_W = 24, 11  # format_table's column widths
@@ -40,7 +40,7 @@ def test_score_counts_invalid_as_bad_over_all_truth_and_not_over_reported():
 
 
 def test_report_prints_one_parsable_table_per_scene_with_every_engine(capsys):
-    rows = report([lambda: sim_scene("thin", 128, 96, seed=1)], threads=1, repeat=1, busy=False)
+    rows = report([lambda: class_scene("thin", 128, 96, seed=1)], threads=1, repeat=1, busy=False)
     out = capsys.readouterr().out
     assert "load average" in out and "numba" in out and "cv2" in out and "threads 1" in out
     table = parse_tables(out)["thin 128x96"]
