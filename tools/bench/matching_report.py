@@ -21,7 +21,7 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -105,10 +105,16 @@ def methods(nd: int) -> tuple[list[Method], list[str]]:
     from stereocam.stereo import Matcher, MatchParams, SGMMatcher, SGMParams
 
     bm = MatchParams(num_disparities=nd, block_size=9)
-    out = [Method("ours bm 9x9", lambda shape: Matcher(shape, bm).match, bm.invalid_value)]
+
+    def ours_bm(shape: tuple[int, int]) -> MatchFn:
+        return Matcher(shape, bm).match
+
+    def ours_sgm(p: SGMParams) -> Callable[[tuple[int, int]], MatchFn]:
+        return lambda shape: SGMMatcher(shape, p).match
+
+    out = [Method("ours bm 9x9", ours_bm, bm.invalid_value)]
     sgm: dict[int, SGMParams] = {paths: SGMParams(num_disparities=nd, paths=paths) for paths in (8, 4)}
-    out += [Method(f"ours sgm {k} paths", lambda shape, p=p: SGMMatcher(shape, p).match, p.invalid_value)
-            for k, p in sgm.items()]
+    out += [Method(f"ours sgm {k} paths", ours_sgm(p), p.invalid_value) for k, p in sgm.items()]
     notes = []
     try:
         post = importlib.import_module("stereocam.stereo.post")
@@ -116,28 +122,35 @@ def methods(nd: int) -> tuple[list[Method], list[str]]:
         notes.append(f"post-processing presets skipped: stereocam.stereo.post is not importable ({exc})")
     else:
         for preset, params in post.POST_PRESETS.items():
-            def make_post(shape, params=params) -> MatchFn:
+            def make_post(shape: tuple[int, int], params: Any = params) -> MatchFn:
                 m = SGMMatcher(shape, sgm[8])
                 return lambda left, right: post.postprocess(m.match(left, right), left, params)
             out.append(Method(f"ours sgm 8 + {preset}", make_post, sgm[8].invalid_value))
 
-    def sgbm(mode: int):
-        return cv2.StereoSGBM_create(0, nd, 5, P1=200, P2=800, disp12MaxDiff=1, uniquenessRatio=10,
-                                     speckleWindowSize=100, speckleRange=2, mode=mode)
-    out += [Method(f"cv2 {name}", lambda shape, code=code: sgbm(code).compute, CV2_INVALID)
-            for name, code in SGBM_MODES.items()]
+    create_sgbm = getattr(cv2, "StereoSGBM_create", None) or cv2.StereoSGBM.create  # OpenCV 4.x or 5.x
+    create_bm = getattr(cv2, "StereoBM_create", None) or cv2.StereoBM.create
 
-    def stereo_bm(shape) -> MatchFn:
-        m = cv2.StereoBM_create(nd, 9)
+    def sgbm(mode: int) -> Any:
+        return create_sgbm(0, nd, 5, P1=200, P2=800, disp12MaxDiff=1, uniquenessRatio=10,
+                           speckleWindowSize=100, speckleRange=2, mode=mode)
+
+    def cv2_sgbm(mode: int) -> Callable[[tuple[int, int]], MatchFn]:
+        return lambda shape: sgbm(mode).compute
+
+    out += [Method(f"cv2 {name}", cv2_sgbm(code), CV2_INVALID) for name, code in SGBM_MODES.items()]
+
+    def stereo_bm(shape: tuple[int, int]) -> MatchFn:
+        m = create_bm(nd, 9)
         m.setSpeckleWindowSize(100)
         m.setSpeckleRange(32)
         return m.compute
     out.append(Method("cv2 StereoBM 9x9", stereo_bm, CV2_INVALID))
-    if hasattr(cv2, "ximgproc"):
-        def wls(shape) -> MatchFn:
+    ximgproc = getattr(cv2, "ximgproc", None)
+    if ximgproc is not None:
+        def wls(shape: tuple[int, int]) -> MatchFn:
             left_m = sgbm(SGBM_MODES["SGBM_3WAY"])
-            right_m = cv2.ximgproc.createRightMatcher(left_m)
-            f = cv2.ximgproc.createDisparityWLSFilter(left_m)
+            right_m = ximgproc.createRightMatcher(left_m)
+            f = ximgproc.createDisparityWLSFilter(left_m)
             return lambda left, right: f.filter(left_m.compute(left, right), left, None,
                                                 right_m.compute(right, left)).astype(np.int16)
         out.append(Method("cv2 SGBM_3WAY + WLS", wls, CV2_INVALID))
@@ -219,7 +232,8 @@ def report(scenes: list[Callable[[], BenchScene]], threads: int, repeat: int, bu
     from stereocam.stereo.engines import engine_named
 
     cv2.setNumThreads(threads)
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    numba_config: Any = numba.config
+    numba.set_num_threads(min(threads, numba_config.NUMBA_NUM_THREADS))
     t0 = time.perf_counter()
     for name in ("bm", "sgm"):
         engine_named(name).warm_up()
