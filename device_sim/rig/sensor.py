@@ -117,7 +117,7 @@ class SensorRig:
         self._rays = [pixel_rays(cal.K_left, cal.D_left, width, height),
                       pixel_rays(cal.K_right, cal.D_right, width, height)]
         self._cones = [render.ray_cones(r) for r in self._rays]
-        self._poses = [(np.zeros(3), np.eye(3)), (-cal.R.T @ cal.T.ravel(), cal.R.T)]
+        self._poses = [(np.zeros(3), np.eye(3)), (self.right_centre, cal.R.T)]
         self._board = None
         self._layers = {}
         self._format = (width, height)
@@ -126,6 +126,11 @@ class SensorRig:
     def left_rays(self) -> np.ndarray:
         """Camera-frame rays of the left imager's raw pixels at the current format (through its lens)."""
         return self._rays[0]
+
+    @property
+    def right_centre(self) -> np.ndarray:
+        """The right imager's centre in the world (left imager's) frame, metres."""
+        return -self.truth.R.T @ self.truth.T.ravel()
 
     def _board_view(self, t: float, frame_seed: int) -> tuple[np.ndarray, np.ndarray]:
         if self._board is None:

@@ -21,7 +21,9 @@ from .sensor import LIGHT, Geometry, expose
 
 PAIR_BASELINE_M = 0.08
 EXPOSURE_SCALE = 255.0  # DN at radiance 1: the sensor's reference exposure at gain 0
-SAME_POINT_REL = 1e-6  # relative depth difference within which a right-eye hit is the same point
+TEXTURE_SIDE = 512
+Texture = tuple[np.ndarray, np.ndarray, int]  # the packed mip pyramid, its level offsets, its side
+SAME_POINT_REL = 1e-4  # relative distance within which the right eye's hit is the point itself (float32 rays)
 
 
 @dataclass(frozen=True)
@@ -62,7 +64,7 @@ def render_primitives(name: str, exposure: list[np.ndarray], at_t: np.ndarray, p
     """The pair for primitive tables ``exposure`` (one per sub-instant the exposure averages) and
     the truth of ``at_t`` (the table at the exposure's middle)."""
     rays = geometry.rays()
-    texture, offsets = render.pack_pyramid(render.make_texture(seed))
+    tex = (*render.pack_pyramid(render.make_texture(seed, TEXTURE_SIDE)), TEXTURE_SIDE)
     right_origin = np.array([geometry.baseline_m, 0.0, 0.0])
     origins = (np.zeros(3), right_origin)
     eye_rot = np.eye(3)
@@ -72,30 +74,37 @@ def render_primitives(name: str, exposure: list[np.ndarray], at_t: np.ndarray, p
         rad = np.zeros(shape, np.float32)
         for prims in exposure:
             sub, depth = np.empty(shape, np.float32), np.empty(shape, np.float32)
-            render.render_radiance(rays, origin, eye_rot, prims, texture, offsets, 512, LIGHT, sub, depth)
+            render.render_radiance(rays, origin, eye_rot, prims, *tex, LIGHT, sub, depth)
             rad += sub
         rad = photometry.apply(rad / np.float32(len(exposure)), rays, eye)
         img = np.empty(shape, np.uint8)
         expose(rad, EXPOSURE_SCALE, (seed * 2 + eye) ^ (0x5CE7E << 32), img, photometry.noise)
         images.append(img)
-    depth = _depth(rays, np.zeros(3), at_t, texture, offsets)
+    depth = _depth(rays, np.zeros(3), np.eye(3), at_t, tex)
     seen = np.isfinite(depth)
     disparity = np.where(seen, geometry.focal_px * geometry.baseline_m / np.where(seen, depth, 1.0), np.nan)
-    # the right camera's ray to each seen point (camera frames are parallel: z stays the depth)
-    z = np.where(seen, depth, 1.0)
-    to_point = rays.astype(np.float64).copy()
-    to_point[..., 0] -= geometry.baseline_m / z
-    right_depth = _depth(to_point.astype(np.float32), right_origin, at_t, texture, offsets)
-    hidden = right_depth < z * (1.0 - SAME_POINT_REL)
-    x_right = np.arange(geometry.width)[None, :] - disparity
-    outside = x_right < -0.5
-    occluded = seen & (hidden | outside)
+    occluded = occlusion(rays, np.eye(3), depth, disparity, right_origin, at_t, tex)
     return StereoPair(name, images[0], images[1], disparity.astype(np.float32), occluded, geometry)
 
 
-def _depth(rays: np.ndarray, origin: np.ndarray, prims: np.ndarray, texture: np.ndarray,
-           offsets: np.ndarray) -> np.ndarray:
+def occlusion(rays: np.ndarray, rot: np.ndarray, depth: np.ndarray, disparity: np.ndarray, right_centre: np.ndarray,
+              prims: np.ndarray, tex: Texture) -> np.ndarray:
+    """Which pixels of a rectified left view (camera-frame ``rays`` with z = 1, camera->world ``rot``,
+    hit ``depth`` along its axis, truth ``disparity``) see a surface point the right camera, centred
+    at ``right_centre`` (world), does not: another surface is nearer along its ray to the point, or
+    the point falls left of the right image (x - disparity < -0.5)."""
+    seen = np.isfinite(depth)
+    point = (rays.astype(np.float64) * np.where(seen, depth, 1.0)[..., None]) @ np.asarray(rot, np.float64).T
+    to_point = point - right_centre  # world frame; z > 0 for anything in front of both cameras
+    along = to_point[..., 2]
+    hit = _depth((to_point / along[..., None]).astype(np.float32), right_centre, np.eye(3), prims, tex)
+    hidden = hit < along * (1.0 - SAME_POINT_REL)
+    outside = np.arange(depth.shape[1])[None, :] - disparity < -0.5
+    return seen & (hidden | outside)
+
+
+def _depth(rays: np.ndarray, origin: np.ndarray, rot: np.ndarray, prims: np.ndarray, tex: Texture) -> np.ndarray:
     """Depth along the optical axis of the nearest hit per ray (inf for none), float32."""
     rad, depth = np.empty(rays.shape[:2], np.float32), np.empty(rays.shape[:2], np.float32)
-    render.render_radiance(rays, origin, np.eye(3), prims, texture, offsets, 512, LIGHT, rad, depth)
+    render.render_radiance(rays, origin, np.ascontiguousarray(rot, np.float64), prims, *tex, LIGHT, rad, depth)
     return depth

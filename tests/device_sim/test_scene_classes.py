@@ -64,6 +64,7 @@ def test_every_class_has_seeded_truth_within_the_disparity_range(name):
     assert np.isfinite(pair.disparity).all()  # every class fills the view
     assert 0 < np.nanmax(pair.disparity) < 64 * W / 640  # below 64 disparities at 640x480
     assert 0 < pair.occluded.mean() < 0.3
+    assert explained_occlusions(pair.disparity, pair.occluded) > 0.99
     again, other = render_pair(name, W, H, seed=2), render_pair(name, W, H, seed=3)
     assert np.array_equal(again.left, pair.left) and np.array_equal(again.disparity, pair.disparity)
     assert not np.array_equal(other.left, pair.left)
@@ -130,6 +131,24 @@ def test_the_simulator_serves_a_class_by_name_with_its_truth():
         sim.close()
     assert truth is not None and frame.left is not None
     assert (truth.disparity_px > 0).mean() > 0.95  # the class fills the view
+    assert truth.occluded is not None and 0 < truth.occluded.mean() < 0.3
+    assert explained_occlusions(truth.disparity_px, truth.occluded) > 0.99
+
+
+def explained_occlusions(disparity: np.ndarray, occluded: np.ndarray) -> float:
+    """Fraction of the occluded pixels with a cause in the truth itself: left of the right image
+    (x < d), or a nearer surface to their right that covers them in the right view (at x' > x
+    with d' - (x' - x) >= d: it lands at or left of the point's own right-image column)."""
+    ys, xs = np.nonzero(occluded)
+    w = disparity.shape[1]
+    explained = 0
+    for y, x in zip(ys, xs):
+        d = disparity[y, x]
+        right = np.arange(x + 1, min(w, x + 1 + int(np.ceil(disparity.max()))))
+        rows = disparity[max(0, y - 1):y + 2, right]  # the rectified rows match to within a pixel
+        covered = right.size and (rows - (right - x)[None, :] >= d - 1.0).any()
+        explained += bool(x < d + 1.0 or covered)
+    return explained / max(1, len(ys))
 
 
 def test_a_sim_url_names_the_class_and_an_unknown_one_is_refused():
