@@ -2,7 +2,7 @@
 exact truth (the ray caster's hit depth) and its own photometry:
 
 slanted      planes at steep angles: disparity changes across every support window
-curved       spheres near and far: no window is fronto-parallel
+curved       spheres, a pillar and a pipe: no window is fronto-parallel
 thin         a fence of slats, poles and wires a few pixels wide in front of a far wall
 low-texture  large walls printed at 2 % contrast: the sensor noise is most of the signal
 repetitive   a brick wall (a 22 px lattice) and a panel whose print repeats every 31 px
@@ -24,7 +24,7 @@ from typing import Callable
 import numpy as np
 
 from .photometry import PLAIN, Photometry
-from .shapes import rect, sphere
+from .shapes import cylinder, rect, sphere
 
 Rows = list[list[float]]
 X, Y, Z = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
@@ -69,6 +69,9 @@ def _curved(t: float, rng: np.random.Generator) -> Rows:
         sphere((-0.5 + rng.uniform(-0.1, 0.1), 0.0, 1.8), 0.45, texoff=rng.uniform(0, 512)),
         sphere((0.55, -0.1 + rng.uniform(-0.1, 0.1), 1.3), 0.3, albedo=0.6, texoff=rng.uniform(0, 512)),
         sphere((0.1, 0.3, 1.0), 0.14, albedo=0.5, texoff=rng.uniform(0, 512)),
+        cylinder((1.15, 0.0, 2.2 + rng.uniform(-0.2, 0.2)), Y, 0.18, 1.2, albedo=0.5, texoff=rng.uniform(0, 512)),
+        cylinder((0.0, -0.75, 2.6), (1.0, 0.0, rng.uniform(-0.4, 0.4)), 0.12, 1.8, albedo=0.6,
+                 texoff=rng.uniform(0, 512)),  # a pipe across the view
     ]
 
 
@@ -138,7 +141,7 @@ def _motion(t: float, rng: np.random.Generator) -> Rows:
 
 CLASSES: dict[str, SceneClass] = {c.name: c for c in (
     SceneClass("slanted", "planes at 35-60 degrees", _slanted),
-    SceneClass("curved", "spheres near and far", _curved),
+    SceneClass("curved", "spheres, a pillar and a pipe", _curved),
     SceneClass("thin", "fence slats, poles and wires a few pixels wide", _thin),
     SceneClass("low-texture", "large walls at 2 % print contrast", _low_texture),
     SceneClass("repetitive", "a brick wall and a print repeating every 31 px", _repetitive),

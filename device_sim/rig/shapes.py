@@ -37,3 +37,17 @@ def sphere(center: Vec, radius: float, albedo: float = 0.55, contrast: float = 0
     row[R.H1] = radius
     row[R.ALBEDO], row[R.CONTRAST], row[R.TEXSCALE], row[R.TEXOFF] = albedo, contrast, texscale, texoff
     return row
+
+
+def cylinder(center: Vec, axis: Vec, radius: float, half_length: float, seam: Vec | None = None,
+             albedo: float = 0.55, contrast: float = 0.5, texscale: float = 1024.0, texoff: float = 0.0) -> list[float]:
+    """An open tube of ``radius`` around ``axis`` through ``center``, ±``half_length`` along it; its
+    print wraps around from ``seam`` (a direction across the axis; any one when None)."""
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    across = (1.0, 0.0, 0.0) if abs(a[0]) < 0.9 else (0.0, 1.0, 0.0)
+    s = np.cross(a, across) if seam is None else np.asarray(seam, float)
+    s = s - (s @ a) * a
+    s /= np.linalg.norm(s)
+    row = rect(center, a, s, radius, half_length, albedo, contrast, texscale, texoff)
+    row[R.KIND] = R.CYLINDER
+    return row

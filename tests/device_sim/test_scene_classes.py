@@ -6,11 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from stereocam.device_sim.calibration.truth import true_calibration
 from stereocam.device_sim.rig import render
 from stereocam.device_sim.rig.photometry import PLAIN, Photometry
 from stereocam.device_sim.rig.scene import Scene
 from stereocam.device_sim.rig.scene_classes import CLASSES
-from stereocam.device_sim.rig.shapes import rect
+from stereocam.device_sim.rig.sensor import LIGHT, SensorRig
+from stereocam.device_sim.rig.shapes import cylinder, rect
 from stereocam.device_sim.rig.stereo_pair import ideal_geometry, render_pair, render_primitives, scene_class
 
 W, H = 160, 120
@@ -35,6 +37,39 @@ def test_slanted_plane_truth_is_the_analytic_plane():
     truth = render_pair("slanted", W, H, seed=0).disparity
     assert np.allclose(truth[on_board], (fb / z)[on_board], rtol=1e-5)
     assert np.ptp((fb / z)[on_board]) > 3  # really slanted: disparity changes across it
+
+
+def test_cylinder_truth_is_the_analytic_tube():
+    xc, zc, r, h = 0.1, 1.5, 0.3, 0.4
+    prims = np.array([cylinder((xc, 0.0, zc), (0, 1, 0), r, h), rect((0, 0, 4.0), (1, 0, 0), (0, 1, 0), 50.0, 50.0)])
+    rx, ry, fb = pixel_rays(W, H)
+    a, b, c = rx ** 2 + 1, rx * xc + zc, xc ** 2 + zc ** 2 - r ** 2  # (rx z - xc)^2 + (z - zc)^2 = r^2
+    disc = b ** 2 - a * c
+    z = (b - np.sqrt(np.maximum(disc, 0))) / a
+    on_tube = (disc > 1e-4) & (np.abs(ry * z) < h - 1e-3)
+    assert on_tube.mean() > 0.1
+    pair = render_primitives("tube", [prims], prims, PLAIN, ideal_geometry(W, H), seed=0)
+    assert np.allclose(pair.disparity[on_tube], (fb / z)[on_tube], rtol=1e-5)
+    assert np.allclose(pair.disparity[~on_tube & (np.abs(ry) > 0.5)], fb / 4.0, rtol=1e-5)  # wall above and below
+
+
+def test_layered_render_of_cylinders_is_the_full_render():
+    rig = SensorRig(5, true_calibration(5))
+    rig.set_format(W, H)
+    prims = CLASSES["curved"].build(0.0)
+    tubes = np.flatnonzero(prims[:, render.KIND] == render.CYLINDER)
+    static = np.setdiff1d(np.arange(len(prims)), tubes)
+    assert tubes.size == 2
+    for eye in (0, 1):
+        origin, rot = rig._poses[eye]
+        args = (rig.texture, rig.tex_offsets, rig.tex_side, LIGHT)
+        full = np.empty((H, W), np.float32)
+        render.render_radiance(rig._rays[eye], origin, rot, prims, *args, full, np.empty_like(full))
+        base, t, hit = np.empty((H, W), np.float32), np.empty((H, W)), np.empty((H, W), np.int64)
+        render.render_layer(rig._rays[eye], origin, rot, prims, static, *args, base, t, hit)
+        over = np.empty_like(full)
+        render.render_over(rig._rays[eye], rig._cones[eye], origin, rot, prims, tubes, base, t, hit, *args, over)
+        assert np.array_equal(over, full)
 
 
 def test_occlusion_mask_is_the_panels_shadow_in_the_right_view():
