@@ -11,7 +11,8 @@ from typing import Callable
 
 import numpy as np
 
-from .rig.scene import Scene
+from .rig.scene import Scene, primitives
+from .rig.stereo_pair import occlusion
 from .rig.sensor import SensorRig
 
 GROUND_TRUTH_KEEP = 64  # captures remembered
@@ -26,6 +27,7 @@ class GroundTruth:
     host_monotonic: float  # the exposure instant on the host's monotonic clock
     depth_m: np.ndarray  # along the delivered view's optical axis; inf where nothing was hit
     disparity_px: np.ndarray  # f * B / z for rectified frames, 0 where nothing was hit (or raw)
+    occluded: np.ndarray | None = None  # rectified frames: a surface the right camera does not see
 
 
 @dataclass(frozen=True)
@@ -78,4 +80,9 @@ class TruthLog:
         depth = self._rig.depth(e.scene_time, e.scene, e.rays, e.rot)
         with np.errstate(divide="ignore"):
             disp = np.where(np.isfinite(depth) & (e.focal_px > 0), e.focal_px * e.baseline_m / depth, 0)
-        return GroundTruth(sequence, e.host_monotonic, depth, disp.astype(np.float32))
+        occluded = None
+        if e.focal_px > 0:
+            rig = self._rig
+            occluded = occlusion(e.rays, e.rot, depth, disp, rig.right_centre, primitives(e.scene, e.scene_time),
+                                 (rig.texture, rig.tex_offsets, rig.tex_side))
+        return GroundTruth(sequence, e.host_monotonic, depth, disp.astype(np.float32), occluded)

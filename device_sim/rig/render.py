@@ -1,6 +1,7 @@
 """Ray-cast renderer: one camera's view of a scene of textured rectangles and spheres.
 
-Every pixel casts the ray its lens gives it (``rays``: camera-frame directions with z = 1, so an
+Primitives: rectangles, spheres and open cylinders (a tube: its outside, and its inside through an
+open end). Every pixel casts the ray its lens gives it (``rays``: camera-frame directions with z = 1, so an
 ideal pinhole and a distorted lens use the same kernel), hits the nearest primitive, samples the
 primitive's printed texture from a mip pyramid at the pixel's footprint (so the image is band-
 limited like a real optical image, and both eyes see the same surface), shades it Lambertian, and
@@ -16,7 +17,7 @@ import numpy as np
 # primitive record layout (float64 row)
 KIND, CX, CY, CZ, A1X, A1Y, A1Z, A2X, A2Y, A2Z, H1, H2, ALBEDO, CONTRAST, TEXSCALE, TEXOFF, NX, NY, NZ = range(19)
 PRIM_FIELDS = 19
-RECT, SPHERE = 0.0, 1.0
+RECT, SPHERE, CYLINDER = 0.0, 1.0, 2.0  # a cylinder: axis A1, radius H1, half-length H2, seam A2
 
 
 def make_texture(seed: int, size: int = 512, levels: int = 9) -> list[np.ndarray]:
@@ -109,6 +110,8 @@ def _intersect(prims, i, origin, dx, dy, dz):
         if abs(s1) <= prims[i, H1] and abs(s2) <= prims[i, H2]:
             return t
         return np.inf
+    if prims[i, KIND] == CYLINDER:
+        return _cylinder_hit(prims, i, px, py, pz, dx, dy, dz)
     r = prims[i, H1]
     a = dx * dx + dy * dy + dz * dz
     b = dx * px + dy * py + dz * pz
@@ -117,6 +120,29 @@ def _intersect(prims, i, origin, dx, dy, dz):
         return np.inf
     t = (b - math.sqrt(disc)) / a
     return t if t > 1e-6 else np.inf
+
+
+@nb.njit(cache=True, inline="always")
+def _cylinder_hit(prims, i, px, py, pz, dx, dy, dz):
+    """Nearest ray parameter on cylinder ``i``'s side within its length (``p``: centre - origin)."""
+    ax, ay, az = prims[i, A1X], prims[i, A1Y], prims[i, A1Z]
+    da = dx * ax + dy * ay + dz * az
+    pa = px * ax + py * ay + pz * az
+    wx, wy, wz = dx - da * ax, dy - da * ay, dz - da * az  # components across the axis
+    qx, qy, qz = px - pa * ax, py - pa * ay, pz - pa * az
+    a = wx * wx + wy * wy + wz * wz
+    if a < 1e-18:
+        return np.inf
+    b = wx * qx + wy * qy + wz * qz
+    r = prims[i, H1]
+    disc = b * b - a * (qx * qx + qy * qy + qz * qz - r * r)
+    if disc < 0:
+        return np.inf
+    root = math.sqrt(disc)
+    for t in ((b - root) / a, (b + root) / a):  # the outside, else the inside through an open end
+        if t > 1e-6 and abs(t * da - pa) <= prims[i, H2]:
+            return t
+    return np.inf
 
 
 @nb.njit(cache=True, inline="always")
@@ -131,6 +157,15 @@ def _shade(rays, y, x, origin, dx, dy, dz, prims, hit, best, tex, tex_off, tex_s
         s1 = qx * prims[hit, A1X] + qy * prims[hit, A1Y] + qz * prims[hit, A1Z]
         s2 = qx * prims[hit, A2X] + qy * prims[hit, A2Y] + qz * prims[hit, A2Z]
         nx, ny, nz = prims[hit, NX], prims[hit, NY], prims[hit, NZ]
+    elif prims[hit, KIND] == CYLINDER:
+        r = prims[hit, H1]
+        s2 = qx * prims[hit, A1X] + qy * prims[hit, A1Y] + qz * prims[hit, A1Z]  # along the axis
+        nx = (qx - s2 * prims[hit, A1X]) / r
+        ny = (qy - s2 * prims[hit, A1Y]) / r
+        nz = (qz - s2 * prims[hit, A1Z]) / r
+        c2 = nx * prims[hit, A2X] + ny * prims[hit, A2Y] + nz * prims[hit, A2Z]
+        c3 = nx * prims[hit, NX] + ny * prims[hit, NY] + nz * prims[hit, NZ]  # NX..NZ: A1 x A2
+        s1 = r * math.atan2(c3, c2)
     else:
         r = prims[hit, H1]
         nx, ny, nz = qx / r, qy / r, qz / r

@@ -71,8 +71,8 @@ def _hash(k: np.uint64) -> np.uint64:
 
 
 @nb.njit(cache=True, parallel=True, nogil=True)
-def expose(radiance, scale, seed, out):
-    """Radiance → 8-bit pixels with shot and read noise.
+def expose(radiance, scale, seed, out, noise=1.0):
+    """Radiance → 8-bit pixels with shot and read noise (both times ``noise``).
 
     The unit Gaussian is the Irwin–Hall sum of the four 16-bit quarters of one 64-bit hash
     (mean 2, variance 4/12), rescaled: no transcendental per pixel, tails cut at ±3.5 σ.
@@ -87,7 +87,7 @@ def expose(radiance, scale, seed, out):
                 + float(r >> np.uint64(48))
             g = (s4 / 65536.0 - 2.0) * 1.7320508075688772
             s = radiance[y, x] * scale
-            v = s + g * math.sqrt(READ_NOISE_DN * READ_NOISE_DN + max(s, 0.0) / CONVERSION)
+            v = s + g * noise * math.sqrt(READ_NOISE_DN * READ_NOISE_DN + max(s, 0.0) / CONVERSION)
             v = math.floor(v + 0.5)
             out[y, x] = 0 if v < 0 else (255 if v > 255 else np.uint8(v))
 
@@ -117,7 +117,7 @@ class SensorRig:
         self._rays = [pixel_rays(cal.K_left, cal.D_left, width, height),
                       pixel_rays(cal.K_right, cal.D_right, width, height)]
         self._cones = [render.ray_cones(r) for r in self._rays]
-        self._poses = [(np.zeros(3), np.eye(3)), (-cal.R.T @ cal.T.ravel(), cal.R.T)]
+        self._poses = [(np.zeros(3), np.eye(3)), (self.right_centre, cal.R.T)]
         self._board = None
         self._layers = {}
         self._format = (width, height)
@@ -126,6 +126,11 @@ class SensorRig:
     def left_rays(self) -> np.ndarray:
         """Camera-frame rays of the left imager's raw pixels at the current format (through its lens)."""
         return self._rays[0]
+
+    @property
+    def right_centre(self) -> np.ndarray:
+        """The right imager's centre in the world (left imager's) frame, metres."""
+        return -self.truth.R.T @ self.truth.T.ravel()
 
     def _board_view(self, t: float, frame_seed: int) -> tuple[np.ndarray, np.ndarray]:
         if self._board is None:
@@ -140,17 +145,22 @@ class SensorRig:
         """Raw left and right images (uint8) exposed at the same instant ``t``."""
         if view == scene.Scene.BOARD:
             return self._board_view(t, frame_seed)
-        prims = scene.primitives(view, t)
         moving = scene.moving_primitives(view)
+        photo = scene.photometry(view)
         scale = 255.0 * exposure_us / EXPOSURE_REF_US * 10.0 ** (gain / 200.0)
+        tables = [scene.primitives(view, ti) for ti in photo.instants(t)]  # blur: the path over the exposure
         images = []
         for eye, (origin, rot) in enumerate(self._poses):
-            layer = self._static_layer(eye, view, prims, moving)
-            rad = np.empty(layer.rad.shape, np.float32)
-            render.render_over(self._rays[eye], self._cones[eye], origin, rot, prims, moving, layer.rad, layer.t,
-                               layer.hit, self.texture, self.tex_offsets, self.tex_side, LIGHT, rad)
+            rad = np.zeros(self._rays[eye].shape[:2], np.float32)
+            for prims in tables:
+                layer = self._static_layer(eye, view, prims, moving)
+                sub = np.empty(layer.rad.shape, np.float32)
+                render.render_over(self._rays[eye], self._cones[eye], origin, rot, prims, moving, layer.rad,
+                                   layer.t, layer.hit, self.texture, self.tex_offsets, self.tex_side, LIGHT, sub)
+                rad += sub
+            rad = photo.apply(rad / np.float32(len(tables)), self._rays[eye], eye)
             img = np.empty(rad.shape, np.uint8)
-            expose(rad, scale, (frame_seed * 2 + eye) ^ (self.seed << 32), img)
+            expose(rad, scale, (frame_seed * 2 + eye) ^ (self.seed << 32), img, photo.noise)
             images.append(img)
         return images[0], images[1]
 

@@ -1,7 +1,10 @@
 """Benchmark the device matching core against cv2.StereoBM in one process.
 
     stereocam bench matching [--threads 2] [--repeat 15] [--quick] [--profile]
-                             [--cold-jit] [--algorithm bm|sgm]
+                             [--cold-jit] [--algorithm bm|sgm] [--scenes NAME ...] [--busy]
+
+``--algorithm sgm`` prints matching_report.py's tables instead (every engine on Motorcycle and every
+simulator scene class; with ``--profile``, sgm.py's stage profile and CPU table).
 
 Prints per case: median ms of each (runs interleaved), ratio core/cv2, G disparity
 evaluations/s (W*H*D/time), bad-2.0 against ground truth (Middlebury Motorcycle from
@@ -18,15 +21,18 @@ import time
 import tracemalloc
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, Callable
 
 import click
 import numpy as np
 
+from stereocam.device_sim.rig.scene_classes import CLASSES
 from stereocam.protocol.params import BY_NAME
 from stereocam.stereo import engines
 from stereocam.tools.bench.stereobm_oracle import opencv_stereobm
 from stereocam.tools.options import CONTEXT, epilog
+
+from .matching_report import MOTORCYCLE, BenchScene, class_scene, motorcycle_scene, report
 
 
 def synthetic_scene(h: int = 480, w: int = 640, seed: int = 0):
@@ -120,21 +126,59 @@ def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
     return out
 
 
+SCENE_CHOICES = [MOTORCYCLE, *CLASSES]
+
+
+def sgm_report(args: SimpleNamespace) -> int:
+    """The per-scene tables of matching_report.py for the scenes asked."""
+    names = list(args.scene_names) or SCENE_CHOICES
+    w, h = (320, 240) if args.quick else args.size
+    scenes: list[Callable[[], BenchScene]] = []
+    for name in names:
+        if name == MOTORCYCLE:
+            if args.quick:
+                continue
+            try:
+                motorcycle()
+            except Exception as exc:  # skimage missing or data unavailable
+                print(f"(Motorcycle skipped: {exc})")
+                continue
+            scenes.append(motorcycle_scene)
+        else:
+            scenes.append(lambda name=name: class_scene(name, w, h, args.seed))
+    report(scenes, args.threads, args.repeat, args.busy)
+    return 0
+
+
 @click.command("matching", context_settings=CONTEXT, epilog=epilog())
 @click.option("--threads", type=click.IntRange(min=1), default=2, show_default=True, help="Threads for both.")
-@click.option("--repeat", type=click.IntRange(min=1), default=15, show_default=True, help="Timed runs per case.")
-@click.option("--quick", is_flag=True, help="Only 640x480, D=64, block 9.")
+@click.option("--repeat", type=click.IntRange(min=1), default=None,
+              help="Timed runs per case.  [default: 15 for bm, 5 for sgm]")
+@click.option("--quick", is_flag=True, help="Only 640x480, D=64, block 9 (sgm: the scene classes at 320x240, no Motorcycle).")
 @click.option("--profile", is_flag=True, help="Per-stage timings of the core.")
 @click.option("--busy", is_flag=True, help="sgm: time beside one busy process (a spinning Python).")
 @click.option("--cold-jit", is_flag=True, help="Also time a from-scratch compile (subprocess, empty numba cache).")
 @click.option("--algorithm", type=click.Choice(engines.names()), default="bm", show_default=True,
               help="bm: the block matcher vs cv2.StereoBM; sgm: our SGM vs every cv2.StereoSGBM mode and StereoBM.")
+@click.option("--scenes", "scene_names", type=click.Choice(SCENE_CHOICES), multiple=True,
+              help="sgm: scenes to measure (repeatable).  [default: motorcycle and every scene class]")
+@click.option("--size", type=(click.IntRange(min=64), click.IntRange(min=48)), default=(640, 480), show_default=True,
+              metavar="W H", help="sgm: the scene classes' image size.")
+@click.option("--seed", type=int, default=0, show_default=True, help="sgm: the scene classes' placement and texture.")
+@click.option("--busy", is_flag=True, help="sgm: run beside a competing busy process (one core spinning).")
 def command(**params: Any) -> int:
-    """Benchmark the device matching core against cv2.StereoBM in one process."""
+    """Benchmark the device matching core against cv2.StereoBM in one process; --algorithm sgm: every
+    engine on Motorcycle and every simulator scene class, one table per scene."""
     args = SimpleNamespace(**params)
     if args.algorithm == "sgm":
-        from .sgm import main as sgm_main
-        return sgm_main(args)
+        if args.repeat is None:
+            args.repeat = 5
+        if args.profile:
+            from .sgm import main as sgm_main
+            return sgm_main(args)
+        return sgm_report(args)
+    if args.repeat is None:
+        args.repeat = 15
 
     import cv2
     import numba

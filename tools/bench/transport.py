@@ -5,10 +5,16 @@ the whole chain sustains, the MB/s of plane data it carried, the exposures it dr
 gaps the host saw) and trigger-to-frame latency (the exposure instant, mapped to the host clock,
 to the moment ``get_frame`` returned it) p50/p99. Where the device runs in this process (sim and
 usb) also the device's stage profile (ms per frame, wall) and the process CPU per frame.
+
+``--rates``: the pipeline's rate targets instead, over sim and TCP: VGA block matching at 60 fps
+asked, VGA SGM (64 disparities) at 30 fps asked, and SGM with the high-density post-processing
+chain at 30 fps (skipped with a note until ``stereocam.stereo.post`` is installed).
 """
 from __future__ import annotations
 
 import contextlib
+import importlib.util
+import os
 import time
 from dataclasses import dataclass, field
 from types import SimpleNamespace
@@ -24,6 +30,24 @@ from stereocam.tools.progress import progress_wanted
 
 KINDS = ("sim", "pty", "tcp", "usb-high", "usb-super")
 CORES = 2
+RATE_KINDS = ("sim", "tcp")
+POST_CHAIN = "high_density"  # the SDK preset naming the post-processing chain (stereocam.stereo.post)
+
+
+@dataclass(frozen=True)
+class RateCase:
+    """One pipeline rate target: an engine at a frame rate asked, optionally with a post chain."""
+
+    algorithm: str
+    fps: int
+    preset: str | None = None
+
+    @property
+    def label(self) -> str:
+        return f"VGA {self.algorithm.upper()} 64 disp" + (f" + {self.preset}" if self.preset else "")
+
+
+RATE_CASES = (RateCase("bm", 60), RateCase("sgm", 30), RateCase("sgm", 30, POST_CHAIN))
 
 
 @dataclass
@@ -65,13 +89,15 @@ def _device(kind: str) -> Iterator[tuple[str, object]]:
         sim.close()
 
 
-def stream(kind: str, algorithm: str, seconds: float) -> Run:
-    """Stream for ``seconds`` over ``kind`` and measure."""
+def stream(kind: str, algorithm: str, seconds: float, fps: int = 60, preset: str | None = None) -> Run:
+    """Stream for ``seconds`` over ``kind`` at ``fps`` asked (after the SDK ``preset``, if named) and measure."""
     import stereocam
 
-    settings = dict(width=640, height=480, fps=60, num_disparities=64, block_size=15,
+    settings = dict(width=640, height=480, fps=fps, num_disparities=64, block_size=15,
                     algorithm=engines.engine_named(algorithm).algorithm)
     with _device(kind) as (url, sim), stereocam.open(url, timeout=3.0) as cam:
+        if preset is not None:
+            cam.load_preset(preset)
         cam.configure(**settings)
         cam.start()
         for _ in range(3):
@@ -81,7 +107,7 @@ def stream(kind: str, algorithm: str, seconds: float) -> Run:
             sim.pipeline.profile.reset()
         lat, nbytes, n = [], 0, 0
         cpu0, t0 = time.process_time(), time.monotonic()
-        with tqdm(total=round(seconds * 60), unit="frame", desc=f"{kind} {algorithm}", leave=False,
+        with tqdm(total=round(seconds * fps), unit="frame", desc=f"{kind} {algorithm}", leave=False,
                   disable=not progress_wanted()) as bar:
             while time.monotonic() - t0 < seconds:
                 f = cam.get_frame(timeout=5.0)
@@ -119,6 +145,26 @@ def report(runs: list[Run], algorithm: str) -> None:
               f"{1e3 * CORES / best:.0f} fps if its stages overlapped perfectly.")
 
 
+def rates(seconds: float) -> dict[str, float]:
+    """Print the achieved fps of every RATE_CASES row over every RATE_KINDS transport."""
+    print(f"pipeline rate at 640x480, 64 disparities, left + right + disparity, {seconds:g} s each; "
+          f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus (sim: device in this process, "
+          "tcp: in a second one):")
+    print(f"  {'case':<30} {'transport':<9} {'asked':>5} {'fps':>6} {'drops':>6} {'p50 ms':>7} {'p99 ms':>7}")
+    out: dict[str, float] = {}
+    for case in RATE_CASES:
+        if case.preset is not None and importlib.util.find_spec("stereocam.stereo.post") is None:
+            print(f"  {case.label:<30} (skipped: stereocam.stereo.post, the post-processing chain, is not installed)")
+            continue
+        for kind in RATE_KINDS:
+            r = stream(kind, case.algorithm, seconds, case.fps, case.preset)
+            print(f"  {case.label:<30} {kind:<9} {case.fps:>5} {r.fps:6.1f} {r.drops:6d} {r.p50_ms:7.1f} "
+                  f"{r.p99_ms:7.1f}", flush=True)
+            out[f"{kind}_{case.label}_fps"] = r.fps
+    print(f"load average at the end: {os.getloadavg()[0]:.2f}")
+    return out
+
+
 @click.command("transport", context_settings=CONTEXT, epilog=epilog())
 @click.option("--algorithm", type=click.Choice(engines.names()), multiple=True,
               help="Matching engine on the device (repeatable).  [default: bm]")
@@ -126,9 +172,13 @@ def report(runs: list[Run], algorithm: str) -> None:
               help="Transport to measure (repeatable).  [default: all]")
 @click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=5.0, show_default=True,
               help="Capture time per transport.")
+@click.option("--rates", is_flag=True, help="The pipeline rate targets over sim and TCP: VGA BM at 60 fps, "
+                                            "VGA SGM (64 disparities) at 30 fps, SGM + post-processing chain.")
 def command(**params: Any) -> dict[str, float]:
     """End-to-end figures of a simulated camera per transport and algorithm."""
     args = SimpleNamespace(**params)
+    if args.rates:
+        return rates(args.seconds)
     out: dict[str, float] = {}
     for algorithm in args.algorithm or ["bm"]:
         print(f"end-to-end at 640x480, 64 disparities, all three planes, 60 fps asked, {algorithm}, "
