@@ -53,6 +53,8 @@ class Param:
             return f"{self.name}={value} must be odd"
         if self.step > 1 and value % self.step:
             return f"{self.name}={value} must be a multiple of {self.step}"
+        if self.values and value not in self.values:
+            return f"{self.name}={value} must be one of {', '.join(str(v) for v in self.values)}"
         return None
 
 
@@ -107,6 +109,26 @@ PARAMS: tuple[Param, ...] = (
     Param(28, "census_height", 7, 1, 7, odd=True, unit="px", description="SGM census window height (odd)"),
     Param(29, "trigger_output", 0, 0, 1, live=False, values={0: "off", 1: "master"},
           description="1: this unit is the trigger master, pulsing the line at fps while streaming (external mode)"),
+    # post-processing after the engine, in this order (SPEC §5.6; INFO POST_PROCESSING); 0 turns a stage off
+    Param(30, "lr_check", -1, -1, 64, unit="px",
+          description="left-right check against the mirrored pair's disparity: tolerance (-1: off)"),
+    Param(31, "hole_fill", 0, 0, 2, values={0: "off", 1: "nearest", 2: "background"},
+          description="fill invalid pixels: 1 nearest valid in the row, 2 background along 8 paths"),
+    Param(32, "spatial_alpha", 0, 0, 256, unit="1/256",
+          description="edge-preserving (domain transform) filter: weight of the current pixel (0: off)"),
+    Param(33, "spatial_delta", 32, 1, 1 << 12, unit="1/16 px",
+          description="spatial filter: neighbours differing by more are an edge, not smoothed"),
+    Param(34, "spatial_iterations", 2, 1, 5, description="spatial filter: passes (each left, right, down, up)"),
+    Param(35, "temporal_alpha", 0, 0, 256, unit="1/256",
+          description="temporal filter: weight of the new frame (0: off)"),
+    Param(36, "temporal_delta", 32, 1, 1 << 12, unit="1/16 px",
+          description="temporal filter: a pixel changing by more starts afresh"),
+    Param(37, "temporal_persistence", 0, 0, 8, unit="frames",
+          description="temporal filter: an invalid pixel keeps the last value up to this many frames (0: off)"),
+    Param(38, "median_size", 0, 0, 5, values={0: "off", 3: "3x3", 5: "5x5"},
+          description="median filter window side: 0 off, 3 or 5"),
+    Param(39, "decimation", 1, 1, 4, unit="px",
+          description="median of the valid pixels of each n x n block, written to the whole block (1: off)"),
 )
 
 BY_ID: dict[int, Param] = {p.pid: p for p in PARAMS}
