@@ -153,7 +153,7 @@ class CapturePipeline:
             cfg["num_disparities"], invalid_disparity(cfg["min_disparity"]), calib_id, focal, cx, cy, baseline)
 
         def match() -> np.ndarray:  # runs once the images are on their way: the link carries them meanwhile
-            return self._stereo.disparity(cfg, left, right)
+            return self._stereo.disparity(cfg, left, right, req.time)
 
         self._send_all(req, begin, {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: match}, t0)
 

@@ -62,11 +62,11 @@ def test_a_failing_delivery_counts_a_drop_and_the_stream_goes_on():
     disparity = sim.pipeline._stereo.disparity
     calls = []
 
-    def flaky(cfg, left, right):
+    def flaky(cfg, left, right, at=None):
         calls.append(1)
         if len(calls) == 2:
             raise RuntimeError("injected matcher fault")
-        return disparity(cfg, left, right)
+        return disparity(cfg, left, right, at)
 
     sim.pipeline._stereo.disparity = flaky
     with Camera(InProcessTransport(sim, owns=True)) as cam:

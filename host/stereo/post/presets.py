@@ -13,14 +13,15 @@ from .params import POST_CONFIG, PostParams
 _OFF = {f.key: getattr(PostParams(), f.field) for f in POST_CONFIG}
 
 POST_PRESETS: Mapping[str, Mapping[str, int]] = MappingProxyType({
-    # every pixel a disparity: the left-right check's holes and occlusions filled from the background
+    # every pixel a disparity: the engine's left-right check (as good as the mirrored pair's here, at
+    # no cost), its holes and the occlusions filled from the background, then smoothed
     "high_density": MappingProxyType({**_OFF, "algorithm": Algorithm.SEMI_GLOBAL, "uniqueness_ratio": 0,
-                                      "speckle_window_size": 100, "speckle_range": 32, "lr_check": 1,
+                                      "disp12_max_diff": 1, "speckle_window_size": 100, "speckle_range": 32,
                                       "hole_fill": 2, "spatial_alpha": 128, "spatial_delta": 32,
                                       "spatial_iterations": 1, "median_size": 3}),
     # fewer, surer pixels: strict left-right check, speckles removed, no filling
     "high_accuracy": MappingProxyType({**_OFF, "algorithm": Algorithm.SEMI_GLOBAL, "uniqueness_ratio": 10,
-                                       "speckle_window_size": 200, "speckle_range": 16, "lr_check": 0,
+                                       "speckle_window_size": 200, "speckle_range": 16, "lr_check": 1,
                                        "median_size": 3}),
     # the chain off (the engines' raw output)
     "off": MappingProxyType(dict(_OFF)),
