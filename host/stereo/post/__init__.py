@@ -11,9 +11,20 @@ kernel bit-exact with the plain numpy reference in tests/support/post_reference.
 """
 from __future__ import annotations
 
-from .chain import STAGES, PostChain, postprocess
-from .params import POST_CONFIG, PostParams, post_params_from_config
-from .presets import POST_PRESETS, preset_config
+import importlib
+from typing import Any
 
-__all__ = ["STAGES", "PostChain", "postprocess", "POST_CONFIG", "PostParams", "post_params_from_config",
-           "POST_PRESETS", "preset_config"]
+_EXPORTS = {
+    "STAGES": "chain", "PostChain": "chain", "postprocess": "chain", "POST_CONFIG": "params",
+    "PostParams": "params", "post_params_from_config": "params", "POST_PRESETS": "presets",
+    "preset_config": "presets",
+}
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    """Names import on first use: the presets and parameters need no numba, the stages do."""
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f".{module}", __name__), name)
