@@ -53,8 +53,6 @@ class Param:
             return f"{self.name}={value} must be odd"
         if self.step > 1 and value % self.step:
             return f"{self.name}={value} must be a multiple of {self.step}"
-        if self.values and value not in self.values:
-            return f"{self.name}={value} must be one of {', '.join(str(v) for v in self.values)}"
         return None
 
 
@@ -125,8 +123,7 @@ PARAMS: tuple[Param, ...] = (
           description="temporal filter: a pixel changing by more starts afresh"),
     Param(37, "temporal_persistence", 0, 0, 8, unit="frames",
           description="temporal filter: an invalid pixel keeps the last value up to this many frames (0: off)"),
-    Param(38, "median_size", 0, 0, 5, values={0: "off", 3: "3x3", 5: "5x5"},
-          description="median filter window side: 0 off, 3 or 5"),
+    Param(38, "median_size", 1, 1, 5, odd=True, unit="px", description="median filter window side: 3 or 5 (1: off)"),
     Param(39, "decimation", 1, 1, 4, unit="px",
           description="median of the valid pixels of each n x n block, written to the whole block (1: off)"),
 )

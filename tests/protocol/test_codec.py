@@ -945,8 +945,8 @@ def test_stats_dropped_sums_every_loss_counter() -> None:
 def test_param_ids_and_names_are_unique_and_sane() -> None:
     ids = [p.pid for p in PARAMS]
     names = [p.name for p in PARAMS]
-    assert len(set(ids)) == len(ids) == 28
-    assert ids == [*range(1, 20), *range(21, 30)]  # 1.1 appended 21 and retired 20, 1.2 22..29; never reused
+    assert len(set(ids)) == len(ids) == 38
+    assert ids == [*range(1, 20), *range(21, 40)]  # 1.1 appended 21 and retired 20, 1.2 22..29, 1.3 30..39
     assert len(set(names)) == len(names)
     assert all(1 <= i <= 0xFFFF for i in ids)  # 0 means "no parameter" in a NACK
     assert BY_ID[10].name == "min_disparity" and BY_NAME["width"].pid == 1
@@ -961,7 +961,8 @@ def test_each_row_carries_its_description_and_value_names() -> None:
         if p.values:  # an enumeration names exactly the values its range allows
             assert sorted(p.values) == list(range(p.lo, p.hi + 1)), p.name
             assert VALUE_NAMES[p.name] is p.values
-    assert set(VALUE_NAMES) == {"trigger_mode", "pre_filter_type", "rectify", "algorithm", "trigger_output"}
+    assert set(VALUE_NAMES) == {"trigger_mode", "pre_filter_type", "rectify", "algorithm", "trigger_output",
+                                "hole_fill"}
     assert VALUE_NAMES["trigger_mode"] == {0: "free_run", 1: "software", 2: "external"}
 
 
@@ -984,7 +985,8 @@ def test_check_rejects_out_of_range(p: Param) -> None:
 
 def test_check_rejects_even_values_for_odd_params() -> None:
     odd = [p for p in PARAMS if p.odd]
-    assert {p.name for p in odd} == {"block_size", "pre_filter_size", "census_width", "census_height"}
+    assert {p.name for p in odd} == {"block_size", "pre_filter_size", "census_width", "census_height",
+                                       "median_size"}
     for p in odd:
         for v in range(p.lo, p.hi + 1):
             assert (p.check(v) is None) == (v % 2 == 1), (p.name, v)

@@ -60,7 +60,7 @@ class PostChain:
         if p.temporal_alpha:
             temporal_filter(disp, self.temporal, p.temporal_alpha, p.temporal_delta, p.temporal_persistence, inv)
         t = self._took("temporal", t)
-        if p.median_size:
+        if p.median_size > 1:
             out = np.empty_like(disp)
             median_filter(disp, p.median_size, out)
             disp = out

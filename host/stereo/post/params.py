@@ -31,7 +31,7 @@ class PostParams:
     temporal_alpha: int = _default("temporal_alpha")  # 1/256: weight of the new frame; 0 off
     temporal_delta: int = _default("temporal_delta")  # 1/16 px
     temporal_persistence: int = _default("temporal_persistence")  # frames an invalid pixel holds its value
-    median_size: int = _default("median_size")  # 0 off, 3, 5
+    median_size: int = _default("median_size")  # 3, 5; 1 off
     decimation: int = _default("decimation")  # block side; 1 off
 
     def __post_init__(self) -> None:
