@@ -107,7 +107,7 @@ PARAMS: tuple[Param, ...] = (
     Param(28, "census_height", 7, 1, 7, odd=True, unit="px", description="SGM census window height (odd)"),
     Param(29, "trigger_output", 0, 0, 1, live=False, values={0: "off", 1: "master"},
           description="1: this unit is the trigger master, pulsing the line at fps while streaming (external mode)"),
-    # post-processing after the engine, in this order (SPEC §5.6; INFO POST_PROCESSING); 0 turns a stage off
+    # post-processing after the engine, in this order (SPEC §5.3; INFO POST_PROCESSING); 0 turns a stage off
     Param(30, "lr_check", -1, -1, 64, unit="px",
           description="left-right check against the mirrored pair's disparity: tolerance (-1: off)"),
     Param(31, "hole_fill", 0, 0, 2, values={0: "off", 1: "nearest", 2: "background"},

@@ -1,6 +1,6 @@
 """The matching stage: the engine the ``algorithm`` parameter selects, configured from the device
 parameters (SPEC §5.1) through the engine table (stereocam.stereo.engines), then the post-processing
-chain (SPEC §5.6, stereocam.stereo.post) when the configuration turns a stage on."""
+chain (SPEC §5.3, stereocam.stereo.post) when the configuration turns a stage on."""
 from __future__ import annotations
 
 from collections.abc import Mapping

@@ -1,4 +1,4 @@
-"""The device runs the post-processing chain (SPEC §5.6) after its engine: what it sends is the host's
+"""The device runs the post-processing chain (SPEC §5.3) after its engine: what it sends is the host's
 ``postprocess`` of the engine's disparity, bit for bit; the temporal filter forgets its past on a
 configuration change and on a trigger gap."""
 from __future__ import annotations

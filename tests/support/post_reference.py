@@ -1,4 +1,4 @@
-"""Plain numpy post-processing (SPEC §5.6): the specification stereocam.stereo.post is bit-exact with.
+"""Plain numpy post-processing (SPEC §5.3): the specification stereocam.stereo.post is bit-exact with.
 
 Written for reading, not speed. Disparities are int16 codes (disparity * DISPARITY_SUBPIXEL); the
 invalid code is the protocol's invalid_disparity(min_disparity). Stages, in chain order:

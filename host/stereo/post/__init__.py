@@ -1,4 +1,4 @@
-"""On-board post-processing of a disparity map (SPEC §5.6), one module per stage, each a numba
+"""On-board post-processing of a disparity map (SPEC §5.3), one module per stage, each a numba
 kernel bit-exact with the plain numpy reference in tests/support/post_reference.py:
 
     lr_check.py (left-right check; the right view from the mirrored pair) -> holes.py (nearest,

@@ -1,4 +1,4 @@
-"""The post-processing chain in its fixed order (SPEC §5.6): left-right check, hole filling, spatial
+"""The post-processing chain in its fixed order (SPEC §5.3): left-right check, hole filling, spatial
 filter, temporal filter, median, decimation. ``PostChain`` keeps the temporal state between frames;
 ``postprocess`` runs the chain once on the host (bench, rematch) exactly as the device does."""
 from __future__ import annotations

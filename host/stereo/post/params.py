@@ -1,5 +1,5 @@
 """Post-processing parameters: one field per stage, read from the device configuration (SPEC §5.1
-ids 30..39, §5.6) through ``POST_CONFIG`` rows, so every limit lives once, in protocol/params.py."""
+ids 30..39, §5.3) through ``POST_CONFIG`` rows, so every limit lives once, in protocol/params.py."""
 from __future__ import annotations
 
 from collections.abc import Mapping

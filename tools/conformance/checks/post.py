@@ -1,4 +1,4 @@
-"""Post-processing (SPEC §5.6): the capability bit and its parameters go together, and each stage
+"""Post-processing (SPEC §5.3): the capability bit and its parameters go together, and each stage
 changes the disparity exactly as the host's chain (stereocam.stereo.post) does to the engine's output
 of the same captured pair."""
 from __future__ import annotations
@@ -93,7 +93,7 @@ def _stage_check(values: dict[str, int]) -> CheckFn:
 
         ctx.require(m.Capability.SOFTWARE_TRIGGER)
         algorithm = Algorithm.SEMI_GLOBAL if "algorithm" in ctx.params else Algorithm.BLOCK_MATCHING
-        # triggered one at a time, well within 3 frame periods (SPEC §5.6: no gap resets the temporal state)
+        # triggered one at a time, well within 3 frame periods (SPEC §5.3: no gap resets the temporal state)
         ctx.apply(trigger_mode=int(TriggerMode.SOFTWARE), fps=1, rectify=1, algorithm=int(algorithm),
                   outputs=int(Output.LEFT | Output.RIGHT | Output.DISPARITY))
         cfg = {**ctx.apply(**values), **values}  # judged against what was asked, whatever the device holds
