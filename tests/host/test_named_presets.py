@@ -25,8 +25,9 @@ def test_a_named_preset_sets_its_values_and_keeps_the_rest() -> None:
 
 
 def test_an_unknown_name_is_a_config_error_naming_the_known_ones() -> None:
-    with stereocam.open("sim://?seed=3", timeout=2.0) as cam, pytest.raises(stereocam.ConfigError, match="high_density"):
-        cam.load_preset("high_densty")
+    with stereocam.open("sim://?seed=3", timeout=2.0) as cam:
+        with pytest.raises(stereocam.ConfigError, match="high_density"):
+            cam.load_preset("high_densty")
 
 
 def test_presets_are_valid_configuration_values() -> None:

@@ -88,8 +88,7 @@ def _stage_check(values: dict[str, int]) -> CheckFn:
         ctx.require(m.Capability.POST_PROCESSING)
         from stereocam.stereo import match
         from stereocam.stereo.engines import params_from_config
-        from stereocam.stereo.post import PostChain, post_params_from_config
-        from stereocam.stereo.post.lr_check import right_view_disparity
+        from stereocam.stereo.post import PostChain, post_params_from_config, postprocess
 
         ctx.require(m.Capability.SOFTWARE_TRIGGER)
         algorithm = Algorithm.SEMI_GLOBAL if "algorithm" in ctx.params else Algorithm.BLOCK_MATCHING
@@ -104,7 +103,7 @@ def _stage_check(values: dict[str, int]) -> CheckFn:
         for c in caps:
             left, right, sent = _planes(c)
             raw = match(left, right, engine)
-            want = chain.run(raw, lambda: right_view_disparity(lambda a, b: match(a, b, engine), left, right))
+            want = postprocess(raw, left, post, right, engine, chain)
             differ = np.count_nonzero(sent != want)
             if differ:
                 raise CheckFailed(f"{', '.join(f'{k}={v}' for k, v in values.items())}: sequence {c.sequence} "
