@@ -122,3 +122,20 @@ def decimate(disp: np.ndarray, n: int, invalid: int) -> np.ndarray:
             vals = np.sort(block[block != invalid])
             out[by:by + n, bx:bx + n] = vals[(vals.size - 1) // 2] if vals.size else invalid
     return out
+
+
+def chain(disp: np.ndarray, p, invalid: int, right: np.ndarray | None = None) -> np.ndarray:
+    """One frame through every stage ``p`` (a PostParams) turns on, in order; the temporal filter's
+    first frame passes unchanged."""
+    out = disp.copy()
+    if p.lr_check >= 0:
+        out = lr_check(out, right, p.lr_check, invalid)
+    if p.hole_fill:
+        out = (fill_nearest if p.hole_fill == 1 else fill_background)(out, invalid)
+    if p.spatial_alpha:
+        out = spatial(out, p.spatial_alpha, p.spatial_delta, p.spatial_iterations, invalid)
+    if p.median_size > 1:
+        out = median(out, p.median_size)
+    if p.decimation > 1:
+        out = decimate(out, p.decimation, invalid)
+    return out

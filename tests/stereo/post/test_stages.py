@@ -155,3 +155,14 @@ def test_decimation_matches_reference(n: int, mind: int) -> None:
     decimate(ours, n, inv)
     assert_same(ours, ref.decimate(disp, n, inv))
     assert np.unique(ours[:n, :n]).size == 1
+
+
+@pytest.mark.parametrize("hole_fill", [1, 2])
+def test_the_chain_runs_every_stage_in_order_as_the_reference(hole_fill: int) -> None:
+    from stereocam.stereo.post import PostChain, PostParams
+
+    p = PostParams(lr_check=1, hole_fill=hole_fill, spatial_alpha=150, spatial_delta=40, spatial_iterations=2,
+                   temporal_alpha=90, median_size=5, decimation=3)
+    disp, right = noisy_map(7, -4), noisy_map(8, -4)
+    ours = PostChain(p, -4).run(disp, lambda: right)
+    assert_same(ours, ref.chain(disp, p, invalid_disparity(-4), right))
