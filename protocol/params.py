@@ -29,6 +29,7 @@ class Output(enum.IntFlag):
     LEFT = 1
     RIGHT = 2
     DISPARITY = 4
+    CONFIDENCE = 8  # since 1.3 (INFO POST_PROCESSING): uint8 per pixel, SPEC §5.3
 
 
 @dataclass(frozen=True)
@@ -71,8 +72,8 @@ PARAMS: tuple[Param, ...] = (
     Param(5, "gain", 0, 0, 240, unit="0.1 dB", description="analogue gain of both imagers"),
     Param(6, "trigger_mode", TriggerMode.FREE_RUN, 0, 2, live=False, values=_TRIGGER_MODES,
           description="0 free run, 1 software trigger (trigger()), 2 external trigger input"),
-    Param(7, "outputs", Output.LEFT | Output.RIGHT | Output.DISPARITY, 1, 7,
-          description="planes each frame carries: 1 left + 2 right + 4 disparity"),
+    Param(7, "outputs", Output.LEFT | Output.RIGHT | Output.DISPARITY, 1, 15,
+          description="planes each frame carries: 1 left + 2 right + 4 disparity + 8 confidence"),
     Param(8, "num_disparities", 64, 16, 256, step=16, unit="px",
           description="disparity search range (max - min disparity)"),
     Param(9, "block_size", 15, 5, 255, odd=True, unit="px", description="matching window side (odd)"),

@@ -8,7 +8,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from stereocam.stereo.engines import StereoMatcher, matcher_for
-from stereocam.stereo.post import PostChain, post_params_from_config
+from stereocam.stereo.post import PostChain, PostParams, post_params_from_config
 from stereocam.stereo.post.lr_check import right_view_disparity
 
 TRIGGER_GAP_PERIODS = 3
@@ -30,16 +30,24 @@ class StereoStage:
     def disparity(self, cfg: Mapping[str, int], left: np.ndarray, right: np.ndarray,
                   at: float | None = None) -> np.ndarray:
         """``at``: the capture's exposure instant (s), to find trigger gaps; None: not known (replay)."""
+        return self.planes(cfg, left, right, at)[0]
+
+    def planes(self, cfg: Mapping[str, int], left: np.ndarray, right: np.ndarray, at: float | None = None,
+               with_confidence: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+        """The disparity plane and, ``with_confidence``, the confidence plane (SPEC §5.3)."""
         self._matcher = matcher_for(cfg, left.shape, self._matcher)
         disp = self._matcher.match(left, right)
         chain = self._post_chain(cfg, at)
+        if chain is None and not with_confidence:
+            return disp, None
         if chain is None:
-            return disp
+            chain = PostChain(PostParams(), cfg.get("min_disparity", 0))  # every stage off
 
         def right_view() -> np.ndarray:
             self._mirror = matcher_for(cfg, left.shape, self._mirror)
             return right_view_disparity(self._mirror.match, left, right)
-        return chain.run(disp, right_view)
+        disp = chain.run(disp, right_view, with_confidence)
+        return disp, chain.confidence if with_confidence else None
 
     def _post_chain(self, cfg: Mapping[str, int], at: float | None) -> PostChain | None:
         """The chain for ``cfg`` (None: every stage off); its temporal state reset on a

@@ -62,3 +62,24 @@ def test_temporal_state_resets_on_a_configuration_change_and_a_trigger_gap() -> 
 def test_post_params_default_off_and_read_from_a_configuration() -> None:
     assert not post_params_from_config(defaults()).active
     assert post_params_from_config({"hole_fill": 2}) == PostParams(hole_fill=2)  # a pre-1.3 config: the rest off
+
+
+def test_the_confidence_plane_is_sent_alone_or_with_the_disparity() -> None:
+    from stereocam.protocol.params import Output
+    from tests.support import post_reference as ref
+
+    cfg = {**SMALL, "algorithm": 1, "hole_fill": 2, "outputs": int(Output.LEFT | Output.RIGHT | Output.DISPARITY
+                                                                     | Output.CONFIDENCE)}
+    sim = SimulatedCamera(seed=7)
+    with Camera(InProcessTransport(sim, owns=True)) as cam:
+        cam.configure(**cfg)
+        cam.start()
+        frame = cam.get_frame(timeout=60)
+        cam.configure(outputs=int(Output.LEFT | Output.CONFIDENCE))
+        alone = next(f for f in iter(lambda: cam.get_frame(timeout=60), None) if f.disparity is None)
+        cam.stop()
+    engine = params_from_config({**defaults(), **cfg})
+    raw = match(frame.left, frame.right, engine)
+    assert frame.confidence is not None and frame.confidence.dtype == np.uint8
+    assert np.array_equal(frame.confidence, ref.confidence(raw, frame.disparity, engine.invalid_value))
+    assert alone.confidence is not None and alone.right is None and (alone.confidence == 16).any()

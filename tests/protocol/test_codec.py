@@ -849,6 +849,15 @@ HEAD_THEN_DATA = {m.FrameData: 9, m.CalibData: 17, m.CalibWrite: 8, m.UpdateData
 EMPTY = [cls for cls in m.MESSAGES.values() if cls not in SAMPLES]
 
 
+def test_frame_end_carries_the_confidence_count_only_when_that_plane_was_sent() -> None:
+    """Since 1.3: a trailing u32 (21 bytes) when the CONFIDENCE plane was sent; 17 bytes read as 0."""
+    with_conf = m.FrameEnd(1, 0, 2, 3, 4, 5)
+    assert len(with_conf.pack()) == 21 and m.FrameEnd.unpack(with_conf.pack()) == with_conf
+    assert m.FrameEnd.unpack(m.FrameEnd(1, 0, 2, 3, 4).pack()).confidence_bytes == 0
+    with pytest.raises(ProtocolError, match="FrameEnd"):
+        decode_packet(Packet(m.FrameEnd.TYPE, 0, 0, with_conf.pack()[:19]))
+
+
 def test_samples_cover_every_message_with_a_payload() -> None:
     assert len(EMPTY) == 14 and all(isinstance(cls(), m._Empty) for cls in EMPTY)
     assert m.CalibRestore in EMPTY

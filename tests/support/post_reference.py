@@ -139,3 +139,21 @@ def chain(disp: np.ndarray, p, invalid: int, right: np.ndarray | None = None) ->
     if p.decimation > 1:
         out = decimate(out, p.decimation, invalid)
     return out
+
+
+def confidence(matched: np.ndarray, final: np.ndarray, invalid: int) -> np.ndarray:
+    """SPEC §5.3's confidence plane: 0 where ``final`` is invalid, CONFIDENCE_FILLED where ``matched``
+    (the map after the left-right check) is, else BASE + PER_NEIGHBOUR * (8-neighbours within 1 px)."""
+    from stereocam.protocol.frame_messages import CONFIDENCE_BASE, CONFIDENCE_FILLED, CONFIDENCE_PER_NEIGHBOUR
+
+    h, w = matched.shape
+    m = np.pad(matched.astype(np.int64), 1, constant_values=invalid)
+    c = matched.astype(np.int64)
+    n = np.zeros((h, w), np.int64)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dy or dx:
+                v = m[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+                n += (v != invalid) & (np.abs(v - c) <= S)
+    out = np.where(matched == invalid, CONFIDENCE_FILLED, CONFIDENCE_BASE + CONFIDENCE_PER_NEIGHBOUR * n)
+    return np.where(final == invalid, 0, out).astype(np.uint8)

@@ -11,6 +11,7 @@ import numpy as np
 from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.frame_messages import invalid_disparity
 
+from .confidence import confidence
 from .decimation import decimate
 from .holes import fill_background, fill_nearest
 from .lr_check import lr_check, right_view_disparity
@@ -33,14 +34,17 @@ class PostChain:
         self.invalid = invalid_disparity(min_disparity)
         self.temporal = TemporalState()
         self.stage_ms: dict[str, float] = dict.fromkeys(STAGES, 0.0)  # the last run's time per stage
+        self.confidence: np.ndarray | None = None  # the last run's confidence plane, when asked for
 
     def reset(self) -> None:
         """Forget the temporal filter's past (a configuration change, a trigger gap)."""
         self.temporal.reset()
 
-    def run(self, disparity: np.ndarray, right_view: Match | None = None) -> np.ndarray:
+    def run(self, disparity: np.ndarray, right_view: Match | None = None, with_confidence: bool = False
+            ) -> np.ndarray:
         """The filtered copy of ``disparity`` (int16, disparity * 16). ``right_view`` gives the right
-        view's disparity when the left-right check is on (ConfigError when it is missing)."""
+        view's disparity when the left-right check is on (ConfigError when it is missing);
+        ``with_confidence``: the confidence plane of the result goes to ``self.confidence``."""
         p, inv = self.params, self.invalid
         disp = np.array(disparity, dtype=np.int16, order="C", copy=True)
         t = time.perf_counter()
@@ -49,6 +53,7 @@ class PostChain:
                 raise ConfigError("lr_check needs the right view's disparity (the right image and the engine)")
             lr_check(disp, right_view(), p.lr_check, inv)
             t = self._took("lr_check", t)
+        matched = disp.copy() if with_confidence else None
         if p.hole_fill == 1:
             fill_nearest(disp, inv)
         elif p.hole_fill == 2:
@@ -68,6 +73,9 @@ class PostChain:
         if p.decimation > 1:
             decimate(disp, p.decimation, inv)
         self._took("decimation", t)
+        if matched is not None:
+            self.confidence = np.empty(disp.shape, np.uint8)
+            confidence(matched, disp, inv, self.confidence)
         return disp
 
     def _took(self, stage: str, since: float) -> float:

@@ -164,5 +164,23 @@ def test_the_chain_runs_every_stage_in_order_as_the_reference(hole_fill: int) ->
     p = PostParams(lr_check=1, hole_fill=hole_fill, spatial_alpha=150, spatial_delta=40, spatial_iterations=2,
                    temporal_alpha=90, median_size=5, decimation=3)
     disp, right = noisy_map(7, -4), noisy_map(8, -4)
-    ours = PostChain(p, -4).run(disp, lambda: right)
-    assert_same(ours, ref.chain(disp, p, invalid_disparity(-4), right))
+    chain = PostChain(p, -4)
+    ours = chain.run(disp, lambda: right, with_confidence=True)
+    inv = invalid_disparity(-4)
+    assert_same(ours, ref.chain(disp, p, inv, right))
+    want = ref.confidence(ref.lr_check(disp, right, 1, inv), ours, inv)
+    assert chain.confidence is not None and np.array_equal(chain.confidence, want)
+    assert (want == 16).any() and (want > 16).any()  # filled holes and matched pixels
+
+
+def test_confidence_without_stages_marks_invalid_and_isolated_pixels() -> None:
+    from stereocam.stereo.post import PostChain, PostParams
+
+    disp = np.full((5, 6), 80, np.int16)
+    disp[0, 0] = -16
+    disp[4, 5] = 400  # an outlier: no neighbour within 1 px
+    chain = PostChain(PostParams())
+    out = chain.run(disp, with_confidence=True)
+    assert np.array_equal(out, disp) and chain.confidence is not None
+    assert chain.confidence[0, 0] == 0 and chain.confidence[4, 5] == 31 and chain.confidence[2, 2] == 255
+    assert np.array_equal(chain.confidence, ref.confidence(disp, disp, -16))
