@@ -18,7 +18,8 @@ N = 3
 def test_the_confidence_plane_is_recorded_as_a_mono8_image(tmp_path) -> None:
     path = tmp_path / "conf.mcap"
     with stereocam.open("sim://?seed=4", timeout=3.0) as cam:
-        cam.configure(**SMALL, algorithm=1, hole_fill=2, outputs=int(Output.LEFT | Output.DISPARITY | Output.CONFIDENCE))
+        outputs = Output.LEFT | Output.DISPARITY | Output.CONFIDENCE
+        cam.configure(**SMALL, algorithm=1, hole_fill=2, outputs=int(outputs))
         cam.record(path, frames=N)
     with Recording(path) as rec:
         assert rec.topics[schemas.CONFIDENCE_TOPIC] == N and rec.topics[schemas.RIGHT] == 0
