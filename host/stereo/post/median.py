@@ -34,24 +34,32 @@ def _median3(padded: np.ndarray, out: np.ndarray) -> None:
 
 @nb.njit(**_JIT)
 def _median(padded: np.ndarray, size: int, out: np.ndarray) -> None:
+    """Any odd size: each column's ``size`` values sorted once per row, then the window's median
+    picked by merging its ``size`` sorted columns up to the middle element."""
     h, w = out.shape
-    n = size * size
+    cols = np.empty((w + size - 1, size), np.int16)
+    heads = np.empty(size, np.int64)
+    middle = size * size // 2
     for y in range(h):
-        win = np.empty(n, np.int16)
-        for x in range(w):
-            k = 0
-            for dy in range(size):
-                for dx in range(size):
-                    win[k] = padded[y + dy, x + dx]
-                    k += 1
-            for i in range(1, n):  # insertion sort
-                v = win[i]
+        for x in range(w + size - 1):
+            for i in range(size):  # insertion sort of one column
+                v = padded[y + i, x]
                 j = i
-                while j > 0 and win[j - 1] > v:
-                    win[j] = win[j - 1]
+                while j > 0 and cols[x, j - 1] > v:
+                    cols[x, j] = cols[x, j - 1]
                     j -= 1
-                win[j] = v
-            out[y, x] = win[n // 2]
+                cols[x, j] = v
+        for x in range(w):
+            heads[:] = 0
+            last = np.int16(0)
+            for _ in range(middle + 1):
+                best = -1
+                for c in range(size):
+                    if heads[c] < size and (best < 0 or cols[x + c, heads[c]] < cols[x + best, heads[best]]):
+                        best = c
+                last = cols[x + best, heads[best]]
+                heads[best] += 1
+            out[y, x] = last
 
 
 def median_filter(disp: np.ndarray, size: int, out: np.ndarray) -> None:
