@@ -32,6 +32,7 @@ from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.frame_messages import DISPARITY_SUBPIXEL, invalid_disparity
 from stereocam.protocol.params import BY_NAME, Output, TriggerMode, defaults
 from stereocam.stereo.engines import params_from_config
+from stereocam.stereo.post import post_params_from_config
 
 from .clock import REAL_CLOCK, Clock
 from .pipeline.capture_engine import CaptureEngine, CaptureRequest
@@ -177,7 +178,9 @@ class ReplaySource:
             ids = (req.sequence, req.trigger_id, self.clock.at(req.time))
         wanted = Output(cfg["outputs"]) & Output(i.planes | (Output.DISPARITY if i.rectified else 0))
         planes = {Output.LEFT: cap.left, Output.RIGHT: cap.right}
-        same = params_from_config(cfg) == params_from_config({**defaults(), **self.config})  # the recorded matching
+        recorded = {**defaults(), **self.config}
+        same = (params_from_config(cfg) == params_from_config(recorded)  # the recorded matching
+                and post_params_from_config(cfg) == post_params_from_config(recorded))  # and post-processing
         if Output.DISPARITY in wanted and same and cap.disparity is not None:
             planes[Output.DISPARITY] = cap.disparity
             fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)

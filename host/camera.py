@@ -371,10 +371,11 @@ class Camera:
         presets.write_preset(path, config, self.connection.info.model)
         return config
 
-    def load_preset(self, path: str | os.PathLike) -> dict[str, int]:
-        """Apply a preset written by ``save_preset`` (all or nothing: a refusal changes nothing);
-        returns the new configuration. ConfigError for a file that is not a preset."""
-        return self.configure(**presets.read_preset(path))
+    def load_preset(self, preset: str | os.PathLike) -> dict[str, int]:
+        """Apply a named preset ('high_density', 'high_accuracy', 'off': the values it names) or one
+        written by ``save_preset`` (all or nothing: a refusal changes nothing); returns the new
+        configuration. ConfigError for a file that is not a preset."""
+        return self.configure(**presets.preset_values(preset))
 
     def counters(self) -> Counters:
         """Host-side counters (link, decoder, frame assembly, delivery), one consistent snapshot."""

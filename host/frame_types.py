@@ -64,10 +64,11 @@ class Frame:
     geometry: StereoGeometry  # from the calibration the host read from the device (see Camera)
     status: FrameStatus = FrameStatus.COMPLETE
     calibration: StereoCalibration | None = None  # that calibration, scaled to this frame's size
+    confidence: np.ndarray | None = None  # uint8 per pixel (outputs bit 8, SPEC §5.3): 0 no disparity .. 255
 
     def __repr__(self) -> str:
-        planes = "+".join(n for n, a in (("left", self.left), ("right", self.right), ("disparity", self.disparity))
-                          if a is not None) or "no planes"
+        planes = "+".join(n for n, a in (("left", self.left), ("right", self.right), ("disparity", self.disparity),
+                                         ("confidence", self.confidence)) if a is not None) or "no planes"
         return (f"Frame(sequence={self.sequence}, {self.width}x{self.height}, {planes}, "
                 f"{'rectified' if self.rectified else 'raw'}, status={self.status.value}, "
                 f"device_time_us={self.device_time_us})")

@@ -149,7 +149,7 @@ class FrameAssembler:
                 self._incomplete(cur)
             return
         sent: dict[int, int] = {Output.LEFT: e.left_bytes, Output.RIGHT: e.right_bytes,
-                                Output.DISPARITY: e.disparity_bytes}
+                                Output.DISPARITY: e.disparity_bytes, Output.CONFIDENCE: e.confidence_bytes}
         if e.status != m.FRAME_OK:
             self._flawed(cur, FrameStatus.DEVICE_ERROR)
         elif cur.bad or any(sent[p] != len(buf) for p, buf in cur.buffers.items()):
@@ -219,7 +219,8 @@ class FrameAssembler:
             disp.astype(np.int16, copy=False) if disp is not None else None, b.exposure_us, b.gain,
             b.width, b.height, bool(b.flags & m.FRAME_RECTIFIED),
             DisparityFormat(b.subpixel, b.min_disparity, b.num_disparities, b.invalid_disparity),
-            StereoGeometry(b.focal_px, b.cx, b.cy, b.baseline_m, b.calibration_id), status)
+            StereoGeometry(b.focal_px, b.cx, b.cy, b.baseline_m, b.calibration_id), status,
+            confidence=planes.get(Output.CONFIDENCE))
 
     def _deliver(self, frame: Frame) -> None:
         """In sequence order: a frame waits behind an older capture still under repair."""

@@ -1,4 +1,6 @@
-"""Presets: a camera's whole configuration as a JSON file (``Camera.save_preset`` / ``load_preset``)."""
+"""Presets: a camera's whole configuration as a JSON file (``Camera.save_preset`` / ``load_preset``),
+or a named combination of matching and post-processing settings (``POST_PRESETS``: 'high_density',
+'high_accuracy', 'off'; stereocam.stereo.post.presets) that changes only the values it names."""
 from __future__ import annotations
 
 import json
@@ -6,6 +8,7 @@ import os
 from pathlib import Path
 
 from stereocam.protocol.errors import ConfigError
+from stereocam.stereo.post.presets import POST_PRESETS, preset_config
 
 PRESET_FORMAT = "stereocam-preset/1"
 
@@ -28,3 +31,10 @@ def read_preset(path: str | os.PathLike) -> dict[str, int]:
     if not isinstance(doc, dict) or doc.get("format") != PRESET_FORMAT or not isinstance(doc.get("config"), dict):
         raise ConfigError(f"{path} is not a stereocam preset (expected format {PRESET_FORMAT!r})")
     return doc["config"]
+
+
+def preset_values(preset: str | os.PathLike) -> dict[str, int]:
+    """The values a preset sets: a name of ``POST_PRESETS``, else a preset file's configuration."""
+    if isinstance(preset, str) and (preset in POST_PRESETS or preset.isidentifier() and not Path(preset).exists()):
+        return preset_config(preset)  # a name (ConfigError naming the known ones when unknown)
+    return read_preset(preset)

@@ -10,6 +10,12 @@ from .message_base import Message, MsgType
 
 DISPARITY_S16_Q4 = 1  # int16 little-endian, value = disparity * subpixel
 DISPARITY_SUBPIXEL = 16  # the subpixel factor of DISPARITY_S16_Q4 (4 fraction bits)
+# The CONFIDENCE plane (since 1.3, SPEC §5.3), uint8 per pixel: 0 where the disparity plane is
+# invalid, CONFIDENCE_FILLED where only hole filling gave it a value, else CONFIDENCE_BASE +
+# CONFIDENCE_PER_NEIGHBOUR * n with n the 8-neighbours whose matched disparity is within 1 px (255 at 8).
+CONFIDENCE_FILLED = 16
+CONFIDENCE_BASE = 31
+CONFIDENCE_PER_NEIGHBOUR = 28
 
 
 def invalid_disparity(min_disparity: int) -> int:
@@ -82,19 +88,25 @@ FRAME_SENSOR_OVERRUN = 1  # device status: the capture was cut short on the devi
 
 @dataclass(frozen=True)
 class FrameEnd(Message):
-    """Trailer: device status and the bytes sent per plane (left, right, disparity)."""
+    """Trailer: device status and the bytes sent per plane (left, right, disparity; since 1.3 the
+    confidence plane's, a trailing u32 present only when that plane was sent)."""
 
     TYPE: ClassVar[int] = MsgType.FRAME_END
     _S: ClassVar[struct.Struct] = struct.Struct("<IBIII")
+    _CONFIDENCE: ClassVar[struct.Struct] = struct.Struct("<I")
     sequence: int
     status: int
     left_bytes: int
     right_bytes: int
     disparity_bytes: int
+    confidence_bytes: int = 0
 
     def pack(self) -> bytes:
-        return self._S.pack(self.sequence, self.status, self.left_bytes, self.right_bytes, self.disparity_bytes)
+        head = self._S.pack(self.sequence, self.status, self.left_bytes, self.right_bytes, self.disparity_bytes)
+        return head + self._CONFIDENCE.pack(self.confidence_bytes) if self.confidence_bytes else head
 
     @classmethod
     def unpack(cls, payload: bytes) -> "FrameEnd":
+        if len(payload) == cls._S.size + cls._CONFIDENCE.size:
+            return cls(*cls._S.unpack_from(payload), *cls._CONFIDENCE.unpack_from(payload, cls._S.size))
         return cls(*cls._S.unpack(payload))

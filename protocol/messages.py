@@ -83,6 +83,7 @@ class Capability:
     FRAME_REPAIR = 0x40  # since 1.2: SET_FRAME_LINK and FRAME_RESEND (SPEC §13)
     FIRMWARE_UPDATE = 0x80  # since 1.2: UPDATE_* messages (SPEC §14)
     TRIGGER_OUTPUT = 0x100  # since 1.2: `trigger_output` = 1 drives the trigger line (SPEC §5.1, §8.5)
+    POST_PROCESSING = 0x400  # since 1.3: the post-processing parameters 30..39 (SPEC §5.1, §5.3)
 
     @classmethod
     def name_of(cls, bit: int) -> str:

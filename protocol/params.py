@@ -29,6 +29,7 @@ class Output(enum.IntFlag):
     LEFT = 1
     RIGHT = 2
     DISPARITY = 4
+    CONFIDENCE = 8  # since 1.3 (INFO POST_PROCESSING): uint8 per pixel, SPEC §5.3
 
 
 @dataclass(frozen=True)
@@ -71,8 +72,8 @@ PARAMS: tuple[Param, ...] = (
     Param(5, "gain", 0, 0, 240, unit="0.1 dB", description="analogue gain of both imagers"),
     Param(6, "trigger_mode", TriggerMode.FREE_RUN, 0, 2, live=False, values=_TRIGGER_MODES,
           description="0 free run, 1 software trigger (trigger()), 2 external trigger input"),
-    Param(7, "outputs", Output.LEFT | Output.RIGHT | Output.DISPARITY, 1, 7,
-          description="planes each frame carries: 1 left + 2 right + 4 disparity"),
+    Param(7, "outputs", Output.LEFT | Output.RIGHT | Output.DISPARITY, 1, 15,
+          description="planes each frame carries: 1 left + 2 right + 4 disparity + 8 confidence"),
     Param(8, "num_disparities", 64, 16, 256, step=16, unit="px",
           description="disparity search range (max - min disparity)"),
     Param(9, "block_size", 15, 5, 255, odd=True, unit="px", description="matching window side (odd)"),
@@ -107,6 +108,25 @@ PARAMS: tuple[Param, ...] = (
     Param(28, "census_height", 7, 1, 7, odd=True, unit="px", description="SGM census window height (odd)"),
     Param(29, "trigger_output", 0, 0, 1, live=False, values={0: "off", 1: "master"},
           description="1: this unit is the trigger master, pulsing the line at fps while streaming (external mode)"),
+    # post-processing after the engine, in this order (SPEC §5.3; INFO POST_PROCESSING); 0 turns a stage off
+    Param(30, "lr_check", -1, -1, 64, unit="px",
+          description="left-right check against the mirrored pair's disparity: tolerance (-1: off)"),
+    Param(31, "hole_fill", 0, 0, 2, values={0: "off", 1: "nearest", 2: "background"},
+          description="fill invalid pixels: 1 nearest valid in the row, 2 background along 8 paths"),
+    Param(32, "spatial_alpha", 0, 0, 256, unit="1/256",
+          description="edge-preserving (domain transform) filter: weight of the current pixel (0: off)"),
+    Param(33, "spatial_delta", 32, 1, 1 << 12, unit="1/16 px",
+          description="spatial filter: neighbours differing by more are an edge, not smoothed"),
+    Param(34, "spatial_iterations", 2, 1, 5, description="spatial filter: passes (each left, right, down, up)"),
+    Param(35, "temporal_alpha", 0, 0, 256, unit="1/256",
+          description="temporal filter: weight of the new frame (0: off)"),
+    Param(36, "temporal_delta", 32, 1, 1 << 12, unit="1/16 px",
+          description="temporal filter: a pixel changing by more starts afresh"),
+    Param(37, "temporal_persistence", 0, 0, 8, unit="frames",
+          description="temporal filter: an invalid pixel keeps the last value up to this many frames (0: off)"),
+    Param(38, "median_size", 1, 1, 5, odd=True, unit="px", description="median filter window side: 3 or 5 (1: off)"),
+    Param(39, "decimation", 1, 1, 4, unit="px",
+          description="median of the valid pixels of each n x n block, written to the whole block (1: off)"),
 )
 
 BY_ID: dict[int, Param] = {p.pid: p for p in PARAMS}

@@ -17,9 +17,10 @@ from .message_base import Message
 from .params import Output
 from .repair_messages import MAX_FRAME_CHUNK
 
-PLANE_ORDER = (Output.LEFT, Output.RIGHT, Output.DISPARITY)  # the order planes are sent in
+PLANE_ORDER = (Output.LEFT, Output.RIGHT, Output.DISPARITY, Output.CONFIDENCE)  # the order planes are sent in
 PLANE_DTYPE: dict[int, np.dtype] = {Output.LEFT: np.dtype(np.uint8), Output.RIGHT: np.dtype(np.uint8),
-               Output.DISPARITY: np.dtype("<i2")}  # little-endian on the wire, row-major, no padding
+               Output.DISPARITY: np.dtype("<i2"), Output.CONFIDENCE: np.dtype(np.uint8)}
+"""Little-endian on the wire, row-major, no padding."""
 REFERENCE_CHUNK = MAX_FRAME_CHUNK  # FRAME_DATA data bytes per message unless the host set another (§13.1)
 
 
@@ -86,4 +87,5 @@ def capture_messages(begin: FrameBegin, images: Mapping[Output, PlaneSource],
         for off in range(0, len(data), chunk):
             yield FrameData(begin.sequence, int(plane), off, data[off:off + chunk])
         sent[plane] = len(data)
-    yield FrameEnd(begin.sequence, FRAME_OK, sent[Output.LEFT], sent[Output.RIGHT], sent[Output.DISPARITY])
+    yield FrameEnd(begin.sequence, FRAME_OK, sent[Output.LEFT], sent[Output.RIGHT], sent[Output.DISPARITY],
+                   sent[Output.CONFIDENCE])

@@ -17,7 +17,7 @@ MODEL = "STOC-SIM"
 FIRMWARE_VERSION = "1.1.0"
 CAPABILITIES = (m.Capability.DISPARITY | m.Capability.SOFTWARE_TRIGGER | m.Capability.EXTERNAL_TRIGGER
                 | m.Capability.TIME_SYNC | m.Capability.CALIBRATION | m.Capability.RAW_OUTPUT
-                | m.Capability.FRAME_REPAIR | m.Capability.TRIGGER_OUTPUT)
+                | m.Capability.FRAME_REPAIR | m.Capability.TRIGGER_OUTPUT | m.Capability.POST_PROCESSING)
 PROTOCOL_MINOR = VERSION_MINOR  # 1.2: frame repair (SPEC §13) and the update messages (§14)
 FACTORY_BUILD = FirmwareBuild(FIRMWARE_VERSION, PROTOCOL_MINOR, CAPABILITIES | m.Capability.FIRMWARE_UPDATE, defaults())
 """The build the factory line signs into slot A of a blank unit."""

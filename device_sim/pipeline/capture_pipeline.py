@@ -141,8 +141,8 @@ class CapturePipeline:
             self._truth.remember(Exposure(req.sequence, req.time, t, view, self._view_rays[geometry], g.R1.T,
                                           focal, baseline))
             flags = m.FRAME_RECTIFIED
-        else:  # raw images: no disparity without a calibration
-            outputs &= ~Output.DISPARITY
+        else:  # raw images: no disparity (nor its confidence) without a calibration
+            outputs &= ~(Output.DISPARITY | Output.CONFIDENCE)
             focal = cx = cy = baseline = 0.0
             self._truth.remember(Exposure(req.sequence, req.time, t, view, self._rig.left_rays, np.eye(3), 0.0, 0.0))
             flags = 0
@@ -152,10 +152,22 @@ class CapturePipeline:
             cfg["gain"], w, h, int(outputs), flags, m.DISPARITY_S16_Q4, DISPARITY_SUBPIXEL, cfg["min_disparity"],
             cfg["num_disparities"], invalid_disparity(cfg["min_disparity"]), calib_id, focal, cx, cy, baseline)
 
-        def match() -> np.ndarray:  # runs once the images are on their way: the link carries them meanwhile
-            return self._stereo.disparity(cfg, left, right)
+        matched: list[np.ndarray | None] = []  # the confidence plane, once matched
 
-        self._send_all(req, begin, {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: match}, t0)
+        def match() -> np.ndarray:  # runs once the images are on their way: the link carries them meanwhile
+            disp, conf = self._stereo.planes(cfg, left, right, req.time, bool(outputs & Output.CONFIDENCE))
+            matched.append(conf)
+            return disp
+
+        def confidence() -> np.ndarray:  # sent after the disparity plane (or alone)
+            if not matched:
+                match()
+            conf = matched[0]
+            assert conf is not None
+            return conf
+
+        self._send_all(req, begin, {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: match,
+                                    Output.CONFIDENCE: confidence}, t0)
 
     def _send_all(self, req: CaptureRequest, begin: m.FrameBegin, images: dict[Output, PlaneSource | None],
                   t0: float) -> None:

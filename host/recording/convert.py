@@ -94,7 +94,7 @@ def camera_infos(calibration: StereoCalibration | None, width: int, height: int,
 def capture_info(ns: int, frame: Frame, counters: LinkCounters) -> dict:
     fmt, g = frame.disparity_format, frame.geometry
     planes = ((frame.left is not None) * Output.LEFT | (frame.right is not None) * Output.RIGHT
-              | (frame.disparity is not None) * Output.DISPARITY)
+              | (frame.disparity is not None) * Output.DISPARITY | (frame.confidence is not None) * Output.CONFIDENCE)
     return {"header": header(ns, FRAME_IDS["left"]), "sequence": frame.sequence, "trigger_id": frame.trigger_id,
             "device_time_us": frame.device_time_us, "host_time": frame.host_time, "status": frame.status.value,
             "exposure_us": frame.exposure_us, "gain": frame.gain, "width": frame.width, "height": frame.height,

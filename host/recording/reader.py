@@ -48,6 +48,7 @@ class RecordedCapture:
     left: np.ndarray | None
     right: np.ndarray | None
     disparity: np.ndarray | None  # int16, disparity * 16, exactly the camera's plane
+    confidence: np.ndarray | None = None  # uint8, the camera's confidence plane (SPEC §5.3) if recorded
 
     def to_frame(self) -> Frame:
         """The capture as the SDK's Frame (what ``get_frame`` returned while recording)."""
@@ -55,7 +56,8 @@ class RecordedCapture:
         return Frame(i.sequence, i.trigger_id, i.device_time_us, i.host_time, self.left, self.right, self.disparity,
                      i.exposure_us, i.gain, i.width, i.height, i.rectified,
                      DisparityFormat(i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity),
-                     StereoGeometry(i.focal_px, i.cx, i.cy, i.baseline_m, i.calibration_id), FrameStatus(i.status))
+                     StereoGeometry(i.focal_px, i.cx, i.cy, i.baseline_m, i.calibration_id), FrameStatus(i.status),
+                     confidence=self.confidence)
 
 
 def _plane(msg: Any, dtype: str) -> np.ndarray:
@@ -80,7 +82,7 @@ def _check_capture(cap: RecordedCapture) -> None:
         why = BY_NAME[name].check(getattr(info, name))
         if why:
             raise ValueError(f"frame size: {why}")
-    for plane in (cap.left, cap.right, cap.disparity):
+    for plane in (cap.left, cap.right, cap.disparity, cap.confidence):
         if plane is not None and plane.shape != (info.height, info.width):
             raise ValueError(f"a plane of {plane.shape[1]}x{plane.shape[0]} in a {info.width}x{info.height} capture")
 
@@ -285,7 +287,8 @@ class Recording:
         left, right, disp = parts.get(schemas.LEFT), parts.get(schemas.RIGHT), parts.get(schemas.DISPARITY_TOPIC)
         cap = RecordedCapture(index, log_time, parts[schemas.CAPTURE],
                               _plane(left, "u1") if left else None, _plane(right, "u1") if right else None,
-                              disparity_from_float(_plane(disp.image, "<f4")) if disp else None)
+                              disparity_from_float(_plane(disp.image, "<f4")) if disp else None,
+                              _plane(conf, "u1") if (conf := parts.get(schemas.CONFIDENCE_TOPIC)) else None)
         _check_capture(cap)
         return cap
 

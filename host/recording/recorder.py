@@ -67,7 +67,7 @@ class RecorderStats:
 
 
 def _frame_bytes(frame: Frame) -> int:
-    return sum(p.nbytes for p in (frame.left, frame.right, frame.disparity) if p is not None)
+    return sum(p.nbytes for p in (frame.left, frame.right, frame.disparity, frame.confidence) if p is not None)
 
 
 class Recorder:
@@ -95,6 +95,7 @@ class Recorder:
         self._encoders = {name: schemas.encoder(name) for name in set(schemas.TOPICS.values())}
         ids = {name: self._writer.register_schema(name, SchemaEncoding.ROS2, schemas.msgdef(name).encode())
                for name in self._encoders}
+        self._schema_ids = ids
         self._channels = {topic: self._writer.register_channel(topic, MessageEncoding.CDR, ids[name])
                           for topic, name in schemas.TOPICS.items()}
         self._write_unit(unit)
@@ -211,7 +212,8 @@ class Recorder:
             self._writer.add_message(self._channels[topic], ns, [self._encoders[schemas.TOPICS[topic]](body)], ns,
                                      frame.sequence)
         blobs = []
-        for topic, side, plane in ((schemas.LEFT, "left", frame.left), (schemas.RIGHT, "right", frame.right)):
+        for topic, side, plane in ((schemas.LEFT, "left", frame.left), (schemas.RIGHT, "right", frame.right),
+                                   (schemas.CONFIDENCE_TOPIC, "left", frame.confidence)):
             if plane is not None:
                 body = convert.image(ns, schemas.FRAME_IDS[side], plane)
                 blobs.append((topic, body, body, convert.blob(plane)))
@@ -219,8 +221,12 @@ class Recorder:
             body = convert.disparity(ns, frame)
             disparity = convert.blob(convert.disparity_to_float(frame))
             blobs.append((schemas.DISPARITY_TOPIC, body, body["image"], disparity))
+        if frame.confidence is not None and schemas.CONFIDENCE_TOPIC not in self._channels:
+            self._channels[schemas.CONFIDENCE_TOPIC] = self._writer.register_channel(
+                schemas.CONFIDENCE_TOPIC, MessageEncoding.CDR, self._schema_ids[schemas.IMAGE])
         for topic, body, slot, data in blobs:
-            encoded = schemas.encode_with_blob(self._encoders[schemas.TOPICS[topic]], body, slot, data)
+            encoded = schemas.encode_with_blob(self._encoders[schemas.TOPICS.get(topic, schemas.IMAGE)], body, slot,
+                                               data)
             self._writer.add_message(self._channels[topic], ns, encoded, ns, frame.sequence)
         self._log_times.append(ns)
         st = self.stats

@@ -27,7 +27,7 @@ from .mcapwriter import ChunkedWriter
 from .recorder import FRAME_INDEX, FRAME_INDEX_TYPE, SUMMARY, RecordingError
 from .scan import Scan
 
-_PLANES = int(Output.LEFT | Output.RIGHT | Output.DISPARITY)
+_PLANES = int(Output.LEFT | Output.RIGHT | Output.DISPARITY | Output.CONFIDENCE)
 _COUNTERS = ("link_lost", "link_incomplete", "host_queue_overflow", "device_dropped", "recorder_dropped")
 
 

@@ -40,7 +40,7 @@ uint32 exposure_us
 int32 gain
 uint16 width
 uint16 height
-uint8 planes                 # 1 left, 2 right, 4 disparity
+uint8 planes                 # 1 left, 2 right, 4 disparity, 8 confidence
 bool rectified
 int32 subpixel
 int32 min_disparity
@@ -95,6 +95,9 @@ TOPICS: dict[str, str] = {
     "/stereocam/capture": CAPTURE_INFO,
 }
 LEFT, RIGHT, LEFT_INFO, RIGHT_INFO, DISPARITY_TOPIC, CAPTURE = TOPICS
+CONFIDENCE_TOPIC = "/stereo/confidence"
+"""The confidence plane (outputs bit 8, SPEC §5.3) as a mono8 IMAGE; its channel is added with the first
+capture that carries one, so a recording without that plane has exactly the TOPICS."""
 FRAME_IDS = {"left": "stereocam_left", "right": "stereocam_right"}
 
 

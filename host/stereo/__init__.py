@@ -19,6 +19,10 @@ SAD sums, texture, winner-take-all, uniqueness, subpixel, left-right check, vali
 postfilter.py (speckle filter). numba, parallel over row stripes; ``warm_up()`` pays the JIT
 (or loads numba's on-disk cache) once per process. OpenCV is the test oracle only.
 
+Post-processing (post/, ``stereocam.stereo.post``): the device's chain after either engine — left-right
+check, hole filling, spatial and temporal filters, median, decimation, the confidence plane — and the
+named presets (SPEC §5.3).
+
 Where OpenCV's own output is not well defined we do the following instead:
   * no valid column (image too narrow for range + window): ConfigError (a ValueError) (OpenCV returns all
     invalid, or its uninitialised output buffer when only the valid region is empty);

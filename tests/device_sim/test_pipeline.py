@@ -59,16 +59,16 @@ def test_a_slow_pipeline_drops_counts_and_numbers_every_exposure():
 
 def test_a_failing_delivery_counts_a_drop_and_the_stream_goes_on():
     sim = SimulatedCamera(seed=42)
-    disparity = sim.pipeline._stereo.disparity
+    planes = sim.pipeline._stereo.planes
     calls = []
 
-    def flaky(cfg, left, right):
+    def flaky(*args, **kwargs):
         calls.append(1)
         if len(calls) == 2:
             raise RuntimeError("injected matcher fault")
-        return disparity(cfg, left, right)
+        return planes(*args, **kwargs)
 
-    sim.pipeline._stereo.disparity = flaky
+    sim.pipeline._stereo.planes = flaky
     with Camera(InProcessTransport(sim, owns=True)) as cam:
         cam.configure(**SMALL, fps=10)
         cam.start()

@@ -849,6 +849,15 @@ HEAD_THEN_DATA = {m.FrameData: 9, m.CalibData: 17, m.CalibWrite: 8, m.UpdateData
 EMPTY = [cls for cls in m.MESSAGES.values() if cls not in SAMPLES]
 
 
+def test_frame_end_carries_the_confidence_count_only_when_that_plane_was_sent() -> None:
+    """Since 1.3: a trailing u32 (21 bytes) when the CONFIDENCE plane was sent; 17 bytes read as 0."""
+    with_conf = m.FrameEnd(1, 0, 2, 3, 4, 5)
+    assert len(with_conf.pack()) == 21 and m.FrameEnd.unpack(with_conf.pack()) == with_conf
+    assert m.FrameEnd.unpack(m.FrameEnd(1, 0, 2, 3, 4).pack()).confidence_bytes == 0
+    with pytest.raises(ProtocolError, match="FrameEnd"):
+        decode_packet(Packet(m.FrameEnd.TYPE, 0, 0, with_conf.pack()[:19]))
+
+
 def test_samples_cover_every_message_with_a_payload() -> None:
     assert len(EMPTY) == 14 and all(isinstance(cls(), m._Empty) for cls in EMPTY)
     assert m.CalibRestore in EMPTY
@@ -945,8 +954,8 @@ def test_stats_dropped_sums_every_loss_counter() -> None:
 def test_param_ids_and_names_are_unique_and_sane() -> None:
     ids = [p.pid for p in PARAMS]
     names = [p.name for p in PARAMS]
-    assert len(set(ids)) == len(ids) == 28
-    assert ids == [*range(1, 20), *range(21, 30)]  # 1.1 appended 21 and retired 20, 1.2 22..29; never reused
+    assert len(set(ids)) == len(ids) == 38
+    assert ids == [*range(1, 20), *range(21, 40)]  # 1.1 appended 21 and retired 20, 1.2 22..29, 1.3 30..39
     assert len(set(names)) == len(names)
     assert all(1 <= i <= 0xFFFF for i in ids)  # 0 means "no parameter" in a NACK
     assert BY_ID[10].name == "min_disparity" and BY_NAME["width"].pid == 1
@@ -961,7 +970,8 @@ def test_each_row_carries_its_description_and_value_names() -> None:
         if p.values:  # an enumeration names exactly the values its range allows
             assert sorted(p.values) == list(range(p.lo, p.hi + 1)), p.name
             assert VALUE_NAMES[p.name] is p.values
-    assert set(VALUE_NAMES) == {"trigger_mode", "pre_filter_type", "rectify", "algorithm", "trigger_output"}
+    assert set(VALUE_NAMES) == {"trigger_mode", "pre_filter_type", "rectify", "algorithm", "trigger_output",
+                                "hole_fill"}
     assert VALUE_NAMES["trigger_mode"] == {0: "free_run", 1: "software", 2: "external"}
 
 
@@ -984,7 +994,8 @@ def test_check_rejects_out_of_range(p: Param) -> None:
 
 def test_check_rejects_even_values_for_odd_params() -> None:
     odd = [p for p in PARAMS if p.odd]
-    assert {p.name for p in odd} == {"block_size", "pre_filter_size", "census_width", "census_height"}
+    assert {p.name for p in odd} == {"block_size", "pre_filter_size", "census_width", "census_height",
+                                       "median_size"}
     for p in odd:
         for v in range(p.lo, p.hi + 1):
             assert (p.check(v) is None) == (v % 2 == 1), (p.name, v)

@@ -32,12 +32,13 @@ def begin(planes: Output, sequence: int = 5) -> m.FrameBegin:
 def images(seed: int = 0) -> dict[Output, np.ndarray]:
     rng = np.random.default_rng(seed)
     return {Output.LEFT: rng.integers(0, 256, (H, W), np.uint8), Output.RIGHT: rng.integers(0, 256, (H, W), np.uint8),
-            Output.DISPARITY: rng.integers(-16, 512, (H, W)).astype(np.int16)}
+            Output.DISPARITY: rng.integers(-16, 512, (H, W)).astype(np.int16),
+            Output.CONFIDENCE: rng.integers(0, 256, (H, W), np.uint8)}
 
 
 @pytest.mark.parametrize("chunk", [1000, plane_size(Output.LEFT, W, H), 7 * 1024, 1 << 17])
 @pytest.mark.parametrize("planes", [Output.LEFT | Output.RIGHT | Output.DISPARITY, Output.RIGHT, Output.DISPARITY,
-                                    Output(0)])
+                                    Output(0), Output.LEFT | Output.RIGHT | Output.DISPARITY | Output.CONFIDENCE])
 def test_segmented_capture_reassembles_byte_for_byte(chunk: int, planes: Output) -> None:
     imgs = images()
     msgs = list(capture_messages(begin(planes), imgs, chunk))
@@ -46,14 +47,15 @@ def test_segmented_capture_reassembles_byte_for_byte(chunk: int, planes: Output)
     assert len(data) == len(msgs) - 2 and all(len(d.data) <= chunk for d in data)
     assert [d.plane for d in data] == sorted((d.plane for d in data), key=lambda p: PLANE_ORDER.index(p))
     end = msgs[-1]
-    assert (end.left_bytes, end.right_bytes, end.disparity_bytes) == tuple(
+    assert (end.left_bytes, end.right_bytes, end.disparity_bytes, end.confidence_bytes) == tuple(
         plane_size(p, W, H) if p in planes else 0 for p in PLANE_ORDER)
     asm, delivered = assembler()
     for msg in Decoder().feed(b"".join(m.encode(x) for x in msgs)):  # through the real codec
         asm.on_message(m.decode_packet(msg))
     frame, = delivered
     assert frame.status is FrameStatus.COMPLETE and asm.stats.frames == 1
-    for plane, got in ((Output.LEFT, frame.left), (Output.RIGHT, frame.right), (Output.DISPARITY, frame.disparity)):
+    for plane, got in ((Output.LEFT, frame.left), (Output.RIGHT, frame.right), (Output.DISPARITY, frame.disparity),
+                       (Output.CONFIDENCE, frame.confidence)):
         if plane in planes:
             assert np.array_equal(got, imgs[plane])
         else:
@@ -80,7 +82,7 @@ def test_a_plane_given_as_a_function_is_computed_when_its_turn_comes() -> None:
     first = taken.index("computed")
     assert set(taken[:first]) == {"FrameBegin", "LEFT", "RIGHT"} and taken.count("computed") == 1
     assert set(taken[first + 1:]) == {"DISPARITY", "FrameEnd"}
-    assert seen[Output.DISPARITY] == imgs[Output.DISPARITY].tobytes() and list(seen) == list(PLANE_ORDER)
+    assert seen[Output.DISPARITY] == imgs[Output.DISPARITY].tobytes() and list(seen) == list(PLANE_ORDER[:3])
     assert msgs == list(capture_messages(begin(Output.LEFT | Output.RIGHT | Output.DISPARITY), imgs, 1000))
 
 

@@ -57,6 +57,13 @@ def dead_trigger_output(p: Packet) -> Packet:
     return _rewrite_config(p, lambda values: {**values, **({pid: 0} if pid in values else {})})
 
 
+def ignore_params(*names: str) -> Rewrite:
+    """SET_CONFIG reaches the device without ``names``: a unit that answers CONFIG_APPLIED to them
+    but never applies them (e.g. a post-processing stage it does not run)."""
+    pids = {BY_NAME[n].pid for n in names}
+    return lambda p: _rewrite_config(p, lambda values: {k: v for k, v in values.items() if k not in pids})
+
+
 def _nearest_legal(prm: Param, v: int) -> int:
     v = min(max(v, prm.lo), prm.hi)
     if prm.step > 1:

@@ -46,6 +46,7 @@ MODULES: dict[str, tuple[str, str]] = {
     "firmware": ("firmware", "a 2 MiB signed image installed per transport, and one update's state trace"),
     "record": ("record", "the recorder's ceiling (MB/s), a live recording's drops, seek time by frame index"),
     "rematch": ("rematch", "stereocam rematch frames/s with 1 and 2 local Dask workers"),
+    "post": ("post", "the post-processing chain at 640x480 per stage; --quality: density and bad-2.0 vs SGBM"),
 }
 """name -> (module in stereocam.tools.bench, one-line help); each module provides ``command``."""
 

@@ -12,8 +12,9 @@ from dataclasses import dataclass, field
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.params import Output
+from stereocam.protocol.segmentation import PLANE_DTYPE, PLANE_ORDER
 
-PLANE_BYTES = {int(Output.LEFT): 1, int(Output.RIGHT): 1, int(Output.DISPARITY): 2}
+PLANE_BYTES = {int(p): PLANE_DTYPE[p].itemsize for p in PLANE_ORDER}
 
 
 @dataclass
@@ -92,7 +93,8 @@ def _add_chunk(cur: Capture, d: m.FrameData) -> None:
 def _close(cur: Capture) -> None:
     e = cur.end
     assert e is not None
-    counts = {int(Output.LEFT): e.left_bytes, int(Output.RIGHT): e.right_bytes, int(Output.DISPARITY): e.disparity_bytes}
+    counts = {int(Output.LEFT): e.left_bytes, int(Output.RIGHT): e.right_bytes, int(Output.DISPARITY): e.disparity_bytes,
+              int(Output.CONFIDENCE): e.confidence_bytes}
     for plane, sent in counts.items():
         want = cur.plane_size(plane) if cur.begin.planes & plane else 0
         got = len(cur.data.get(plane, b""))

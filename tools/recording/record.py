@@ -15,6 +15,7 @@ from tqdm import tqdm
 
 import stereocam
 from stereocam.protocol.errors import ConfigError
+from stereocam.presets import POST_PRESETS
 from stereocam.recording.mcapwriter import check_level
 from stereocam.tools.options import CONTEXT, SETTING, epilog
 from stereocam.tools.progress import progress_wanted
@@ -28,10 +29,12 @@ from stereocam.tools.progress import progress_wanted
 @click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=None, help="Stop after S seconds.")
 @click.option("--set", "settings", type=SETTING, multiple=True,
               help="Configure the camera before recording (repeatable), e.g. --set width=1280.")
+@click.option("--preset", type=click.Choice(list(POST_PRESETS)), default=None,
+              help="A named matching and post-processing preset, applied before any --set.")
 @click.option("--level", type=int, default=1, show_default=True, help="zstd level of the chunks.")
 @click.option("--quiet", is_flag=True, help="No progress bar (there is none when stderr is not a terminal).")
 def command(url: str, out: Path, frames: int | None, seconds: float | None, settings: tuple[tuple[str, int], ...],
-            level: int, quiet: bool) -> int:
+            preset: str | None, level: int, quiet: bool) -> int:
     """Record a camera to an MCAP file in the ROS 2 profile (ros2 bag / Foxglove open it): left and
     right images, disparity, camera infos from the unit's stored calibration, per-capture metadata.
     Give exactly one of --frames and --seconds."""
@@ -59,6 +62,8 @@ def command(url: str, out: Path, frames: int | None, seconds: float | None, sett
                             f"recorder {c.recorder_dropped}")
 
     with bar, stereocam.open(url, timeout=2.0) as cam:
+        if preset:
+            cam.load_preset(preset)
         if settings:
             cam.configure(**dict(settings))
         stats = cam.record(str(out), frames=frames, seconds=seconds, level=level,

@@ -22,6 +22,7 @@ from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.params import BY_NAME
 from stereocam.recording.reader import Recording
 from stereocam.stereo import engines
+from stereocam.presets import POST_PRESETS, preset_values
 from stereocam.tools.options import CONTEXT, SETTING, epilog
 from stereocam.tools.recording import rematch_tasks as tasks
 
@@ -147,6 +148,8 @@ def _scheduler(ctx: click.Context, param: click.Parameter, value: str | None) ->
               help="Matcher: bm (block matching) or sgm (semi-global).  [default: the recorded one]")
 @click.option("--set", "settings", type=SETTING, multiple=True,
               help="Matching parameter to change from the recorded configuration (repeatable).")
+@click.option("--preset", type=click.Choice(list(POST_PRESETS)), default=None,
+              help="A named matching and post-processing preset; --set and --algorithm change it further.")
 @click.option("--scheduler", default=None, metavar="tcp://HOST:PORT", callback=_scheduler,
               help="A running Dask scheduler.  [default: a local cluster]")
 @click.option("--workers", type=click.IntRange(min=1), default=2, show_default=True,
@@ -155,7 +158,7 @@ def _scheduler(ctx: click.Context, param: click.Parameter, value: str | None) ->
               help="File chunks per task.")
 @click.option("--force", is_flag=True, help="Replace outputs that exist already.")
 def command(recordings: tuple[Path, ...], out: Path, algorithm: str | None, settings: tuple[tuple[str, int], ...],
-            scheduler: str | None, workers: int, chunks_per_task: int, force: bool) -> int:
+            preset: str | None, scheduler: str | None, workers: int, chunks_per_task: int, force: bool) -> int:
     """Match recorded images again, on a Dask cluster: each recording is split into tasks by chunk,
     re-matched, and joined into OUT/NAME.mcap with the original images and the new disparity."""
     if any(p.resolve().parent == out.resolve() for p in recordings):
@@ -165,7 +168,8 @@ def command(recordings: tuple[Path, ...], out: Path, algorithm: str | None, sett
         check_outputs(list(recordings), out, force)
     except ConfigError as exc:
         raise click.BadParameter(str(exc), param_hint="--out") from None
-    r = rematch(list(recordings), out, dict(settings), algorithm=algorithm, scheduler=scheduler,
+    overrides = {**(preset_values(preset) if preset else {}), **dict(settings)}
+    r = rematch(list(recordings), out, overrides, algorithm=algorithm, scheduler=scheduler,
                 workers=workers, chunks_per_task=chunks_per_task, force=force)
     click.echo(f"{r['frames']} frames re-matched in {r['seconds']:.1f} s ({r['fps']:.1f} frames/s) -> "
                + ", ".join(str(p) for p in r["outputs"]))

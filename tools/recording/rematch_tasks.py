@@ -23,6 +23,7 @@ from stereocam.recording import LinkCounters, Recorder
 from stereocam.recording.mcapwriter import ChunkedWriter
 from stereocam.recording.reader import Recording
 from stereocam.stereo.engines import StereoMatcher, matcher_for, params_from_config
+from stereocam.stereo.post import PostChain, post_params_from_config, postprocess
 from stereocam.recording.recorder import FRAME_INDEX, FRAME_INDEX_TYPE, SUMMARY
 
 def matching_config(recorded: dict[str, int], overrides: dict[str, int]) -> dict[str, int]:
@@ -55,6 +56,8 @@ def rematch_range(path: str, start: int, stop: int, overrides: dict[str, int], p
         fmt = DisparityFormat(DISPARITY_SUBPIXEL, cfg["min_disparity"], cfg["num_disparities"],
                               invalid_disparity(cfg["min_disparity"]))
         matcher: StereoMatcher | None = None
+        post = post_params_from_config(cfg)
+        chain = PostChain(post, cfg["min_disparity"]) if post.active else None  # temporal state: this range's
         unit = replace(rec.unit, config=cfg)
         try:
             with Recorder(tmp, unit, clock_offset_ns=rec.clock_offset_ns) as writer:
@@ -62,7 +65,10 @@ def rematch_range(path: str, start: int, stop: int, overrides: dict[str, int], p
                     frame = cap.to_frame()
                     if frame.rectified and frame.left is not None and frame.right is not None:
                         matcher = matcher_for(cfg, frame.left.shape, matcher)
-                        frame.disparity, frame.disparity_format = matcher.match(frame.left, frame.right), fmt
+                        disp = matcher.match(frame.left, frame.right)
+                        if chain is not None:
+                            disp = postprocess(disp, frame.left, post, frame.right, matcher.params, chain)
+                        frame.disparity, frame.disparity_format = disp, fmt
                     i = cap.info
                     writer.put_wait(frame, LinkCounters(i.link_lost, i.link_incomplete, i.host_queue_overflow,
                                                         i.device_dropped, i.recorder_dropped))

@@ -82,7 +82,8 @@ def capture_problems(captures: list[Capture], cfg: dict[str, int]) -> list[str]:
         if "exposure_us" in cfg and (b.exposure_us, b.gain) != (cfg["exposure_us"], cfg["gain"]):
             problems.append(f"{where}: exposure/gain {b.exposure_us}/{b.gain}, configured "
                             f"{cfg['exposure_us']}/{cfg['gain']}")
-        want = cfg.get("outputs", 7) & (7 if b.flags & m.FRAME_RECTIFIED else ~int(Output.DISPARITY))
+        raw_planes = ~int(Output.DISPARITY | Output.CONFIDENCE)  # a raw frame has neither
+        want = cfg.get("outputs", 7) & (~0 if b.flags & m.FRAME_RECTIFIED else raw_planes)
         if b.planes != want:
             problems.append(f"{where}: planes 0x{b.planes:x}, expected 0x{want:x} (outputs {cfg.get('outputs')}, "
                             f"{'rectified' if b.flags & m.FRAME_RECTIFIED else 'raw'})")

@@ -1,0 +1,37 @@
+"""Named combinations of device parameters (``cam.load_preset('high_density')``, the CLI, the viewer):
+the matching engine's settings and the post-processing chain's, as configuration values."""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+
+from stereocam.protocol.errors import ConfigError
+from stereocam.protocol.params import Algorithm
+
+from .params import POST_CONFIG, PostParams
+
+_OFF = {f.key: getattr(PostParams(), f.field) for f in POST_CONFIG}
+
+POST_PRESETS: Mapping[str, Mapping[str, int]] = MappingProxyType({
+    # every pixel a disparity: the engine's left-right check (as good as the mirrored pair's here, at
+    # no cost), its holes and the occlusions filled from the background, then smoothed
+    "high_density": MappingProxyType({**_OFF, "algorithm": Algorithm.SEMI_GLOBAL, "uniqueness_ratio": 0,
+                                      "disp12_max_diff": 1, "speckle_window_size": 100, "speckle_range": 32,
+                                      "hole_fill": 2, "spatial_alpha": 128, "spatial_delta": 32,
+                                      "spatial_iterations": 1, "median_size": 3}),
+    # fewer, surer pixels: strict left-right check, speckles removed, no filling
+    "high_accuracy": MappingProxyType({**_OFF, "algorithm": Algorithm.SEMI_GLOBAL, "uniqueness_ratio": 10,
+                                       "speckle_window_size": 200, "speckle_range": 16, "lr_check": 1,
+                                       "median_size": 3}),
+    # the chain off (the engines' raw output)
+    "off": MappingProxyType(dict(_OFF)),
+})
+"""Preset name -> the configuration values it sets (others keep their values)."""
+
+
+def preset_config(name: str) -> dict[str, int]:
+    """The configuration values preset ``name`` sets (ConfigError naming the known ones)."""
+    try:
+        return {k: int(v) for k, v in POST_PRESETS[name].items()}
+    except KeyError:
+        raise ConfigError(f"unknown preset {name!r}; known: {', '.join(POST_PRESETS)}") from None
