@@ -156,7 +156,6 @@ def sgm_report(args: SimpleNamespace) -> int:
               help="Timed runs per case.  [default: 15 for bm, 5 for sgm]")
 @click.option("--quick", is_flag=True, help="Only 640x480, D=64, block 9 (sgm: the scene classes at 320x240, no Motorcycle).")
 @click.option("--profile", is_flag=True, help="Per-stage timings of the core.")
-@click.option("--busy", is_flag=True, help="sgm: time beside one busy process (a spinning Python).")
 @click.option("--cold-jit", is_flag=True, help="Also time a from-scratch compile (subprocess, empty numba cache).")
 @click.option("--algorithm", type=click.Choice(engines.names()), default="bm", show_default=True,
               help="bm: the block matcher vs cv2.StereoBM; sgm: our SGM vs every cv2.StereoSGBM mode and StereoBM.")

@@ -121,11 +121,21 @@ def methods(nd: int) -> tuple[list[Method], list[str]]:
     except ImportError as exc:
         notes.append(f"post-processing presets skipped: stereocam.stereo.post is not importable ({exc})")
     else:
-        for preset, params in post.POST_PRESETS.items():
-            def make_post(shape: tuple[int, int], params: Any = params) -> MatchFn:
-                m = SGMMatcher(shape, sgm[8])
-                return lambda left, right: post.postprocess(m.match(left, right), left, params)
-            out.append(Method(f"ours sgm 8 + {preset}", make_post, sgm[8].invalid_value))
+        from stereocam.protocol.params import defaults
+        from stereocam.stereo import engines
+
+        for preset, settings in post.POST_PRESETS.items():
+            if preset == "off":
+                continue
+            cfg = {**defaults(), "num_disparities": nd, **settings}  # the preset as a device applies it
+            engine_params = engines.params_from_config(cfg)
+
+            def make_post(shape: tuple[int, int], cfg: dict[str, int] = cfg, ep: Any = engine_params) -> MatchFn:
+                matcher = engines.matcher_for(cfg, shape)
+                chain = post.post_params_from_config(cfg)
+                return lambda left, right: post.postprocess(matcher.match(left, right), left, chain, right, ep)
+            out.append(Method(f"ours {engines.selected(cfg).name} + {preset}", make_post,
+                              engine_params.invalid_value))
 
     create_sgbm = getattr(cv2, "StereoSGBM_create", None) or cv2.StereoSGBM.create  # OpenCV 4.x or 5.x
     create_bm = getattr(cv2, "StereoBM_create", None) or cv2.StereoBM.create
