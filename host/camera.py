@@ -19,7 +19,7 @@ from . import calibration_io, firmware_update, presets
 from .arguments import config_update, count_arg, flag_arg, timeout_arg
 from .calibration_io import StoredCalibration
 from .callbacks import FrameCallback, FrameCallbacks
-from .connection import MIN_HEARTBEAT_INTERVAL, Connection, Counters
+from .connection import HEARTBEAT_INTERVAL, MIN_HEARTBEAT_INTERVAL, Connection, Counters
 from .device_types import DeviceInfo, DeviceStatus, config_names
 from .dispatch import DropPolicy, FrameDispatcher, FrameQueue, Listener
 from .frame_geometry import FrameGeometry
@@ -40,7 +40,7 @@ class Camera:
     ``on_frame`` callbacks), and any added with ``add_listener`` (a recorder, a viewer)."""
 
     def __init__(self, transport: Transport, *, timeout: float = 1.0, retries: int = 2,
-                 heartbeat_interval: float = 0.5, queue_depth: int = 8, deliver_incomplete: bool = False,
+                 heartbeat_interval: float = HEARTBEAT_INTERVAL, queue_depth: int = 8, deliver_incomplete: bool = False,
                  auto_reconnect: bool = False):
         """``auto_reconnect``: when the link drops, ``get_frame`` (and iteration) call ``reconnect``
         within their own timeout instead of raising DisconnectedError at once."""

@@ -31,6 +31,7 @@ SYNC_SAMPLES = 8
 SYNC_PERIOD = 1.0  # seconds between background time-sync bursts (the map needs them to follow drift)
 SYNC_BURST = 3  # round trips per burst: one of them usually finds the link free of frame data
 MIN_HEARTBEAT_INTERVAL = 0.01  # s: a faster heartbeat would only load the link
+HEARTBEAT_INTERVAL = 0.5  # s: the default (Camera's heartbeat_interval)
 REPAIR_TIMEOUT = 0.5  # s per FRAME_RESEND try at most
 _log = logging.getLogger(__name__)
 
