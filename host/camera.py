@@ -11,8 +11,8 @@ from typing import Iterator
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.config_rules import merge
-from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError,
-                                      StreamStalledError, StreamStoppedError, TransportError)
+from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, EndOfRecordingError,
+                                      StereoCamError, StreamStalledError, StreamStoppedError, TransportError)
 from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, Param, TriggerMode
 
 from . import calibration_io, firmware_update, presets
@@ -250,7 +250,8 @@ class Camera:
     def get_frame(self, timeout: float | None = None) -> Frame:
         """The next complete frame; CameraTimeoutError (a TimeoutError) if none within ``timeout``
         (finite seconds >= 0; ConfigError otherwise). ``timeout=0`` polls: a queued frame at once, or
-        the error at once. StreamStoppedError if the device stopped the stream and would not restart
+        the error at once. EndOfRecordingError (naming the file) once a replayed recording's last frame
+        has been taken. StreamStoppedError if the device stopped the stream and would not restart
         (see ``_restart_stopped_stream``)."""
         if self._callbacks is not None and len(self._callbacks):
             raise StereoCamError("frames go to the on_frame callbacks; remove them (cam.remove_callback) "
@@ -280,8 +281,20 @@ class Camera:
                 self.reconnect(timeout=max(deadline - time.monotonic(), 0.0))
             left = deadline - time.monotonic()
             frame = self._frames.get(min(left, 0.1) if left > 0 else 0.0)
+            if frame is None and self._streaming and (path := self.connection.ended()) is not None:
+                frame = self._last_of_recording(path)
             if frame is not None or left <= 0:
                 return frame
+
+    def _last_of_recording(self, path: str) -> Frame:
+        """A frame still on its way from a replay that reached its end, else EndOfRecordingError: a
+        round trip first (every frame sent before the reply has then been delivered)."""
+        self.connection.status()
+        frame = self._frames.get(0.0)
+        if frame is None:
+            raise EndOfRecordingError(f"{self.url}: end of recording {path} (every frame was delivered; "
+                                      "?loop=1 plays it again)", path)
+        return frame
 
     @property
     def frames(self) -> FrameQueue:
@@ -345,13 +358,20 @@ class Camera:
 
     def __iter__(self) -> Iterator[Frame]:
         """Frames as they come while streaming. Ends when the stream is stopped (``stop()`` from any
-        thread, ``close()``) and the queued frames are taken; raises StreamStalledError (a
-        CameraTimeoutError) when streaming but no frame came for ``timeout`` seconds."""
+        thread, ``close()``) and the queued frames are taken, or when a replayed recording's last frame
+        was taken; raises StreamStalledError (a CameraTimeoutError) when streaming but no frame came
+        for ``timeout`` seconds."""
         if not self._streaming:
             raise StereoCamError("not streaming: call start() before iterating over the camera")
         while True:
             deadline = time.monotonic() + self.timeout
-            while (frame := self._next_frame(min(0.1, max(deadline - time.monotonic(), 0.0)))) is None:
+            while True:
+                try:
+                    frame = self._next_frame(min(0.1, max(deadline - time.monotonic(), 0.0)))
+                except EndOfRecordingError:
+                    return
+                if frame is not None:
+                    break
                 if not self._streaming or self.connection.closed:
                     return
                 if time.monotonic() >= deadline:

@@ -88,6 +88,10 @@ class Connection:
             raise
         self._heartbeat = threading.Thread(target=self._heartbeat_loop, name="stereocam-heartbeat", daemon=True)
 
+    def ended(self) -> str | None:
+        """The recording this link's device has played to its end (Transport.ended), else None."""
+        return self._arrivals.ended()
+
     def start_heartbeat(self) -> None:
         """Begin the periodic STATUS (to ``on_status``) and clock-sync bursts, once the owner is ready."""
         self._heartbeat.start()

@@ -145,7 +145,7 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
         return InProcessTransport(live, url, owns=owns)
     if serial is not None and "seed" not in query:
         held = [s.serial for s in registry.live_simulators()]
-        state = "held by another link" if serial in held else "not found"
+        state = "in use by another host (a link in this process)" if serial in held else "not found"
         raise TransportError(f"{url}: simulator {serial!r} {state} in this process (free ones: "
                              f"{[e.serial for e in discover()] or 'none'}); "
                              f"sim://?seed=N&serial={serial} makes a new one")
