@@ -252,11 +252,15 @@ class Camera:
         (finite seconds >= 0; ConfigError otherwise). ``timeout=0`` polls: a queued frame at once, or
         the error at once. EndOfRecordingError (naming the file) once a replayed recording's last frame
         has been taken. StreamStoppedError if the device stopped the stream and would not restart
-        (see ``_restart_stopped_stream``)."""
+        (see ``_restart_stopped_stream``). Not streaming with no frame queued: the CameraTimeoutError
+        at once, saying so (no frame would come: call ``start`` first)."""
         if self._callbacks is not None and len(self._callbacks):
             raise StereoCamError("frames go to the on_frame callbacks; remove them (cam.remove_callback) "
                                  "before calling get_frame")
         timeout = self.timeout if timeout is None else timeout_arg(timeout)
+        if not self._streaming and len(self._frames) == 0 and not self.connection.closed:
+            raise CameraTimeoutError(f"no frame from {self.url}: it is not streaming (call start() before get_frame(); "
+                                     "no frame would come)")
         frame = self._next_frame(timeout)
         if frame is None:
             raise CameraTimeoutError(f"no frame from {self.url} within {timeout:.3g} s")
@@ -412,6 +416,11 @@ class Camera:
         if self._callbacks is not None:
             self._callbacks.close()
         self.connection.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self.connection.closed else "streaming" if self._streaming else "stopped"
+        info = self.connection.info
+        return f"<Camera {self.url} {info.model} serial={info.serial} firmware={info.firmware_version} {state}>"
 
     def __enter__(self) -> "Camera":
         return self

@@ -177,6 +177,11 @@ class CameraGroup:
             _log.warning("camera %s (%s): could not be stopped and put back as found: %s", name,
                          self._url_of.get(name, "?"), exc)
 
+    def __repr__(self) -> str:
+        state = "closed" if self._closed.is_set() else "open" if self._opened else "not opened"
+        heads = list(self.cameras) or self.urls
+        return f"<CameraGroup {', '.join(heads)} master={self.master} {state}>"
+
     def __enter__(self) -> "CameraGroup":
         return self.open()
 

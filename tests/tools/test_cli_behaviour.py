@@ -143,3 +143,14 @@ def test_capture_and_demo_print_json(tmp_path):
     assert r.returncode == 0, r.stderr
     doc = json.loads(r.stdout)
     assert doc["frames"] >= 1 and doc["fps_asked"] == 15 and ("keep up" in doc["note"] or "kept up" in doc["note"])
+
+
+def test_simulators_served_without_a_seed_have_unique_serials():
+    """Issue 20: every `stereocam sim` without --seed was SIM00000, so `list` showed duplicates."""
+    with ServedSimulator("tcp:127.0.0.1:0", seed=None) as a, ServedSimulator("tcp:127.0.0.1:0", seed=None) as b:
+        serials = []
+        for url in (a.url, b.url):
+            with stereocam.open(url, timeout=3.0) as cam:
+                serials.append(cam.info().serial)
+        listed = [e.serial for e in stereocam.list_devices() if e.url in (a.url, b.url)]
+    assert len(set(serials)) == 2 and sorted(listed) == sorted(serials)
