@@ -87,12 +87,13 @@ class Camera:
         calibrated = self.connection.info.capabilities & m.Capability.CALIBRATION
         self._geometry.resolve(self.read_calibration() if calibrated else None)
 
-    def reconnect(self, timeout: float = 10.0, backoff: float = 0.1) -> None:
+    def reconnect(self, timeout: float = 10.0, backoff: float = 0.1, expected: bool = False) -> None:
         """After a disconnect: find the same unit again (by serial), re-apply every parameter this
         Camera set, and resume streaming if it was streaming. Retries with exponential backoff
-        until ``timeout``; DisconnectedError if the unit does not come back in time."""
-        self.connection.reconnect(timeout, backoff)
-        _log.warning("%s: reconnected to serial %s; re-applying %d parameters%s", self.url, self.connection.info.serial,
+        until ``timeout``; DisconnectedError if the unit does not come back in time. ``expected``: the
+        caller made the unit reset (a firmware update): logged at INFO, not as a WARNING."""
+        self.connection.reconnect(timeout, backoff, expected)
+        _log.log(logging.INFO if expected else logging.WARNING, "%s: reconnected to serial %s; re-applying %d parameters%s", self.url, self.connection.info.serial,
                      len(self._applied), ", resuming the stream" if self._streaming else "")
         self._resolve_geometry()
         # the unit may not have noticed the lost link yet and still stream for it (SPEC §4.6: STOP is

@@ -196,16 +196,18 @@ class Connection:
         return Counters(self.link.stats, replace(self.link.decoder.stats), self.assembler.snapshot())
 
     # -- reconnect and close ------------------------------------------------------------------
-    def reconnect(self, timeout: float = 10.0, backoff: float = 0.1) -> None:
+    def reconnect(self, timeout: float = 10.0, backoff: float = 0.1, expected: bool = False) -> None:
         """After a disconnect: open the same unit again (by serial), retrying with exponential backoff
-        until ``timeout``; DisconnectedError if it does not come back in time."""
+        until ``timeout``; DisconnectedError if it does not come back in time. ``expected``: a reset the
+        caller asked for (logged at INFO instead of WARNING)."""
         timeout, backoff = timeout_arg(timeout), timeout_arg(backoff, "backoff")
         if self._closed.is_set():
             raise TransportError(f"{self.url}: camera closed; open it again with stereocam.open")
         serial = self.info.serial
         url = reopen_url(self.url, serial)
         deadline = time.monotonic() + timeout
-        _log.warning("%s: link lost (%s); reconnecting to serial %s via %s", self.url, self.link.error, serial, url)
+        _log.log(logging.INFO if expected else logging.WARNING, "%s: link lost (%s); reconnecting to serial %s via %s",
+                 self.url, self.link.error, serial, url)
         self.link.close()
         while True:
             try:

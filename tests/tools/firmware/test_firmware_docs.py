@@ -4,6 +4,7 @@ installs (a large counter would have locked every release out for good)."""
 from __future__ import annotations
 
 import json
+import logging
 import re
 import shlex
 from importlib import resources
@@ -35,7 +36,7 @@ def test_the_example_build_ships_in_the_package():
 
 
 def test_the_readme_firmware_commands_run_and_the_rollback_leaves_later_releases_installable(
-        tmp_path, monkeypatch, usb_bus, capsys):
+        tmp_path, monkeypatch, usb_bus, capsys, caplog):
     monkeypatch.chdir(tmp_path)
     example = json.loads((ROOT / EXAMPLE).read_text())
     Path("build-1.1.0.json").write_text(json.dumps({**example, "version": "1.1.0"}))  # as the README says
@@ -61,6 +62,8 @@ def test_the_readme_firmware_commands_run_and_the_rollback_leaves_later_releases
         assert cli.main(["firmware", "sign", "--key", "vendor.pem", "--out", "fw-1.2.1.img", "build-1.2.1.json"]) == 0
         assert cli.main(["firmware", "update", url, "fw-1.2.1.img"]) == 0  # the next release still installs
         assert "1.1.0 -> 1.2.1" in capsys.readouterr().out
+        warnings = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+        assert warnings == []  # the reboots were asked for: no 'link lost' / 'reconnected' WARNINGs
     finally:
         if sim is not None:
             sim.close()
