@@ -89,20 +89,23 @@ def command(out: Path, seconds: float, fps: int, seed: int, as_json: bool, heads
                        f"protocol {info.protocol_version[0]}.{info.protocol_version[1]}")
         cam.configure(width=640, height=480, fps=fps, num_disparities=64, block_size=15)
         cam.start()
-        first = cam.get_frame(timeout=30.0)  # first frame pays the JIT warm-up: the timed run starts after it
+        cam.get_frame(timeout=30.0)  # first frame pays the JIT warm-up
         host0, dev0 = cam.stats, cam.status().counters
         recent: list = []
+        first_seq = None  # the timed run's drops are counted from its first frame on (not the warm-up's)
         frames = 0
         t0 = time.monotonic()
         with tqdm(total=round(seconds * fps), unit="frame", desc="demo", disable=not progress_wanted()) as bar:
             while time.monotonic() - t0 < seconds:
                 recent = (recent + [cam.get_frame(timeout=5.0)])[-GROUND_TRUTH_KEEP // 2:]
+                first_seq = recent[-1].sequence if first_seq is None else first_seq
                 frames += 1
                 bar.update()
         elapsed = time.monotonic() - t0
         host_stats, dev = cam.stats, cam.status().counters
         cam.stop()
-        drops = Drops.of(first.sequence + 1, recent[-1].sequence, frames, dev["frames_dropped"] - dev0["frames_dropped"],
+        assert first_seq is not None  # the loop ran at least once: seconds > 0
+        drops = Drops.of(first_seq, recent[-1].sequence, frames, dev["frames_dropped"] - dev0["frames_dropped"],
                          host_stats["queue_overflow"] - host0["queue_overflow"])
         stats = [depth_errors(f, sim.ground_truth(f.sequence)) for f in recent]  # truth after timing
         paths = save_frame(recent[-1], out, "demo")
