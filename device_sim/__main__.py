@@ -111,7 +111,9 @@ def command(**params: Any) -> int:
     stereocam.device_sim). The first line printed is the URL to open; stereocam list shows it while
     it runs."""
     args = SimpleNamespace(**params)
-    if args.seed is not None or args.replay:
+    if args.replay and args.seed is None:  # the recorded unit's serial: no seed to claim
+        args.seed = 0
+    if args.seed is not None:
         return serve(args)
     with free_seed() as seed:
         args.seed = seed

@@ -57,7 +57,7 @@ def test_rematch_cli_local_cluster(source, tmp_path, capfd):
     assert cli.main(["rematch", str(source), "--out", str(tmp_path / "out"), "--set", "block_size=21",
                      "--workers", "2"]) == 0
     err = capfd.readouterr().err  # the workers' processes too: Dask printed 33 INFO lines (issue 20)
-    assert " INFO " not in err and "distributed." not in err, err
+    assert " INFO " not in err, err  # warnings may show (a worker killed at shutdown on a loaded machine)
     _check(source, tmp_path / "out" / "run.mcap", 21)
 
 
