@@ -11,19 +11,23 @@ simulator's truth, for benchmarks; never on the wire).
 """
 from __future__ import annotations
 
+import contextlib
+import os
 import signal
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any, NoReturn
+from typing import Any, Iterator, NoReturn
 
 import click
 
 from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.firmware_image import ImageError, load_private_key
+from stereocam.transports import announced
 from stereocam.transports.announced import announce
 
 from .boot.factory import DEV_SIGNING_KEY
 from .firmware import SimulatedCamera
+from .links.inprocess import SEED_MAX
 from .links.servers import PtyServer, TcpServer
 from .rig.scene import Scene
 from .shared_line import SharedTriggerLine
@@ -32,6 +36,39 @@ from .shared_line import SharedTriggerLine
 def usage_error(message: str) -> NoReturn:
     """A bad argument: the reason on stderr and exit code 2, as the epilog promises."""
     raise click.UsageError(message)
+
+
+@contextlib.contextmanager
+def free_seed() -> Iterator[int]:
+    """The lowest seed no other simulator served on this machine by this user has claimed, claimed by
+    this process (a file in the announce directory, created exclusively) until the block ends; a claim
+    whose process is gone is taken over."""
+    folder = announced.runtime_dir()
+    folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    seed = 0
+    while True:
+        path = folder / f"seed-{seed}.claim"
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600)
+        except FileExistsError:
+            try:
+                owner = int(path.read_text() or "0")
+            except (OSError, ValueError):
+                owner = 0
+            if owner and announced.pid_alive(owner):
+                seed += 1
+            elif owner:  # left by a killed simulator: remove it and try this seed again
+                path.unlink(missing_ok=True)
+            else:  # another process is writing its claim right now
+                seed += 1
+            continue
+        with os.fdopen(fd, "w") as f:
+            f.write(str(os.getpid()))
+        try:
+            yield seed
+        finally:
+            path.unlink(missing_ok=True)
+        return
 
 
 def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
@@ -49,7 +86,9 @@ def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
                epilog="Exit codes: 0 stopped by SIGINT/SIGTERM; 2 bad usage (a --serve, --scene, --trigger-line "
                       "or --vendor-key that cannot be used).")
 @click.option("--serve", required=True, metavar="pty|tcp:HOST:PORT", help="Where to serve the unit.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Which simulated unit.")
+@click.option("--seed", type=click.IntRange(0, SEED_MAX), default=None,
+              help="Which simulated unit (its serial is SIM<seed>).  [default: the lowest no other simulator "
+                   "served on this machine has, so serials are unique]")
 @click.option("--serial", default=None, help="Serial number.  [default: derived from the seed]")
 @click.option("--flash", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="PATH",
               help="File behind the unit's flash, kept across restarts (created erased if missing).  "
@@ -71,7 +110,14 @@ def command(**params: Any) -> int:
     """Serve a simulated camera over a pty or TCP until SIGINT or SIGTERM (also: python -m
     stereocam.device_sim). The first line printed is the URL to open; stereocam list shows it while
     it runs."""
-    return serve(SimpleNamespace(**params))
+    args = SimpleNamespace(**params)
+    if args.replay and args.seed is None:  # the recorded unit's serial: no seed to claim
+        args.seed = 0
+    if args.seed is not None:
+        return serve(args)
+    with free_seed() as seed:
+        args.seed = seed
+        return serve(args)
 
 
 def serve(args: SimpleNamespace) -> int:

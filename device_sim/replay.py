@@ -88,7 +88,9 @@ class ReplaySource:
         except BaseException:
             self.recording.close()
             raise
+        self.path = str(path)
         self.realtime, self.loop, self.start = realtime, loop, start
+        self.finished = False  # played once to the end (the stream sends nothing more until restarted)
         self._lock = threading.Lock()
         self._iter: Iterator[RecordedCapture] | None = None
         self._pending: RecordedCapture | None = None
@@ -129,6 +131,7 @@ class ReplaySource:
         the firmware finds it no longer current and does not send it)."""
         with self._lock:
             self._iter, self._t0, self._last_us = None, None, None
+            self.finished = False
 
     def next_request(self, epoch: int, paced: bool = True) -> CaptureRequest | None:
         """The next capture as a request (recorded sequence and trigger id), once it is due (at once
@@ -142,6 +145,7 @@ class ReplaySource:
                 self._t0, self._last_us = None, None
                 cap = self._next()
             self._pending = cap
+            self.finished = cap is None
         if cap is None:
             return None
         now, t_us = self.timebase.monotonic(), cap.info.device_time_us

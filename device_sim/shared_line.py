@@ -12,7 +12,6 @@ from __future__ import annotations
 import fcntl
 import itertools
 import os
-import re
 import socket
 import struct
 import tempfile
@@ -20,19 +19,14 @@ import threading
 import time
 from pathlib import Path
 
-from stereocam.protocol.errors import ConfigError
-
-from .trigger import OnPulse
+from .trigger import OnPulse, check_line_name
 
 PULSE = struct.Struct("<Qd")  # trigger id, instant
-_NAME = re.compile(r"[A-Za-z0-9_.-]{1,40}")
 _ids = itertools.count()
 
 
 def line_dir(name: str) -> Path:
-    if not _NAME.fullmatch(name):
-        raise ConfigError(f"trigger line name must be 1-40 of [A-Za-z0-9_.-], got {name!r}")
-    return Path(tempfile.gettempdir()) / f"stereocam-trigger-{name}"
+    return Path(tempfile.gettempdir()) / f"stereocam-trigger-{check_line_name(name)}"
 
 
 class SharedTriggerLine:

@@ -12,8 +12,12 @@ from __future__ import annotations
 
 import collections
 import random
+import re
 import threading
+import weakref
 from typing import Callable, Protocol
+
+from stereocam.protocol.errors import ConfigError
 
 from .clock import REAL_CLOCK, Clock, DeviceClock
 
@@ -61,6 +65,29 @@ class TriggerLine:
     def close(self) -> None:
         with self._lock:
             self._heads.clear()
+
+
+LINE_NAME = re.compile(r"[A-Za-z0-9_.-]{1,40}")
+"""What a trigger line may be called (``sim://?line=NAME``, ``stereocam sim --trigger-line NAME``)."""
+_named: "weakref.WeakValueDictionary[str, TriggerLine]" = weakref.WeakValueDictionary()
+_named_lock = threading.Lock()
+
+
+def check_line_name(name: str) -> str:
+    """``name`` if it is a valid line name, else ConfigError naming it."""
+    if not LINE_NAME.fullmatch(name):
+        raise ConfigError(f"trigger line name must be 1-40 of [A-Za-z0-9_.-], got {name!r}")
+    return name
+
+
+def named_line(name: str) -> TriggerLine:
+    """The in-process line called ``name`` (``sim://?line=NAME``): every head opened with that name
+    is wired to it, for as long as one of them lives."""
+    with _named_lock:
+        line = _named.get(check_line_name(name))
+        if line is None:
+            line = _named[name] = TriggerLine()
+        return line
 
 
 class TriggerInput:

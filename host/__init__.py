@@ -17,7 +17,8 @@ if TYPE_CHECKING:
     from stereocam.protocol.errors import (CallbackError, CameraTimeoutError, ConfigError, DeviceError,
                                           DisconnectedError, ErrorCode, LinkFailedError, MissingPlaneError,
                                           ProtocolError, StereoCamError, StreamStalledError, StreamStoppedError,
-                                          TransportError, VerificationError, VersionMismatchError)
+                                          TransportError, VerificationError, VersionMismatchError,
+                                          SilentHeadsError, EndOfRecordingError)
     from stereocam.protocol.params import Output, TriggerMode
 
     from .calibration_io import StoredCalibration
@@ -29,7 +30,8 @@ if TYPE_CHECKING:
 
 _ERRORS = ("StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError", "ErrorCode",
            "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError", "CameraTimeoutError",
-           "VerificationError", "StreamStalledError", "CallbackError", "MissingPlaneError")
+           "VerificationError", "StreamStalledError", "CallbackError", "MissingPlaneError", "SilentHeadsError",
+           "EndOfRecordingError")
 _EXPORTS: dict[str, str] = {
     **dict.fromkeys(_ERRORS, "stereocam.protocol.errors"),
     "StereoCalibration": "stereocam.protocol.calibration",
@@ -51,7 +53,8 @@ __all__ = [
     "FrameStatus", "DisparityFormat", "StereoGeometry", "StereoCalibration", "StoredCalibration", "TriggerMode",
     "Output", "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError",
     "ErrorCode", "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError", "CameraTimeoutError",
-    "VerificationError", "StreamStalledError", "CallbackError", "MissingPlaneError",
+    "VerificationError", "StreamStalledError", "CallbackError", "MissingPlaneError", "SilentHeadsError",
+    "EndOfRecordingError",
 ]
 
 

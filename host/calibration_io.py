@@ -26,6 +26,11 @@ class StoredCalibration:
     calibration_id: int  # what frames carry while this record is in force
 
 
+def id_text(calibration_id: int) -> str:
+    """A calibration id as every tool prints it: 8 hex digits (JSON carries the number)."""
+    return f"{calibration_id:08x}"
+
+
 def read_calibration(request, source: str = "active") -> StoredCalibration | None:
     """The stored record (``active``: the one in force), or None if there is none."""
     if not isinstance(source, str) or source not in SOURCES:

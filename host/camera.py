@@ -11,15 +11,15 @@ from typing import Iterator
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.config_rules import merge
-from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, StereoCamError,
-                                      StreamStalledError, StreamStoppedError, TransportError)
+from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, EndOfRecordingError,
+                                      StereoCamError, StreamStalledError, StreamStoppedError, TransportError)
 from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, Param, TriggerMode
 
 from . import calibration_io, firmware_update, presets
 from .arguments import config_update, count_arg, flag_arg, timeout_arg
 from .calibration_io import StoredCalibration
 from .callbacks import FrameCallback, FrameCallbacks
-from .connection import MIN_HEARTBEAT_INTERVAL, Connection, Counters
+from .connection import HEARTBEAT_INTERVAL, MIN_HEARTBEAT_INTERVAL, Connection, Counters
 from .device_types import DeviceInfo, DeviceStatus, config_names
 from .dispatch import DropPolicy, FrameDispatcher, FrameQueue, Listener
 from .frame_geometry import FrameGeometry
@@ -40,7 +40,7 @@ class Camera:
     ``on_frame`` callbacks), and any added with ``add_listener`` (a recorder, a viewer)."""
 
     def __init__(self, transport: Transport, *, timeout: float = 1.0, retries: int = 2,
-                 heartbeat_interval: float = 0.5, queue_depth: int = 8, deliver_incomplete: bool = False,
+                 heartbeat_interval: float = HEARTBEAT_INTERVAL, queue_depth: int = 8, deliver_incomplete: bool = False,
                  auto_reconnect: bool = False):
         """``auto_reconnect``: when the link drops, ``get_frame`` (and iteration) call ``reconnect``
         within their own timeout instead of raising DisconnectedError at once."""
@@ -87,12 +87,13 @@ class Camera:
         calibrated = self.connection.info.capabilities & m.Capability.CALIBRATION
         self._geometry.resolve(self.read_calibration() if calibrated else None)
 
-    def reconnect(self, timeout: float = 10.0, backoff: float = 0.1) -> None:
+    def reconnect(self, timeout: float = 10.0, backoff: float = 0.1, expected: bool = False) -> None:
         """After a disconnect: find the same unit again (by serial), re-apply every parameter this
         Camera set, and resume streaming if it was streaming. Retries with exponential backoff
-        until ``timeout``; DisconnectedError if the unit does not come back in time."""
-        self.connection.reconnect(timeout, backoff)
-        _log.warning("%s: reconnected to serial %s; re-applying %d parameters%s", self.url, self.connection.info.serial,
+        until ``timeout``; DisconnectedError if the unit does not come back in time. ``expected``: the
+        caller made the unit reset (a firmware update): logged at INFO, not as a WARNING."""
+        self.connection.reconnect(timeout, backoff, expected)
+        _log.log(logging.INFO if expected else logging.WARNING, "%s: reconnected to serial %s; re-applying %d parameters%s", self.url, self.connection.info.serial,
                      len(self._applied), ", resuming the stream" if self._streaming else "")
         self._resolve_geometry()
         # the unit may not have noticed the lost link yet and still stream for it (SPEC §4.6: STOP is
@@ -250,12 +251,17 @@ class Camera:
     def get_frame(self, timeout: float | None = None) -> Frame:
         """The next complete frame; CameraTimeoutError (a TimeoutError) if none within ``timeout``
         (finite seconds >= 0; ConfigError otherwise). ``timeout=0`` polls: a queued frame at once, or
-        the error at once. StreamStoppedError if the device stopped the stream and would not restart
-        (see ``_restart_stopped_stream``)."""
+        the error at once. EndOfRecordingError (naming the file) once a replayed recording's last frame
+        has been taken. StreamStoppedError if the device stopped the stream and would not restart
+        (see ``_restart_stopped_stream``). Not streaming with no frame queued: the CameraTimeoutError
+        at once, saying so (no frame would come: call ``start`` first)."""
         if self._callbacks is not None and len(self._callbacks):
             raise StereoCamError("frames go to the on_frame callbacks; remove them (cam.remove_callback) "
                                  "before calling get_frame")
         timeout = self.timeout if timeout is None else timeout_arg(timeout)
+        if not self._streaming and len(self._frames) == 0 and not self.connection.closed:
+            raise CameraTimeoutError(f"no frame from {self.url}: it is not streaming (call start() before get_frame(); "
+                                     "no frame would come)")
         frame = self._next_frame(timeout)
         if frame is None:
             raise CameraTimeoutError(f"no frame from {self.url} within {timeout:.3g} s")
@@ -280,8 +286,20 @@ class Camera:
                 self.reconnect(timeout=max(deadline - time.monotonic(), 0.0))
             left = deadline - time.monotonic()
             frame = self._frames.get(min(left, 0.1) if left > 0 else 0.0)
+            if frame is None and self._streaming and (path := self.connection.ended()) is not None:
+                frame = self._last_of_recording(path)
             if frame is not None or left <= 0:
                 return frame
+
+    def _last_of_recording(self, path: str) -> Frame:
+        """A frame still on its way from a replay that reached its end, else EndOfRecordingError: a
+        round trip first (every frame sent before the reply has then been delivered)."""
+        self.connection.status()
+        frame = self._frames.get(0.0)
+        if frame is None:
+            raise EndOfRecordingError(f"{self.url}: end of recording {path} (every frame was delivered; "
+                                      "?loop=1 plays it again)", path)
+        return frame
 
     @property
     def frames(self) -> FrameQueue:
@@ -345,13 +363,20 @@ class Camera:
 
     def __iter__(self) -> Iterator[Frame]:
         """Frames as they come while streaming. Ends when the stream is stopped (``stop()`` from any
-        thread, ``close()``) and the queued frames are taken; raises StreamStalledError (a
-        CameraTimeoutError) when streaming but no frame came for ``timeout`` seconds."""
+        thread, ``close()``) and the queued frames are taken, or when a replayed recording's last frame
+        was taken; raises StreamStalledError (a CameraTimeoutError) when streaming but no frame came
+        for ``timeout`` seconds."""
         if not self._streaming:
             raise StereoCamError("not streaming: call start() before iterating over the camera")
         while True:
             deadline = time.monotonic() + self.timeout
-            while (frame := self._next_frame(min(0.1, max(deadline - time.monotonic(), 0.0)))) is None:
+            while True:
+                try:
+                    frame = self._next_frame(min(0.1, max(deadline - time.monotonic(), 0.0)))
+                except EndOfRecordingError:
+                    return
+                if frame is not None:
+                    break
                 if not self._streaming or self.connection.closed:
                     return
                 if time.monotonic() >= deadline:
@@ -393,6 +418,11 @@ class Camera:
         if self._callbacks is not None:
             self._callbacks.close()
         self.connection.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self.connection.closed else "streaming" if self._streaming else "stopped"
+        info = self.connection.info
+        return f"<Camera {self.url} {info.model} serial={info.serial} firmware={info.firmware_version} {state}>"
 
     def __enter__(self) -> "Camera":
         return self

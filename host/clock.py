@@ -155,5 +155,8 @@ class ArrivalStamp(Transport):
     def close(self) -> None:
         self.inner.close()
 
+    def ended(self) -> str | None:
+        return self.inner.ended()
+
     def __getattr__(self, name: str):  # the wrapped transport's own attributes (sim, port, ...)
         return getattr(self.inner, name)

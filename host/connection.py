@@ -31,6 +31,7 @@ SYNC_SAMPLES = 8
 SYNC_PERIOD = 1.0  # seconds between background time-sync bursts (the map needs them to follow drift)
 SYNC_BURST = 3  # round trips per burst: one of them usually finds the link free of frame data
 MIN_HEARTBEAT_INTERVAL = 0.01  # s: a faster heartbeat would only load the link
+HEARTBEAT_INTERVAL = 0.5  # s: the default (Camera's heartbeat_interval)
 REPAIR_TIMEOUT = 0.5  # s per FRAME_RESEND try at most
 _log = logging.getLogger(__name__)
 
@@ -86,6 +87,10 @@ class Connection:
                 self._repairer.close()
             raise
         self._heartbeat = threading.Thread(target=self._heartbeat_loop, name="stereocam-heartbeat", daemon=True)
+
+    def ended(self) -> str | None:
+        """The recording this link's device has played to its end (Transport.ended), else None."""
+        return self._arrivals.ended()
 
     def start_heartbeat(self) -> None:
         """Begin the periodic STATUS (to ``on_status``) and clock-sync bursts, once the owner is ready."""
@@ -191,16 +196,18 @@ class Connection:
         return Counters(self.link.stats, replace(self.link.decoder.stats), self.assembler.snapshot())
 
     # -- reconnect and close ------------------------------------------------------------------
-    def reconnect(self, timeout: float = 10.0, backoff: float = 0.1) -> None:
+    def reconnect(self, timeout: float = 10.0, backoff: float = 0.1, expected: bool = False) -> None:
         """After a disconnect: open the same unit again (by serial), retrying with exponential backoff
-        until ``timeout``; DisconnectedError if it does not come back in time."""
+        until ``timeout``; DisconnectedError if it does not come back in time. ``expected``: a reset the
+        caller asked for (logged at INFO instead of WARNING)."""
         timeout, backoff = timeout_arg(timeout), timeout_arg(backoff, "backoff")
         if self._closed.is_set():
             raise TransportError(f"{self.url}: camera closed; open it again with stereocam.open")
         serial = self.info.serial
         url = reopen_url(self.url, serial)
         deadline = time.monotonic() + timeout
-        _log.warning("%s: link lost (%s); reconnecting to serial %s via %s", self.url, self.link.error, serial, url)
+        _log.log(logging.INFO if expected else logging.WARNING, "%s: link lost (%s); reconnecting to serial %s via %s",
+                 self.url, self.link.error, serial, url)
         self.link.close()
         while True:
             try:

@@ -146,6 +146,6 @@ def await_reboot(cam, timeout: float) -> None:
             raise FirmwareUpdateError(f"{cam.url} did not reboot within {timeout:.3g} s of UPDATE_ACTIVATE")
         time.sleep(0.01)
     try:
-        cam.reconnect(timeout=max(deadline - time.monotonic(), 1.0))
+        cam.reconnect(timeout=max(deadline - time.monotonic(), 1.0), expected=True)  # the reboot it asked for
     except DisconnectedError as exc:
         raise FirmwareUpdateError(f"the unit did not come back after the reboot: {exc}") from exc

@@ -195,7 +195,8 @@ class Link:
             self._counters.add("undecodable")
             msg, bad = None, exc
         if isinstance(msg, m.Nack) and packet.request_id == 0:  # the device refuses this link (SPEC §9: busy)
-            self._die(DisconnectedError(f"{self.transport.url}: the device refused this link: {msg.message}"))
+            self._die(DisconnectedError(f"{self.transport.url}: in use by another host: the device refused this "
+                                         f"link: {msg.message}"))
             return
         if packet.msg_type & m.REPLY_BIT:
             with self._lock:

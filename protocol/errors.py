@@ -79,6 +79,23 @@ class StreamStalledError(CameraTimeoutError):
     """Streaming, but no frame came within the deadline (iteration raises this instead of ending)."""
 
 
+class SilentHeadsError(StereoCamError):
+    """Cameras of a group that see no trigger pulses while the others stream (an unwired head, a
+    cable out); ``heads`` names them."""
+
+    def __init__(self, message: str, heads: tuple[str, ...] = ()):
+        super().__init__(message)
+        self.heads = heads
+
+
+class EndOfRecordingError(StereoCamError):
+    """A replayed recording has delivered its last frame (``replay://``); ``path`` names the file."""
+
+    def __init__(self, message: str, path: str = ""):
+        super().__init__(message)
+        self.path = path
+
+
 class MissingPlaneError(StereoCamError, ValueError):
     """A frame lacks the plane an operation needs (depth without a disparity plane: outputs
     excluded it, or the frame is raw); also a ValueError."""

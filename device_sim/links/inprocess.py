@@ -6,7 +6,9 @@ units with one serial); a bare ``sim://`` unit 0. ``sim://?serial=S`` (no seed) 
 unattached simulator with that serial in this process (``stereocam.list_devices`` lists them) and
 raises TransportError when there is none: a serial that is not found never makes a new unit.
 ``scene=lab|wall|board`` sets what the unit looks at (a simulator setting, not a device parameter;
-also applied to a live unit). Host writes go straight into the firmware's
+also applied to a live unit). ``line=NAME`` wires a new unit's trigger connector to the in-process
+line NAME (``sim://?seed=11&line=L`` and ``sim://?seed=12&line=L`` are two heads on one wire, ready
+for a ``CameraGroup``); without it a unit's connector is unplugged. Host writes go straight into the firmware's
 ``receive``; the firmware's output lands in a bounded FIFO the host reads (a full FIFO blocks
 the device, as a full USB or TCP buffer would).
 """
@@ -20,6 +22,7 @@ from stereocam.protocol.errors import ConfigError, DisconnectedError, TransportE
 
 from .. import registry
 from ..rig.scene import Scene
+from ..trigger import named_line
 
 from stereocam.discovery import DeviceEntry
 from stereocam.transports.base import Transport
@@ -116,9 +119,9 @@ _handed_over: "weakref.WeakSet[object]" = weakref.WeakSet()  # units whose ownin
 
 def open_transport(url: str, timeout: float) -> InProcessTransport:
     query = parse_qs(urlsplit(url).query, keep_blank_values=True)
-    unknown = set(query) - {"seed", "serial", "scene"}
+    unknown = set(query) - {"seed", "serial", "scene", "line"}
     if unknown:
-        raise ConfigError(f"sim:// URL: unknown option(s) {sorted(unknown)}; known: seed, serial, scene")
+        raise ConfigError(f"sim:// URL: unknown option(s) {sorted(unknown)}; known: seed, serial, scene, line")
     if any(len(v) > 1 for v in query.values()):
         raise ConfigError(f"sim:// URL: an option given twice in {url!r}")
     text = query.get("seed", ["0"])[0]
@@ -127,10 +130,14 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
     seed = int(text)
     scene = Scene.parse(query["scene"][0]) if "scene" in query else None
     serial = query.get("serial", [None])[0]
+    line = named_line(query["line"][0]) if "line" in query else None
     live = registry.find_free(serial) if serial is not None else None
     if live is not None and not live.powered:
         raise DisconnectedError(f"simulated unit {serial} is off or rebooting")
     if live is not None:  # the unit with that serial is alive here: open it, never a second one
+        if line is not None and live.trigger_line is not line:
+            raise ConfigError(f"{url}: simulator {serial} is alive here on another trigger line; a live unit "
+                              "is not rewired")
         if scene is not None:
             live.scene = scene
         owns = live in _handed_over  # a unit a closed link owned when it rebooted: this link owns it now
@@ -138,13 +145,14 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
         return InProcessTransport(live, url, owns=owns)
     if serial is not None and "seed" not in query:
         held = [s.serial for s in registry.live_simulators()]
-        state = "held by another link" if serial in held else "not found"
+        state = "in use by another host (a link in this process)" if serial in held else "not found"
         raise TransportError(f"{url}: simulator {serial!r} {state} in this process (free ones: "
                              f"{[e.serial for e in discover()] or 'none'}); "
                              f"sim://?seed=N&serial={serial} makes a new one")
     from ..firmware import SimulatedCamera
 
-    return InProcessTransport(SimulatedCamera(serial=serial, seed=seed, scene=scene or Scene.LAB), url)
+    return InProcessTransport(SimulatedCamera(serial=serial, seed=seed, scene=scene or Scene.LAB, trigger_line=line),
+                                url)
 
 
 def discover() -> list[DeviceEntry]:
@@ -158,6 +166,6 @@ def reopen_url(url: str, serial: str) -> str:
     (a unit opened by seed closes with its link) the same seed and serial freshly booted."""
     query = parse_qs(urlsplit(url).query)
     if "seed" in query:
-        scene = f"&scene={query['scene'][0]}" if "scene" in query else ""
-        return f"sim://?seed={query['seed'][0]}&serial={serial}{scene}"
+        extra = "".join(f"&{key}={query[key][0]}" for key in ("scene", "line") if key in query)
+        return f"sim://?seed={query['seed'][0]}&serial={serial}{extra}"
     return f"sim://?serial={serial}"

@@ -35,9 +35,17 @@ def parse(url: str) -> tuple[str, dict]:
                   "start": start}
 
 
-def open_transport(url: str, timeout: float) -> InProcessTransport:
+class ReplayTransport(InProcessTransport):
+    """The link to a replaying unit: it also says when the recording has been played to its end."""
+
+    def ended(self) -> str | None:
+        source = self.sim.engine.source
+        return source.path if source.finished else None
+
+
+def open_transport(url: str, timeout: float) -> ReplayTransport:
     from ..firmware import SimulatedCamera
     from ..replay import ReplaySource
 
     path, options = parse(url)
-    return InProcessTransport(SimulatedCamera(source=ReplaySource(path, **options)), url)
+    return ReplayTransport(SimulatedCamera(source=ReplaySource(path, **options)), url)

@@ -39,7 +39,8 @@ def announce(url: str, serial: str, model: str, firmware: str, transport: str) -
         path.unlink(missing_ok=True)
 
 
-def _alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (one of another user counts)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -61,7 +62,7 @@ def discover() -> list["DeviceEntry"]:
             pid = int(doc["pid"])
         except (OSError, ValueError, KeyError, TypeError):
             continue  # being written or removed right now, or not ours
-        if not _alive(pid):
+        if not pid_alive(pid):
             path.unlink(missing_ok=True)
             continue
         entries.append(DeviceEntry(doc["url"], doc.get("serial"), doc.get("model"), doc.get("transport", "serial"),

@@ -23,6 +23,11 @@ class Transport(ABC):
     def read(self, max_bytes: int, timeout: float) -> bytes:
         """Up to ``max_bytes`` available bytes; ``b""`` after ``timeout`` seconds with none."""
 
+    def ended(self) -> str | None:
+        """The file whose end the device behind this link has reached (a ``replay://`` recording played
+        once to its end): it will send no more frames. None for a camera (a live source never ends)."""
+        return None
+
     @abstractmethod
     def close(self) -> None:
         """Release the link; idempotent."""

@@ -118,9 +118,15 @@ def split_frame_chunk(url: str) -> tuple[str, int | None]:
 def open_transport(url: str, timeout: float) -> SerialTransport:
     _check_network_url(url)
     port_url, frame_chunk = split_frame_chunk(url)
+    local = "://" not in port_url  # a device path: locked against a second host on this machine
     try:
-        port = serial.serial_for_url(port_url, baudrate=921600, timeout=timeout, write_timeout=max(timeout, 5.0))
-    except (serial.SerialException, OSError, ValueError) as exc:
+        port = serial.serial_for_url(port_url, baudrate=921600, timeout=timeout, write_timeout=max(timeout, 5.0),
+                                     **({"exclusive": True} if local else {}))
+    except serial.SerialException as exc:
+        if local and "exclusively lock" in str(exc):
+            raise TransportError(f"{url}: in use by another host (another program has the port open)") from exc
+        raise TransportError(f"cannot open {url}: {exc}") from exc
+    except (OSError, ValueError) as exc:
         raise TransportError(f"cannot open {url}: {exc}") from exc
     except Exception as exc:  # pyserial's URL handlers raise KeyError, TypeError, ...
         raise TransportError(f"cannot open {url}: {type(exc).__name__}: {exc}") from exc

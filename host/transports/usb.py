@@ -188,7 +188,8 @@ class UsbTransport(Transport):
         except usb.core.USBError as exc:
             usb.util.dispose_resources(dev)
             if exc.errno == errno.EBUSY or exc.backend_error_code == LIBUSB_ERROR_BUSY:
-                raise TransportError(f"{url}: the camera is in use by another program") from exc
+                raise TransportError(f"{url}: in use by another host (another program has claimed its "
+                                     "interface)") from exc
             if exc.errno == errno.EACCES:
                 raise TransportError(f"{url}: no permission to open the USB device "
                                      "(install the udev rule or run as a privileged user)") from exc

@@ -47,9 +47,21 @@ def test_replay_url_is_the_recorded_unit(recording):
         cam.start()
         frames = [cam.get_frame(timeout=10.0) for _ in range(N)]
         _same(frames, caps)
-        with pytest.raises(stereocam.CameraTimeoutError):  # played once: the stream ends
-            cam.get_frame(timeout=0.5)
+        with pytest.raises(stereocam.EndOfRecordingError, match="end of recording") as end:  # played once
+            cam.get_frame(timeout=5.0)
+        assert end.value.path == str(path) and str(path) in str(end.value)
         assert frames[0].geometry.calibration_id == calibration.calibration_id and cam.geometry_mismatches == 0
+
+
+def test_iterating_a_replay_stops_after_its_last_frame(recording):
+    """The end of a recording played once ends the iteration (it was a StreamStalledError that spoke
+    of software triggers); started again, it plays again."""
+    path, caps, _ = recording
+    with stereocam.open(f"replay://{path}?speed=fast", timeout=3.0) as cam:
+        for _ in range(2):
+            cam.start()
+            _same(list(cam), caps)
+            cam.stop()
 
 
 def test_a_recording_of_a_triggered_head_replays_at_its_recorded_pace_with_its_trigger_ids(tmp_path):

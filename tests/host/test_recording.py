@@ -117,11 +117,12 @@ def test_camera_record_and_tools(tmp_path, capsys, device_url):
     path = tmp_path / "cam.mcap"
     with stereocam.open(device_url, timeout=3.0) as cam:
         cam.configure(**{**defaults(), "width": 320, "height": 240, "num_disparities": 32, "block_size": 11})
-        serial, stored = cam.info().serial, cam.read_calibration()
+        cam_info, stored = cam.info(), cam.read_calibration()
+        serial = cam_info.serial
         stats = cam.record(path, frames=4)
     assert stats.frames == 4 and stats.recorder_dropped == 0
     assert cli.main(["recording", "info", str(path)]) == 0
-    out = capsys.readouterr().out
+    out = out_text = capsys.readouterr().out
     assert serial in out and "frames    4" in out and "stereo_msgs/msg/DisparityImage" in out
     assert cli.main(["recording", "info", str(path), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -130,7 +131,9 @@ def test_camera_record_and_tools(tmp_path, capsys, device_url):
     assert (doc["calibration"] is None) == (stored is None)
     if stored is not None:
         assert doc["calibration"]["lens_model"] == stored.calibration.lens_model
-        assert doc["calibration"]["id"] == f"{stored.calibration_id:08x}"
+        assert doc["calibration"]["id"] == stored.calibration_id  # a number, as every number in the JSON
+        assert f"id {stored.calibration_id:08x}:" in out_text  # text: 8 hex digits, as info and calibrate print it
+        assert doc["unit"]["capabilities"] == cam_info.capabilities and doc["unit"]["protocol_version"] == "1.2"
     assert cli.main(["recording", "export", str(path), "--out", str(tmp_path / "x"), "--stop", "2"]) == 0
     names = sorted(p.name for p in (tmp_path / "x").iterdir())
     assert names[:5] == ["frame000000_disparity.npy", "frame000000_disparity.png", "frame000000_left.png",
@@ -173,7 +176,7 @@ def test_a_damaged_chunk_is_a_typed_error_naming_the_frame(tmp_path, recorded, c
     with stereocam.open(f"replay://{bad}?speed=fast", timeout=2.0) as cam:  # replayed as a device
         cam.start()
         got = []
-        with pytest.raises(stereocam.CameraTimeoutError):
+        with pytest.raises(stereocam.EndOfRecordingError):  # played once: the end, after every readable frame
             while True:
                 got.append(cam.get_frame(timeout=3.0).sequence)
         assert cam.status().counters["frames_sent"] == len(got)

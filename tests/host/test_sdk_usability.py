@@ -138,3 +138,19 @@ def test_presets_round_trip_and_refusals_change_nothing(device_cam, tmp_path):
     (tmp_path / "junk.json").write_text("[1, 2]")
     with pytest.raises(stereocam.ConfigError, match="not a stereocam preset"):
         device_cam.load_preset(tmp_path / "junk.json")
+
+
+def test_camera_and_group_say_what_they_are():
+    cam = stereocam.open("sim://?seed=3")
+    assert repr(cam) == "<Camera sim://?seed=3 STOC-SIM serial=SIM00003 firmware=1.1.0 stopped>"
+    cam.close()
+    assert repr(cam).endswith(" closed>")
+    group = stereocam.CameraGroup(["sim://?seed=1&line=R", "sim://?seed=2&line=R"], master=1)
+    assert repr(group) == "<CameraGroup sim://?seed=1&line=R, sim://?seed=2&line=R master=1 not opened>"
+
+
+def test_get_frame_before_start_says_so_at_once():
+    """It waited for its whole timeout and raised a bare timeout."""
+    with stereocam.open("sim://?seed=3") as cam:
+        with pytest.raises(stereocam.CameraTimeoutError, match=r"not streaming \(call start\(\) before get_frame"):
+            cam.get_frame(timeout=600)  # at once, or the test's own (180 s) timeout fails it

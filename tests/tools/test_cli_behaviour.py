@@ -143,3 +143,28 @@ def test_capture_and_demo_print_json(tmp_path):
     assert r.returncode == 0, r.stderr
     doc = json.loads(r.stdout)
     assert doc["frames"] >= 1 and doc["fps_asked"] == 15 and ("keep up" in doc["note"] or "kept up" in doc["note"])
+    assert doc["dropped"] == doc["device_dropped"] + doc["host_queue_dropped"] + doc["other_dropped"]
+
+
+@pytest.mark.parametrize("first, last, frames, device, queue, split", [
+    (10, 19, 10, 0, 0, (0, 0, 0, 0)),
+    (10, 29, 10, 7, 2, (10, 7, 2, 1)),
+    (10, 29, 10, 351, 0, (10, 10, 0, 0)),  # a device count from before the run cannot exceed what is missing
+    (10, 29, 10, 3, 50, (10, 0, 10, 0))])
+def test_demo_drops_add_up_to_their_total(first, last, frames, device, queue, split):
+    """Issue 20: `demo --fps 120` printed dropped=343 beside device_dropped=351 (counted since boot)."""
+    from stereocam.tools.demo.cli import Drops
+
+    drops = Drops.of(first, last, frames, device, queue)
+    assert (drops.total, drops.device, drops.host_queue, drops.other) == split
+
+
+def test_simulators_served_without_a_seed_have_unique_serials():
+    """Issue 20: every `stereocam sim` without --seed was SIM00000, so `list` showed duplicates."""
+    with ServedSimulator("tcp:127.0.0.1:0", seed=None) as a, ServedSimulator("tcp:127.0.0.1:0", seed=None) as b:
+        serials = []
+        for url in (a.url, b.url):
+            with stereocam.open(url, timeout=3.0) as cam:
+                serials.append(cam.info().serial)
+        listed = [e.serial for e in stereocam.list_devices() if e.url in (a.url, b.url)]
+    assert len(set(serials)) == 2 and sorted(listed) == sorted(serials)

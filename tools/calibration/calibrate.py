@@ -77,7 +77,7 @@ from stereocam.tools.calibration.solve import (
 )
 from stereocam.tools.camera.session import writable_dir
 from stereocam.tools.exit_codes import EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_SAVE, EXIT_USAGE
-from stereocam.tools.factory.db import FactoryDB, FactoryDBError, default_url
+from stereocam.tools.factory.db import GATE_FAILED, FactoryDB, FactoryDBError, default_url
 from stereocam.tools.factory.record import make_attempt, now_utc
 from stereocam.tools.options import CONTEXT, SIZE, epilog
 
@@ -250,7 +250,7 @@ def _offline(args: SimpleNamespace, config: SolveConfig, db: FactoryDB, started:
     except ValueError as exc:
         return _fail(EXIT_USAGE, str(exc))
     code = EXIT_OK if result.passed else EXIT_GATE
-    reason = "passed" if result.passed else "calibration FAILED the gate: " + "; ".join(result.failures)
+    reason = "passed" if result.passed else GATE_FAILED + "; ".join(result.failures)
     try:
         paths = write_outputs(result, args.out)
     except OSError as exc:

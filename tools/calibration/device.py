@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 import stereocam
+from stereocam.calibration_io import id_text
 from stereocam.protocol import messages as m
 from stereocam.tools.calibration.solve import CalibrationError, CalibrationResult, SolveConfig, calibrate_pairs
 from stereocam.tools.exit_codes import EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_UNSUPPORTED, EXIT_WRITE
@@ -68,7 +69,7 @@ def calibrate_device(cam: stereocam.Camera, board, config: SolveConfig, outdir: 
         return _finish(code, result, verdict, outdir, write_outputs)
     result.quality = dataclasses.replace(result.quality, written=True, verified=True)
     verdict = (f"calibration PASSED, written to {cam.info().serial} as the {stored.source} record "
-               f"(generation {stored.generation}, id {stored.calibration_id:08x}) and verified by read-back")
+               f"(generation {stored.generation}, id {id_text(stored.calibration_id)}) and verified by read-back")
     return _finish(EXIT_OK, result, verdict, outdir, write_outputs)
 
 
@@ -92,12 +93,12 @@ def _after_failed_write(cam: stereocam.Camera, result: CalibrationResult, target
         how = "after reconnecting, " if isinstance(exc, stereocam.DisconnectedError) else ""
         return EXIT_OK, (f"calibration PASSED; the write reported {type(exc).__name__} ({exc}), but {how}the camera "
                          f"holds it as the {held.source} record (generation {held.generation}, id "
-                         f"{held.calibration_id:08x}), verified by read-back")
+                         f"{id_text(held.calibration_id)}), verified by read-back")
     if (held.body if held else None) == (previous.body if previous else None):
         kept = "the camera keeps its previous calibration"
     else:
         kept = "the camera holds neither the new nor its previous calibration"
-    return EXIT_WRITE, f"writing the calibration failed: {exc}; {kept} (in force: {in_force:08x})"
+    return EXIT_WRITE, f"writing the calibration failed: {exc}; {kept} (in force: {id_text(in_force)})"
 
 
 def _finish(code: int, result: CalibrationResult, verdict: str, outdir: Path, write_outputs

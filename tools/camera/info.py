@@ -7,6 +7,7 @@ from typing import Any
 import click
 
 import stereocam
+from stereocam.calibration_io import id_text
 from stereocam.protocol.messages import Capability
 from stereocam.protocol.params import VALUE_NAMES, Output
 from stereocam.tools.options import CONTEXT, epilog
@@ -42,7 +43,7 @@ def format_text(doc: dict[str, Any]) -> str:
     lines = [f"{k} {doc[k]}" for k in ("model", "serial", "firmware", "protocol", "sensor", "max_payload")]
     cal = doc["calibration"]
     lines.append("calibration none (uncalibrated: raw images, no disparity)" if cal is None else
-                 f"calibration id {cal['id']} source {cal['source']} generation {cal['generation']}")
+                 f"calibration id {id_text(cal['id'])} source {cal['source']} generation {cal['generation']}")
     lines += [f"config.{k} {v}" for k, v in doc["config"].items()]
     lines += [f"uptime_s {doc['uptime_s']}", f"streaming {doc['streaming']}"]
     lines += [f"counter.{k} {v}" for k, v in doc["counters"].items()]

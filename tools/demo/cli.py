@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import click
@@ -32,6 +33,26 @@ def depth_errors(frame, truth) -> tuple[float, float, float]:
     rel = np.abs(z[valid] - truth.depth_m[valid]) / truth.depth_m[valid]
     bad1 = np.abs(d[valid] - truth.disparity_px[valid]) > 1.0
     return 100.0 * valid.mean(), 100.0 * float(np.median(rel)), 100.0 * float(bad1.mean())
+
+
+@dataclass(frozen=True)
+class Drops:
+    """The frames of the timed run that never reached the user, split into parts that add up to the
+    total: the user's sequence numbers say how many are missing; the host knows the ones its queue
+    discarded; the device's counter says how many it dropped (at most what is left); ``other`` is the
+    rest (lost on the link, or dropped by the device after its counter was read)."""
+
+    total: int
+    device: int
+    host_queue: int
+    other: int
+
+    @classmethod
+    def of(cls, first_seq: int, last_seq: int, frames: int, device: int, host_queue: int) -> "Drops":
+        total = max(last_seq - first_seq + 1 - frames, 0)
+        host_queue = min(host_queue, total)
+        device = min(device, total - host_queue)
+        return cls(total, device, host_queue, total - host_queue - device)
 
 
 def keep_up_note(fps: float, asked: int, dropped: int) -> str:
@@ -73,35 +94,40 @@ def command(out: Path, seconds: float, fps: int, seed: int, as_json: bool, heads
                          **dict(settings)})
         cam.start()
         cam.get_frame(timeout=30.0)  # first frame pays the JIT warm-up
+        host0, dev0 = cam.stats, cam.status().counters
         recent: list = []
+        first_seq = None  # the timed run's drops are counted from its first frame on (not the warm-up's)
         frames = 0
         t0 = time.monotonic()
         with tqdm(total=round(seconds * fps), unit="frame", desc="demo", disable=not progress_wanted()) as bar:
             while time.monotonic() - t0 < seconds:
                 recent = (recent + [cam.get_frame(timeout=5.0)])[-GROUND_TRUTH_KEEP // 2:]
+                first_seq = recent[-1].sequence if first_seq is None else first_seq
                 frames += 1
                 bar.update()
         elapsed = time.monotonic() - t0
+        host_stats, dev = cam.stats, cam.status().counters
         cam.stop()
-        host_stats = cam.stats
-        dev = cam.status().counters
+        assert first_seq is not None  # the loop ran at least once: seconds > 0
+        drops = Drops.of(first_seq, recent[-1].sequence, frames, dev["frames_dropped"] - dev0["frames_dropped"],
+                         host_stats["queue_overflow"] - host0["queue_overflow"])
         stats = [depth_errors(f, sim.ground_truth(f.sequence)) for f in recent]  # truth after timing
         paths = save_frame(recent[-1], out, "demo")
     valid, med, bad1 = (float(np.mean([s[i] for s in stats])) for i in range(3))
-    link = host_stats["incomplete"] + host_stats["size_mismatch"] + host_stats["header_crc_errors"] + \
-        host_stats["payload_crc_errors"]
+    link = sum(host_stats[k] - host0[k] for k in ("incomplete", "size_mismatch", "header_crc_errors",
+                                                  "payload_crc_errors"))
     summary = {"frames": frames, "fps": round(frames / elapsed, 1), "fps_asked": fps,
-               "dropped": host_stats["frames_dropped"], "device_dropped": dev["frames_dropped"],
-               "host_queue_dropped": host_stats["queue_overflow"], "link_errors": link,
+               "dropped": drops.total, "device_dropped": drops.device, "host_queue_dropped": drops.host_queue,
+               "other_dropped": drops.other, "link_errors": link,
                "valid_disparity_pct": round(valid, 1), "depth_error_median_pct": round(med, 2),
                "bad1px_pct": round(bad1, 1), "files": {k: str(p) for k, p in paths.items()},
-               "note": keep_up_note(frames / elapsed, fps, host_stats["frames_dropped"])}
+               "note": keep_up_note(frames / elapsed, fps, drops.total)}
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return 0
     click.echo("wrote " + ", ".join(str(p) for p in paths.values()))
-    click.echo(f"summary: frames={frames} fps={frames / elapsed:.1f} dropped={host_stats['frames_dropped']} "
-               f"device_dropped={dev['frames_dropped']} host_queue_dropped={host_stats['queue_overflow']} "
+    click.echo(f"summary: frames={frames} fps={frames / elapsed:.1f} dropped={drops.total} "
+               f"device_dropped={drops.device} host_queue_dropped={drops.host_queue} other_dropped={drops.other} "
                f"link_errors={link} valid_disparity={valid:.1f}% depth_error_median={med:.2f}% bad1px={bad1:.1f}%")
     click.echo(summary["note"])
     return 0

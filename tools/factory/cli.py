@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from collections import defaultdict
 from datetime import datetime
 from pathlib import Path
@@ -18,6 +19,7 @@ import numpy as np
 
 from stereocam.tools.factory.db import (
     COLUMNS,
+    GATE_FAILED,
     Attempt,
     FactoryDB,
     FactoryDBError,
@@ -50,13 +52,40 @@ def report_lines(attempts: list[Attempt]) -> list[str]:
         stats = "  ".join(f"{_stats([getattr(a, m) for a in rows if getattr(a, m) is not None]):<28}"
                           for m in METRICS)
         lines.append(f"{key[0]:<10} {key[1]:<16} {len(rows):>5} {passed:>5} {yield_:>6}  {stats}")
-    reasons: dict[str, int] = defaultdict(int)
-    for a in attempts:
-        if not a.passed:
-            reasons[a.reason.split(":")[0]] += 1
-    for reason, n in sorted(reasons.items(), key=lambda kv: -kv[1]):
-        lines.append(f"failed {n:>4} x  {reason}")
+    reasons, examples = failure_counts(attempts)
+    for kind, n in sorted(reasons.items(), key=lambda kv: -kv[1]):
+        example = f"  (latest: {examples[kind]})" if examples[kind] != kind else ""
+        lines.append(f"failed {n:>4} x  {kind}{example}")
     return lines
+
+
+_FIRST_NUMBER = re.compile(r"[-+(]?\d")
+
+
+def failure_kinds(reason: str) -> list[tuple[str, str]]:
+    """(kind, text) for each failure in a failed attempt's reason: each of the gate's failures is its own,
+    its kind the words before its first number ("stereo RMS 0.812 px > 0.5 px": "gate: stereo RMS");
+    any other reason is its own kind, whole."""
+    if not reason.startswith(GATE_FAILED):
+        return [(reason, reason)]
+    out = []
+    for part in filter(None, (p.strip() for p in reason[len(GATE_FAILED):].split("; "))):
+        number = _FIRST_NUMBER.search(part)
+        words = part[:number.start()].rstrip(" (=,:") if number and number.start() else part
+        out.append((f"gate: {words}", part))
+    return out or [(reason, reason)]
+
+
+def failure_counts(attempts: list[Attempt]) -> tuple[dict[str, int], dict[str, str]]:
+    """How often each kind of failure happened, and the latest full text of each."""
+    counts: dict[str, int] = defaultdict(int)
+    latest: dict[str, str] = {}
+    for a in sorted(attempts, key=lambda a: a.started_at):
+        if not a.passed:
+            for kind, text in failure_kinds(a.reason):
+                counts[kind] += 1
+                latest[kind] = text
+    return dict(counts), latest
 
 
 def report_doc(db: str, attempts: list[Attempt]) -> dict:
@@ -75,10 +104,7 @@ def report_doc(db: str, attempts: list[Attempt]) -> dict:
                                               "max": float(v.max())}
         return out
 
-    reasons: dict[str, int] = defaultdict(int)
-    for a in attempts:
-        if not a.passed:
-            reasons[a.reason.split(":")[0]] += 1
+    reasons, _ = failure_counts(attempts)
     return {"db": db, "groups": {k: summary(v) for k, v in sorted(groups.items())}, "total": summary(attempts),
             "failures": dict(reasons)}
 

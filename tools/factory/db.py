@@ -74,6 +74,8 @@ class Attempt:
 
 
 COLUMNS = [f for f in Attempt.__dataclass_fields__]
+GATE_FAILED = "calibration FAILED the gate: "
+"""How the reason of an attempt that failed the quality gate begins; its failures follow, "; "-separated."""
 SQLITE_BUSY_S = 10.0  # how long a station waits for another's write lock on a shared SQLite file
 _MIGRATION_LOCK = 0x5C_FAC7  # PostgreSQL advisory lock the migration holds (any constant of this tool)
 _TEXT = ("unit_serial", "started_at", "station", "tool_version", "mode", "board", "reason", "lens_model",

@@ -2,14 +2,13 @@
 
     stereocam firmware keygen --out KEY [--force]        (KEY: Ed25519 private key, KEY.pub: its public half;
                                                           an existing KEY or KEY.pub is kept unless --force)
-    stereocam firmware sign --key KEY --version V --out IMAGE BUILD.json [--security-counter N] [--code BIN]
+    stereocam firmware sign --key KEY --out IMAGE BUILD.json [--version V] [--security-counter N] [--code BIN]
                             [--target MODEL]
     stereocam firmware update URL IMAGE [--replace]      (progress bar; success only once the unit runs it)
     stereocam firmware status URL                        (both slots: version, state, hash, confirmed)
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import sys
@@ -124,8 +123,11 @@ def sign(args: SimpleNamespace) -> int:
             return _fail("sign", f"--out {args.out} is the {flag} file; refusing to overwrite it")
     try:
         key = load_private_key(_read(args.key, "key", MAX_KEY_BYTES))
-        build = dataclasses.replace(FirmwareBuild.from_json(_read(args.build, "build")), version=args.version)
-        build.check()  # --version, as the build's own version was
+        build = FirmwareBuild.from_json(_read(args.build, "build"))
+        if args.version is not None and args.version != build.version:
+            return _fail("sign", f"--version {args.version} disagrees with {args.build}, whose version is "
+                                 f"{build.version}: the image is what its build file says (change the file, or "
+                                 "leave --version out)")
         for name in build.parameter_defaults:
             if name not in BY_NAME:
                 raise ConfigError(f"parameter default {name!r}: no such parameter")
@@ -202,16 +204,20 @@ def keygen_command(**params: object) -> int:
 @command.command("sign", epilog=epilog())
 @click.argument("build", type=click.Path(path_type=Path))
 @click.option("--key", type=click.Path(path_type=Path), required=True, help="The private key (PEM).")
-@click.option("--version", required=True, help="Version of the image, e.g. 1.4.0.")
+@click.option("--version", default=None,
+              help="The version the image must have: refused unless BUILD says the same.  [default: BUILD's version]")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True, help="The image file to write.")
 @click.option("--security-counter", type=int, default=None,
-              help="Anti-rollback counter; a rollback image sets one >= the unit's.  [default: the version as a number]")
+              help="Anti-rollback counter. A unit refuses an image below the highest counter it has confirmed, and "
+                   "confirming raises that floor for good: a rollback image takes the NEXT counter (the unit's, "
+                   "from `firmware status`, plus 1), never a large one.  [default: the version as a number]")
 @click.option("--target", default=DEFAULT_TARGET, show_default=True,
               help=f"Model the image is for (printable ASCII, at most {TARGET_LEN} characters).")
 @click.option("--code", type=click.Path(path_type=Path), default=None,
               help="The firmware's code (opaque bytes).  [default: none]")
 def sign_command(**params: object) -> int:
-    """Build a signed image from a firmware build (BUILD: JSON)."""
+    """Build a signed image from a firmware build (BUILD: JSON; the example one ships as
+    stereocam/tools/firmware/build.example.json)."""
     return sign(SimpleNamespace(**params))
 
 

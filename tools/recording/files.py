@@ -11,6 +11,7 @@ from pathlib import Path
 
 import click
 
+from stereocam.calibration_io import id_text
 from stereocam.recording.reader import Recording
 from stereocam.recording.recorder import SUMMARY
 from stereocam.recording.repair import repair
@@ -28,18 +29,23 @@ def describe_file(path: Path) -> dict:
         repaired = bool(rec.metadata.get(SUMMARY, {}).get("repaired"))
         return {
             "file": str(path), "megabytes": round(path.stat().st_size / 1e6, 3),
-            "chunks": len(rec.summary.chunk_indexes), "unit": dict(rec.device), "frames": len(rec),
+            "chunks": len(rec.summary.chunk_indexes), "unit": _typed(rec.device), "frames": len(rec),
             "duration_s": round(rec.duration_s, 6),
             "fps": round((len(rec) - 1) / rec.duration_s, 3) if rec.duration_s else None,
             "drops": {k: s[k] for k in DROP_KEYS if k in s}, "repaired": repaired,
             "config": rec.config,
             "calibration": None if cal is None else {
-                "source": cal.source, "generation": cal.generation, "id": f"{cal.calibration_id:08x}",
+                "source": cal.source, "generation": cal.generation, "id": cal.calibration_id,
                 "image_size": list(cal.calibration.image_size), "fx_px": float(cal.calibration.K_left[0, 0]),
                 "baseline_mm": float(cal.calibration.baseline_m * 1000), "lens_model": cal.calibration.lens_model},
             "topics": {ch.topic: {"messages": rec.topics[ch.topic], "schema": _schema_name(rec, ch.schema_id)}
                        for ch in rec.summary.channels.values()},
         }
+
+
+def _typed(unit: dict[str, str]) -> dict[str, str | int]:
+    """The recorded INFO (MCAP metadata holds strings) with its numbers as numbers."""
+    return {k: int(v) if v.isascii() and v.lstrip("-").isdigit() else v for k, v in unit.items()}
 
 
 def _schema_name(rec: Recording, schema_id: int) -> str:
@@ -65,7 +71,7 @@ def info(path: Path, as_json: bool = False) -> None:
         print("calib     none stored (raw frames)")
     else:
         w, h = cal["image_size"]
-        print(f"calib     {cal['source']} generation {cal['generation']} id {cal['id']}: {w}x{h}, "
+        print(f"calib     {cal['source']} generation {cal['generation']} id {id_text(cal['id'])}: {w}x{h}, "
               f"fx {cal['fx_px']:.1f}, baseline {cal['baseline_mm']:.1f} mm, {cal['lens_model']}")
     print("topics")
     for topic, t in doc["topics"].items():

@@ -65,7 +65,7 @@ def test_every_attempt_is_recorded_and_reported(db_url: str, tmp_path: Path, cap
     assert cli.main(["factory", "report", "--db", db_url, "--since", day, "--csv", str(tmp_path / "r.csv")]) == 0
     out = capsys.readouterr().out
     assert "2 attempts" in out and "line-1" in out and "line-2" in out and "50.0%" in out
-    assert "calibration FAILED the gate" in out
+    assert "gate: held-out epipolar RMS" in out and "> 0.01 px" in out  # the reason, not its first words
     with (tmp_path / "r.csv").open() as f:
         table = list(csv.DictReader(f))
     assert [t["station"] for t in table] == ["line-1", "line-2"] and float(table[0]["rms_stereo"]) > 0
@@ -77,7 +77,7 @@ def test_every_attempt_is_recorded_and_reported(db_url: str, tmp_path: Path, cap
     assert (doc["total"]["attempts"], doc["total"]["passed"], doc["total"]["yield"]) == (2, 1, 0.5)
     assert set(doc["groups"]) == {f"{day} line-1", f"{day} line-2"}
     assert doc["groups"][f"{day} line-1"]["rms_stereo"]["median"] == ok.rms_stereo
-    assert doc["failures"] == {"calibration FAILED the gate": 1}
+    assert doc["failures"] == {"gate: held-out epipolar RMS": 1}
 
 
 def test_device_blob_round_trips(db_url: str) -> None:
@@ -236,3 +236,22 @@ def test_stations_creating_the_database_at_once_lose_no_record(tmp_path, request
     assert not errors, errors[:3]
     with FactoryDB(url, create=False) as db:
         assert sorted(a.unit_serial for a in db.attempts()) == sorted(f"SN-{i}" for i in range(n))
+
+
+def test_a_report_counts_each_failure_by_kind_and_shows_the_latest_whole():
+    """Issue 20: the report cut every reason to its words before a colon ('calibration FAILED the gate')."""
+    from stereocam.tools.factory.cli import report_doc, report_lines
+    from stereocam.tools.factory.db import GATE_FAILED, Attempt
+
+    def attempt(when: str, passed: bool, reason: str) -> Attempt:
+        return Attempt("SN", f"2026-11-2{when}T10:00:00", "line-1", "0.2.0", "device", "9x6:0.025", passed, reason)
+
+    rows = [attempt("1", False, GATE_FAILED + "stereo RMS 0.812 px > 0.5 px; baseline 0.2 m outside [0.05, 0.15]"),
+            attempt("2", False, GATE_FAILED + "stereo RMS 0.634 px > 0.5 px"),
+            attempt("3", False, "board not found in any of 14 pairs: is it in view and lit?"),
+            attempt("4", True, "passed")]
+    assert report_doc("db", rows)["failures"] == {"gate: stereo RMS": 2, "gate: baseline": 1,
+                                                  "board not found in any of 14 pairs: is it in view and lit?": 1}
+    lines = report_lines(rows)
+    assert "failed    2 x  gate: stereo RMS  (latest: stereo RMS 0.634 px > 0.5 px)" in lines
+    assert "failed    1 x  board not found in any of 14 pairs: is it in view and lit?" in lines

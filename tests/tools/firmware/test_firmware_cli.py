@@ -30,17 +30,17 @@ def signed(tmp_path: Path):
     """A vendor key and its images: 1.2.0 (fps default 12), 1.1.0 as a rollback image, 1.1.0 plain."""
     key = tmp_path / "vendor.pem"
     assert stereocam("firmware", "keygen", "--out", str(key)).returncode == 0
-    build = tmp_path / "build.json"
-    build.write_text(json.dumps({**json.loads(FACTORY_BUILD.to_json()),
-                                 "parameter_defaults": {**FACTORY_BUILD.parameter_defaults, "fps": 12}}))
     code = tmp_path / "code.bin"
     code.write_bytes(os.urandom(300_000))
     images = {}
-    for name, version, extra in (("new", "1.2.0", ()), ("rollback", "1.1.0", ("--security-counter", "99999999")),
+    for name, version, extra in (("new", "1.2.0", ()), ("rollback", "1.1.0", ("--security-counter", "16908289")),
                                  ("old", "1.1.0", ())):
         out = tmp_path / f"{name}.img"
-        r = stereocam("firmware", "sign", "--key", str(key), "--version", version, "--code", str(code),
-                      "--out", str(out), *extra, str(build))
+        build = tmp_path / f"build-{version}.json"
+        build.write_text(json.dumps({**json.loads(FACTORY_BUILD.to_json()), "version": version,
+                                     "parameter_defaults": {**FACTORY_BUILD.parameter_defaults, "fps": 12}}))
+        r = stereocam("firmware", "sign", "--key", str(key), "--code", str(code), "--out", str(out), *extra,
+                      str(build))
         assert r.returncode == 0, r.stderr
         images[name] = out
     return key, images
@@ -166,11 +166,12 @@ def _sign(tmp_path: Path, build: dict | str, *extra: str) -> tuple[int, Path]:
                      str(path)]), out
 
 
-FACTORY = json.loads(FACTORY_BUILD.to_json())
+FACTORY = {**json.loads(FACTORY_BUILD.to_json()), "version": "1.2.0"}
 
 
 @pytest.mark.parametrize("build, words", [
     ({**FACTORY, "protocol_minor": 99999999999}, "protocol_minor"),
+    ({**FACTORY, "version": "1.2"}, "MAJOR.MINOR.PATCH"),
     ({**FACTORY, "capabilities": -5}, "capabilities"),
     ({**FACTORY, "capabilities": 2**32}, "capabilities"),
     ({**FACTORY, "parameter_defaults": {"fps": 1000}}, "fps"),
@@ -190,7 +191,7 @@ def test_sign_refuses_a_build_a_unit_could_not_run(tmp_path: Path, capsys, build
 @pytest.mark.parametrize("extra, words", [
     (("--security-counter", "-1"), "0..4294967295"), (("--security-counter", "99999999999999"), "0..4294967295"),
     (("--target", "ABCDEFGHIJKLMNOPQ"), "at most 16"), (("--target", "ABCDEFGHIJKLMNOé"), "16 printable ASCII"),
-    (("--version", "1.2"), "MAJOR.MINOR.PATCH")])
+    (("--version", "1.2"), "disagrees with"), (("--version", "1.3.0"), "whose version is 1.2.0")])
 def test_sign_refuses_header_fields_the_image_cannot_hold(tmp_path: Path, capsys, extra, words: str) -> None:
     rc, out = _sign(tmp_path, FACTORY, *extra)
     err = capsys.readouterr().err
