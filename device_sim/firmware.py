@@ -133,7 +133,7 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         booted = BootStage(slots, states).boot(recovery)
         build = booted.image.build if booted.image else RECOVERY_BUILD
         self.firmware_version = self._source.firmware_version if self._source else build.version
-        self.config.reset(build.parameter_defaults, build.capabilities)
+        self.config.reset(build.parameter_defaults, m.negotiated_capabilities(build.protocol_minor, build.capabilities))
         if self._source:  # a replayed unit starts in the configuration it was recorded with
             self._apply_recorded_config(self._source.boot_config())
         self.update = UpdateService(slots, states, booted)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import threading
+from collections.abc import Iterable, Mapping
 
 from stereocam.protocol.config_rules import ConfigRejected, merge
 from stereocam.protocol.params import PARAMS, defaults
@@ -32,8 +33,9 @@ class ConfigStore:
         snap = self.snapshot()
         return {p.pid: snap[p.name] for p in PARAMS}
 
-    def apply(self, update: dict[int, int], streaming: bool) -> None:
-        """Apply ``update`` (wire id → value) atomically; a Refusal leaves the store as it was."""
+    def apply(self, update: Mapping[int, int] | Iterable[tuple[int, int]], streaming: bool) -> None:
+        """Apply ``update`` (wire id → value, or SET_CONFIG's entries in payload order) atomically; a
+        Refusal leaves the store as it was."""
         with self._lock:
             try:
                 self._values = merge(self._values, update, streaming, self._capabilities)

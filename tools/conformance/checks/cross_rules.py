@@ -53,7 +53,7 @@ CASES: dict[str, list[Case]] = {
 }
 
 
-@family("config.cross")
+@family("config.cross", "R-5.2-1")
 def cross_rules(ctx: Context) -> Iterator[tuple[str, CheckFn]]:
     for rule in spec_rules.CROSS_RULES:
         yield rule, _rule_check(rule)
