@@ -8,6 +8,7 @@ import time
 import zlib
 
 from stereocam.protocol import messages as m
+from stereocam.protocol.errors import StereoCamError
 from stereocam.protocol.framing import DEVICE_MESSAGE_TIMEOUT, FLAG_RESEND, MAGIC, header_crc
 from stereocam.protocol.params import BY_NAME, TriggerMode
 
@@ -201,8 +202,11 @@ def stray_header_keeps_host(ctx: Context) -> str:
     ctx.s.call(m.Start())
     ctx.s.send_bytes(header(m.MsgType.SET_CONFIG, ctx.s.new_id(), min(1024, ctx.info.max_payload)))
     end = time.monotonic() + STRAY_KEEPALIVE_S
-    while time.monotonic() < end:
-        ctx.s.send(m.Heartbeat())  # answered late while the decoder waits: not waited for here
+    while time.monotonic() < end and ctx.s.alive:
+        try:
+            ctx.s.send(m.Heartbeat())  # answered late while the decoder waits: not waited for here
+        except StereoCamError:
+            break
         time.sleep(STRAY_HEARTBEAT_S)
     dropped = not ctx.s.alive
     if dropped:
