@@ -73,7 +73,8 @@ def test_the_device_conforms(device_url, request, tmp_path):
     if not external:  # the simulator advertises everything: nothing is skipped but what only TCP shows
         passed = {c["name"] for c in report["checks"] if c["outcome"] == "PASS"}
         skipped = {c["name"] for c in report["checks"] if c["outcome"] == "SKIP"}
-        assert skipped == (set() if device_url.startswith("socket://") else {"link.second_client"}), skipped
+        tcp_only = {"link.second_client", "link.first_frame_deadline"}
+        assert skipped == (set() if device_url.startswith("socket://") else tcp_only), skipped
         assert passed == set(names) - failed - skipped
         assert {"config.limits.width", "config.cross.exposure_vs_frame_period", "stream.free_run_rate",
                 "trigger.software", "link.watchdog", "link.resend_trigger", "link.garbage", "time.sync",
