@@ -204,6 +204,16 @@ def without_capabilities(bits: int) -> Rewrite:
     return rewrite
 
 
+def small_sgm_limit(p: Packet) -> Packet:
+    """Device-to-host: INFO says SGM runs up to 640x480 (SPEC §4.1 stage limits) while the device
+    still accepts SGM at every format: a limit it does not enforce (§5.2 rule 8)."""
+    if p.msg_type != m.MsgType.INFO:
+        return p
+    info = m.Info.unpack(p.payload)
+    return Packet(p.msg_type, p.request_id, p.flags,
+                  dataclasses.replace(info, stage_limits=((m.Stage.SEMI_GLOBAL, 640, 480),)).pack())
+
+
 def stale_slot_report(p: Packet) -> Packet:
     """Device-to-host: UPDATE_STATE names another version in every slot (bookkeeping that says an
     update took when the unit still runs the old image, or the reverse)."""

@@ -23,8 +23,8 @@ from stereocam.tools import cli
 from stereocam.tools.conformance.checks.config import UNUSED_PARAM_ID
 from tests.support.broken_devices import (RewritingProxy, blinding_decoder, clamp_into_range, commit_what_is_staged,
                                           counting_stop_discards, dead_trigger_output, first_duplicate_wins,
-                                          forget_resend, generations_restart, rescan_timed_decoder, stale_slot_report,
-                                          typed_busy_nack, unchanged, without_features)
+                                          forget_resend, generations_restart, rescan_timed_decoder, small_sgm_limit,
+                                          stale_slot_report, typed_busy_nack, unchanged, without_features)
 
 # Checks the reference simulator fails today, and why. The suite is right about them; the
 # simulator is fixed elsewhere. Remove an entry when its fix lands: the tests then demand a PASS.
@@ -215,6 +215,18 @@ def test_a_unit_that_hides_a_capability_but_accepts_its_value_fails(tcp_sim):
         rc, out = _run_cli([proxy.url, "--json", "-k", r"^(identity|config\.limits\.trigger_mode$)"])
     report = json.loads(out)
     assert rc == 1 and _failures(report) == {"config.limits.trigger_mode", "identity.unknown_type"}, out
+
+
+@BUILT_HERE
+def test_fails_against_a_device_that_does_not_enforce_its_stage_limit(tcp_sim):
+    """INFO stage limits are promises (SPEC §4.1, §5.2 rule 8): SGM at 1280x960 accepted by a unit
+    whose INFO says SGM stops at 640x480 fails config.limits.algorithm."""
+    with RewritingProxy(tcp_sim.url, unchanged, to_host=small_sgm_limit) as proxy:
+        rc, out = _run_cli([proxy.url, "--json", "-k", r"^(identity\.info|config\.limits\.(algorithm|width))$"])
+    report = json.loads(out)
+    assert rc == 1 and _failures(report) == {"config.limits.algorithm"}, out
+    detail = next(c["detail"] for c in report["checks"] if c["name"] == "config.limits.algorithm")
+    assert "accepted, expected NACK OUT_OF_RANGE" in detail, detail
 
 
 # Each check added for issue 21's gaps, failing against a device broken in exactly that way.

@@ -39,8 +39,9 @@ def limits(ctx: Context) -> Iterator[tuple[str, CheckFn]]:
 
 def _limit_check(p: Param) -> CheckFn:
     def run(ctx: Context) -> str:
-        base = ctx.apply(**spec_rules.roomy_base(ctx.info.max_width, ctx.info.max_height, set(ctx.params)))
-        hi = spec_rules.effective_hi(p, ctx.info.max_width, ctx.info.max_height)
+        max_w, max_h = ctx.info.stage_limit(m.Stage.BLOCK_MATCHING)  # the roomy base block-matches
+        base = ctx.apply(**spec_rules.roomy_base(max_w, max_h, set(ctx.params)))
+        hi = spec_rules.effective_hi(p, max_w, max_h)
         accept, refuse = spec_rules.limit_probes(p, hi)
         lacking = spec_rules.optional_values(ctx.info.effective_capabilities)
         outcomes = []
@@ -58,7 +59,7 @@ def _limit_check(p: Param) -> CheckFn:
 
 def _expect_outcome(ctx: Context, p: Param, value: int, base: dict[str, int]) -> str:
     """A value within the table: accepted, unless a §5.2 rule forbids it with this base; says which."""
-    refusal = spec_rules.cross_refusal({**base, p.name: value}, {p.name})
+    refusal = spec_rules.cross_refusal({**base, p.name: value}, {p.name}, spec_rules.stage_limits(ctx.info))
     if refusal is not None:
         _expect_refused(ctx, p, value, ErrorCode.OUT_OF_RANGE, str(refusal), refusal.param_id)
         return f"refused as §5.2 demands ({refusal.param})"
