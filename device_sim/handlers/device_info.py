@@ -22,6 +22,13 @@ PROTOCOL_MINOR = VERSION_MINOR  # 1.3: SGM capability bit and INFO stage limits 
 STAGE_LIMITS = ((m.Stage.BLOCK_MATCHING, BY_NAME["width"].hi, BY_NAME["height"].hi),
                 (m.Stage.SEMI_GLOBAL, BY_NAME["width"].hi, BY_NAME["height"].hi))
 """Both matchers run at the largest format (SPEC §4.1 stage limits; shown so a host sees the mechanism)."""
+
+
+def config_limits(build: FirmwareBuild) -> tuple[int, dict[int, tuple[int, int]] | None]:
+    """What the booted ``build``'s configuration store enforces: its capabilities as a host
+    negotiates them (SPEC §11.2: a 1.2 build has SGM without the bit) and its INFO stage limits."""
+    limits = {stage: (w, h) for stage, w, h in STAGE_LIMITS} if build.protocol_minor >= 3 else None
+    return m.negotiated_capabilities(build.protocol_minor, build.capabilities), limits
 FACTORY_BUILD = FirmwareBuild(FIRMWARE_VERSION, PROTOCOL_MINOR, CAPABILITIES | m.Capability.FIRMWARE_UPDATE, defaults())
 """The build the factory line signs into slot A of a blank unit."""
 RECOVERY_BUILD = FirmwareBuild("recovery", PROTOCOL_MINOR, m.Capability.FIRMWARE_UPDATE, {})
