@@ -210,8 +210,12 @@ def build_decoder_vectors() -> dict:
 
 
 def write(path: Path, doc: dict) -> None:
+    """One case per line: a change shows as the cases it changes."""
+    head = {k: v for k, v in doc.items() if k != "cases"}
+    lines = [f" {json.dumps(k)}: {json.dumps(v, ensure_ascii=False)}," for k, v in head.items()]
+    cases = ",\n".join(f"  {json.dumps(c, ensure_ascii=False)}" for c in doc["cases"])
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    path.write_text("{\n" + "\n".join(lines) + '\n "cases": [\n' + cases + "\n ]\n}\n", encoding="utf-8")
     print(f"wrote {path}")
 
 
