@@ -33,7 +33,7 @@ from .ground_truth import GroundTruth, TruthLog
 from .handlers.calibration import CalibrationService
 from .handlers.config import ConfigHandlers
 from .handlers.config_store import ConfigStore
-from .handlers.device_info import FACTORY_BUILD, MODEL, RECOVERY_BUILD, Identity, InfoHandler
+from .handlers.device_info import FACTORY_BUILD, MODEL, RECOVERY_BUILD, Identity, InfoHandler, config_limits
 from .handlers.frame_repair import FrameRepair
 from .handlers.heartbeat import HeartbeatHandlers
 from .handlers.streaming import StreamingHandlers
@@ -133,7 +133,7 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         booted = BootStage(slots, states).boot(recovery)
         build = booted.image.build if booted.image else RECOVERY_BUILD
         self.firmware_version = self._source.firmware_version if self._source else build.version
-        self.config.reset(build.parameter_defaults, build.capabilities)
+        self.config.reset(build.parameter_defaults, *config_limits(build))
         if self._source:  # a replayed unit starts in the configuration it was recorded with
             self._apply_recorded_config(self._source.boot_config())
         self.update = UpdateService(slots, states, booted)

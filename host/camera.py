@@ -199,9 +199,13 @@ class Camera:
         """The configuration ``configure(**params)`` would give, checked here against the
         protocol's rules (protocol/config_rules.py) without changing the device; ConfigRejected
         (a ConfigError naming the parameter, ``.param``, and the NACK code) if the device would
-        refuse it (also a value needing a capability this device does not advertise). The device
-        stays the authority: ``configure`` still sends the request."""
-        return merge(self.config(), config_update(params), self._streaming, self.connection.info.capabilities)
+        refuse it (also a value needing a capability this device does not advertise, or a format
+        beyond the selected matcher's INFO stage limit). The device stays the authority:
+        ``configure`` still sends the request."""
+        info = self.connection.info
+        limits = {m.Stage.BLOCK_MATCHING: info.stage_limit(m.Stage.BLOCK_MATCHING),
+                  m.Stage.SEMI_GLOBAL: info.stage_limit(m.Stage.SEMI_GLOBAL)}
+        return merge(self.config(), config_update(params), self._streaming, info.effective_capabilities, limits)
 
     def set_trigger_mode(self, mode: TriggerMode | str) -> None:
         """``mode``: a TriggerMode, its name ("free_run", "software", "external") or its number."""

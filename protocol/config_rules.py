@@ -6,11 +6,11 @@ the host check only spares a round trip and names the parameter earlier.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
 from .errors import ConfigError, ErrorCode
-from .messages import Capability
+from .messages import Capability, Stage
 from .params import BY_ID, BY_NAME, Algorithm, TriggerMode
 
 
@@ -29,21 +29,33 @@ class ConfigRejected(ConfigError):
 
 
 CAPABILITY_VALUES: dict[tuple[str, int], int] = {
+    ("trigger_mode", TriggerMode.EXTERNAL): Capability.EXTERNAL_TRIGGER,
     ("rectify", 0): Capability.RAW_OUTPUT,
     ("trigger_output", 1): Capability.TRIGGER_OUTPUT,
+    ("algorithm", Algorithm.SEMI_GLOBAL): Capability.SGM,
 }
-"""Values within the table that only a device advertising the capability accepts (SPEC §5.1);
-a device without it NACKs them OUT_OF_RANGE."""
+"""Values within the table that only a device advertising the capability accepts (SPEC §5.1
+*Capability-bound values*); a device without it NACKs them OUT_OF_RANGE. Judge with the negotiated
+capabilities (``Info.effective_capabilities``): a 1.2 device has SGM without the bit."""
+
+STAGE_OF_ALGORITHM: dict[int, int] = {Algorithm.BLOCK_MATCHING: Stage.BLOCK_MATCHING,
+                                      Algorithm.SEMI_GLOBAL: Stage.SEMI_GLOBAL}
+"""The INFO stage (SPEC §4.1 stage limits) each ``algorithm`` value runs."""
+
+StageLimits = Mapping[int, tuple[int, int]]
+"""Stage id -> (max_width, max_height), the INFO stage limits a device advertises (SPEC §4.1)."""
 
 
-def merge(current: Mapping[str, int], update: Mapping[int, int], streaming: bool,
-          capabilities: int | None = None) -> dict[str, int]:
-    """The whole configuration after ``update`` (wire id → value), or ConfigRejected for the first
-    failure in SPEC §4.3 order: unknown id, range/odd/step (and a value whose capability
-    ``capabilities`` lacks; None: not checked), non-live change while streaming, then the
-    cross-parameter rules of §5.2 on the merged result."""
+def merge(current: Mapping[str, int], update: Mapping[int, int] | Iterable[tuple[int, int]], streaming: bool,
+          capabilities: int | None = None, stage_limits: StageLimits | None = None) -> dict[str, int]:
+    """The whole configuration after ``update`` (wire id → value, or the (id, value) entries of a
+    SET_CONFIG in payload order, duplicates included), or ConfigRejected for the first failure in
+    SPEC §4.3 order: every entry's id, range/odd/step (and a value whose capability ``capabilities``
+    lacks; None: not checked), non-live change while streaming (against ``current``), then the
+    cross-parameter rules of §5.2 on the merged result, the last (rule 8) against ``stage_limits``."""
+    pairs = tuple(update.items()) if isinstance(update, Mapping) else tuple(update)
     new = dict(current)
-    for pid, value in update.items():
+    for pid, value in pairs:
         p = BY_ID.get(pid)
         if p is None:
             raise ConfigRejected(ErrorCode.UNKNOWN_PARAM, pid, f"unknown parameter id {pid}")
@@ -53,11 +65,29 @@ def merge(current: Mapping[str, int], update: Mapping[int, int], streaming: bool
             why = f"{p.name}={value} needs INFO capability {Capability.name_of(needs)}, which this device lacks"
         if why:
             raise ConfigRejected(ErrorCode.OUT_OF_RANGE, pid, why)
-        if streaming and not p.live and value != new[p.name]:
+        if streaming and not p.live and value != current[p.name]:
             raise ConfigRejected(ErrorCode.BAD_STATE, pid, f"{p.name} cannot change while streaming; stop first")
         new[p.name] = value
-    cross_check(new, update)
+    cross_check(new, dict(pairs))
+    if stage_limits:
+        check_stage_limits(new, dict(pairs), stage_limits)
     return new
+
+
+def check_stage_limits(c: Mapping[str, int], update: Mapping[int, int], stage_limits: StageLimits) -> None:
+    """SPEC §5.2 rule 8: the selected matching stage's INFO limit bounds width and height; the NACK
+    names the first of width, height, algorithm that ``update`` touched, else width."""
+    stage = STAGE_OF_ALGORITHM.get(_algorithm(c))
+    if stage is None or stage not in stage_limits:
+        return
+    max_w, max_h = stage_limits[stage]
+    if c["width"] <= max_w and c["height"] <= max_h:
+        return
+    touched = {BY_ID[pid].name for pid in update if pid in BY_ID}
+    blamed = next((n for n in ("width", "height", "algorithm") if n in touched), "width")
+    raise ConfigRejected(ErrorCode.OUT_OF_RANGE, BY_NAME[blamed].pid,
+                         f"{c['width']}x{c['height']} exceeds what the selected matcher (INFO stage {stage}) "
+                         f"supports: {max_w}x{max_h}")
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ is never trusted before the header CRC checks out.
 from __future__ import annotations
 
 import binascii
+import bisect
 import logging
 import math
 import struct
@@ -23,7 +24,7 @@ from .crc_range import CrcIndex
 
 MAGIC = b"STOC"
 VERSION_MAJOR = 1
-VERSION_MINOR = 2
+VERSION_MINOR = 3
 HEADER_LEN = 20
 MAX_HEADER_LEN = 64
 TRAILER_LEN = 4
@@ -31,6 +32,7 @@ MAX_PAYLOAD = 1 << 20  # hard v1 limit; a device may advertise less
 
 DEVICE_MESSAGE_TIMEOUT = 1.0  # s: a device abandons a request frame not complete this long after its header
 HOST_MESSAGE_TIMEOUT = 5.0  # s: the host's limit (a 128 KiB chunk takes 1.4 s at 921600 baud)
+STAMP_GRAIN = 0.001  # s: chunks arriving closer together than this share one arrival stamp (SPEC §3)
 
 FLAG_RESEND = 0x01  # request: this is a retry of the same request id
 
@@ -98,6 +100,8 @@ class Decoder:
     ``message_timeout`` (float seconds, None: never) bounds how long a frame whose header has
     arrived may take to complete; after it the frame is abandoned like a corrupt one. Time is the
     ``now`` given to ``feed`` (default ``time.monotonic()``); an idle receiver calls ``expire``.
+    A header's wait runs from the arrival of its last byte (each chunk is stamped on arrival,
+    SPEC §3), never from when a rescan reached it: stray headers cost T in all, not T each.
     Work per input byte is bounded (SPEC §3.1): a rescan inside a rejected frame reuses the
     checksums already computed instead of checksumming the same bytes again.
     """
@@ -107,7 +111,9 @@ class Decoder:
     message_timeout: float | None = None
     _buf: bytearray = field(default_factory=bytearray, repr=False)
     _base: int = field(default=0, repr=False)  # absolute stream offset of _buf[0]
-    _waiting: tuple[int, float] = field(default=(-1, 0.0), repr=False)  # (offset, since) of a partial frame
+    _arrival_ends: list[int] = field(default_factory=list, repr=False)  # absolute end offset of each stamp's bytes
+    _arrival_times: list[float] = field(default_factory=list, repr=False)  # when those bytes arrived
+    _pending: float | None = field(default=None, repr=False)  # arrival of the header being waited on
     _failed: tuple[int, int] = field(default=(-1, -1), repr=False)  # payload range of the last rejected frame
     _index: CrcIndex | None = field(default=None, repr=False)
 
@@ -130,12 +136,15 @@ class Decoder:
     def feed(self, data: bytes | bytearray | memoryview, now: float | None = None) -> list[Packet]:
         """Consume ``data``; return the packets completed by it (possibly none)."""
         self.stats.bytes_in += len(data)
+        if data and self.message_timeout is not None:
+            self._stamp(len(data), time.monotonic() if now is None else now)
         self._buf += data
         out: list[Packet] = []
         buf = self._buf
         pos = 0
         end = len(buf)
         st = self.stats
+        self._pending = None
         while True:
             i = buf.find(MAGIC, pos)
             if i < 0:
@@ -171,6 +180,8 @@ class Decoder:
                     st.message_timeouts += 1
                     pos += 1
                     continue
+                if self.message_timeout is not None:
+                    self._pending = self._header_arrival(self._base + pos)
                 break
             (crc,) = _CRC32.unpack_from(buf, pos + hlen + plen)
             if crc != self._payload_crc(pos + HEADER_LEN, pos + hlen + plen):
@@ -187,15 +198,34 @@ class Decoder:
             self._discard(pos)
         return out
 
+    def _stamp(self, n: int, now: float) -> None:
+        """Record the arrival of the next ``n`` bytes. Chunks within STAMP_GRAIN of the last stamp
+        share it (their bytes count as arrived up to STAMP_GRAIN early), so a byte-at-a-time
+        stream keeps few stamps."""
+        end = self._base + len(self._buf) + n
+        if self._arrival_times and now - self._arrival_times[-1] < STAMP_GRAIN:
+            self._arrival_ends[-1] = end
+        else:
+            self._arrival_ends.append(end)
+            self._arrival_times.append(now)
+
     def _timed_out(self, offset: int, now: float | None) -> bool:
-        """Whether the partial frame at absolute ``offset`` has waited longer than message_timeout."""
+        """Whether the partial frame at absolute ``offset`` has waited longer than message_timeout
+        since its header's last byte arrived."""
         if self.message_timeout is None:
             return False
         now = time.monotonic() if now is None else now
-        if self._waiting[0] != offset:
-            self._waiting = (offset, now)
-            return False
-        return now - self._waiting[1] > self.message_timeout
+        return now - self._header_arrival(offset) > self.message_timeout
+
+    def _header_arrival(self, offset: int) -> float:
+        """When the last header byte of the frame at absolute ``offset`` arrived."""
+        return self._arrival_times[bisect.bisect_right(self._arrival_ends, offset + HEADER_LEN - 1)]
+
+    @property
+    def waiting_since(self) -> float | None:
+        """Arrival time of the header whose frame the decoder is waiting to complete (None: not
+        waiting, or no message timeout)."""
+        return self._pending
 
     def _payload_crc(self, a: int, b: int) -> int:
         """CRC-32 of ``_buf[a:b]``. A range overlapping bytes already checksummed for a rejected
@@ -223,3 +253,6 @@ class Decoder:
                 self._index.drop_before(self._buf, self._base, cut)
         del self._buf[:pos]
         self._base = cut
+        k = bisect.bisect_right(self._arrival_ends, cut)
+        if k:
+            del self._arrival_ends[:k], self._arrival_times[:k]

@@ -83,12 +83,29 @@ class Capability:
     FRAME_REPAIR = 0x40  # since 1.2: SET_FRAME_LINK and FRAME_RESEND (SPEC §13)
     FIRMWARE_UPDATE = 0x80  # since 1.2: UPDATE_* messages (SPEC §14)
     TRIGGER_OUTPUT = 0x100  # since 1.2: `trigger_output` = 1 drives the trigger line (SPEC §5.1, §8.5)
+    SGM = 0x200  # since 1.3: `algorithm` = 1, the semi-global matcher (SPEC §5.1); implied for a 1.2 device
     POST_PROCESSING = 0x400  # since 1.3: the post-processing parameters 30..39 (SPEC §5.1, §5.3)
 
     @classmethod
     def name_of(cls, bit: int) -> str:
         """The bit's name (``bit<n>`` for one this protocol version does not define)."""
         return next((k for k, v in vars(cls).items() if k.isupper() and v == bit), f"bit{bit.bit_length() - 1}")
+
+
+def negotiated_capabilities(protocol_minor: int, capabilities: int) -> int:
+    """What a device of ``protocol_minor`` advertising ``capabilities`` has (SPEC §11.2): a 1.2
+    device implements SGM without the bit, which 1.3 added."""
+    return capabilities | (Capability.SGM if protocol_minor == 2 else 0)
+
+
+class Stage:
+    """INFO stage limits' stage ids (SPEC §4.1): matching engines and later processing stages."""
+
+    BLOCK_MATCHING = 1  # algorithm = 0
+    SEMI_GLOBAL = 2  # algorithm = 1
+
+
+_STAGE_LIMIT = struct.Struct("<HHH")
 
 
 class UsbSpeed:
@@ -115,12 +132,26 @@ class Info(Message):
     max_height: int
     calibration_id: int = 0  # since 1.1: the active calibration, 0 = uncalibrated
     usb_speed: int = 0  # since 1.2: the USB link's speed (UsbSpeed), 0 = not on USB
+    stage_limits: tuple[tuple[int, int, int], ...] = ()  # since 1.3: (Stage, max_width, max_height)
 
     def pack(self) -> bytes:
         head = self._S.pack(*self.protocol_version, self.capabilities, self.sensor_width, self.sensor_height,
                             self.max_payload, self.max_width, self.max_height)
         return head + _str(self.model) + _str(self.serial) + _str(self.firmware_version) + \
-            struct.pack("<IB", self.calibration_id, self.usb_speed)
+            struct.pack("<IBB", self.calibration_id, self.usb_speed, len(self.stage_limits)) + \
+            b"".join(_STAGE_LIMIT.pack(*limit) for limit in self.stage_limits)
+
+    @property
+    def effective_capabilities(self) -> int:
+        """The capabilities as negotiated (SPEC §11.2): the bits, plus what this minor implies."""
+        return negotiated_capabilities(self.protocol_version[1], self.capabilities)
+
+    def stage_limit(self, stage: int) -> tuple[int, int]:
+        """(max_width, max_height) a stage supports: its entry, else the device's maxima (SPEC §4.1)."""
+        for sid, w, h in self.stage_limits:
+            if sid == stage:
+                return min(w, self.max_width), min(h, self.max_height)
+        return self.max_width, self.max_height
 
     @classmethod
     def unpack(cls, payload: bytes) -> "Info":
@@ -131,7 +162,12 @@ class Info(Message):
         fw, off = _read_str(payload, off)
         cid = struct.unpack_from("<I", payload, off)[0] if len(payload) >= off + 4 else 0  # 1.0 devices
         speed = payload[off + 4] if len(payload) >= off + 5 else 0  # 1.0 and 1.1 devices
-        return cls(model, serial, fw, (major, minor), caps, sw, sh, mp, mw, mh, cid, speed)
+        off += 5
+        n = payload[off] if len(payload) > off else 0  # before 1.3: no stage limits
+        if n and len(payload) < off + 1 + n * _STAGE_LIMIT.size:
+            raise struct.error(f"INFO announces {n} stage limits, the payload ends before them")
+        limits = tuple(_STAGE_LIMIT.unpack_from(payload, off + 1 + k * _STAGE_LIMIT.size) for k in range(n))
+        return cls(model, serial, fw, (major, minor), caps, sw, sh, mp, mw, mh, cid, speed, limits)
 
 
 _KV = struct.Struct("<Hi")
@@ -148,15 +184,34 @@ class _ParamList(Message):
 
     @classmethod
     def unpack(cls, payload: bytes) -> "_ParamList":
-        (n,) = struct.unpack_from("<H", payload, 0)
-        if len(payload) != 2 + n * _KV.size:
-            raise struct.error(f"{n} parameters need {2 + n * _KV.size} bytes, got {len(payload)}")
-        return cls({k: v for k, v in _KV.iter_unpack(payload[2:])})
+        return cls(dict(_param_pairs(payload)))
+
+
+def _param_pairs(payload: bytes) -> tuple[tuple[int, int], ...]:
+    """A param list's (id, value) entries in payload order (SPEC §4.2)."""
+    (n,) = struct.unpack_from("<H", payload, 0)
+    if len(payload) != 2 + n * _KV.size:
+        raise struct.error(f"{n} parameters need {2 + n * _KV.size} bytes, got {len(payload)}")
+    return tuple(_KV.iter_unpack(payload[2:]))
 
 
 @dataclass(frozen=True)
 class SetConfig(_ParamList):
     TYPE: ClassVar[int] = MsgType.SET_CONFIG
+    entries: tuple[tuple[int, int], ...] = field(default=(), compare=False)
+    """Every (id, value) in payload order when an id occurs more than once (``values`` keeps the last
+    of each); empty otherwise. A device checks every entry (SPEC §4.3)."""
+
+    @classmethod
+    def unpack(cls, payload: bytes) -> "SetConfig":
+        pairs = _param_pairs(payload)
+        values = dict(pairs)
+        return cls(values, pairs if len(pairs) != len(values) else ())
+
+    @property
+    def pairs(self) -> tuple[tuple[int, int], ...]:
+        """The entries in payload order, duplicates included."""
+        return self.entries or tuple(self.values.items())
 
 
 @dataclass(frozen=True)
@@ -297,8 +352,8 @@ def encode(msg: Message, request_id: int = 0, flags: int = 0) -> bytes:
 __all__ = [  # the whole message catalogue, whichever module defines each part
     "MsgType", "Message", "REPLY_BIT", "EVENT_BIT", "reply_type", "MESSAGES", "REPLIES", "decode_packet", "encode",
     "UnknownMessageError", "GetInfo", "GetConfig", "SetConfig", "Trigger", "Start", "Stop", "Heartbeat", "TimeSync",
-    "Info", "Capability", "Config", "ConfigApplied", "Triggered", "Started", "Stopped", "Status", "COUNTERS", "Time",
-    "Nack",
+    "Info", "Capability", "negotiated_capabilities", "Stage", "Config", "ConfigApplied", "Triggered", "Started",
+    "Stopped", "Status", "COUNTERS", "Time", "Nack",
     "FrameBegin", "FrameData", "FrameEnd", "DISPARITY_S16_Q4", "FRAME_RECTIFIED", "FRAME_OK", "FRAME_SENSOR_OVERRUN",
     "CalibSource", "CalibRead", "CalibData", "CalibWrite", "CalibWritten", "CalibCommit", "CalibRestore",
     "CalibState", "CalibCommitted", "CalibRestored", "MAX_CALIB_CHUNK", "calib_id",

@@ -41,6 +41,7 @@ MAGIC = 0x4C414353
 FORMAT_VERSION = 1
 _HEADER = struct.Struct("<IHHII")
 _CRC = struct.Struct("<I")
+_MAGIC_BYTES = struct.pack("<I", MAGIC)
 _MAX_GENERATION = 0xFFFFFFFF
 
 Region = Literal["factory", "user"]
@@ -88,6 +89,24 @@ class CalibrationStore:
             return None
         return StoredRecord(data[_HEADER.size:_HEADER.size + length], generation, region, slot)
 
+    def _highest_generation(self, region: Region) -> int:
+        """The highest generation the region's slots hold, valid records and tombstones alike (a
+        tombstone only zeroes the magic, its CRC checks with the magic put back): generations never
+        repeat after a restore (SPEC §12.1). 0 when none."""
+        best = 0
+        for slot in (0, 1):
+            addr = self._slot_addr(region, slot)
+            magic, version, header_len, length, generation = _HEADER.unpack(self.flash.read(addr, _HEADER.size))
+            if magic not in (MAGIC, 0) or (version, header_len) != (FORMAT_VERSION, _HEADER.size) \
+                    or not 0 < length <= self.capacity:
+                continue
+            data = bytearray(self.flash.read(addr, _HEADER.size + length + _CRC.size))
+            data[:4] = _MAGIC_BYTES
+            (crc,) = _CRC.unpack_from(data, _HEADER.size + length)
+            if zlib.crc32(data[:_HEADER.size + length]) == crc:
+                best = max(best, generation)
+        return best
+
     def _valid(self, region: Region) -> list[StoredRecord]:
         """The region's valid records, newest first (ties: lower slot first)."""
         recs = [r for r in (self._load(region, s) for s in (0, 1)) if r is not None]
@@ -110,7 +129,7 @@ class CalibrationStore:
         if not 0 < len(body) <= self.capacity:
             raise StoreError(f"record body must be 1..{self.capacity} bytes, got {len(body)}")
         recs = self._valid(region)
-        generation = recs[0].generation + 1 if recs else 1
+        generation = self._highest_generation(region) + 1
         if generation > _MAX_GENERATION:
             raise StoreError(f"{region} generation counter exhausted")
         slot = 1 - recs[0].slot if recs else 0

@@ -131,8 +131,11 @@ class CalibrationService:
             raise Refusal(ErrorCode.OUT_OF_RANGE, f"commit target must be factory (1) or user (2), not {msg.target}")
         if msg.target == m.CalibSource.FACTORY and self.store.factory_locked:
             raise Refusal(ErrorCode.BAD_STATE, "the factory calibration is write-protected; write target=user")
-        body = bytes(self._staging)
+        body, announced = bytes(self._staging), self._staging_total
         self._staging, self._staging_total = bytearray(), 0  # one commit attempt per staging
+        if len(body) != announced or not body:
+            raise Refusal(ErrorCode.BAD_PAYLOAD, f"the staging is incomplete: {len(body)} of the {announced} bytes "
+                              "its CALIB_WRITEs announced; nothing written")
         if msg.total != len(body) or zlib.crc32(body) != msg.crc:
             raise Refusal(ErrorCode.BAD_PAYLOAD, f"staged {len(body)} bytes with CRC {zlib.crc32(body):08x}, "
                               f"commit announced {msg.total} bytes with CRC {msg.crc:08x}; nothing written")

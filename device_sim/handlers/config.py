@@ -20,6 +20,6 @@ class ConfigHandlers:
         return m.Config(self._store.by_id())
 
     def set_config(self, msg: m.SetConfig) -> m.ConfigApplied:
-        self._store.apply(msg.values, self._engine.streaming)  # a Refusal leaves everything as it was
+        self._store.apply(msg.pairs, self._engine.streaming)  # a Refusal leaves everything as it was
         self._engine.set_rate(self._store.snapshot()["fps"])
         return m.ConfigApplied(self._store.by_id())

@@ -4,6 +4,7 @@ drives this one object."""
 from __future__ import annotations
 
 import threading
+import time
 from typing import Callable
 
 from stereocam.protocol.framing import DEVICE_MESSAGE_TIMEOUT, Decoder, DecoderStats
@@ -87,8 +88,14 @@ class DeviceLink:
         self._on_lost()
 
     def silent_for(self) -> float:
-        """Seconds since the host last sent a whole frame (or since it attached)."""
-        return self._timebase.monotonic() - self.last_rx
+        """Seconds since the host last sent a whole frame (or since it attached). While the decoder
+        waits for the rest of a frame whose header arrived, the host is not silent; once that wait
+        is over, silence counts from its end (SPEC §9: a stray header never costs a host its link)."""
+        silent = self._timebase.monotonic() - self.last_rx
+        since, limit = self.decoder.waiting_since, self.decoder.message_timeout
+        if since is not None and limit is not None:
+            silent = min(silent, max(time.monotonic() - (since + limit), 0.0))
+        return silent
 
     def drop_if_silent(self, heartbeat_timeout_ms: int, contested: bool = False) -> bool:
         """SPEC §9: end a link silent for longer than its link timeout (from the watchdog thread,
@@ -108,7 +115,11 @@ class DeviceLink:
     def receive(self, data: bytes) -> None:
         """Bytes from the host; replies go to the sink before this returns."""
         with self._rx_lock:
-            for packet in self.decoder.feed(data):
+            abandoned = self.decoder.stats.message_timeouts
+            packets = self.decoder.feed(data)
+            if self.decoder.stats.message_timeouts != abandoned:  # a wait just ended: silence starts now
+                self.last_rx = self._timebase.monotonic()
+            for packet in packets:
                 self.last_rx = self._timebase.monotonic()
                 self.spoken = True
                 wire = self._dispatcher.answer(packet)

@@ -38,7 +38,7 @@ def unit():
 
 def test_update_changes_what_the_unit_reports_and_does_and_a_signed_rollback_goes_back(unit):
     sim, cam = unit
-    assert cam.config()["fps"] == 30 and cam.info().protocol_version == (1, 2)
+    assert cam.config()["fps"] == 30 and cam.info().protocol_version == (1, 3)
     no_calib = image("1.2.0", code_size=5000, fps=12)
     result = cam.update_firmware(no_calib)
     info = cam.info()

@@ -23,7 +23,7 @@ from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode, ProtocolError
 from stereocam.protocol.framing import (
     FLAG_RESEND, HEADER_LEN, MAGIC, MAX_HEADER_LEN, MAX_PAYLOAD, TRAILER_LEN, Decoder,
-    DecoderStats, Packet, encode_frame, header_crc,
+    VERSION_MAJOR, VERSION_MINOR, DecoderStats, Packet, encode_frame, header_crc,
 )
 from stereocam.protocol.messages import UnknownMessageError, decode_packet
 from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, VALUE_NAMES, Param, defaults
@@ -35,7 +35,7 @@ LIGHT = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCh
 
 # -- helpers -----------------------------------------------------------------------------------
 def raw_frame(msg_type: int, request_id: int = 0, payload: bytes = b"", *, flags: int = 0, major: int = 1,
-              minor: int = 2, header_len: int = HEADER_LEN, payload_len: int | None = None,
+              minor: int = VERSION_MINOR, header_len: int = HEADER_LEN, payload_len: int | None = None,
               ext: bytes | None = None) -> bytes:
     """A frame built by hand (not through encode_frame), with a correct header CRC for whatever it claims."""
     ext = bytes(header_len - HEADER_LEN) if ext is None else ext
@@ -86,7 +86,7 @@ def assert_every_byte_accounted(dec: Decoder, packets: list[Packet]) -> None:
 
 
 def packet_of(msg: m.Message, rid: int = 0, flags: int = 0) -> Packet:
-    return Packet(msg.TYPE, rid, flags, msg.pack(), (1, 2))  # what this code (v1.2) sends
+    return Packet(msg.TYPE, rid, flags, msg.pack(), (VERSION_MAJOR, VERSION_MINOR))  # what this code sends
 
 
 # -- strategies --------------------------------------------------------------------------------
@@ -120,7 +120,8 @@ MESSAGE_STRATEGIES: dict[type[m.Message], st.SearchStrategy[m.Message]] = {
     m.TimeSync: st.just(m.TimeSync()),
     m.Info: st.builds(m.Info, model=short_str, serial=short_str, firmware_version=short_str,
                       protocol_version=st.tuples(u8, u8), capabilities=u32, sensor_width=u16, sensor_height=u16,
-                      max_payload=u32, max_width=u16, max_height=u16, calibration_id=u32, usb_speed=u8),
+                      max_payload=u32, max_width=u16, max_height=u16, calibration_id=u32, usb_speed=u8,
+                      stage_limits=st.lists(st.tuples(u16, u16, u16), max_size=3).map(tuple)),
     m.Config: st.builds(m.Config, param_values),
     m.ConfigApplied: st.builds(m.ConfigApplied, param_values),
     m.Triggered: st.builds(m.Triggered, trigger_id=u32, sequence=u32),
@@ -273,9 +274,9 @@ def test_info_from_a_v1_1_device_carries_calibration_id() -> None:
     payload = info_v10_payload(minor=1) + b"\x78\x56\x34\x12"
     out = decode_packet(Packet(m.MsgType.INFO, 1, 0, payload))
     assert out == dataclasses.replace(V10_INFO, protocol_version=(1, 1), calibration_id=0x12345678)
-    assert out.pack() == payload + b"\x00"  # this sender always writes its fields (usb_speed since 1.2), 0 included
+    assert out.pack() == payload + b"\x00\x00"  # this sender always writes its fields (usb_speed, n_limits), 0 included
     uncalibrated = dataclasses.replace(out, calibration_id=0)
-    assert uncalibrated.pack() == info_v10_payload(minor=1) + bytes(5)
+    assert uncalibrated.pack() == info_v10_payload(minor=1) + bytes(6)
     assert m.Info("a", "b", "c", (1, 1), 0, 0, 0, 0, 0, 0).calibration_id == 0  # the default
 
 
@@ -285,7 +286,7 @@ def test_info_from_a_v1_1_device_carries_calibration_id() -> None:
     (b"\x01\x02\x03\x04", 0x04030201, 0),  # 1.1 device: no usb_speed
     (b"\xff\xff\xff\xff", 0xFFFFFFFF, 0),
     (b"\x01\x02\x03\x04\x03", 0x04030201, m.UsbSpeed.HIGH),  # 1.2 device on a USB 2.0 link
-    (b"\x01\x02\x03\x04\x04later v1.x fields", 0x04030201, m.UsbSpeed.SUPER),  # later fields: ignored
+    (b"\x01\x02\x03\x04\x04\x00later v1.x fields", 0x04030201, m.UsbSpeed.SUPER),  # later fields: ignored
 ])
 def test_info_trailing_calibration_id_and_usb_speed(tail: bytes, calibration_id: int, usb_speed: int) -> None:
     out = decode_packet(Packet(m.MsgType.INFO, 0, 0, info_v10_payload() + tail))
@@ -295,12 +296,17 @@ def test_info_trailing_calibration_id_and_usb_speed(tail: bytes, calibration_id:
 @LIGHT
 @given(msg=MESSAGE_STRATEGIES[m.Info])
 def test_info_without_its_trailing_fields_is_the_older_message(msg: m.Info) -> None:
-    """INFO is the 1.0 INFO plus 4 bytes (1.1) plus 1 (1.2): what an older host reads of it is unchanged."""
+    """INFO is the 1.0 INFO plus 4 bytes (1.1) plus 1 (1.2) plus 1 + 6n (1.3): what an older host
+    reads of it is unchanged."""
     payload = msg.pack()
-    assert payload[-5:] == struct.pack("<IB", msg.calibration_id, msg.usb_speed)
-    assert decode_packet(Packet(m.MsgType.INFO, 0, 0, payload[:-5])) == dataclasses.replace(msg, calibration_id=0,
-                                                                                            usb_speed=0)
-    assert decode_packet(Packet(m.MsgType.INFO, 0, 0, payload[:-1])) == dataclasses.replace(msg, usb_speed=0)
+    limits = 1 + 6 * len(msg.stage_limits)
+    assert payload[-5 - limits:-limits] == struct.pack("<IB", msg.calibration_id, msg.usb_speed)
+    v12 = payload[:-limits]
+    assert decode_packet(Packet(m.MsgType.INFO, 0, 0, v12[:-5])) == dataclasses.replace(
+        msg, calibration_id=0, usb_speed=0, stage_limits=())
+    assert decode_packet(Packet(m.MsgType.INFO, 0, 0, v12[:-1])) == dataclasses.replace(msg, usb_speed=0,
+                                                                                        stage_limits=())
+    assert decode_packet(Packet(m.MsgType.INFO, 0, 0, v12)) == dataclasses.replace(msg, stage_limits=())
     assert decode_packet(Packet(m.MsgType.INFO, 0, 0, payload)) == msg
 
 
@@ -869,8 +875,8 @@ def test_samples_cover_every_message_with_a_payload() -> None:
 def test_every_truncation_is_a_protocol_error_naming_the_message(cls) -> None:
     payload = SAMPLES[cls].pack()
     assert decode_packet(Packet(cls.TYPE, 0, 0, payload)) == SAMPLES[cls]
-    # data running to the end may legitimately be shorter; INFO's trailing fields (1.1, 1.2) may be absent
-    limit = HEAD_THEN_DATA.get(cls, len(payload) - 5 if cls is m.Info else len(payload))
+    # data running to the end may legitimately be shorter; INFO's trailing fields (1.1, 1.2, 1.3) may be absent
+    limit = HEAD_THEN_DATA.get(cls, len(payload) - 6 if cls is m.Info else len(payload))
     for n in range(limit):
         with pytest.raises(ProtocolError, match=cls.__name__) as info:
             decode_packet(Packet(cls.TYPE, 0, 0, payload[:n]))

@@ -1,4 +1,4 @@
-"""Golden wire vectors of protocol v1 (currently v1.1): the exact bytes every message class puts on the wire.
+"""Golden wire vectors of protocol v1 (currently v1.3): the exact bytes every message class puts on the wire.
 
 ``tests/golden/protocol_v1.json`` pins, for one representative instance of EVERY class in
 ``protocol.messages.MESSAGES``, the complete frame (header + payload + CRC-32 trailer) as hex.
@@ -16,7 +16,8 @@ History: v1.1 rewrote every vector (header byte 5, ver_minor, 0 -> 1; INFO gaine
 calibration_id) and added the eight CALIB_* messages of SPEC §12. Retiring parameter id 20 (a
 simulator control, SPEC §5.1) shortened the CONFIG vector (every parameter of the table) by one entry.
 v1.2 rewrote every vector again (ver_minor 1 -> 2) and added the four frame-repair messages of SPEC §13
-and the twelve UPDATE_* messages of SPEC §14.
+and the twelve UPDATE_* messages of SPEC §14. v1.3 rewrote every vector again (ver_minor 2 -> 3); INFO
+gained its trailing stage limits (SPEC §4.1).
 """
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ from tests.support import paths
 
 GOLDEN = paths.GOLDEN / "protocol_v1.json"
 SPEC = paths.REPO / "protocol" / "SPEC.md"
-VERSION = (1, 2)  # the version these vectors pin; a change here is a protocol change
+VERSION = (1, 3)  # the version these vectors pin; a change here is a protocol change
 
 _COUNTERS = {name: (i + 1) * 1_000_003 for i, name in enumerate(m.COUNTERS)}
 _COUNTERS["rx_bytes"] = (1 << 64) - 1  # full u64 range
@@ -57,7 +58,8 @@ CASES: list[tuple[m.Message, int, int]] = [
     (m.TimeSync(), 0x7FFF, 0),
     (m.Info(model="STOC-Σ1 stereo", serial="SN-00042-ß", firmware_version="1.2.3+çà", protocol_version=(1, 1),
             capabilities=0xA5A50F0F, sensor_width=1280, sensor_height=960, max_payload=1 << 20,
-            max_width=1280, max_height=960, calibration_id=0x8BADF00D), 1, 0),
+            max_width=1280, max_height=960, calibration_id=0x8BADF00D,
+            stage_limits=((m.Stage.BLOCK_MATCHING, 1280, 960), (m.Stage.SEMI_GLOBAL, 640, 480))), 1, 0),
     (m.Config({p.pid: int(p.default) for p in PARAMS if p.pid <= 21}), 2, 0),  # the 1.1 table
     (m.ConfigApplied({1: 640, 10: -256, 14: 1 << 20, 0xFFFF: -(1 << 31), 0x1234: (1 << 31) - 1}), 0x1234, 0),
     (m.Triggered(trigger_id=0xDEADBEEF, sequence=42), 0xFFFF, 0),
@@ -131,7 +133,7 @@ def _jsonable(v):
 
 
 def fields_json(msg: m.Message) -> dict:
-    return {f.name: _jsonable(getattr(msg, f.name)) for f in dataclasses.fields(msg)}
+    return {f.name: _jsonable(getattr(msg, f.name)) for f in dataclasses.fields(msg) if f.compare}  # not derived views
 
 
 def build_golden() -> dict:
@@ -166,24 +168,27 @@ def test_every_message_class_has_exactly_one_vector() -> None:
     assert sorted(BY_NAME) == classes
     assert len(CASES) == len(BY_NAME)
     assert sorted(NAMES) == classes
-    assert load_golden()["protocol_version"] == [1, 2]
+    assert load_golden()["protocol_version"] == [1, 3]
 
 
 def test_the_code_speaks_the_pinned_version() -> None:
-    assert (VERSION_MAJOR, VERSION_MINOR) == VERSION == (1, 2)
-    assert {(v["hex"][8:10], v["hex"][10:12]) for v in VECTORS} == {("01", "02")}
+    assert (VERSION_MAJOR, VERSION_MINOR) == VERSION == (1, 3)
+    assert {(v["hex"][8:10], v["hex"][10:12]) for v in VECTORS} == {("01", "03")}
 
 
-def test_info_is_the_v1_0_layout_plus_trailing_calibration_id_and_usb_speed() -> None:
+def test_info_is_the_v1_0_layout_plus_trailing_calibration_id_usb_speed_and_stage_limits() -> None:
     """A 1.0 host reads INFO unchanged: the 1.0 fields, then 4 + 1 bytes it ignores (SPEC §4.1, §11)."""
     info, _, _ = BY_NAME["Info"]
     p = bytes.fromhex(vector("Info")["hex"])[HEADER_LEN:-TRAILER_LEN]
     strings = b"".join(len(s.encode()).to_bytes(1, "little") + s.encode()
                        for s in (info.model, info.serial, info.firmware_version))
     v10_part = struct.pack("<BBIHHIHH", 1, 1, 0xA5A50F0F, 1280, 960, 1 << 20, 1280, 960) + strings
-    assert p == v10_part + b"\x0d\xf0\xad\x8b" + b"\x00"  # calibration_id 0x8BADF00D, u32 LE; usb_speed 0
+    limits = b"\x02" + bytes.fromhex("0100 0005 c003") + bytes.fromhex("0200 8002 e001")  # u16 stage, width, height
+    assert p == v10_part + b"\x0d\xf0\xad\x8b" + b"\x00" + limits  # calibration_id 0x8BADF00D, u32 LE; usb_speed 0
+    # as a 1.2 device sends it (no stage limits): read as none
+    assert m.Info.unpack(p[:-len(limits)]) == dataclasses.replace(info, stage_limits=())
     # no trailing field: as a 1.0 device sends it
-    assert m.Info.unpack(v10_part) == dataclasses.replace(info, calibration_id=0)
+    assert m.Info.unpack(v10_part) == dataclasses.replace(info, calibration_id=0, stage_limits=())
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -241,7 +246,7 @@ def test_header_and_trailer_fields_by_hand(name: str) -> None:
     wire = bytes.fromhex(vector(name)["hex"])
     payload = wire[20:-4]
     assert wire[0:4] == b"STOC"
-    assert (wire[4], wire[5]) == (1, 2)  # version 1.2
+    assert (wire[4], wire[5]) == (1, 3)  # version 1.3
     assert wire[6] == 20  # header_len
     assert wire[7] == flags
     assert int.from_bytes(wire[8:10], "little") == msg.TYPE
@@ -254,7 +259,7 @@ def test_header_and_trailer_fields_by_hand(name: str) -> None:
 
 def test_little_endian_fields_literally() -> None:
     wire = bytes.fromhex(vector("SetConfig")["hex"])
-    assert wire[:16] == b"STOC\x01\x02\x14\x01\x03\x00\x34\x12" + struct.pack("<I", 2 + 5 * 6)
+    assert wire[:16] == b"STOC\x01\x03\x14\x01\x03\x00\x34\x12" + struct.pack("<I", 2 + 5 * 6)
     # payload: u16 count, then (u16 id, i32 value) pairs in insertion order
     assert wire[20:22] == b"\x05\x00"
     assert wire[22:28] == b"\x01\x00" + (1280).to_bytes(4, "little")
@@ -263,7 +268,7 @@ def test_little_endian_fields_literally() -> None:
 
     wire = bytes.fromhex(vector("GetInfo")["hex"])
     assert len(wire) == 24
-    assert wire[:18] == b"STOC\x01\x02\x14\x00\x01\x00\x01\x00" + bytes(6)
+    assert wire[:18] == b"STOC\x01\x03\x14\x00\x01\x00\x01\x00" + bytes(6)
     assert wire[20:] == bytes(4)  # CRC-32 of an empty payload
 
     wire = bytes.fromhex(vector("Trigger")["hex"])
@@ -350,12 +355,12 @@ def test_frame_repair_fields_literally() -> None:
     assert wire[8:10] == b"\x0e\x80" and wire[20:-4] == b"\x04\x03\x02\x01\x00\x00\x21\x00\x00\x00"
 
 
-SPEC_GET_INFO = "53 54 4f 43 01 02 14 00 01 00 01 00 00 00 00 00 00 00 9f b6 00 00 00 00"
-SPEC_SET_CONFIG = "53 54 4f 43 01 02 14 00 03 00 02 00 08 00 00 00 00 00 22 ad 01 00 03 00 00 00 00 00 59 ad 1c 2f"
-SPEC_NACK = ("53 54 4f 43 01 02 14 00 ff ff 02 00 1c 00 00 00 00 00 f1 e1"
+SPEC_GET_INFO = "53 54 4f 43 01 03 14 00 01 00 01 00 00 00 00 00 00 00 fc f3 00 00 00 00"
+SPEC_SET_CONFIG = "53 54 4f 43 01 03 14 00 03 00 02 00 08 00 00 00 00 00 41 e8 01 00 03 00 00 00 00 00 59 ad 1c 2f"
+SPEC_NACK = ("53 54 4f 43 01 03 14 00 ff ff 02 00 1c 00 00 00 00 00 92 a4"
              "03 00 04 00 03 00 14 00 66 70 73 3d 30 20 6f 75 74 73 69 64 65 20 31 2e 2e 31 32 30"
              "3f 04 0b fe")
-SPEC_CALIB_READ = ("53 54 4f 43 01 02 14 00 09 00 03 00 09 00 00 00 00 00 90 3b"
+SPEC_CALIB_READ = ("53 54 4f 43 01 03 14 00 09 00 03 00 09 00 00 00 00 00 f3 7e"
                    "00 00 00 00 00 00 f0 00 00 7e 67 cd 53")
 
 
@@ -364,8 +369,8 @@ def test_spec_worked_examples() -> None:
     assert m.encode(m.GetInfo(), 1) == bytes.fromhex(SPEC_GET_INFO)
     # the RESEND retry of it: flags 01, header CRC value 0xA173 (on the wire LE: 73 a1)
     retry = m.encode(m.GetInfo(), 1, FLAG_RESEND)
-    assert retry[7] == 0x01 and int.from_bytes(retry[18:20], "little") == 0x6ED6
-    assert int.from_bytes(bytes.fromhex(SPEC_GET_INFO)[18:20], "little") == 0xB69F
+    assert retry[7] == 0x01 and int.from_bytes(retry[18:20], "little") == 0x2BB5
+    assert int.from_bytes(bytes.fromhex(SPEC_GET_INFO)[18:20], "little") == 0xF3FC
     assert m.encode(m.SetConfig({3: 0}), 2) == bytes.fromhex(SPEC_SET_CONFIG)
     nack = bytes.fromhex(SPEC_NACK)
     assert m.encode(m.Nack(m.MsgType.SET_CONFIG, ErrorCode.OUT_OF_RANGE, 3, "fps=0 outside 1..120"), 2) == nack
@@ -374,7 +379,7 @@ def test_spec_worked_examples() -> None:
     assert m.decode_packet(p) == m.Nack(3, 4, 3, "fps=0 outside 1..120")
     read = bytes.fromhex(SPEC_CALIB_READ)
     assert m.encode(m.CalibRead(m.CalibSource.ACTIVE, 0, m.MAX_CALIB_CHUNK), 3) == read
-    assert int.from_bytes(read[18:20], "little") == 0x3B90 and int.from_bytes(read[-4:], "little") == 0x53CD677E
+    assert int.from_bytes(read[18:20], "little") == 0x7EF3 and int.from_bytes(read[-4:], "little") == 0x53CD677E
 
 
 @pytest.mark.parametrize("example", [SPEC_GET_INFO, SPEC_SET_CONFIG, SPEC_NACK, SPEC_CALIB_READ],

@@ -34,3 +34,14 @@ def as_v1_1_info(p) -> bytes | None:
     info = m.decode_packet(p)
     return m.encode(dataclasses.replace(info, protocol_version=(1, 1),
                                         capabilities=info.capabilities & ~m.Capability.FRAME_REPAIR), p.request_id)
+
+
+def as_v1_2_info(p) -> bytes | None:
+    """Rewrite INFO as a protocol 1.2 device sends it: no SGM bit (1.2 had SGM without one) and the
+    payload ending at usb_speed (no stage limits)."""
+    if p.msg_type != m.MsgType.INFO:
+        return None
+    info = m.decode_packet(p)
+    old = dataclasses.replace(info, protocol_version=(1, 2), capabilities=info.capabilities & ~m.Capability.SGM,
+                              stage_limits=())
+    return encode_frame(m.MsgType.INFO, p.request_id, old.pack()[:-1])  # the n_limits byte a 1.2 device lacks

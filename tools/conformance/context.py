@@ -77,7 +77,8 @@ class Context:
 
     # -- applicability ----------------------------------------------------------------------------
     def has(self, capability: int) -> bool:
-        return bool(self.info.capabilities & capability)
+        """Whether the device has ``capability`` as negotiated (SPEC §11.2: a 1.2 device has SGM)."""
+        return bool(self.info.effective_capabilities & capability)
 
     def require(self, capability: int) -> None:
         if not self.has(capability):

@@ -16,6 +16,7 @@ class Check:
     name: str  # "area.what"
     fn: Callable[["Context"], object]
     family: bool  # fn returns (suffix, check) pairs, each run and reported as name.suffix
+    rules: tuple[str, ...]  # the SPEC rule ids ("R-4.3-1") this check enforces
 
     @property
     def area(self) -> str:
@@ -25,17 +26,19 @@ class Check:
 CHECKS: list[Check] = []
 
 
-def check(name: str) -> Callable[[CheckFn], CheckFn]:
-    """Register a check: it returns a detail line (or None) on pass, raises CheckFailed/CheckSkipped."""
+def check(name: str, *rules: str) -> Callable[[CheckFn], CheckFn]:
+    """Register a check enforcing SPEC ``rules``: it returns a detail line (or None) on pass,
+    raises CheckFailed/CheckSkipped."""
     def register(fn: CheckFn) -> CheckFn:
-        CHECKS.append(Check(name, fn, family=False))
+        CHECKS.append(Check(name, fn, family=False, rules=rules))
         return fn
     return register
 
 
-def family(name: str) -> Callable[[FamilyFn], FamilyFn]:
-    """Register a family: called once, it lists (suffix, check) pairs, e.g. one per parameter."""
+def family(name: str, *rules: str) -> Callable[[FamilyFn], FamilyFn]:
+    """Register a family enforcing SPEC ``rules``: called once, it lists (suffix, check) pairs,
+    e.g. one per parameter."""
     def register(fn: FamilyFn) -> FamilyFn:
-        CHECKS.append(Check(name, fn, family=True))
+        CHECKS.append(Check(name, fn, family=True, rules=rules))
         return fn
     return register

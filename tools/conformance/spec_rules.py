@@ -4,7 +4,8 @@ configuration in which every parameter's limits are legal."""
 from __future__ import annotations
 
 from stereocam.protocol import config_rules
-from stereocam.protocol.config_rules import ConfigRejected, cross_check
+from stereocam.protocol import messages as m
+from stereocam.protocol.config_rules import ConfigRejected, StageLimits, check_stage_limits, cross_check
 from stereocam.protocol.params import BY_NAME, INT32_MAX, INT32_MIN, Param, TriggerMode, defaults
 
 
@@ -13,14 +14,24 @@ CROSS_RULES: dict[str, tuple[str, ...]] = {r.name: r.names for r in config_rules
 """SPEC §5.2, in order: each rule and the parameters it reads."""
 
 
-def cross_refusal(config: dict[str, int], touched: set[str]) -> ConfigRejected | None:
+def cross_refusal(config: dict[str, int], touched: set[str], stage_limits: StageLimits | None = None
+                  ) -> ConfigRejected | None:
     """The refusal SPEC §5.2 demands for ``config`` reached by changing ``touched`` (the NACK's
-    parameter and why), or None. Parameters the device lacks take the table's defaults."""
+    parameter and why), or None; rule 8 against ``stage_limits`` (INFO's). Parameters the device
+    lacks take the table's defaults."""
+    merged, update = {**defaults(), **config}, {BY_NAME[n].pid: config[n] for n in touched}
     try:
-        cross_check({**defaults(), **config}, {BY_NAME[n].pid: config[n] for n in touched})
+        cross_check(merged, update)
+        if stage_limits:
+            check_stage_limits(merged, update, stage_limits)
     except ConfigRejected as refusal:
         return refusal
     return None
+
+
+def stage_limits(info: m.Info) -> dict[int, tuple[int, int]]:
+    """INFO's stage limits as §5.2 rule 8 reads them (a stage without an entry: the device's maxima)."""
+    return {stage: info.stage_limit(stage) for stage in (m.Stage.BLOCK_MATCHING, m.Stage.SEMI_GLOBAL)}
 
 
 def effective_hi(p: Param, max_width: int, max_height: int) -> int:

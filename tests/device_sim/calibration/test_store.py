@@ -103,7 +103,11 @@ def test_read_order_user_then_factory_then_none(path: Path) -> None:
     assert (rec.region, rec.generation, rec.body) == ("user", 2, BIG)
     s.restore_factory()
     assert reopen(path).read().body == SMALL
-    assert s.write_user(body(3)).generation == 1
+    assert s.write_user(body(3)).generation == 3  # never repeats after a restore (SPEC §12.1)
+    assert reopen(path).write_user(body(4)).generation == 4
+    s.restore_factory()
+    s.restore_factory()  # nothing left to invalidate: the tombstones still number the next record
+    assert reopen(path).write_user(body(5)).generation == 5
 
 
 def test_restore_without_factory_record_is_refused(path: Path) -> None:

@@ -21,8 +21,10 @@ from stereocam.protocol.framing import Packet
 from stereocam.protocol.params import BY_ID
 from stereocam.tools import cli
 from stereocam.tools.conformance.checks.config import UNUSED_PARAM_ID
-from tests.support.broken_devices import (RewritingProxy, clamp_into_range, dead_trigger_output, forget_resend,
-                                          stale_slot_report, unchanged, without_capabilities)
+from tests.support.broken_devices import (RewritingProxy, blinding_decoder, clamp_into_range, commit_what_is_staged,
+                                          counting_stop_discards, dead_trigger_output, first_duplicate_wins,
+                                          forget_resend, generations_restart, rescan_timed_decoder, small_sgm_limit,
+                                          stale_slot_report, typed_busy_nack, unchanged, without_features)
 
 # Checks the reference simulator fails today, and why. The suite is right about them; the
 # simulator is fixed elsewhere. Remove an entry when its fix lands: the tests then demand a PASS.
@@ -68,9 +70,12 @@ def test_the_device_conforms(device_url, request, tmp_path):
     cases = ET.parse(junit).getroot().findall("./testsuite/testcase")
     assert sorted(c.get("name") for c in cases) == sorted(names)
     assert {c.get("name") for c in cases if c.find("failure") is not None} == failed
-    if not external:  # the simulator advertises everything: nothing is skipped
+    if not external:  # the simulator advertises everything: nothing is skipped but what only TCP shows
         passed = {c["name"] for c in report["checks"] if c["outcome"] == "PASS"}
-        assert passed == set(names) - failed
+        skipped = {c["name"] for c in report["checks"] if c["outcome"] == "SKIP"}
+        tcp_only = {"link.second_client", "link.first_frame_deadline"}
+        assert skipped == (set() if device_url.startswith("socket://") else tcp_only), skipped
+        assert passed == set(names) - failed - skipped
         assert {"config.limits.width", "config.cross.exposure_vs_frame_period", "stream.free_run_rate",
                 "trigger.software", "link.watchdog", "link.resend_trigger", "link.garbage", "time.sync",
                 "calib.write_restore", "stream.format.64x48", "session.restored"} <= passed
@@ -182,14 +187,93 @@ def test_what_a_device_does_not_advertise_is_skipped_with_the_reason(tcp_sim):
     """A unit without external trigger and calibration storage (its INFO says so): those checks
     are skipped, naming the capability, and the unit still conforms."""
     no = m.Capability.EXTERNAL_TRIGGER | m.Capability.CALIBRATION
-    with RewritingProxy(tcp_sim.url, unchanged, to_host=without_capabilities(no)) as proxy:
-        rc, out = _run_cli([proxy.url, "-k", r"^(identity|trigger\.external|calib|session)"])
+    to_device, to_host = without_features(no)
+    with RewritingProxy(tcp_sim.url, to_device, to_host=to_host) as proxy:
+        rc, out = _run_cli([proxy.url, "-k", r"^(identity|config\.limits\.trigger_mode|trigger\.external|calib|session)"])
     lines = out.splitlines()
     skipped = {ln.split()[1]: ln for ln in lines if ln.startswith("SKIP")}
-    assert set(skipped) == {"trigger.external", "calib.read", "calib.write_restore", "calib.refusals"}, out
+    calib = {"calib.read", "calib.write_restore", "calib.refusals", "calib.generation_after_restore",
+             "calib.partial_commit"}
+    assert set(skipped) == {"trigger.external", *calib}, out
     assert "EXTERNAL_TRIGGER not advertised" in skipped["trigger.external"]
-    assert all("CALIBRATION not advertised" in skipped[n] for n in ("calib.read", "calib.write_restore"))
-    assert rc == 0 and lines[-1].startswith("CONFORMS") and "4 skipped" in lines[-1], out
+    assert all("CALIBRATION not advertised" in skipped[n] for n in calib)
+    assert rc == 0 and lines[-1].startswith("CONFORMS") and "6 skipped" in lines[-1], out
+    # the details say what happened: trigger_mode=2 refused for want of the capability (issue 21 item 2)
+    mode = next(ln for ln in lines if ln.split()[1:2] == ["config.limits.trigger_mode"])
+    assert "2 refused (capability not advertised)" in mode and "0 accepted" in mode, mode
+    unknown = next(ln for ln in lines if ln.split()[1:2] == ["identity.unknown_type"])
+    assert "CALIBRATION UNKNOWN_TYPE" in unknown, unknown
+
+
+@BUILT_HERE
+def test_a_unit_that_hides_a_capability_but_accepts_its_value_fails(tcp_sim):
+    """INFO without EXTERNAL_TRIGGER while trigger_mode=2 is still accepted: SPEC §5.1 demands the
+    refusal (issue 21 item 1), so config.limits.trigger_mode fails; CALIB_READ still known without
+    CALIBRATION fails identity.unknown_type (SPEC §4.0 capability groups)."""
+    _, to_host = without_features(m.Capability.EXTERNAL_TRIGGER | m.Capability.CALIBRATION)
+    with RewritingProxy(tcp_sim.url, unchanged, to_host=to_host) as proxy:
+        rc, out = _run_cli([proxy.url, "--json", "-k", r"^(identity|config\.limits\.trigger_mode$)"])
+    report = json.loads(out)
+    assert rc == 1 and _failures(report) == {"config.limits.trigger_mode", "identity.unknown_type"}, out
+
+
+@BUILT_HERE
+def test_fails_against_a_device_that_does_not_enforce_its_stage_limit(tcp_sim):
+    """INFO stage limits are promises (SPEC §4.1, §5.2 rule 8): SGM at 1280x960 accepted by a unit
+    whose INFO says SGM stops at 640x480 fails config.limits.algorithm."""
+    with RewritingProxy(tcp_sim.url, unchanged, to_host=small_sgm_limit) as proxy:
+        rc, out = _run_cli([proxy.url, "--json", "-k", r"^(identity\.info|config\.limits\.(algorithm|width))$"])
+    report = json.loads(out)
+    assert rc == 1 and _failures(report) == {"config.limits.algorithm"}, out
+    detail = next(c["detail"] for c in report["checks"] if c["name"] == "config.limits.algorithm")
+    assert "accepted, expected NACK OUT_OF_RANGE" in detail, detail
+
+
+# Each check added for issue 21's gaps, failing against a device broken in exactly that way.
+GAP_BREAKAGES = {
+    "config.duplicate_id": dict(rewrite=first_duplicate_wins),
+    "stream.stop_not_dropped": dict(to_host_factory=counting_stop_discards),
+    "link.message_timeout": dict(decoder=rescan_timed_decoder),
+    "link.stray_header_keeps_host": dict(decoder=blinding_decoder),
+    "link.first_frame_deadline": dict(speak_for_silent_host=True),
+    "link.second_client": dict(to_host=typed_busy_nack),
+    "calib.generation_after_restore": dict(to_host_factory=generations_restart),
+    "calib.partial_commit": dict(rewrite=commit_what_is_staged),
+}
+GAP_DETAILS = {
+    "config.duplicate_id": "the last value must be used",
+    "stream.stop_not_dropped": "discarded captures are not drops",
+    "link.message_timeout": "from its own arrival",
+    "link.stray_header_keeps_host": "stray header",
+    "link.first_frame_deadline": "never spoke is still open",
+    "link.second_client": "request_type 1",
+    "calib.generation_after_restore": "can name two commits",
+    "calib.partial_commit": "expected BAD_PAYLOAD",
+}
+
+
+@BUILT_HERE
+@pytest.mark.parametrize("name", sorted(GAP_BREAKAGES))
+def test_each_new_check_fails_against_a_device_broken_that_way(tcp_sim, name):
+    how = dict(GAP_BREAKAGES[name])
+    factory = how.pop("to_host_factory", None)
+    rewrite = how.pop("rewrite", unchanged)
+    if factory is not None:
+        how["to_host"] = factory()
+    with RewritingProxy(tcp_sim.url, rewrite, **how) as proxy:
+        rc, out = _run_cli([proxy.url, "--json", "-k", f"^{name.replace('.', chr(92) + '.')}$"])
+    report = json.loads(out)
+    assert rc == 1 and _failures(report) == {name}, out
+    detail = next(c["detail"] for c in report["checks"] if c["name"] == name)
+    assert GAP_DETAILS[name] in detail, detail
+
+
+@BUILT_HERE
+def test_the_new_checks_pass_against_the_simulator_over_tcp(tcp_sim):
+    rc, out = _run_cli([tcp_sim.url, "--json", "-k", "^(" + "|".join(n.replace(".", r"\.") for n in GAP_BREAKAGES)
+                        + ")$"])
+    report = json.loads(out)
+    assert rc == 0 and {c["name"] for c in report["checks"] if c["outcome"] == "PASS"} >= set(GAP_BREAKAGES), out
 
 
 @BUILT_HERE

@@ -13,6 +13,7 @@ import pytest
 
 from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.handlers.device_info import FACTORY_BUILD
+from stereocam.protocol.framing import VERSION_MINOR
 from stereocam.device_sim.process import ServedSimulator
 from stereocam.tools import cli
 from tests.support.hangs import returns_within
@@ -58,7 +59,7 @@ def test_update_and_signed_rollback_over_tcp(signed):
         assert r.returncode == 1 and "rollback: security counter" in r.stderr and "Traceback" not in r.stderr
         r = stereocam("firmware", "update", sim.url, str(images["rollback"]))
         assert r.returncode == 0 and "1.2.0 -> 1.1.0 in slot A, confirmed" in r.stdout, r.stderr
-        assert "protocol 1.2" in stereocam("info", sim.url).stdout
+        assert f"protocol 1.{VERSION_MINOR}" in stereocam("info", sim.url).stdout
 
 
 def test_an_image_signed_with_another_key_is_refused_over_tcp(signed):

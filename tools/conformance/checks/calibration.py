@@ -35,7 +35,7 @@ def _info_id(ctx: Context) -> int:
     return info.calibration_id
 
 
-@check("calib.read")
+@check("calib.read", "R-12.2-1")
 def read(ctx: Context) -> str:
     """Active = user if stored, else factory; INFO names it; small chunks reassemble the same body;
     reading past the end is empty; an unknown source is refused OUT_OF_RANGE."""
@@ -64,7 +64,7 @@ def read(ctx: Context) -> str:
     return f"records: {held}; active {_id(active):08x}"
 
 
-@check("calib.write_restore")
+@check("calib.write_restore", "R-12.4-3", "R-12.5-1")
 def write_restore(ctx: Context) -> str:
     """A user record written, committed and read back byte for byte, in force (INFO and the next
     capture); restore puts the factory record back in force; then the records found are put back."""
@@ -132,7 +132,7 @@ def _leave_as_found(ctx: Context, user: StoredCalibration | None) -> int:
     return _info_id(ctx)
 
 
-@check("calib.refusals")
+@check("calib.refusals", "R-12.3-1", "R-12.4-2")
 def refusals(ctx: Context) -> str:
     """Bad staging and commits are refused with the SPEC's codes and store nothing."""
     ctx.require(m.Capability.CALIBRATION)
@@ -160,3 +160,60 @@ def refusals(ctx: Context) -> str:
     expect({k: (_id(v), v and v.generation) for k, v in after.items()}
            == {k: (_id(v), v and v.generation) for k, v in before.items()}, "a refused request changed the records")
     return f"{sum(c is not None for _, c, _ in cases)} bad requests refused with the right codes, records unchanged"
+
+
+def _test_calibration(ctx: Context) -> tuple[StoredCalibration, StoredCalibration | None, StereoCalibration]:
+    """The factory record, the user record found, and a usable calibration unlike both (a focal
+    length nudged); CheckSkipped without a factory record (a test user record could not be removed)."""
+    ctx.require(m.Capability.CALIBRATION)
+    found = _records(ctx)
+    factory, user = found["factory"], found["user"]
+    if factory is None:
+        raise CheckSkipped("no factory record: a test user record could not be removed again")
+    base = (user or factory).calibration
+    k = base.K_left.copy()
+    k[0, 0] += 0.5
+    return factory, user, dataclasses.replace(base, K_left=k)
+
+
+@check("calib.generation_after_restore", "R-12.1-1")
+def generation_after_restore(ctx: Context) -> str:
+    """SPEC §12.1: a user record, CALIB_RESTORE, another user record: the second's generation is
+    higher than the first's (generations never repeat, so (id, generation) names one commit)."""
+    factory, user, test = _test_calibration(ctx)
+    try:
+        first = write_calibration(ctx.s.call, test, "user")
+        restored = ctx.s.call(m.CalibRestore())
+        expect(isinstance(restored, m.CalibRestored), f"CALIB_RESTORE answered {restored!r}")
+        second = write_calibration(ctx.s.call, test, "user")
+    finally:
+        left = _leave_as_found(ctx, user)
+    expect(second.generation > first.generation,
+           f"user generation {second.generation} after a restore, the invalidated record had {first.generation}: "
+           f"the pair ({second.calibration_id:08x}, {second.generation}) can name two commits")
+    expect(left == _id(user or factory), f"the unit holds {left:08x}, it was found holding {_id(user or factory):08x}")
+    return f"user generation {first.generation}, restore, then {second.generation}"
+
+
+@check("calib.partial_commit", "R-12.4-1")
+def partial_commit(ctx: Context) -> str:
+    """SPEC §12.4 step 3: a usable body staged in a staging announced 16 bytes longer, committed with
+    the staged length and CRC: refused BAD_PAYLOAD (the staging is incomplete), nothing stored."""
+    factory, user, test = _test_calibration(ctx)
+    body = test.to_bytes()
+    before = _records(ctx)
+    try:
+        staged = ctx.s.call(m.CalibWrite(0, len(body) + 16, body))
+        expect(isinstance(staged, m.CalibWritten) and staged.staged == len(body),
+               f"CALIB_WRITE of {len(body)} of {len(body) + 16} bytes answered {staged!r}")
+        r = ctx.s.exchange(m.CalibCommit(m.CalibSource.USER, len(body), zlib.crc32(body)))
+        after = _records(ctx)
+    finally:
+        left = _leave_as_found(ctx, user)
+    expect(isinstance(r, m.Nack) and r.code == ErrorCode.BAD_PAYLOAD,
+           f"CALIB_COMMIT of {len(body)} staged bytes of an announced {len(body) + 16}: "
+           f"{describe_nack(r) if isinstance(r, m.Nack) else r!r}, expected BAD_PAYLOAD")
+    expect({k: _id(v) for k, v in after.items()} == {k: _id(v) for k, v in before.items()},
+           "a refused commit of an incomplete staging changed the records")
+    expect(left == _id(user or factory), f"the unit holds {left:08x}, it was found holding {_id(user or factory):08x}")
+    return f"commit of {len(body)} of {len(body) + 16} staged bytes refused BAD_PAYLOAD, records unchanged"

@@ -16,7 +16,7 @@ from ..wire import describe_nack
 UNUSED_PARAM_ID = 0x7FFE  # never assigned
 
 
-@check("config.get")
+@check("config.get", "R-4.3-3")
 def config_lists_every_parameter(ctx: Context) -> str:
     """CONFIG: ascending ids, every value valid on its own, the table's parameters present."""
     ids = list(ctx.found)
@@ -30,7 +30,7 @@ def config_lists_every_parameter(ctx: Context) -> str:
     return f"{len(ids)} parameters" + (f"; ids {unknown} unknown to this host (not probed)" if unknown else "")
 
 
-@family("config.limits")
+@family("config.limits", "R-4.1-2", "R-4.3-3", "R-5.1-1", "R-5.1-2")
 def limits(ctx: Context) -> Iterator[tuple[str, CheckFn]]:
     """One check per advertised parameter: its limits accepted, beyond them refused naming it."""
     for name, p in ctx.params.items():
@@ -39,26 +39,30 @@ def limits(ctx: Context) -> Iterator[tuple[str, CheckFn]]:
 
 def _limit_check(p: Param) -> CheckFn:
     def run(ctx: Context) -> str:
-        base = ctx.apply(**spec_rules.roomy_base(ctx.info.max_width, ctx.info.max_height, set(ctx.params)))
-        hi = spec_rules.effective_hi(p, ctx.info.max_width, ctx.info.max_height)
+        max_w, max_h = ctx.info.stage_limit(m.Stage.BLOCK_MATCHING)  # the roomy base block-matches
+        base = ctx.apply(**spec_rules.roomy_base(max_w, max_h, set(ctx.params)))
+        hi = spec_rules.effective_hi(p, max_w, max_h)
         accept, refuse = spec_rules.limit_probes(p, hi)
+        lacking = spec_rules.optional_values(ctx.info.effective_capabilities)
+        outcomes = []
         for value in accept:
-            if (p.name, value) in spec_rules.optional_values(ctx.info.capabilities):
-                _accepted_or_refused(ctx, p, value, base)
+            if (p.name, value) in lacking:  # SPEC §5.1 capability-bound value: refused, exactly
+                _expect_refused(ctx, p, value, ErrorCode.OUT_OF_RANGE, "its capability is not advertised")
+                outcomes.append(f"{value} refused (capability not advertised)")
             else:
-                _expect_outcome(ctx, p, value, base)
+                outcomes.append(f"{value} {_expect_outcome(ctx, p, value, base)}")
         for value, why in refuse:
             _expect_refused(ctx, p, value, ErrorCode.OUT_OF_RANGE, why)
-        return f"{' and '.join(map(str, accept))} accepted; {len(refuse)} values beyond refused OUT_OF_RANGE"
+        return f"{'; '.join(outcomes)}; {len(refuse)} values beyond refused OUT_OF_RANGE"
     return run
 
 
-def _expect_outcome(ctx: Context, p: Param, value: int, base: dict[str, int]) -> None:
-    """A value within the table: accepted, unless a §5.2 rule forbids it with this base."""
-    refusal = spec_rules.cross_refusal({**base, p.name: value}, {p.name})
+def _expect_outcome(ctx: Context, p: Param, value: int, base: dict[str, int]) -> str:
+    """A value within the table: accepted, unless a §5.2 rule forbids it with this base; says which."""
+    refusal = spec_rules.cross_refusal({**base, p.name: value}, {p.name}, spec_rules.stage_limits(ctx.info))
     if refusal is not None:
         _expect_refused(ctx, p, value, ErrorCode.OUT_OF_RANGE, str(refusal), refusal.param_id)
-        return
+        return f"refused as §5.2 demands ({refusal.param})"
     r = ctx.set(**{p.name: value})
     if isinstance(r, m.Nack):
         raise CheckFailed(f"{p.name}={value} (within {p.lo}..{p.hi}) refused: {describe_nack(r)}")
@@ -69,18 +73,7 @@ def _expect_outcome(ctx: Context, p: Param, value: int, base: dict[str, int]) ->
     expect({BY_ID[k].name: v for k, v in r.values.items() if k in BY_ID} == now,
            "CONFIG_APPLIED differs from the GET_CONFIG that follows")
     ctx.apply(**{p.name: base[p.name]})
-
-
-def _accepted_or_refused(ctx: Context, p: Param, value: int, base: dict[str, int]) -> None:
-    """A value a device may lack (its capability not advertised): accepted, or refused OUT_OF_RANGE."""
-    before = ctx.config()
-    r = ctx.set(**{p.name: value})
-    if isinstance(r, m.Nack):
-        expect(r.code == ErrorCode.OUT_OF_RANGE and r.param_id == p.pid,
-               f"{p.name}={value} (capability not advertised): {describe_nack(r)}, expected OUT_OF_RANGE or accepted")
-        expect(ctx.config() == before, f"{p.name}={value} refused but the configuration changed")
-    else:
-        ctx.apply(**{p.name: base[p.name]})
+    return "accepted"
 
 
 def _expect_refused(ctx: Context, p: Param, value: int, code: ErrorCode, why: str, blamed: int | None = None) -> None:
@@ -97,7 +90,7 @@ def _expect_refused(ctx: Context, p: Param, value: int, code: ErrorCode, why: st
                             f"{ {k: (before.get(k), v) for k, v in after.items() if before.get(k) != v} }")
 
 
-@check("config.unknown_param")
+@check("config.unknown_param", "R-4.3-2")
 def unknown_param(ctx: Context) -> str:
     """An id the device does not have: NACK UNKNOWN_PARAM naming that id; nothing changes."""
     before = ctx.config()
@@ -111,7 +104,7 @@ def unknown_param(ctx: Context) -> str:
     return f"id {UNUSED_PARAM_ID} NACKed UNKNOWN_PARAM, the valid entry beside it not applied"
 
 
-@check("config.all_or_nothing")
+@check("config.all_or_nothing", "R-4.3-1", "R-4.3-2")
 def all_or_nothing(ctx: Context) -> str:
     """One bad entry refuses the whole update, whatever its position; an empty update changes nothing."""
     ctx.require_params("gain", "fps")
@@ -128,18 +121,53 @@ def all_or_nothing(ctx: Context) -> str:
     expect(isinstance(r, m.ConfigApplied), f"empty SET_CONFIG answered {r!r}")
     assert isinstance(r, m.ConfigApplied)
     expect(r.values == ctx.s.call(m.GetConfig()).values, "empty SET_CONFIG: CONFIG_APPLIED differs from CONFIG")
-    payload = b"\x02\x00" + _entry("gain", new_gain) + _entry("gain", before["gain"])  # a dict cannot hold this
-    dup = ctx.s.wait_reply(ctx.s.send_frame(m.MsgType.SET_CONFIG, payload)).message
-    expect(isinstance(dup, m.ConfigApplied) and ctx.config()["gain"] == before["gain"],
-           "an id given twice: the last value must be used")
-    return "a bad entry first or last refuses the whole update; empty update = CONFIG; duplicate id: last wins"
+    return "a bad entry first or last refuses the whole update; empty update = CONFIG"
 
 
-def _entry(name: str, value: int) -> bytes:
-    return BY_NAME[name].pid.to_bytes(2, "little") + value.to_bytes(4, "little", signed=True)
+def _entries(*pairs: tuple[str, int]) -> bytes:
+    """A raw param list, duplicates kept (a dict cannot hold them)."""
+    return len(pairs).to_bytes(2, "little") + b"".join(
+        BY_NAME[n].pid.to_bytes(2, "little") + v.to_bytes(4, "little", signed=True) for n, v in pairs)
 
 
-@check("config.live_while_streaming")
+def _set_raw(ctx: Context, *pairs: tuple[str, int]) -> m.Message | None:
+    return ctx.s.wait_reply(ctx.s.send_frame(m.MsgType.SET_CONFIG, _entries(*pairs))).message
+
+
+@check("config.duplicate_id", "R-4.3-1")
+def duplicate_id(ctx: Context) -> str:
+    """SPEC §4.3: an id given twice is checked at every occurrence and the last value is used; while
+    streaming a non-live entry is compared with the value in force before the request."""
+    ctx.require_params("gain", "width")
+    gain, width = BY_NAME["gain"], BY_NAME["width"]
+    before = ctx.config()
+    a, b = (gain.lo + 1, gain.lo + 2) if before["gain"] != gain.lo + 2 else (gain.lo + 2, gain.lo + 1)
+    r = _set_raw(ctx, ("gain", a), ("gain", b))
+    expect(isinstance(r, m.ConfigApplied) and r.values.get(gain.pid) == b and ctx.config()["gain"] == b,
+           f"gain={a} then gain={b} in one SET_CONFIG: {describe_nack(r) if isinstance(r, m.Nack) else 'applied'}, "
+           f"gain now {ctx.config()['gain']}; the last value must be used")
+    r = _set_raw(ctx, ("gain", gain.hi + 1), ("gain", a))
+    expect(isinstance(r, m.Nack) and r.code == ErrorCode.OUT_OF_RANGE and r.param_id == gain.pid,
+           f"gain={gain.hi + 1} then gain={a}: {describe_nack(r) if isinstance(r, m.Nack) else 'accepted'}, expected "
+           "OUT_OF_RANGE naming gain (every occurrence is checked)")
+    expect(ctx.config()["gain"] == b, "a refused SET_CONFIG with a duplicate id changed gain")
+    now = before["width"]
+    other = now - width.step if now - width.step >= width.lo else now + width.step
+    ctx.s.call(m.Start())
+    try:
+        r = _set_raw(ctx, ("width", other), ("width", now))
+        expect(isinstance(r, m.Nack) and r.code == ErrorCode.BAD_STATE and r.param_id == width.pid,
+               f"while streaming, width={other} then width={now} (in force): "
+               f"{describe_nack(r) if isinstance(r, m.Nack) else 'accepted'}, expected BAD_STATE naming width")
+        r = _set_raw(ctx, ("width", now), ("width", now))
+        expect(isinstance(r, m.ConfigApplied), f"while streaming, width={now} twice (in force): {r!r}")
+    finally:
+        ctx.stop()
+    return (f"gain {a},{b} -> {b}; gain {gain.hi + 1},{a} refused OUT_OF_RANGE; streaming width {other},{now} "
+            f"refused BAD_STATE, {now},{now} applied")
+
+
+@check("config.live_while_streaming", "R-4.3-2")
 def live_while_streaming(ctx: Context) -> str:
     """While streaming: a non-live parameter change is NACKed BAD_STATE naming it, its current value
     is accepted, a live parameter changes."""

@@ -53,7 +53,7 @@ CASES: dict[str, list[Case]] = {
 }
 
 
-@family("config.cross")
+@family("config.cross", "R-5.2-1")
 def cross_rules(ctx: Context) -> Iterator[tuple[str, CheckFn]]:
     for rule in spec_rules.CROSS_RULES:
         yield rule, _rule_check(rule)
@@ -78,7 +78,7 @@ def _rule_check(rule: str) -> CheckFn:
 def _case(ctx: Context, setup: dict[str, int], probe: dict[str, int]) -> bool:
     """Apply ``setup``, send ``probe``; True if it was (rightly) refused."""
     cfg = ctx.apply(**{k: int(v) for k, v in setup.items()})
-    refusal = spec_rules.cross_refusal({**cfg, **probe}, set(probe))
+    refusal = spec_rules.cross_refusal({**cfg, **probe}, set(probe), spec_rules.stage_limits(ctx.info))
     r = ctx.set(**probe)
     shown = ", ".join(f"{k}={int(v)}" for k, v in probe.items()) + (f" after {setup}" if setup else "")
     if refusal is None:

@@ -26,7 +26,7 @@ def formats(max_width: int, max_height: int) -> list[tuple[int, int]]:
     return sorted(set(fit) | {largest})
 
 
-@family("stream.format")
+@family("stream.format", "R-8.2-1")
 def each_format(ctx: Context) -> Iterator[tuple[str, CheckFn]]:
     ctx.require_params("width", "height", "trigger_mode", "fps")
     for w, h in formats(ctx.info.max_width, ctx.info.max_height):

@@ -17,7 +17,7 @@ KEPT_ALIVE_S = 1.0
 CHECK_SLACK_S = 0.35  # the device checks at least every 50 ms (ref) and between captures
 
 
-@check("link.watchdog")
+@check("link.watchdog", "R-9-2")
 def watchdog(ctx: Context) -> str:
     """Heartbeats keep a stream alive; silence longer than heartbeat_timeout_ms stops it (as STOP),
     counted in heartbeat_timeouts, and no capture begins after that."""
@@ -47,7 +47,7 @@ def watchdog(ctx: Context) -> str:
     return f"kept alive {KEPT_ALIVE_S:.1f} s by heartbeats ({len(caps)} captures), stopped by {WATCHDOG_MS} ms of silence"
 
 
-@check("link.resend_replayed")
+@check("link.resend_replayed", "R-7-1", "R-7-2")
 def resend_replayed(ctx: Context) -> str:
     """A RESEND of an answered request gets the cached reply, byte for byte, and is not executed:
     TIME keeps the first time, a SET_CONFIG does not undo a later change; without RESEND the
@@ -82,7 +82,7 @@ def resend_replayed(ctx: Context) -> str:
     return f"TIME and SET_CONFIG replayed, not re-executed (resends_replayed +{d})"
 
 
-@check("link.resend_trigger")
+@check("link.resend_trigger", "R-7-2")
 def resend_trigger(ctx: Context) -> str:
     """A resent TRIGGER: the same TRIGGERED, the trigger counter +1 only, one capture."""
     ctx.require(m.Capability.SOFTWARE_TRIGGER)
@@ -108,3 +108,4 @@ def resend_trigger(ctx: Context) -> str:
     ctx.note_captures(caps)
     expect(len(caps) == 1, f"{len(caps)} captures for one TRIGGER and its RESEND")
     return f"one trigger (id {first.message.trigger_id}), one capture, replay identical"  # type: ignore[union-attr]
+

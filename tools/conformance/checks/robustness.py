@@ -8,8 +8,9 @@ import time
 import zlib
 
 from stereocam.protocol import messages as m
+from stereocam.protocol.errors import StereoCamError
 from stereocam.protocol.framing import DEVICE_MESSAGE_TIMEOUT, FLAG_RESEND, MAGIC, header_crc
-from stereocam.protocol.params import BY_NAME
+from stereocam.protocol.params import BY_NAME, TriggerMode
 
 from ..budget import budget
 from ..context import Context
@@ -53,7 +54,7 @@ def _no_reply(ctx: Context, rid: int) -> bool:
     return False
 
 
-@check("link.garbage")
+@check("link.garbage", "R-3-1", "R-3.1-1")
 def garbage(ctx: Context) -> str:
     """Random bytes and frames with a bad header or payload CRC are dropped and counted; the device
     executes none of them and answers the next request in time."""
@@ -79,7 +80,7 @@ def garbage(ctx: Context) -> str:
     return f"answered within {took * 1e3:.0f} ms; counted {d}"
 
 
-@check("link.versions_and_extensions")
+@check("link.versions_and_extensions", "R-2-1", "R-2-2", "R-3-1", "R-11-1", "R-11.2-1")
 def versions(ctx: Context) -> str:
     """Any minor and a header extension (header_len 21..64) accepted; another major and
     header_len outside 20..64 dropped without an answer, counted."""
@@ -103,7 +104,7 @@ def versions(ctx: Context) -> str:
     return "minor 9 + extension answered; major 2, header_len 19 and 65 dropped and counted"
 
 
-@check("link.oversize_header")
+@check("link.oversize_header", "R-3-2")
 def oversize(ctx: Context) -> str:
     """A CRC-valid header announcing more than INFO.max_payload is rejected from the header alone
     (never buffered): the next request is answered in time, rx_oversize counts it."""
@@ -116,7 +117,7 @@ def oversize(ctx: Context) -> str:
     return f"answered within {took * 1e3:.0f} ms after headers of {ctx.info.max_payload + 1} and 2^32-1 bytes"
 
 
-@check("link.large_length_header")
+@check("link.large_length_header", "R-3-3")
 def large_length(ctx: Context) -> str:
     """A CRC-valid header announcing the largest legal payload, then nothing: the device must not
     wait for that payload forever (issue 9): it answers a following GET_INFO (resent every
@@ -143,3 +144,81 @@ def large_length(ctx: Context) -> str:
            f"DEAF: no answer within {allowed:.3g} s after a CRC-valid header announcing {n} payload bytes "
            f"(the device waits for the payload; it must bound that wait, issue 9)")
     return f"answered within {took * 1e3:.0f} ms after a header announcing {n} bytes"
+
+
+STRAY_HEADERS = 8  # chained stray headers: T in all for a decoder timing by arrival, 8 T for one timing by rescan
+STRAY_PAYLOAD = 1024  # what each announces: more than every byte sent behind them, within any max_payload
+MESSAGE_TIMEOUT_BUDGET_S = DEVICE_MESSAGE_TIMEOUT + 1.0
+
+
+@check("link.message_timeout", "R-3-4", "R-3-5")
+def message_timeout(ctx: Context) -> str:
+    """SPEC §3: CRC-valid headers announcing payloads that never come, sent back to back with a
+    GET_INFO behind them: each header's wait runs from its own arrival, so the GET_INFO is answered
+    within T (not T per header), and rx_message_timeouts counts the abandoned frames."""
+    s = ctx.s
+    n = min(STRAY_PAYLOAD, ctx.info.max_payload)
+    before = ctx.status()
+    rid = s.new_id()
+    s.expect_reply(rid, m.MsgType.GET_INFO)
+    stray = b"".join(header(m.MsgType.SET_CONFIG, s.new_id(), n) for _ in range(STRAY_HEADERS))
+    t0 = time.monotonic()
+    s.send_bytes(stray + frame(m.MsgType.GET_INFO, rid))
+    allowed = budget(MESSAGE_TIMEOUT_BUDGET_S)
+    answered = None
+    try:
+        while answered is None and time.monotonic() - t0 < allowed:
+            try:  # a device need not poll its decoder while idle: later bytes let it expire the wait
+                answered = s.wait_reply(rid, min(0.2, allowed - (time.monotonic() - t0)))
+            except TimeoutError:
+                s.send(m.GetInfo(), rid, FLAG_RESEND)
+    finally:
+        if answered is None:
+            s.send_bytes(bytes(n + 4))  # completes the frame being waited on: the decoder resynchronises
+    took = time.monotonic() - t0
+    expect(answered is not None,
+           f"no answer within {allowed:.3g} s behind {STRAY_HEADERS} stray headers announcing {n} bytes each: "
+           "each header's wait must run from its own arrival (T in all), not from when a rescan reached it")
+    counters = ctx.status().counters
+    if "rx_message_timeouts" in counters:
+        d = counters["rx_message_timeouts"] - before.counters["rx_message_timeouts"]
+        expect(d >= 1, f"rx_message_timeouts +{d} after abandoned frames")
+    return f"answered after {took * 1e3:.0f} ms behind {STRAY_HEADERS} stray headers (T = {DEVICE_MESSAGE_TIMEOUT} s)"
+
+
+STRAY_WATCHDOG_MS = 500  # below T + a heartbeat period: a blinded decoder would trip it
+STRAY_KEEPALIVE_S = 2.0
+STRAY_HEARTBEAT_S = 0.15
+
+
+@check("link.stray_header_keeps_host", "R-9-1")
+def stray_header_keeps_host(ctx: Context) -> str:
+    """SPEC §9: a stray header (a CRC-valid header whose payload never comes) while streaming with
+    heartbeat_timeout_ms = 500 and heartbeats every 150 ms: the decoder waits up to T (1 s) for the
+    payload, but that wait is not silence, so neither the watchdog nor the link timeout fires."""
+    ctx.require_params("heartbeat_timeout_ms", "trigger_mode", "fps")
+    ctx.apply(heartbeat_timeout_ms=STRAY_WATCHDOG_MS, trigger_mode=int(TriggerMode.FREE_RUN), fps=5)
+    before = ctx.status()
+    ctx.s.call(m.Start())
+    ctx.s.send_bytes(header(m.MsgType.SET_CONFIG, ctx.s.new_id(), min(1024, ctx.info.max_payload)))
+    end = time.monotonic() + STRAY_KEEPALIVE_S
+    while time.monotonic() < end and ctx.s.alive:
+        try:
+            ctx.s.send(m.Heartbeat())  # answered late while the decoder waits: not waited for here
+        except StereoCamError:
+            break
+        time.sleep(STRAY_HEARTBEAT_S)
+    dropped = not ctx.s.alive
+    if dropped:
+        ctx.reconnect()
+    after = ctx.status()
+    ctx.stop()
+    d = after.counters["heartbeat_timeouts"] - before.counters["heartbeat_timeouts"]
+    expect(not dropped, "the device dropped the link of a host that sent HEARTBEAT every "
+                        f"{STRAY_HEARTBEAT_S * 1e3:.0f} ms after one stray header")
+    expect(after.streaming and d == 0,
+           f"after one stray header the watchdog stopped the stream (streaming={after.streaming}, "
+           f"heartbeat_timeouts +{d}) although HEARTBEATs arrived every {STRAY_HEARTBEAT_S * 1e3:.0f} ms "
+           f"(heartbeat_timeout_ms={STRAY_WATCHDOG_MS})")
+    return (f"streaming on for {STRAY_KEEPALIVE_S:.1f} s after a stray header with heartbeat_timeout_ms="
+            f"{STRAY_WATCHDOG_MS}, link kept")

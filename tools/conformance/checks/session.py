@@ -7,7 +7,7 @@ from ..registry import check
 from ..results import expect
 
 
-@check("session.framing")
+@check("session.framing", "R-7-3")
 def framing(ctx: Context) -> str:
     """Replies echo the request id with flags 0 and the matching type (or NACK naming the request);
     events carry request id 0; every payload decodes (SPEC §4.0, §7)."""
@@ -18,7 +18,7 @@ def framing(ctx: Context) -> str:
     return f"{st.packets} device messages, all well formed; host decoder dropped {st.dropped}{again}"
 
 
-@check("session.sequences")
+@check("session.sequences", "R-8.1-1")
 def sequences(ctx: Context) -> str:
     """Across every stream of the run: sequence numbers and device timestamps never went back."""
     expect(not ctx.sequence_log, "; ".join(ctx.sequence_log[:3]))

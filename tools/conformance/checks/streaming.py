@@ -27,7 +27,7 @@ def free_run(ctx: Context) -> StreamRun:
     return run
 
 
-@check("stream.free_run_rate")
+@check("stream.free_run_rate", "R-8.5-3")
 def free_run_rate(ctx: Context) -> str:
     """Exposures every 1/fps of device time (within 5 %), trigger id 0."""
     run = free_run(ctx)
@@ -45,7 +45,7 @@ def free_run_rate(ctx: Context) -> str:
             f"({(period * fps - 1) * 100:+.2f} %)")
 
 
-@check("stream.sequence_and_time")
+@check("stream.sequence_and_time", "R-8.4-1", "R-10-1")
 def sequence_and_time(ctx: Context) -> str:
     """Sequence numbers and device timestamps rise strictly, across streams too (never reset by START)."""
     run = free_run(ctx)
@@ -54,7 +54,7 @@ def sequence_and_time(ctx: Context) -> str:
         if run.captures else "no captures"
 
 
-@check("stream.capture_integrity")
+@check("stream.capture_integrity", "R-4.6-3", "R-8.1-1")
 def capture_integrity(ctx: Context) -> str:
     """Left, right and disparity of one capture under one sequence between its FRAME_BEGIN and
     FRAME_END, whole planes, byte counts that match; nothing after STOPPED."""
@@ -90,7 +90,7 @@ def capture_problems(captures: list[Capture], cfg: dict[str, int]) -> list[str]:
     return problems
 
 
-@check("stream.disparity_description")
+@check("stream.disparity_description", "R-4.9-1")
 def disparity_description(ctx: Context) -> str:
     """FRAME_BEGIN describes the disparity as configured: format 1, subpixel 16, min/num as set,
     invalid = (min - 1) x 16; rectified frames carry geometry, raw ones none and no disparity;
@@ -123,7 +123,7 @@ def disparity_description(ctx: Context) -> str:
            f"{cfg['num_disparities']} subpixel 16 as configured"
 
 
-@check("stream.raw_output")
+@check("stream.raw_output", "R-4.9-2")
 def raw_output(ctx: Context) -> str:
     """Where RAW_OUTPUT is advertised, rectify=0 gives raw frames: RECTIFIED clear, geometry 0, no
     disparity plane whatever ``outputs`` asks, and the calibration in force still named."""
@@ -161,7 +161,7 @@ def _check_values(c: Capture) -> None:
                           f"(e.g. {int(outside[0])}) that are not the invalid marker {b.invalid_disparity}")
 
 
-@check("stream.drop_accounting")
+@check("stream.drop_accounting", "R-8.4-1")
 def drop_accounting(ctx: Context) -> str:
     """Device counters and what the host received add up (SPEC §4.7, §8.4)."""
     problems, summary = accounting(free_run(ctx), ctx)

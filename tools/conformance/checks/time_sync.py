@@ -14,7 +14,7 @@ SAMPLES = 26
 ENDS = 6  # the best-rtt sample of the first and of the last few bound the rate
 
 
-@check("time.sync")
+@check("time.sync", "R-4.8-1", "R-10-1")
 def time_sync(ctx: Context) -> str:
     """TIME_SYNC round trips over a few seconds: device time rises strictly, and its rate against
     the host's monotonic clock, bounded by each sample's round trip, admits 1 +- 1000 ppm."""

@@ -24,7 +24,7 @@ def _software(ctx: Context) -> None:
     ctx.apply(trigger_mode=int(TriggerMode.SOFTWARE))
 
 
-@check("trigger.software")
+@check("trigger.software", "R-4.6-1", "R-8.5-1")
 def software(ctx: Context) -> str:
     """Each TRIGGER: the next trigger id (+1), a new sequence, and one capture carrying both."""
     _software(ctx)
@@ -59,7 +59,7 @@ def software(ctx: Context) -> str:
     return f"trigger ids {ids}, sequences {seqs}, one capture each"
 
 
-@check("trigger.refusals")
+@check("trigger.refusals", "R-4.4-1")
 def refusals(ctx: Context) -> str:
     """TRIGGER while stopped, or while streaming in free-run: NACK BAD_STATE naming trigger_mode."""
     _software(ctx)
@@ -83,7 +83,7 @@ def refusals(ctx: Context) -> str:
     return "stopped and free-run TRIGGERs NACKed BAD_STATE naming trigger_mode, not counted"
 
 
-@check("trigger.burst")
+@check("trigger.burst", "R-4.4-2", "R-4.4-3")
 def burst(ctx: Context) -> str:
     """TRIGGERs sent back to back: each TRIGGERED or NACK BUSY; a refused one consumes no sequence
     number, so accepted ones have consecutive sequences; one capture per accepted trigger."""
@@ -110,10 +110,53 @@ def burst(ctx: Context) -> str:
     ctx.note_captures(caps)
     got = {(c.sequence, c.begin.trigger_id) for c in caps if c.end is not None}
     expect(got == set(zip(seqs, tids)), f"captures {sorted(got)} for accepted triggers {list(zip(seqs, tids))}")
-    return f"{len(accepted)} accepted, {len(busy)} BUSY; sequences {seqs[0]}..{seqs[-1]} consecutive"
+    paced = _paced_triggers(ctx)
+    return (f"{len(accepted)} accepted, {len(busy)} BUSY; sequences {seqs[0]}..{seqs[-1]} consecutive; "
+            f"{paced} TRIGGERs each sent after the last one's FRAME_BEGIN all accepted")
 
 
-@check("trigger.external")
+def _paced_triggers(ctx: Context, count: int = 3) -> int:
+    """SPEC §4.4: a capture stops being pending when its exposure is taken, so a host that waits for
+    each FRAME_BEGIN before the next TRIGGER is never refused BUSY (whatever the queue depth)."""
+    ctx.s.captures.clear()
+    ctx.s.call(m.Start())
+    try:
+        for k in range(count):
+            r = ctx.s.exchange(m.Trigger())
+            expect(isinstance(r, m.Triggered), f"TRIGGER {k + 1} sent after the previous capture's FRAME_BEGIN: "
+                                               f"{describe_nack(r) if isinstance(r, m.Nack) else r!r}")
+            assert isinstance(r, m.Triggered)
+            deadline = time.monotonic() + budget(FRAME_WAIT_S)
+            while ctx.s.captures.find(r.sequence) is None:
+                expect(time.monotonic() < deadline, f"no FRAME_BEGIN for sequence {r.sequence} within "
+                                                    f"{budget(FRAME_WAIT_S):.3g} s")
+                time.sleep(0.005)
+    finally:
+        ctx.stop()
+    return count
+
+
+@check("stream.stop_not_dropped", "R-4.6-2")
+def stop_not_dropped(ctx: Context) -> str:
+    """SPEC §4.6: captures a STOP discards (pending triggers, a free-run stream stopped at once) are
+    not counted frames_dropped; the stream they were part of dropped nothing."""
+    _software(ctx)
+    before = ctx.status()
+    ctx.s.call(m.Start())
+    try:
+        rids = [ctx.s.send(m.Trigger()) for _ in range(BURST)]
+        accepted = sum(isinstance(ctx.s.wait_reply(rid).message, m.Triggered) for rid in rids)
+    finally:
+        ctx.stop()
+    mid = ctx.status()
+    sent = mid.counters["frames_sent"] - before.counters["frames_sent"]
+    dropped = mid.counters["frames_dropped"] - before.counters["frames_dropped"]
+    expect(dropped == 0, f"frames_dropped +{dropped} after {accepted} accepted TRIGGERs and a STOP "
+                         f"({sent} frames sent): discarded captures are not drops")
+    return f"{accepted} triggers accepted, {sent} sent before the STOP, {accepted - sent} discarded; frames_dropped +0"
+
+
+@check("trigger.external", "R-8.5-2")
 def external(ctx: Context) -> str:
     """External mode where advertised: accepted, STATUS reports it, TRIGGER refused; captures that
     arrive (pulses on the line) carry rising non-zero trigger ids. Pulses cannot be made over the wire."""
@@ -144,7 +187,7 @@ OUTPUT_RUN_S = 1.2
 OUTPUT_CAPTURES = int(OUTPUT_RUN_S * OUTPUT_FPS / 2)  # half the pulses of the run: a few dropped aside
 
 
-@check("trigger.output")
+@check("trigger.output", "R-8.5-2")
 def output(ctx: Context) -> str:
     """Where TRIGGER_OUTPUT is advertised: with ``trigger_output`` = 1 in external mode the unit is
     its own (and its line's) master: while streaming, captures on consecutive trigger ids, one per

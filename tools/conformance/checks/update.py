@@ -20,7 +20,7 @@ def _state(ctx: Context) -> m.UpdateState:
     return r
 
 
-@check("update.status")
+@check("update.status", "R-14.3-1")
 def update_status(ctx: Context) -> str:
     """UPDATE_STATUS: the running slot holds the version INFO reports, in the state its boot mode says."""
     ctx.require(m.Capability.FIRMWARE_UPDATE)
@@ -45,7 +45,7 @@ def update_status(ctx: Context) -> str:
             f"minimum security counter {st.security_counter}")
 
 
-@check("update.refusals")
+@check("update.refusals", "R-14.3-1")
 def update_refusals(ctx: Context) -> str:
     """An image size no slot can hold, and VERIFY / ACTIVATE with no transfer, are refused with the
     SPEC's codes; UPDATE_STATUS is unchanged after them."""
