@@ -117,8 +117,11 @@ def test_gate_failure_writes_nothing_as_passed(image_dir: Path, tmp_path: Path, 
 
 
 def test_mismatched_pairs_fail_the_gate(pairs, tmp_path: Path) -> None:
-    """Right images shifted by one pair: the solve 'converges' but held-out epipolar error exposes it."""
-    shifted = [(pairs[i][0], pairs[(i + 1) % len(pairs)][1]) for i in range(len(pairs))]
+    """Right images shifted by one pair: the solve 'converges' but held-out epipolar error exposes it.
+    Ten pairs, not all: on mismatched pairs every stereo solve runs to its iteration cap, and on 24
+    pairs the fit took ~50 s on a loaded machine (past the test timeout beside two busy loops)."""
+    few = pairs[:10]
+    shifted = [(few[i][0], few[(i + 1) % len(few)][1]) for i in range(len(few))]
     res = calibrate_pairs(iter(shifted), BOARD, select=False)
     assert not res.passed and any("stereo RMS" in f for f in res.failures)
 

@@ -173,12 +173,14 @@ def test_an_unplug_during_the_write_is_followed_by_a_read_back_that_says_what_th
         return reply
 
     sim.dispatcher.handlers[m.MsgType.CALIB_COMMIT] = commit_then_unplug
-    cam = stereocam.open("usb://?serial=UNPLUG-15", timeout=1.0)
+    # a request timeout of 2 s as the other device tests: three tries of 1 s without a reply to a
+    # CALIB_WRITE chunk on a loaded host failed the write before the commit ran (nothing to unplug after)
+    cam = stereocam.open("usb://?serial=UNPLUG-15", timeout=2.0)
     try:
         before = cam.read_calibration()
         code, result, verdict = run(cam, tmp_path, SolveConfig(max_views=12), reconnect_timeout=3.0)
         stored = sim.calibration.store.read()
-        assert stored.body == result.calibration.to_bytes() != before.body  # the unit did store it
+        assert stored.body == result.calibration.to_bytes() != before.body, verdict  # the unit did store it
         doc = json.loads((tmp_path / "calibration.json").read_text())
         if replug:
             assert code == EXIT_OK and "reconnect" in verdict and f"{m.calib_id(stored.body):08x}" in verdict, verdict
