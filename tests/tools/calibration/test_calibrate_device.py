@@ -44,7 +44,9 @@ def fresh(tmp_path):
 def test_calibrates_writes_verifies_and_the_device_uses_it(fresh, tmp_path):
     cam, sim = fresh
     config_before = cam.config()
-    code, result, verdict = run(cam, tmp_path, target="factory")
+    # 40 views for the accuracy below, one lens model: the race of three runs in device mode in
+    # test_calibrate_wire and test_calib_export (it took this test past its timeout on a loaded host)
+    code, result, verdict = run(cam, tmp_path, SolveConfig(lens_model="plumb_bob"), target="factory")
     assert code == EXIT_OK, verdict
     assert "verified by read-back" in verdict
     stored = cam.read_calibration()
