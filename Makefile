@@ -32,8 +32,11 @@ lint: $(LINKED)
 # Tests run on one worker process per core (pytest-xdist); TEST_WORKERS=0 runs them in this process.
 TEST_WORKERS ?= auto
 
+# Bytecode caching on even where the environment turns it off (PYTHONDONTWRITEBYTECODE): each worker,
+# and every CLI or simulator the tests start in a child process, would otherwise compile the package
+# (and pytest re-rewrite every test module) from source again.
 test: lint
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist load
+	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q -n $(TEST_WORKERS) --dist load
 
 # The suite's stability on a busy machine: RUNS full runs of `make test`, one after another, with two
 # busy-loop processes beside them; each run's output in out/stability-N.log, a line per run.

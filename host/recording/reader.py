@@ -17,7 +17,8 @@ from typing import Any, Callable, Iterator
 import numpy as np
 from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
-from mcap.records import Channel, Chunk, Message
+from mcap.records import Channel, Chunk, Message, Statistics
+from mcap.summary import Summary
 from mcap_ros2.decoder import DecoderFactory
 
 from stereocam.calibration_io import StoredCalibration
@@ -113,15 +114,18 @@ class Recording:
             # every chunk's CRC is checked as it is read: a damaged frame is an error, never bad pixels
             self._reader = SeekingReader(self._file, validate_crcs=True, decoder_factories=[DecoderFactory()],
                                          record_size_limit=RECORD_SIZE_LIMIT)
-            self.summary = self._reader.get_summary()
+            summary = self._reader.get_summary()
         except Exception as exc:  # whatever a cut-off or damaged end makes the reader raise
             raise RecordingError(f"{path} is truncated or damaged: an MCAP file without a valid summary and footer "
                                  f"at its end (was the recorder killed?); {repair}") from exc
         self._size = os.fstat(self._file.fileno()).st_size
-        self._decoder_factory, self._decoders = DecoderFactory(), {}
-        if self.summary is None or self.summary.statistics is None \
-                or not self.summary.chunk_indexes and self.summary.statistics.message_count:
+        self._decoder_factory = DecoderFactory()
+        self._decoders: dict[int, Callable[[bytes], Any]] = {}
+        if summary is None or summary.statistics is None \
+                or not summary.chunk_indexes and summary.statistics.message_count:
             raise RecordingError(f"{path} has no summary or index (was the recorder killed?); {repair}")
+        self.summary: Summary = summary
+        self._statistics: Statistics = summary.statistics
         try:
             self.metadata = {m.name: dict(m.metadata) for m in self._reader.iter_metadata()}
             index = next((a for a in self._reader.iter_attachments() if a.name == FRAME_INDEX), None)
@@ -136,7 +140,7 @@ class Recording:
         self.log_times = np.frombuffer(index.data, "<i8")
         if np.any(np.diff(self.log_times) <= 0):
             raise DamagedRecordingError(f"{path}: its frame index is damaged (times not increasing); {repair}")
-        counts = self.summary.statistics.channel_message_counts
+        counts = self._statistics.channel_message_counts
         captures = sum(counts.get(cid, 0) for cid, ch in self.summary.channels.items() if ch.topic == schemas.CAPTURE)
         if captures != len(self.log_times):
             raise DamagedRecordingError(f"{path}: its frame index lists {len(self.log_times)} frames but the file "
@@ -179,7 +183,7 @@ class Recording:
     @property
     def topics(self) -> dict[str, int]:
         """Topic → message count."""
-        counts = self.summary.statistics.channel_message_counts
+        counts = self._statistics.channel_message_counts
         return {ch.topic: counts.get(cid, 0) for cid, ch in self.summary.channels.items()}
 
     @property

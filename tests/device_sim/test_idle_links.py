@@ -154,7 +154,7 @@ def test_an_in_process_link_that_goes_silent_is_dropped() -> None:
     t = InProcessTransport(SimulatedCamera(seed=92))
     try:
         t.write(set_config(1, heartbeat_timeout_ms=200))
-        deadline = time.monotonic() + 3
+        deadline = time.monotonic() + budget(3)  # dropped after 0.4 s of silence; stretched on a busy host
         with pytest.raises(DisconnectedError):
             while time.monotonic() < deadline:
                 t.read(65536, 0.1)
@@ -266,10 +266,7 @@ def test_the_next_pty_host_after_one_killed_mid_stream_gets_no_stale_output_and_
         ends += sum(p.msg_type == m.MsgType.FRAME_END for p in decoder.feed(dead.read(65536)))
     assert ends >= 2 and sim.engine.streaming
     dead.close()  # killed: the port closes with the stream running
-    deadline = time.monotonic() + 2
-    while sim.engine.streaming and time.monotonic() < deadline:
-        time.sleep(0.02)
-    assert not sim.engine.streaming, "the device must notice that no host holds the pty"
+    wait_until(lambda: not sim.engine.streaming, 2, "the device must notice that no host holds the pty")
     with serial.Serial(server.url, timeout=0.2) as host:
         sent = time.monotonic()
         host.write(m.encode(m.GetInfo(), 9))

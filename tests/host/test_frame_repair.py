@@ -11,10 +11,11 @@ import pytest
 from stereocam.camera import Camera
 from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.links.inprocess import InProcessTransport
-from stereocam.frame_repair import Coverage
+from stereocam.frame_repair import REPAIR_WINDOW, Coverage
 from stereocam.link import Link
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import encode_frame
+from stereocam.tools.conformance.budget import budget
 
 from stereocam.tools.soak.parts import PlaneTruth  # what the device sent, by plane CRC
 from tests.support.faults import FaultyTransport, LineNoise, PacketFilter
@@ -126,7 +127,11 @@ def stream_through_noise(rate: float, frames: int, seed: int = 53, v1_1: bool = 
                 pass
         link.set_manipulator(read=lambda b: b, write=lambda b: b)
         cam.stop()
-        time.sleep(0.5)
+        # the repairs in flight settle, or give up after their window (a fixed half second was short
+        # on a loaded host); what is still missing then counts as lost below
+        deadline = time.monotonic() + budget(REPAIR_WINDOW + 1.0)
+        while cam.connection.assembler._repairing and time.monotonic() < deadline:
+            time.sleep(0.01)
         while (frame := cam.try_get_frame()) is not None:
             got.append(frame)
         sent = sorted(rec.sent)[:frames]  # the first ``frames`` captures the device sent

@@ -104,6 +104,6 @@ def command(**params: Any) -> int:
     print(f"  {'stream':<30} {'ns/byte':>9} {'x clean':>8}")
     for name, c in costs.items():
         print(f"  {name:<30} {c * 1e9:9.2f} {c / clean:8.1f}")
-    worst = max(costs, key=costs.get)
+    worst = max(costs, key=lambda n: costs[n])
     print(f"worst: {worst}, {costs[worst] / clean:.0f}x the clean cost per byte")
     return 0

@@ -187,7 +187,7 @@ def command(**params: Any) -> int:
     from stereocam.stereo import Matcher, MatchParams
     t_import = time.perf_counter() - t0
     cv2.setNumThreads(args.threads)
-    numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
 
     sl, sr, sgt = synthetic_scene()
     scenes = [("synthetic 640x480", sl, sr, sgt)]

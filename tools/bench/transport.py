@@ -18,7 +18,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from types import SimpleNamespace
-from typing import Any, Iterator
+from typing import TYPE_CHECKING, Any, Iterator
 
 import click
 import numpy as np
@@ -27,6 +27,9 @@ from tqdm import tqdm
 from stereocam.stereo import engines
 from stereocam.tools.options import CONTEXT, epilog
 from stereocam.tools.progress import progress_wanted
+
+if TYPE_CHECKING:
+    from stereocam.device_sim import SimulatedCamera
 
 KINDS = ("sim", "pty", "tcp", "usb-high", "usb-super")
 CORES = 2
@@ -63,7 +66,7 @@ class Run:
 
 
 @contextlib.contextmanager
-def _device(kind: str) -> Iterator[tuple[str, object]]:
+def _device(kind: str) -> Iterator[tuple[str, SimulatedCamera | None]]:
     """A simulator reachable over ``kind``: (URL, the in-process SimulatedCamera or None)."""
     from stereocam.device_sim import SimulatedCamera
     from stereocam.device_sim.process import ServedSimulator
@@ -139,7 +142,7 @@ def report(runs: list[Run], algorithm: str) -> None:
         print(f"  {'transport':<10} " + " ".join(f"{s:>8}" for s in names))
         for r in profiled:
             print(f"  {r.kind:<10} " + " ".join(f"{r.stages[s]:8.2f}" for s in names))
-        best = min(r.cpu_ms for r in profiled)
+        best = min(r.cpu_ms for r in profiled if r.cpu_ms is not None)  # in-process runs: all of them
         print(f"ESTIMATE, not a measurement: on {CORES} idle cores, at {best:.1f} ms of CPU per frame (device and "
               f"host together, least of the in-process runs), the chain could carry about "
               f"{1e3 * CORES / best:.0f} fps if its stages overlapped perfectly.")

@@ -36,7 +36,7 @@ def worst_views(result: CalibrationResult, n: int = WORST) -> list[tuple[ViewRec
     for v in (v for v in result.views if v.status == "used"):
         errs = view_errors(v)
         if errs:
-            name = max(errs, key=errs.get)
+            name = max(errs, key=lambda n: errs[n])
             ranked.append((v, name, errs[name]))
     return sorted(ranked, key=lambda t: -t[2])[:n]
 

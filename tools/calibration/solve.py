@@ -263,7 +263,7 @@ def choose_detector(found: Sequence[tuple[int, str, dict[str, Detection], dict[s
                                      [d[n].image_points for d in common], size).rms
         except LensSolveError:
             continue
-    return min(fits, key=fits.get) if fits else names[0]
+    return min(fits, key=lambda n: fits[n]) if fits else names[0]
 
 
 def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, int], coverage: tuple[float, ...],

@@ -19,7 +19,7 @@ def value_name(name: str, value: int) -> str | int:
     if value in VALUE_NAMES.get(name, {}):
         return VALUE_NAMES[name][value]
     if name == "outputs":
-        return "+".join(p.name.lower() for p in Output if value & p) or "none"
+        return "+".join(str(p.name).lower() for p in Output if value & p) or "none"
     return value
 
 

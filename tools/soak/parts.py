@@ -228,9 +228,9 @@ def stream_with_faults(url: str, seconds: float, flip: float, drop: float = 0.0,
         link.max_write = None
         cam.stop()
         time.sleep(3.5)  # repairs in flight settle (REPAIR_WINDOW)
-        while (frame := cam.try_get_frame()) is not None:
+        while (late := cam.try_get_frame()) is not None:
             delivered += 1
-            corrupted += truth is not None and not truth.intact(frame)
+            corrupted += truth is not None and not truth.intact(late)
         after = cam.status().counters
     finally:
         cam.close()

@@ -28,8 +28,8 @@ def test_old_firmware_refuses_the_new_body_and_keeps_its_calibration(tmp_path, m
     with Camera(InProcessTransport(sim), timeout=2.0) as cam:
         before = cam.read_calibration()
         monkeypatch.setattr(calib_service, "StereoCalibration", _Version1Firmware)
-        code, result, verdict = calibrate_device(cam, BOARD, SolveConfig(max_views=12), tmp_path, size=(640, 480),
-                                                 fps=20)
+        config = SolveConfig(max_views=12, lens_model="plumb_bob")  # the refusal, not the model race
+        code, result, verdict = calibrate_device(cam, BOARD, config, tmp_path, size=(640, 480), fps=20)
         assert code == EXIT_WRITE and result is not None and result.passed
         assert "BAD_PAYLOAD" in verdict and "version 2" in verdict and f"{before.calibration_id:08x}" in verdict
         after = cam.read_calibration()

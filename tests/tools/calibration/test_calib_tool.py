@@ -109,7 +109,7 @@ def test_forced_lens_model(pairs) -> None:
 
 def test_gate_failure_writes_nothing_as_passed(image_dir: Path, tmp_path: Path, capsys) -> None:
     (tmp_path / "left.yaml").write_text("stale")
-    assert run(image_dir, tmp_path, "--max-stereo-rms", "0.01") == calibrate.EXIT_GATE
+    assert run(image_dir, tmp_path, "--max-stereo-rms", "0.01", "--lens-model", "plumb_bob") == calibrate.EXIT_GATE
     assert "FAILED the gate: stereo RMS" in capsys.readouterr().err
     assert json.loads((tmp_path / "calibration.json").read_text())["passed"] is False
     assert not any((tmp_path / n).exists() for n in ("left.yaml", "right.yaml", "calibration.yaml"))
@@ -117,8 +117,11 @@ def test_gate_failure_writes_nothing_as_passed(image_dir: Path, tmp_path: Path, 
 
 
 def test_mismatched_pairs_fail_the_gate(pairs, tmp_path: Path) -> None:
-    """Right images shifted by one pair: the solve 'converges' but held-out epipolar error exposes it."""
-    shifted = [(pairs[i][0], pairs[(i + 1) % len(pairs)][1]) for i in range(len(pairs))]
+    """Right images shifted by one pair: the solve 'converges' but held-out epipolar error exposes it.
+    Ten pairs, not all: on mismatched pairs every stereo solve runs to its iteration cap, and on 24
+    pairs the fit took ~50 s on a loaded machine (past the test timeout beside two busy loops)."""
+    few = pairs[:10]
+    shifted = [(few[i][0], few[(i + 1) % len(few)][1]) for i in range(len(few))]
     res = calibrate_pairs(iter(shifted), BOARD, select=False)
     assert not res.passed and any("stereo RMS" in f for f in res.failures)
 
@@ -239,7 +242,7 @@ def test_offline_run_shows_pairs_done_of_total_even_when_quiet(tmp_path):
         return subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "calibrate", "--images",
                                str(DATA / "opencv_chessboard_pairs"), "--board", "9x6", "--square-size", "0.025",
                                "--out", str(tmp_path / f"out{len(extra)}"), "--db", str(tmp_path / "f.sqlite"),
-                               *extra], capture_output=True, text=True, timeout=600)
+                               "--lens-model", "plumb_bob", *extra], capture_output=True, text=True, timeout=600)
 
     loud, quiet = run(), run("-q")
     assert loud.returncode == quiet.returncode == 0, loud.stderr + quiet.stderr
