@@ -15,6 +15,8 @@ machine are only comparable within one run.
 """
 from __future__ import annotations
 
+import functools
+
 import statistics
 import sys
 import time
@@ -145,7 +147,7 @@ def sgm_report(args: SimpleNamespace) -> int:
                 continue
             scenes.append(motorcycle_scene)
         else:
-            scenes.append(lambda name=name: class_scene(name, w, h, args.seed))
+            scenes.append(functools.partial(class_scene, name, w, h, args.seed))
     report(scenes, args.threads, args.repeat, args.busy)
     return 0
 
