@@ -20,8 +20,8 @@ import numba as nb
 import numpy as np
 
 from .lanes import uidx
-from .sgm_simd import add_argmin, cost_run, count_le, diag_update, pixel_paths, stream_copy, \
-    try_lock, unlock
+from .sgm_simd import add_argmin, cost_run, count_le, diag_update, fetch_add, load_acquire, \
+    pixel_paths, spin_pause, store_release, stream_copy, try_lock, unlock
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
@@ -43,44 +43,46 @@ def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int
 
 
 @nb.njit(**_JIT)
-def _aggregate_row(g: int, y: int, step: int, img: np.ndarray, cfg: np.ndarray,
+def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, cur: int,
+                   prv: int, i0: int, i1: int, img: np.ndarray, cfg: np.ndarray,
                    p2tab: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                    meta: np.ndarray, pm: np.ndarray, acc: np.ndarray) -> None:
-    """acc = sum over group g's paths of L at row y, the group's step-th row.
+    """acc = sum of npaths paths of L at row y, pixels i0 .. i1-1 in path order: the
+    horizontal path (left to right for g = 0, right to left for g = 1), then the vertical and
+    diagonal paths arriving from the row above (g = 0) or below (g = 1), none on the first.
 
-    lbuf runs of nd + 2 (a padding element each side): two for the horizontal path (this
-    pixel's and its predecessor's), one zero run (predecessor of a path's first pixel), then
-    per row parity and vertical/diagonal path one run per column. mv[parity, v, x]: minima.
-    p2tab[|I(p) - I(q)|]: the effective P2 between neighbours of those intensities."""
+    lbuf runs of nd + 2 (a padding element each side): from hb, two for the horizontal path
+    (this pixel's and its predecessor's) and one zero run (predecessor of a path's first
+    pixel); from vb, per row slot and vertical/diagonal path one run per column, row y in
+    slot cur, its predecessor row in prv. mv[slot, v, x]: minima. p2tab[|I(p) - I(q)|]: the
+    effective P2 between neighbours of those intensities."""
     nd, p1 = cfg[C_ND], cfg[C_P1]
     x0, cols = cfg[C_X0], cfg[C_COLS]
-    npaths = 2 if cfg[C_PATHS] == 4 else 4
     dy = 1 if g == 0 else -1
     stride = nd + 2
-    zero = 2 * stride + 1
-    cur, prv = step & 1, 1 - (step & 1)
-    for i in range(cols):
+    zero = hb + 2 * stride + 1
+    for i in range(i0, i1):
         x = i if g == 0 else cols - 1 - i
         X = x0 + x
         # horizontal path (0, dy): predecessor x - dy on this row
-        meta[1] = (i & 1) * stride + 1
+        meta[1] = hb + (i & 1) * stride + 1
         if i == 0:
             meta[0], meta[2], meta[3] = zero, 255, 0
         else:
             hm = np.int64(pm[0])
-            meta[0] = (1 - (i & 1)) * stride + 1
+            meta[0] = hb + (1 - (i & 1)) * stride + 1
             meta[2] = min(hm + p2tab[abs(np.int64(img[y, X]) - img[y, X - dy])], 255)
             meta[3] = hm
         for v in range(1, npaths):  # (dy, 0), (dy, 1), (dy, -1): predecessor (y-dy, x-dx)
             dx = v - 1 if v < 3 else -1
             xq = x - dx
             o = 4 * v
-            meta[o + 1] = 3 * stride + ((cur * 3 + v - 1) * cols + x) * stride + 1
-            if step == 0 or xq < 0 or xq >= cols:
+            meta[o + 1] = vb + ((cur * 3 + v - 1) * cols + x) * stride + 1
+            if first or xq < 0 or xq >= cols:
                 meta[o], meta[o + 2], meta[o + 3] = zero, 255, 0
             else:
                 mp = np.int64(mv[prv, v - 1, xq])
-                meta[o] = 3 * stride + ((prv * 3 + v - 1) * cols + xq) * stride + 1
+                meta[o] = vb + ((prv * 3 + v - 1) * cols + xq) * stride + 1
                 meta[o + 2] = min(mp + p2tab[abs(np.int64(img[y, X]) - img[y - dy, X - dx])],
                                   255)
                 meta[o + 3] = mp
@@ -144,7 +146,9 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
     for step in range(h):
         y = step if g == 0 else h - 1 - step
         _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
-        _aggregate_row(g, y, step, img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc)
+        _aggregate_row(g, y, step == 0, 2 if cfg[C_PATHS] == 4 else 4, 0, 3 * (nd + 2),
+                       step & 1, 1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf, mv,
+                       meta, pm, acc)
         while not try_lock(locks, y):
             pass
         first = done[y] == 0
@@ -168,3 +172,57 @@ def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
     for g in nb.prange(2):
         _group(g, img, cl, crr, cfg, p2tab, parked, locks, done, disp, cost[g], lbuf[g], mv[g],
                meta[g], pm[g], acc[g], rmin[g], rarg[g], karg[g])
+
+
+BAND = 32  # columns a row publishes its progress after (single-pass mode)
+
+
+@nb.njit(**_JIT)
+def _single_pass(t: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
+                 p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray, disp: np.ndarray,
+                 cost: np.ndarray, side: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+                 meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
+                 rarg: np.ndarray, karg: np.ndarray) -> None:
+    """Rows taken one at a time (nxt[0]: the next row) until none is left: cost row, the
+    right-to-left path into side, then left to right the other four paths into acc, band by
+    band once the row above has published (prog[y - 1]) the columns the band reads; then the
+    selection. t: this worker's horizontal-path area in lbuf."""
+    h = img.shape[0]
+    nd, md, x0, cols = cfg[C_ND], cfg[C_MIND], cfg[C_X0], cfg[C_COLS]
+    stride = nd + 2
+    vb = lbuf.shape[0] - 9 * cols * stride  # three row slots of three paths
+    hb = t * 3 * stride
+    while True:
+        y = fetch_add(nxt, 0, 1)
+        if y >= h:
+            return
+        _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
+        _aggregate_row(1, y, True, 1, hb, vb, 0, 0, 0, cols, img, cfg, p2tab, cost, lbuf, mv,
+                       meta, pm, side)
+        i = 0
+        while i < cols:
+            i1 = min(i + BAND, cols)
+            if y > 0:
+                need = min(i1 + 1, cols)
+                while load_acquire(prog, y - 1) < need:
+                    spin_pause()
+            _aggregate_row(0, y, y == 0, 4, hb, vb, y % 3, (y + 2) % 3, i, i1, img, cfg,
+                           p2tab, cost, lbuf, mv, meta, pm, acc)
+            store_release(prog, y, i1)
+            i = i1
+        _finish_row(y, cfg, acc, side, rmin, rarg, karg, disp[y])
+
+
+@nb.njit(parallel=True, **_JIT)
+def sgm_single_pass(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
+                    p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray, disp: np.ndarray,
+                    cost: np.ndarray, side: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+                    meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
+                    rarg: np.ndarray, karg: np.ndarray) -> None:
+    """Disparity rows (before the speckle filter) with the five paths of one top-down pass
+    (left to right, right to left, from above and the two upper diagonals): every worker
+    takes the next row (_single_pass). Scratch has one slice per worker (leading axis); nxt
+    and prog must be zero."""
+    for t in nb.prange(nb.get_num_threads()):
+        _single_pass(t, img, cl, crr, cfg, p2tab, nxt, prog, disp, cost[t], side[t], lbuf[0],
+                     mv[0], meta[t], pm[t], acc[t], rmin[t], rarg[t], karg[t])

@@ -197,6 +197,58 @@ def unlock(typingctx, locks, i):
     return types.none(locks, i), codegen
 
 
+@intrinsic
+def fetch_add(typingctx, arr, i, v):
+    """arr[i] += v atomically (int32); returns the value before."""
+    if not (isinstance(arr, types.Array) and arr.dtype == types.int32):
+        return None
+
+    def codegen(context, builder, sig, args):
+        val = context.cast(builder, args[2], sig.args[2], types.int32)
+        old = builder.atomic_rmw("add", _lock_ptr(context, builder, sig, args), val, "monotonic")
+        return builder.sext(old, ir.IntType(64))
+
+    return types.int64(arr, i, v), codegen
+
+
+@intrinsic
+def load_acquire(typingctx, arr, i):
+    """arr[i] (int32), read with acquire ordering."""
+    if not (isinstance(arr, types.Array) and arr.dtype == types.int32):
+        return None
+
+    def codegen(context, builder, sig, args):
+        v = builder.load_atomic(_lock_ptr(context, builder, sig, args), "acquire", 4)
+        return builder.sext(v, ir.IntType(64))
+
+    return types.int64(arr, i), codegen
+
+
+@intrinsic
+def store_release(typingctx, arr, i, v):
+    """arr[i] = v (int32), written with release ordering."""
+    if not (isinstance(arr, types.Array) and arr.dtype == types.int32):
+        return None
+
+    def codegen(context, builder, sig, args):
+        val = context.cast(builder, args[2], sig.args[2], types.int32)
+        builder.store_atomic(val, _lock_ptr(context, builder, sig, args), "release", 4)
+        return context.get_dummy_value()
+
+    return types.none(arr, i, v), codegen
+
+
+@intrinsic
+def spin_pause(typingctx):
+    """A spin-wait hint to the processor (x86 PAUSE; nothing elsewhere)."""
+    def codegen(context, builder, sig, args):
+        if _X86:
+            _call(builder, "llvm.x86.sse2.pause", ir.VoidType(), [])
+        return context.get_dummy_value()
+
+    return types.none(), codegen
+
+
 def _u8_arrays(*tys) -> bool:
     return all(isinstance(t, types.Array) and t.ndim == 1 and t.dtype == types.uint8
                for t in tys)
@@ -208,7 +260,7 @@ def _umin(builder, a, b):
 
 @intrinsic
 def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
-    """All path steps of one pixel (2 or 4 paths) in one pass over the disparities:
+    """All path steps of one pixel (1, 2 or 4 paths) in one pass over the disparities:
 
         for path v < npaths, with (po, oo, p2m, mprev) = meta[4v : 4v+4]:
           L_v[k] = cost[ci+k] + min(P, min(P[-1], P[+1]) +sat p1, p2m) - mprev,  P = lbuf[po+k]
@@ -226,8 +278,9 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
         st = sig.args
         u8 = ir.IntType(8)
         civ, aiv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 7, 8))
-        nmore = builder.icmp_signed(">", _intp(context, builder, sig, args, 4),
-                                    ir.Constant(ir.IntType(64), 2))
+        npv = _intp(context, builder, sig, args, 4)
+        ntwo = builder.icmp_signed(">", npv, ir.Constant(npv.type, 1))
+        nmore = builder.icmp_signed(">", npv, ir.Constant(npv.type, 2))
         p1v = context.cast(builder, args[5], st[5], types.uint8)
         one = ir.Constant(civ.type, 1)
         meta_v = [builder.load(_ptr(context, builder, st[3], args[3], [ir.Constant(civ.type, i)]))
@@ -272,7 +325,9 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
                 builder.store(_umin(builder, builder.load(best[v]), lw), best[v])
                 return builder.zext(L, wty)
 
-            builder.store(builder.add(step(0), step(1)), total)
+            builder.store(step(0), total)
+            with builder.if_then(ntwo, likely=True):
+                builder.store(builder.add(builder.load(total), step(1)), total)
             with builder.if_then(nmore, likely=True):
                 builder.store(builder.add(builder.load(total),
                                           builder.add(step(2), step(3))), total)
@@ -286,11 +341,11 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
                             [builder.load(best[v])])
                 builder.store(builder.zext(low, _I16), _ptr(context, builder, st[9], args[9],
                                                             [ir.Constant(civ.type, v)]))
-            if v >= 2:
-                with builder.if_then(nmore, likely=True):
-                    put()
-            else:
+            if v == 0:
                 put()
+            else:
+                with builder.if_then(nmore if v >= 2 else ntwo, likely=True):
+                    put()
         return context.get_dummy_value()
 
     return types.none(cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins), codegen
