@@ -47,33 +47,43 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
                    prv: int, i0: int, i1: int, img: np.ndarray, cfg: np.ndarray,
                    p2tab: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                    meta: np.ndarray, pm: np.ndarray, acc: np.ndarray) -> None:
-    """acc = sum of npaths paths of L at row y, pixels i0 .. i1-1 in path order: the
-    horizontal path (left to right for g = 0, right to left for g = 1), then the vertical and
-    diagonal paths arriving from the row above (g = 0) or below (g = 1), none on the first.
+    """acc = sum of the paths of L at row y, pixels i0 .. i1-1 in path order: the horizontal
+    path (left to right for g = 0, right to left for g = 1), then (npaths 2 or 4) the
+    vertical and diagonal paths arriving from the row above (g = 0) or below (g = 1), none
+    on the first. npaths 1: the horizontal path alone, kept per column in lbuf (acc
+    untouched); 5: four paths plus that kept one.
 
     lbuf runs of nd + 2 (a padding element each side): from hb, two for the horizontal path
-    (this pixel's and its predecessor's) and one zero run (predecessor of a path's first
-    pixel); from vb, per row slot and vertical/diagonal path one run per column, row y in
-    slot cur, its predecessor row in prv. mv[slot, v, x]: minima. p2tab[|I(p) - I(q)|]: the
-    effective P2 between neighbours of those intensities."""
+    (this pixel's and its predecessor's), one zero run (predecessor of a path's first pixel)
+    and, for npaths 1 and 5, one per column; from vb, per row slot and vertical/diagonal
+    path one run per column, row y in slot cur, its predecessor row in prv. mv[slot, v, x]:
+    minima. p2tab[|I(p) - I(q)|]: the effective P2 between neighbours of those intensities."""
     nd, p1 = cfg[C_ND], cfg[C_P1]
     x0, cols = cfg[C_X0], cfg[C_COLS]
     dy = 1 if g == 0 else -1
     stride = nd + 2
     zero = hb + 2 * stride + 1
+    kept = hb + 3 * stride + 1  # + x * stride: the kept horizontal path's run of column x
+    vpaths = min(npaths, 4)
     for i in range(i0, i1):
         x = i if g == 0 else cols - 1 - i
         X = x0 + x
         # horizontal path (0, dy): predecessor x - dy on this row
-        meta[1] = hb + (i & 1) * stride + 1
+        if npaths == 1:
+            meta[1] = kept + x * stride
+            meta[0] = kept + (x - dy) * stride
+        else:
+            meta[1] = hb + (i & 1) * stride + 1
+            meta[0] = hb + (1 - (i & 1)) * stride + 1
+        if npaths == 5:
+            meta[16] = kept + x * stride
         if i == 0:
             meta[0], meta[2], meta[3] = zero, 255, 0
         else:
             hm = np.int64(pm[0])
-            meta[0] = hb + (1 - (i & 1)) * stride + 1
             meta[2] = min(hm + p2tab[abs(np.int64(img[y, X]) - img[y, X - dy])], 255)
             meta[3] = hm
-        for v in range(1, npaths):  # (dy, 0), (dy, 1), (dy, -1): predecessor (y-dy, x-dx)
+        for v in range(1, vpaths):  # (dy, 0), (dy, 1), (dy, -1): predecessor (y-dy, x-dx)
             dx = v - 1 if v < 3 else -1
             xq = x - dx
             o = 4 * v
@@ -87,15 +97,15 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
                                   255)
                 meta[o + 3] = mp
         pixel_paths(cost, x * nd, lbuf, meta, npaths, p1, acc, x * nd, nd, pm)
-        for v in range(1, npaths):
+        for v in range(1, vpaths):
             mv[cur, v - 1, x] = pm[v]
 
 
 @nb.njit(**_JIT)
-def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray,
+def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray | None,
                 rmin: np.ndarray, rarg: np.ndarray, karg: np.ndarray,
                 out: np.ndarray) -> None:
-    """acc += parked (the other group's sum), then winner-take-all, uniqueness and subpixel
+    """acc += parked (the other group's sum; None: acc is the whole sum), then winner-take-all, uniqueness and subpixel
     per pixel in one pass (the sum stays in L1), and the left-right check, which needs the
     whole row's right-image winners, in a second pass over the kept winners karg."""
     nd, md, uratio, lrdiff = cfg[C_ND], cfg[C_MIND], cfg[C_URATIO], cfg[C_LRDIFF]
@@ -180,25 +190,26 @@ BAND = 32  # columns a row publishes its progress after (single-pass mode)
 @nb.njit(**_JIT)
 def _single_pass(t: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
                  p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray, disp: np.ndarray,
-                 cost: np.ndarray, side: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
-                 meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
-                 rarg: np.ndarray, karg: np.ndarray) -> None:
+                 cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
+                 pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
+                 karg: np.ndarray) -> None:
     """Rows taken one at a time (nxt[0]: the next row) until none is left: cost row, the
-    right-to-left path into side, then left to right the other four paths into acc, band by
-    band once the row above has published (prog[y - 1]) the columns the band reads; then the
-    selection. t: this worker's horizontal-path area in lbuf."""
+    right-to-left path (kept per column in lbuf), then left to right the other four paths
+    and the kept one into acc, band by band once the row above has published (prog[y - 1])
+    the columns the band reads; then the selection. t: this worker's horizontal-path area in
+    lbuf (cols + 3 runs)."""
     h = img.shape[0]
     nd, md, x0, cols = cfg[C_ND], cfg[C_MIND], cfg[C_X0], cfg[C_COLS]
     stride = nd + 2
     vb = lbuf.shape[0] - 9 * cols * stride  # three row slots of three paths
-    hb = t * 3 * stride
+    hb = t * (cols + 3) * stride
     while True:
         y = fetch_add(nxt, 0, 1)
         if y >= h:
             return
         _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
         _aggregate_row(1, y, True, 1, hb, vb, 0, 0, 0, cols, img, cfg, p2tab, cost, lbuf, mv,
-                       meta, pm, side)
+                       meta, pm, acc)
         i = 0
         while i < cols:
             i1 = min(i + BAND, cols)
@@ -206,23 +217,23 @@ def _single_pass(t: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: 
                 need = min(i1 + 1, cols)
                 while load_acquire(prog, y - 1) < need:
                     spin_pause()
-            _aggregate_row(0, y, y == 0, 4, hb, vb, y % 3, (y + 2) % 3, i, i1, img, cfg,
+            _aggregate_row(0, y, y == 0, 5, hb, vb, y % 3, (y + 2) % 3, i, i1, img, cfg,
                            p2tab, cost, lbuf, mv, meta, pm, acc)
             store_release(prog, y, i1)
             i = i1
-        _finish_row(y, cfg, acc, side, rmin, rarg, karg, disp[y])
+        _finish_row(y, cfg, acc, None, rmin, rarg, karg, disp[y])
 
 
 @nb.njit(parallel=True, **_JIT)
 def sgm_single_pass(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
                     p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray, disp: np.ndarray,
-                    cost: np.ndarray, side: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
-                    meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
-                    rarg: np.ndarray, karg: np.ndarray) -> None:
+                    cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
+                    pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
+                    karg: np.ndarray, workers: int) -> None:
     """Disparity rows (before the speckle filter) with the five paths of one top-down pass
     (left to right, right to left, from above and the two upper diagonals): every worker
-    takes the next row (_single_pass). Scratch has one slice per worker (leading axis); nxt
-    and prog must be zero."""
-    for t in nb.prange(nb.get_num_threads()):
-        _single_pass(t, img, cl, crr, cfg, p2tab, nxt, prog, disp, cost[t], side[t], lbuf[0],
+    takes the next row (_single_pass). Scratch has one slice per worker (leading axis, at
+    least ``workers``); nxt and prog must be zero."""
+    for t in nb.prange(workers):
+        _single_pass(t, img, cl, crr, cfg, p2tab, nxt, prog, disp, cost[t], lbuf[0],
                      mv[0], meta[t], pm[t], acc[t], rmin[t], rarg[t], karg[t])

@@ -55,13 +55,13 @@ class SGMMatcher:
             self.p2tab[:] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + np.arange(256))))
         stride = nd + 2
         if p.paths == 5:  # one top-down pass (sgm.sgm_single_pass); per worker n
-            self.parked = _aligned((n, cols * nd), np.int16)  # the right-to-left path's row
             self.locks = np.zeros(16, np.int32)  # [0]: next row to take
             self.done = np.zeros(h, np.int32)  # columns each row has published
-            # horizontal-path areas (three runs each), then three row slots of three paths
-            self.lbuf = np.full((1, n * 3 * stride + 9 * cols * stride), 255, np.uint8)
+            # horizontal-path areas (cols + 3 runs each), then three row slots of three paths
+            area = (cols + 3) * stride
+            self.lbuf = np.full((1, n * area + 9 * cols * stride), 255, np.uint8)
             for t in range(n):
-                self.lbuf[0, (3 * t + 2) * stride + 1:(3 * t + 3) * stride - 1] = 0
+                self.lbuf[0, t * area + 2 * stride + 1:t * area + 3 * stride - 1] = 0
             self.mv = np.empty((1, 3, 3, cols), np.int16)
         else:  # two groups of paths (sgm.sgm_rows)
             n = 2
@@ -123,9 +123,9 @@ class SGMMatcher:
         try:
             if self.params.paths == 5:
                 _sgm.sgm_single_pass(left, self.cl, self.crr, self.cfg, self.p2tab, self.locks,
-                                     self.done, disp, self.cost, self.parked, self.lbuf, self.mv,
+                                     self.done, disp, self.cost, self.lbuf, self.mv,
                                      self.meta, self.pm, self.acc, self.rmin, self.rarg,
-                                     self.karg)
+                                     self.karg, nb.get_num_threads())
                 return
             _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.p2tab, self.parked, self.locks,
                           self.done, disp, self.cost, self.lbuf, self.mv, self.meta, self.pm,

@@ -35,10 +35,12 @@ def _i16(context, builder, sig, args, i):
 
 @intrinsic
 def add_argmin(typingctx, dst, di, src, si, nd):
-    """dst[di+k] += src[si+k] for k < nd; returns (m, first k with dst[di+k] == m), m the
-    minimum of the new values, in one pass: per lane the first strict minimum and its index,
-    then the smallest index among the lanes holding the overall minimum."""
-    if not _i16_arrays(dst, src):
+    """dst[di+k] += src[si+k] for k < nd (src None: dst as it is); returns (m, first k with
+    dst[di+k] == m), m the minimum of the new values, in one pass: per lane the first strict
+    minimum and its index, then the smallest index among the lanes holding the overall
+    minimum."""
+    add = not isinstance(src, (types.NoneType, types.Omitted))
+    if not (_i16_arrays(dst) and (not add or _i16_arrays(src))):
         return None
     ret = types.UniTuple(types.int64, 2)
 
@@ -52,10 +54,12 @@ def add_argmin(typingctx, dst, di, src, si, nd):
         def body(j0, n):
             vty = ir.VectorType(_I16, n)
             pd = _ptr(context, builder, st[0], args[0], [builder.add(div, j0)])
-            s = _vload(builder, _ptr(context, builder, st[2], args[2], [builder.add(siv, j0)]),
-                       vty)
-            t = builder.add(_vload(builder, pd, vty), s)
-            _vstore(builder, t, pd)
+            t = _vload(builder, pd, vty)
+            if add:
+                s = _vload(builder, _ptr(context, builder, st[2], args[2],
+                                         [builder.add(siv, j0)]), vty)
+                t = builder.add(t, s)
+                _vstore(builder, t, pd)
             ks = builder.add(_splat(builder, builder.trunc(j0, _I16), vty),
                              ir.Constant(vty, list(range(n))))
             if n < 64:  # pad to 64 lanes with values that never win
@@ -260,12 +264,14 @@ def _umin(builder, a, b):
 
 @intrinsic
 def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
-    """All path steps of one pixel (1, 2 or 4 paths) in one pass over the disparities:
+    """All path steps of one pixel (npaths 1, 2, 4, or 5: four and a fifth path's stored
+    L) in one pass over the disparities:
 
-        for path v < npaths, with (po, oo, p2m, mprev) = meta[4v : 4v+4]:
+        for path v < min(npaths, 4), with (po, oo, p2m, mprev) = meta[4v : 4v+4]:
           L_v[k] = cost[ci+k] + min(P, min(P[-1], P[+1]) +sat p1, p2m) - mprev,  P = lbuf[po+k]
           lbuf[oo+k] = L_v[k];  mins[v] = min_k L_v[k]
-        acc[ai+k] = sum_v L_v[k]   (int16)
+        acc[ai+k] = sum_v L_v[k] (+ lbuf[meta[16]+k] when npaths is 5)   (int16; not
+        written when npaths is 1)
 
     Path costs are uint8 (the caller keeps every L <= 255 and passes p2m <= 255; the padding
     elements hold 255, and +p1 saturates), so one 512-bit register holds 64 disparities. The
@@ -281,10 +287,11 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
         npv = _intp(context, builder, sig, args, 4)
         ntwo = builder.icmp_signed(">", npv, ir.Constant(npv.type, 1))
         nmore = builder.icmp_signed(">", npv, ir.Constant(npv.type, 2))
+        extra = builder.icmp_signed("==", npv, ir.Constant(npv.type, 5))
         p1v = context.cast(builder, args[5], st[5], types.uint8)
         one = ir.Constant(civ.type, 1)
         meta_v = [builder.load(_ptr(context, builder, st[3], args[3], [ir.Constant(civ.type, i)]))
-                  for i in range(16)]
+                  for i in range(17)]
         wide = ir.VectorType(u8, 64)
         best = [cgutils.alloca_once_value(builder, ir.Constant(wide, [255] * 64))
                 for _ in range(4)]
@@ -325,14 +332,17 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
                 builder.store(_umin(builder, builder.load(best[v]), lw), best[v])
                 return builder.zext(L, wty)
 
-            builder.store(step(0), total)
+            first = step(0)
             with builder.if_then(ntwo, likely=True):
-                builder.store(builder.add(builder.load(total), step(1)), total)
-            with builder.if_then(nmore, likely=True):
-                builder.store(builder.add(builder.load(total),
-                                          builder.add(step(2), step(3))), total)
-            _vstore(builder, builder.load(total),
-                    _ptr(context, builder, st[6], args[6], [builder.add(aiv, j0)]))
+                builder.store(builder.add(first, step(1)), total)
+                with builder.if_then(nmore, likely=True):
+                    builder.store(builder.add(builder.load(total),
+                                              builder.add(step(2), step(3))), total)
+                with builder.if_then(extra, likely=True):
+                    builder.store(builder.add(builder.load(total), builder.zext(
+                        lb(builder.add(meta_v[16], j0), vty), wty)), total)
+                _vstore(builder, builder.load(total),
+                        _ptr(context, builder, st[6], args[6], [builder.add(aiv, j0)]))
 
         _chunked(builder, ndv, body)
         for v in range(4):
