@@ -185,6 +185,40 @@ def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
 
 
 BAND = 32  # columns a row publishes its progress after (single-pass mode)
+NXT_STRIDE = 16  # nxt[c * NXT_STRIDE]: chain c's next row, each on its own cache line
+
+
+@nb.njit(**_JIT)
+def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, cl: np.ndarray,
+               crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray, prog: np.ndarray,
+               disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+               meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
+               rarg: np.ndarray, karg: np.ndarray) -> None:
+    """Row j of chain c (c = 0: the top half top-down, paths from above; c = 1: the bottom
+    half bottom-up, paths from below): cost row, one horizontal path kept per column in lbuf,
+    then in the other horizontal direction the other four paths plus the kept one into acc,
+    band by band once the chain's previous row has published (prog) the columns the band
+    reads; then the selection. hb: this worker's horizontal-path area (cols + 3 runs); vb:
+    the chain's three row slots of three paths."""
+    h = img.shape[0]
+    nd, md, x0, cols = cfg[C_ND], cfg[C_MIND], cfg[C_X0], cfg[C_COLS]
+    dy = 1 - 2 * c
+    y = j if c == 0 else h - 1 - j
+    _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
+    _aggregate_row(1 - c, y, True, 1, hb, vb, 0, 0, 0, cols, img, cfg, p2tab, cost, lbuf, mv,
+                   meta, pm, acc)
+    i = 0
+    while i < cols:
+        i1 = min(i + BAND, cols)
+        if j > 0:
+            need = min(i1 + 1, cols)
+            while load_acquire(prog, y - dy) < need:
+                spin_pause()
+        _aggregate_row(c, y, j == 0, 5, hb, vb, j % 3, (j + 2) % 3, i, i1, img, cfg, p2tab,
+                       cost, lbuf, mv, meta, pm, acc)
+        store_release(prog, y, i1)
+        i = i1
+    _finish_row(y, cfg, acc, None, rmin, rarg, karg, disp[y])
 
 
 @nb.njit(**_JIT)
@@ -193,35 +227,23 @@ def _single_pass(t: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: 
                  cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
                  pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
                  karg: np.ndarray) -> None:
-    """Rows taken one at a time (nxt[0]: the next row) until none is left: cost row, the
-    right-to-left path (kept per column in lbuf), then left to right the other four paths
-    and the kept one into acc, band by band once the row above has published (prog[y - 1])
-    the columns the band reads; then the selection. t: this worker's horizontal-path area in
-    lbuf (cols + 3 runs)."""
+    """Worker t: rows of chain t % 2 taken one at a time, then of the other chain, until
+    none is left (_chain_row)."""
     h = img.shape[0]
-    nd, md, x0, cols = cfg[C_ND], cfg[C_MIND], cfg[C_X0], cfg[C_COLS]
+    nd, cols = cfg[C_ND], cfg[C_COLS]
     stride = nd + 2
-    vb = lbuf.shape[0] - 9 * cols * stride  # three row slots of three paths
+    vbase = lbuf.shape[0] - 18 * cols * stride  # per chain three row slots of three paths
     hb = t * (cols + 3) * stride
-    while True:
-        y = fetch_add(nxt, 0, 1)
-        if y >= h:
-            return
-        _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
-        _aggregate_row(1, y, True, 1, hb, vb, 0, 0, 0, cols, img, cfg, p2tab, cost, lbuf, mv,
-                       meta, pm, acc)
-        i = 0
-        while i < cols:
-            i1 = min(i + BAND, cols)
-            if y > 0:
-                need = min(i1 + 1, cols)
-                while load_acquire(prog, y - 1) < need:
-                    spin_pause()
-            _aggregate_row(0, y, y == 0, 5, hb, vb, y % 3, (y + 2) % 3, i, i1, img, cfg,
-                           p2tab, cost, lbuf, mv, meta, pm, acc)
-            store_release(prog, y, i1)
-            i = i1
-        _finish_row(y, cfg, acc, None, rmin, rarg, karg, disp[y])
+    top = (h + 1) // 2
+    for n in range(2):
+        c = (t + n) & 1
+        rows = top if c == 0 else h - top
+        while True:
+            j = fetch_add(nxt, c * NXT_STRIDE, 1)
+            if j >= rows:
+                break
+            _chain_row(c, j, hb, vbase + c * 9 * cols * stride, img, cl, crr, cfg, p2tab, prog,
+                       disp, cost, lbuf, mv[c], meta, pm, acc, rmin, rarg, karg)
 
 
 @nb.njit(parallel=True, **_JIT)
@@ -230,10 +252,11 @@ def sgm_single_pass(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nd
                     cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
                     pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
                     karg: np.ndarray, workers: int) -> None:
-    """Disparity rows (before the speckle filter) with the five paths of one top-down pass
-    (left to right, right to left, from above and the two upper diagonals): every worker
-    takes the next row (_single_pass). Scratch has one slice per worker (leading axis, at
-    least ``workers``); nxt and prog must be zero."""
+    """Disparity rows (before the speckle filter) with five paths in one pass per half: the
+    two horizontal ones, and from above (top half, rows < ceil(h / 2)) or from below (the
+    rest) the vertical and both diagonals. The halves are independent chains: two workers
+    start one each, a worker whose chain is done joins the other (_single_pass). Scratch has
+    one slice per worker (leading axis, at least ``workers``); nxt and prog must be zero."""
     for t in nb.prange(workers):
         _single_pass(t, img, cl, crr, cfg, p2tab, nxt, prog, disp, cost[t], lbuf[0],
-                     mv[0], meta[t], pm[t], acc[t], rmin[t], rarg[t], karg[t])
+                     mv, meta[t], pm[t], acc[t], rmin[t], rarg[t], karg[t])

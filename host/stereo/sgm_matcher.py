@@ -55,14 +55,15 @@ class SGMMatcher:
             self.p2tab[:] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + np.arange(256))))
         stride = nd + 2
         if p.paths == 5:  # one top-down pass (sgm.sgm_single_pass); per worker n
-            self.locks = np.zeros(16, np.int32)  # [0]: next row to take
+            self.locks = np.zeros(2 * _sgm.NXT_STRIDE, np.int32)  # each chain's next row
             self.done = np.zeros(h, np.int32)  # columns each row has published
-            # horizontal-path areas (cols + 3 runs each), then three row slots of three paths
+            # horizontal-path areas (cols + 3 runs each), then per chain three row slots of
+            # three paths
             area = (cols + 3) * stride
-            self.lbuf = np.full((1, n * area + 9 * cols * stride), 255, np.uint8)
+            self.lbuf = np.full((1, n * area + 18 * cols * stride), 255, np.uint8)
             for t in range(n):
                 self.lbuf[0, t * area + 2 * stride + 1:t * area + 3 * stride - 1] = 0
-            self.mv = np.empty((1, 3, 3, cols), np.int16)
+            self.mv = np.empty((2, 3, 3, cols), np.int16)
         else:  # two groups of paths (sgm.sgm_rows)
             n = 2
             self.parked = _aligned((h, cols * nd), np.int16)
