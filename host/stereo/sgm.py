@@ -226,16 +226,17 @@ def _single_pass(t: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: 
                  p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray, disp: np.ndarray,
                  cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
                  pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
-                 karg: np.ndarray) -> None:
-    """Worker t: rows of chain t % 2 taken one at a time, then of the other chain, until
-    none is left (_chain_row)."""
+                 karg: np.ndarray, workers: int) -> None:
+    """Worker t: rows of chain t % 2 taken one at a time until none is left (_chain_row),
+    then, when it is the only worker, those of chain 1. A worker never joins the other
+    chain once its own is done: under load it would spin behind a descheduled one."""
     h = img.shape[0]
     nd, cols = cfg[C_ND], cfg[C_COLS]
     stride = nd + 2
     vbase = lbuf.shape[0] - 18 * cols * stride  # per chain three row slots of three paths
     hb = t * (cols + 3) * stride
     top = (h + 1) // 2
-    for n in range(2):
+    for n in range(2 if workers == 1 else 1):
         c = (t + n) & 1
         rows = top if c == 0 else h - top
         while True:
@@ -254,9 +255,9 @@ def sgm_single_pass(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nd
                     karg: np.ndarray, workers: int) -> None:
     """Disparity rows (before the speckle filter) with five paths in one pass per half: the
     two horizontal ones, and from above (top half, rows < ceil(h / 2)) or from below (the
-    rest) the vertical and both diagonals. The halves are independent chains: two workers
-    start one each, a worker whose chain is done joins the other (_single_pass). Scratch has
+    rest) the vertical and both diagonals. The halves are independent chains, one per
+    worker; more workers share them row by row (_single_pass). Scratch has
     one slice per worker (leading axis, at least ``workers``); nxt and prog must be zero."""
     for t in nb.prange(workers):
         _single_pass(t, img, cl, crr, cfg, p2tab, nxt, prog, disp, cost[t], lbuf[0],
-                     mv, meta[t], pm[t], acc[t], rmin[t], rarg[t], karg[t])
+                     mv, meta[t], pm[t], acc[t], rmin[t], rarg[t], karg[t], workers)
