@@ -21,7 +21,7 @@ import numpy as np
 
 from .lanes import uidx
 from .sgm_simd import add_argmin, cost_run, count_le, diag_update, fetch_add, load_acquire, \
-    pixel_paths, spin_pause, store_release, stream_copy, try_lock, unlock
+    path_step, pixel_paths, spin_pause, store_release, stream_copy, try_lock, unlock
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
@@ -50,12 +50,11 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
     """acc = sum of the paths of L at row y, pixels i0 .. i1-1 in path order: the horizontal
     path (left to right for g = 0, right to left for g = 1), then (npaths 2 or 4) the
     vertical and diagonal paths arriving from the row above (g = 0) or below (g = 1), none
-    on the first. npaths 1: the horizontal path alone, kept per column in lbuf (acc
-    untouched); 5: four paths plus that kept one.
+    on the first; npaths 5: four paths plus the one _kept_row kept.
 
     lbuf runs of nd + 2 (a padding element each side): from hb, two for the horizontal path
     (this pixel's and its predecessor's), one zero run (predecessor of a path's first pixel)
-    and, for npaths 1 and 5, one per column; from vb, per row slot and vertical/diagonal
+    and, for npaths 5, the kept path's one per column; from vb, per row slot and vertical/diagonal
     path one run per column, row y in slot cur, its predecessor row in prv. mv[slot, v, x]:
     minima. p2tab[|I(p) - I(q)|]: the effective P2 between neighbours of those intensities."""
     nd, p1 = cfg[C_ND], cfg[C_P1]
@@ -69,12 +68,8 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
         x = i if g == 0 else cols - 1 - i
         X = x0 + x
         # horizontal path (0, dy): predecessor x - dy on this row
-        if npaths == 1:
-            meta[1] = kept + x * stride
-            meta[0] = kept + (x - dy) * stride
-        else:
-            meta[1] = hb + (i & 1) * stride + 1
-            meta[0] = hb + (1 - (i & 1)) * stride + 1
+        meta[1] = hb + (i & 1) * stride + 1
+        meta[0] = hb + (1 - (i & 1)) * stride + 1
         if npaths == 5:
             meta[16] = kept + x * stride
         if i == 0:
@@ -99,6 +94,34 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
         pixel_paths(cost, x * nd, lbuf, meta, npaths, p1, acc, x * nd, nd, pm)
         for v in range(1, vpaths):
             mv[cur, v - 1, x] = pm[v]
+
+
+@nb.njit(**_JIT)
+def _kept_row(g: int, y: int, hb: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray,
+              cfg: np.ndarray, p2tab: np.ndarray, cost: np.ndarray, lbuf: np.ndarray) -> None:
+    """Cost row y (as _cost_row) and, pixel by pixel as the costs are made, the horizontal
+    path (left to right for g = 0, right to left for g = 1) kept per column in lbuf (the runs
+    from hb + 3 (nd + 2), _aggregate_row's layout)."""
+    nd, md, p1 = cfg[C_ND], cfg[C_MIND], cfg[C_P1]
+    x0, cols, maxc = cfg[C_X0], cfg[C_COLS], cfg[C_MAXC]
+    w = cl.shape[1]
+    stride = nd + 2
+    kept, zero = hb + 3 * stride + 1, hb + 2 * stride + 1
+    dy = 1 if g == 0 else -1
+    outside = nd - 1 - x0 + md  # columns x < outside have disparities left of the image
+    hm = np.int64(0)
+    for i in range(cols):
+        x = i if g == 0 else cols - 1 - i
+        X = x0 + x
+        cost_run(cl[y, uidx(X)], crr[y], w - 1 - X + md, cost, x * nd, nd)
+        if x < outside:
+            cost[x * nd + X - md + 1:(x + 1) * nd] = maxc
+        if i == 0:
+            hm = path_step(cost, x * nd, lbuf, zero, kept + x * stride, 255, 0, p1, nd)
+        else:
+            p2m = min(hm + p2tab[abs(np.int64(img[y, X]) - img[y, X - dy])], 255)
+            hm = path_step(cost, x * nd, lbuf, kept + (x - dy) * stride, kept + x * stride,
+                           p2m, hm, p1, nd)
 
 
 @nb.njit(**_JIT)
@@ -201,12 +224,10 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, cl: np.ndarray
     reads; then the selection. hb: this worker's horizontal-path area (cols + 3 runs); vb:
     the chain's three row slots of three paths."""
     h = img.shape[0]
-    nd, md, x0, cols = cfg[C_ND], cfg[C_MIND], cfg[C_X0], cfg[C_COLS]
+    cols = cfg[C_COLS]
     dy = 1 - 2 * c
     y = j if c == 0 else h - 1 - j
-    _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
-    _aggregate_row(1 - c, y, True, 1, hb, vb, 0, 0, 0, cols, img, cfg, p2tab, cost, lbuf, mv,
-                   meta, pm, acc)
+    _kept_row(1 - c, y, hb, img, cl, crr, cfg, p2tab, cost, lbuf)
     i = 0
     while i < cols:
         i1 = min(i + BAND, cols)

@@ -262,6 +262,72 @@ def _umin(builder, a, b):
     return builder.select(builder.icmp_unsigned("<", a, b), a, b)
 
 
+def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, p1s):
+    """L[k] for the n disparities from j0 of one path step (pixel_paths), stored at
+    lbuf[oo + j0 + k]; meta = (po, oo, p2m, mprev) as int64 values."""
+    u8 = ir.IntType(8)
+    vty = ir.VectorType(u8, n)
+    po, oo, p2m, mp = meta
+    pj = builder.add(po, j0)
+
+    def at(off):
+        return _ptr(context, builder, lbty, lbuf, [off])
+    # P[k-1] and P[k+1] by shifting the chunk (loaded where it was stored, so a just-written
+    # predecessor forwards) with the neighbouring element (padding 255 at either end of the
+    # run)
+    pv = _vload(builder, at(pj), vty)
+    before = builder.load(at(builder.sub(pj, ir.Constant(pj.type, 1))))
+    after = builder.load(at(builder.add(pj, ir.Constant(pj.type, n))))
+    lo = builder.shuffle_vector(pv, _splat(builder, before, vty), ir.Constant(
+        ir.VectorType(_I32, n), [n] + list(range(n - 1))))
+    hi = builder.shuffle_vector(pv, _splat(builder, after, vty), ir.Constant(
+        ir.VectorType(_I32, n), list(range(1, n)) + [n]))
+    t = _call(builder, f"llvm.uadd.sat.v{n}i8", vty, [_umin(builder, lo, hi), p1s])
+    m = _umin(builder, _umin(builder, pv, t), _splat(builder, builder.trunc(p2m, u8), vty))
+    L = builder.sub(builder.add(c, m), _splat(builder, builder.trunc(mp, u8), vty))
+    _vstore(builder, L, at(builder.add(oo, j0)))
+    return L
+
+
+def _keep_min(builder, best, L, n):
+    """best (a <64 x i8> slot) = lane-wise min(best, L padded with 255 to 64 lanes)."""
+    lw = L if n == 64 else builder.shuffle_vector(
+        L, ir.Constant(L.type, [255] * n),
+        ir.Constant(ir.VectorType(_I32, 64), list(range(n)) + [n] * (64 - n)))
+    builder.store(_umin(builder, builder.load(best), lw), best)
+
+
+@intrinsic
+def path_step(typingctx, cost, ci, lbuf, po, oo, p2m, mprev, p1, nd):
+    """One path step of one pixel (pixel_paths' for a single path, its meta as arguments):
+    lbuf[oo+k] = L[k] for k < nd; returns min_k L[k]."""
+    if not (_u8_arrays(cost, lbuf) and all(isinstance(t, types.Integer)
+                                           for t in (ci, po, oo, p2m, mprev, p1, nd))):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        u8 = ir.IntType(8)
+        civ, pov, oov, p2v, mpv, ndv = (_intp(context, builder, sig, args, i)
+                                        for i in (1, 3, 4, 5, 6, 8))
+        p1v = context.cast(builder, args[7], st[7], types.uint8)
+        best = cgutils.alloca_once_value(builder, ir.Constant(ir.VectorType(u8, 64), [255] * 64))
+
+        def body(j0, n):
+            vty = ir.VectorType(u8, n)
+            c = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(civ, j0)]),
+                       vty)
+            L = _step_chunk(context, builder, st[2], args[2], c, (pov, oov, p2v, mpv), j0, n,
+                            _splat(builder, p1v, vty))
+            _keep_min(builder, best, L, n)
+
+        _chunked(builder, ndv, body)
+        low = _call(builder, "llvm.vector.reduce.umin.v64i8", u8, [builder.load(best)])
+        return builder.zext(low, ir.IntType(64))
+
+    return types.int64(cost, ci, lbuf, po, oo, p2m, mprev, p1, nd), codegen
+
+
 @intrinsic
 def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
     """All path steps of one pixel (npaths 1, 2, 4, or 5: four and a fifth path's stored
@@ -289,7 +355,6 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
         nmore = builder.icmp_signed(">", npv, ir.Constant(npv.type, 2))
         extra = builder.icmp_signed("==", npv, ir.Constant(npv.type, 5))
         p1v = context.cast(builder, args[5], st[5], types.uint8)
-        one = ir.Constant(civ.type, 1)
         meta_v = [builder.load(_ptr(context, builder, st[3], args[3], [ir.Constant(civ.type, i)]))
                   for i in range(17)]
         wide = ir.VectorType(u8, 64)
@@ -307,29 +372,9 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
             p1s = _splat(builder, p1v, vty)
 
             def step(v):
-                po, oo, p2m, mp = meta_v[4 * v:4 * v + 4]
-                pj = builder.add(po, j0)
-                # P[k-1] and P[k+1] by shifting the chunk (loaded where it was stored, so a
-                # just-written predecessor forwards) with the neighbouring element (padding 255
-                # at either end of the run)
-                pv = lb(pj, vty)
-                before = builder.load(_ptr(context, builder, st[2], args[2],
-                                           [builder.sub(pj, one)]))
-                after = builder.load(_ptr(context, builder, st[2], args[2],
-                                          [builder.add(pj, ir.Constant(pj.type, n))]))
-                lo = builder.shuffle_vector(pv, _splat(builder, before, vty), ir.Constant(
-                    ir.VectorType(_I32, n), [n] + list(range(n - 1))))
-                hi = builder.shuffle_vector(pv, _splat(builder, after, vty), ir.Constant(
-                    ir.VectorType(_I32, n), list(range(1, n)) + [n]))
-                t = _call(builder, f"llvm.uadd.sat.v{n}i8", vty, [_umin(builder, lo, hi), p1s])
-                m = _umin(builder, _umin(builder, pv, t),
-                          _splat(builder, builder.trunc(p2m, u8), vty))
-                L = builder.sub(builder.add(c, m), _splat(builder, builder.trunc(mp, u8), vty))
-                _vstore(builder, L, _ptr(context, builder, st[2], args[2], [builder.add(oo, j0)]))
-                lw = L if n == 64 else builder.shuffle_vector(  # pad with 255 to 64 lanes
-                    L, ir.Constant(vty, [255] * n),
-                    ir.Constant(ir.VectorType(_I32, 64), list(range(n)) + [n] * (64 - n)))
-                builder.store(_umin(builder, builder.load(best[v]), lw), best[v])
+                L = _step_chunk(context, builder, st[2], args[2], c, meta_v[4 * v:4 * v + 4],
+                                j0, n, p1s)
+                _keep_min(builder, best[v], L, n)
                 return builder.zext(L, wty)
 
             first = step(0)
