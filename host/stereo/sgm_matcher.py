@@ -17,8 +17,9 @@ from .sgm_params import SGMGeometry, SGMParams, sgm_geometry
 class SGMMatcher:
     """Semi-global matcher for one (shape, params); scratch buffers live between frames.
 
-    Runs on two threads (one per group of path directions) when numba has them; the output
-    does not depend on the thread count. Calls are serialised by a lock."""
+    Runs on two threads (one per group of path directions, or with 5 paths one per half of
+    the image) when numba has them; the output does not depend on the thread count. Calls
+    are serialised by a lock."""
 
     def __init__(self, shape: tuple[int, int], params: SGMParams = SGMParams()) -> None:
         if not isinstance(params, SGMParams):
