@@ -82,7 +82,8 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
             meta[0], meta[2], meta[3] = zero, 255, 0
         else:
             hm = np.int64(pm[0])
-            meta[2] = min(hm + p2tab[abs(np.int64(img[y, X]) - img[y, X - dy])], 255)
+            meta[2] = min(hm + p2tab[uidx(abs(np.int64(img[y, uidx(X)])
+                                              - img[y, uidx(X - dy)]))], 255)
             meta[3] = hm
         for v in range(1, vpaths):  # (dy, 0), (dy, 1), (dy, -1): predecessor (y-dy, x-dx)
             dx = v - 1 if v < 3 else -1
@@ -92,14 +93,14 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
             if first or xq < 0 or xq >= cols:
                 meta[o], meta[o + 2], meta[o + 3] = zero, 255, 0
             else:
-                mp = np.int64(mv[prv, v - 1, xq])
+                mp = np.int64(mv[prv, v - 1, uidx(xq)])
                 meta[o] = vb + ((prv * 3 + v - 1) * cols + xq) * stride + 1
-                meta[o + 2] = min(mp + p2tab[abs(np.int64(img[y, X]) - img[y - dy, X - dx])],
-                                  255)
+                meta[o + 2] = min(mp + p2tab[uidx(abs(np.int64(img[y, uidx(X)])
+                                                      - img[uidx(y - dy), uidx(X - dx)]))], 255)
                 meta[o + 3] = mp
         pixel_paths(cost, x * nd, lbuf, meta, npaths, p1, acc, x * nd, nd, pm)
         for v in range(1, vpaths):
-            mv[cur, v - 1, x] = pm[v]
+            mv[cur, v - 1, uidx(x)] = pm[v]
 
 
 @nb.njit(**_JIT)
