@@ -102,7 +102,8 @@ def motorcycle_small(motorcycle):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kw", [dict(), dict(paths=4, uniqueness_ratio=10, lr_max_diff=1)])
+@pytest.mark.parametrize("kw", [dict(), dict(paths=4, uniqueness_ratio=10, lr_max_diff=1),
+                                dict(paths=5)])
 def test_full_size_motorcycle_bit_exact(motorcycle, kw) -> None:
     """Middlebury Motorcycle at 741x500 with 128 disparities, as the benchmark runs it."""
     left, right = motorcycle
