@@ -1,5 +1,5 @@
 """Stereo matching engines, for the device and for host-side tools alike: StereoBM block matching,
-bit-exact with cv2.StereoBM (OpenCV 4.x/5.x), and semi-global matching (census, 4 or 8 paths),
+bit-exact with cv2.StereoBM (OpenCV 4.x/5.x), and semi-global matching (census, 4, 5 or 8 paths),
 bit-exact with tests/sgm_reference.py. Depends on stereocam.protocol, numpy and numba only.
 
     from stereocam.stereo import MatchParams, SGMParams, match, Matcher, SGMMatcher

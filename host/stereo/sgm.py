@@ -11,6 +11,12 @@ finishes that row (winner-take-all ... left-right) into ``disp``. A per-row spin
 who is first; nobody ever waits for the other group's progress, so one thread runs the same
 code (group 0, then group 1) with the same result.
 
+5 paths (sgm_single_pass) store no volume: one pass per half of the image, the top half top
+to bottom with the paths from above, the bottom half bottom to top with those from below, each
+row making its cost row once, the right-to-left path kept per column, then left to right the
+other four paths, the sum and the selection. The halves are independent chains (one per
+worker); rows within a chain wait band by band on the row before (a per-row progress count).
+
 numba caches this module's kernels on disk keyed on *this* file only: after editing
 sgm_simd.py, touch this file and census.py (or delete __pycache__) so the cache is rebuilt.
 """
@@ -20,8 +26,8 @@ import numba as nb
 import numpy as np
 
 from .lanes import uidx
-from .sgm_simd import add_argmin, cost_run, count_le, diag_update, pixel_paths, stream_copy, \
-    try_lock, unlock
+from .sgm_simd import add_argmin, cost_run, count_le, diag_update, fetch_add, load_acquire, \
+    path_step, pixel_paths, spin_pause, store_release, stream_copy, try_lock, unlock
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
@@ -43,57 +49,93 @@ def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int
 
 
 @nb.njit(**_JIT)
-def _aggregate_row(g: int, y: int, step: int, img: np.ndarray, cfg: np.ndarray,
+def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, cur: int,
+                   prv: int, i0: int, i1: int, img: np.ndarray, cfg: np.ndarray,
                    p2tab: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                    meta: np.ndarray, pm: np.ndarray, acc: np.ndarray) -> None:
-    """acc = sum over group g's paths of L at row y, the group's step-th row.
+    """acc = sum of the paths of L at row y, pixels i0 .. i1-1 in path order: the horizontal
+    path (left to right for g = 0, right to left for g = 1), then (npaths 2 or 4) the
+    vertical and diagonal paths arriving from the row above (g = 0) or below (g = 1), none
+    on the first; npaths 5: four paths plus the one _kept_row kept.
 
-    lbuf runs of nd + 2 (a padding element each side): two for the horizontal path (this
-    pixel's and its predecessor's), one zero run (predecessor of a path's first pixel), then
-    per row parity and vertical/diagonal path one run per column. mv[parity, v, x]: minima.
-    p2tab[|I(p) - I(q)|]: the effective P2 between neighbours of those intensities."""
+    lbuf runs of nd + 2 (a padding element each side): from hb, two for the horizontal path
+    (this pixel's and its predecessor's), one zero run (predecessor of a path's first pixel)
+    and, for npaths 5, the kept path's one per column; from vb, per row slot and vertical/diagonal
+    path one run per column, row y in slot cur, its predecessor row in prv. mv[slot, v, x]:
+    minima. p2tab[|I(p) - I(q)|]: the effective P2 between neighbours of those intensities."""
     nd, p1 = cfg[C_ND], cfg[C_P1]
     x0, cols = cfg[C_X0], cfg[C_COLS]
-    npaths = 2 if cfg[C_PATHS] == 4 else 4
     dy = 1 if g == 0 else -1
     stride = nd + 2
-    zero = 2 * stride + 1
-    cur, prv = step & 1, 1 - (step & 1)
-    for i in range(cols):
+    zero = hb + 2 * stride + 1
+    kept = hb + 3 * stride + 1  # + x * stride: the kept horizontal path's run of column x
+    vpaths = min(npaths, 4)
+    for i in range(i0, i1):
         x = i if g == 0 else cols - 1 - i
         X = x0 + x
         # horizontal path (0, dy): predecessor x - dy on this row
-        meta[1] = (i & 1) * stride + 1
+        meta[1] = hb + (i & 1) * stride + 1
+        meta[0] = hb + (1 - (i & 1)) * stride + 1
+        if npaths == 5:
+            meta[16] = kept + x * stride
         if i == 0:
             meta[0], meta[2], meta[3] = zero, 255, 0
         else:
             hm = np.int64(pm[0])
-            meta[0] = (1 - (i & 1)) * stride + 1
-            meta[2] = min(hm + p2tab[abs(np.int64(img[y, X]) - img[y, X - dy])], 255)
+            meta[2] = min(hm + p2tab[uidx(abs(np.int64(img[y, uidx(X)])
+                                              - img[y, uidx(X - dy)]))], 255)
             meta[3] = hm
-        for v in range(1, npaths):  # (dy, 0), (dy, 1), (dy, -1): predecessor (y-dy, x-dx)
+        for v in range(1, vpaths):  # (dy, 0), (dy, 1), (dy, -1): predecessor (y-dy, x-dx)
             dx = v - 1 if v < 3 else -1
             xq = x - dx
             o = 4 * v
-            meta[o + 1] = 3 * stride + ((cur * 3 + v - 1) * cols + x) * stride + 1
-            if step == 0 or xq < 0 or xq >= cols:
+            meta[o + 1] = vb + ((cur * 3 + v - 1) * cols + x) * stride + 1
+            if first or xq < 0 or xq >= cols:
                 meta[o], meta[o + 2], meta[o + 3] = zero, 255, 0
             else:
-                mp = np.int64(mv[prv, v - 1, xq])
-                meta[o] = 3 * stride + ((prv * 3 + v - 1) * cols + xq) * stride + 1
-                meta[o + 2] = min(mp + p2tab[abs(np.int64(img[y, X]) - img[y - dy, X - dx])],
-                                  255)
+                mp = np.int64(mv[prv, v - 1, uidx(xq)])
+                meta[o] = vb + ((prv * 3 + v - 1) * cols + xq) * stride + 1
+                meta[o + 2] = min(mp + p2tab[uidx(abs(np.int64(img[y, uidx(X)])
+                                                      - img[uidx(y - dy), uidx(X - dx)]))], 255)
                 meta[o + 3] = mp
         pixel_paths(cost, x * nd, lbuf, meta, npaths, p1, acc, x * nd, nd, pm)
-        for v in range(1, npaths):
-            mv[cur, v - 1, x] = pm[v]
+        for v in range(1, vpaths):
+            mv[cur, v - 1, uidx(x)] = pm[v]
 
 
 @nb.njit(**_JIT)
-def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray,
+def _kept_row(g: int, y: int, hb: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray,
+              cfg: np.ndarray, p2tab: np.ndarray, cost: np.ndarray, lbuf: np.ndarray) -> None:
+    """Cost row y (as _cost_row) and, pixel by pixel as the costs are made, the horizontal
+    path (left to right for g = 0, right to left for g = 1) kept per column in lbuf (the runs
+    from hb + 3 (nd + 2), _aggregate_row's layout)."""
+    nd, md, p1 = cfg[C_ND], cfg[C_MIND], cfg[C_P1]
+    x0, cols, maxc = cfg[C_X0], cfg[C_COLS], cfg[C_MAXC]
+    w = cl.shape[1]
+    stride = nd + 2
+    kept, zero = hb + 3 * stride + 1, hb + 2 * stride + 1
+    dy = 1 if g == 0 else -1
+    outside = nd - 1 - x0 + md  # columns x < outside have disparities left of the image
+    hm = np.int64(0)
+    for i in range(cols):
+        x = i if g == 0 else cols - 1 - i
+        X = x0 + x
+        cost_run(cl[y, uidx(X)], crr[y], w - 1 - X + md, cost, x * nd, nd)
+        if x < outside:
+            cost[x * nd + X - md + 1:(x + 1) * nd] = maxc
+        if i == 0:
+            hm = path_step(cost, x * nd, lbuf, zero, kept + x * stride, 255, 0, p1, nd)
+        else:
+            p2m = min(hm + p2tab[abs(np.int64(img[y, X]) - img[y, X - dy])], 255)
+            hm = path_step(cost, x * nd, lbuf, kept + (x - dy) * stride, kept + x * stride,
+                           p2m, hm, p1, nd)
+
+
+@nb.njit(**_JIT)
+def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray | None,
                 rmin: np.ndarray, rarg: np.ndarray, karg: np.ndarray,
                 out: np.ndarray) -> None:
-    """acc += parked (the other group's sum), then winner-take-all, uniqueness and subpixel
+    """acc += parked (the other group's sum; None: acc is the whole sum), then winner-take-all, uniqueness and subpixel
     per pixel in one pass (the sum stays in L1), and the left-right check, which needs the
     whole row's right-image winners, in a second pass over the kept winners karg."""
     nd, md, uratio, lrdiff = cfg[C_ND], cfg[C_MIND], cfg[C_URATIO], cfg[C_LRDIFF]
@@ -144,7 +186,9 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
     for step in range(h):
         y = step if g == 0 else h - 1 - step
         _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
-        _aggregate_row(g, y, step, img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc)
+        _aggregate_row(g, y, step == 0, 2 if cfg[C_PATHS] == 4 else 4, 0, 3 * (nd + 2),
+                       step & 1, 1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf, mv,
+                       meta, pm, acc)
         while not try_lock(locks, y):
             pass
         first = done[y] == 0
@@ -168,3 +212,80 @@ def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
     for g in nb.prange(2):
         _group(g, img, cl, crr, cfg, p2tab, parked, locks, done, disp, cost[g], lbuf[g], mv[g],
                meta[g], pm[g], acc[g], rmin[g], rarg[g], karg[g])
+
+
+BAND = 32  # columns a row publishes its progress after (single-pass mode)
+NXT_STRIDE = 16  # nxt[c * NXT_STRIDE]: chain c's next row, each on its own cache line
+
+
+@nb.njit(**_JIT)
+def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, cl: np.ndarray,
+               crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray, prog: np.ndarray,
+               disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+               meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
+               rarg: np.ndarray, karg: np.ndarray) -> None:
+    """Row j of chain c (c = 0: the top half top-down, paths from above; c = 1: the bottom
+    half bottom-up, paths from below): cost row, one horizontal path kept per column in lbuf,
+    then in the other horizontal direction the other four paths plus the kept one into acc,
+    band by band once the chain's previous row has published (prog) the columns the band
+    reads; then the selection. hb: this worker's horizontal-path area (cols + 3 runs); vb:
+    the chain's three row slots of three paths."""
+    h = img.shape[0]
+    cols = cfg[C_COLS]
+    dy = 1 - 2 * c
+    y = j if c == 0 else h - 1 - j
+    _kept_row(1 - c, y, hb, img, cl, crr, cfg, p2tab, cost, lbuf)
+    i = 0
+    while i < cols:
+        i1 = min(i + BAND, cols)
+        if j > 0:
+            need = min(i1 + 1, cols)
+            while load_acquire(prog, y - dy) < need:
+                spin_pause()
+        _aggregate_row(c, y, j == 0, 5, hb, vb, j % 3, (j + 2) % 3, i, i1, img, cfg, p2tab,
+                       cost, lbuf, mv, meta, pm, acc)
+        store_release(prog, y, i1)
+        i = i1
+    _finish_row(y, cfg, acc, None, rmin, rarg, karg, disp[y])
+
+
+@nb.njit(**_JIT)
+def _single_pass(t: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
+                 p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray, disp: np.ndarray,
+                 cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
+                 pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
+                 karg: np.ndarray, workers: int) -> None:
+    """Worker t: rows of chain t % 2 taken one at a time until none is left (_chain_row),
+    then, when it is the only worker, those of chain 1. A worker never joins the other
+    chain once its own is done: under load it would spin behind a descheduled one."""
+    h = img.shape[0]
+    nd, cols = cfg[C_ND], cfg[C_COLS]
+    stride = nd + 2
+    vbase = lbuf.shape[0] - 18 * cols * stride  # per chain three row slots of three paths
+    hb = t * (cols + 3) * stride
+    top = (h + 1) // 2
+    for n in range(2 if workers == 1 else 1):
+        c = (t + n) & 1
+        rows = top if c == 0 else h - top
+        while True:
+            j = fetch_add(nxt, c * NXT_STRIDE, 1)
+            if j >= rows:
+                break
+            _chain_row(c, j, hb, vbase + c * 9 * cols * stride, img, cl, crr, cfg, p2tab, prog,
+                       disp, cost, lbuf, mv[c], meta, pm, acc, rmin, rarg, karg)
+
+
+@nb.njit(parallel=True, **_JIT)
+def sgm_single_pass(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
+                    p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray, disp: np.ndarray,
+                    cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
+                    pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
+                    karg: np.ndarray, workers: int) -> None:
+    """Disparity rows (before the speckle filter) with five paths in one pass per half: the
+    two horizontal ones, and from above (top half, rows < ceil(h / 2)) or from below (the
+    rest) the vertical and both diagonals. The halves are independent chains, one per
+    worker; more workers share them row by row (_single_pass). Scratch has
+    one slice per worker (leading axis, at least ``workers``); nxt and prog must be zero."""
+    for t in nb.prange(workers):
+        _single_pass(t, img, cl, crr, cfg, p2tab, nxt, prog, disp, cost[t], lbuf[0],
+                     mv, meta[t], pm[t], acc[t], rmin[t], rarg[t], karg[t], workers)

@@ -17,8 +17,9 @@ from .sgm_params import SGMGeometry, SGMParams, sgm_geometry
 class SGMMatcher:
     """Semi-global matcher for one (shape, params); scratch buffers live between frames.
 
-    Runs on two threads (one per group of path directions) when numba has them; the output
-    does not depend on the thread count. Calls are serialised by a lock."""
+    Runs on two threads (one per group of path directions, or with 5 paths one per half of
+    the image) when numba has them; the output does not depend on the thread count. Calls
+    are serialised by a lock."""
 
     def __init__(self, shape: tuple[int, int], params: SGMParams = SGMParams()) -> None:
         if not isinstance(params, SGMParams):
@@ -53,24 +54,36 @@ class SGMMatcher:
         if p.p2_adapt > 0:
             a = p.p2_adapt
             self.p2tab[:] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + np.arange(256))))
-        self.parked = _aligned((h, cols * nd), np.int16)
-        self.locks = np.zeros(h, np.int32)
-        self.done = np.zeros(h, np.int32)
-        # per group of paths: cost row, uint8 path buffers (sgm._aggregate_row; the padding
-        # elements hold 255) and their minima
         stride = nd + 2
-        self.cost = _aligned((2, cols * nd), np.uint8)
-        self.lbuf = np.full((2, 3 * stride + 6 * cols * stride), 255, np.uint8)
-        self.lbuf[:, 2 * stride + 1:3 * stride - 1] = 0
-        self.mv = np.empty((2, 2, 3, cols), np.int16)
-        # written at every pixel by both threads: each group's slice 128 bytes away from the
-        # other's, never on one cache line (false sharing made two threads slower than one)
-        self.meta = np.zeros((2, 32), np.int64)  # 16 used
-        self.pm = np.zeros((2, 64), np.int16)  # 4 used
-        self.acc = _aligned((2, cols * nd), np.int16)
-        self.rmin = np.empty((2, cols + nd - 1), np.int16)
-        self.rarg = np.zeros((2, cols + nd - 1), np.int16)
-        self.karg = np.empty((2, cols), np.int16)  # winners of a row (left-right check)
+        if p.paths == 5:  # one top-down pass (sgm.sgm_single_pass); per worker n
+            self.locks = np.zeros(2 * _sgm.NXT_STRIDE, np.int32)  # each chain's next row
+            self.done = np.zeros(h, np.int32)  # columns each row has published
+            # horizontal-path areas (cols + 3 runs each), then per chain three row slots of
+            # three paths
+            area = (cols + 3) * stride
+            self.lbuf = np.full((1, n * area + 18 * cols * stride), 255, np.uint8)
+            for t in range(n):
+                self.lbuf[0, t * area + 2 * stride + 1:t * area + 3 * stride - 1] = 0
+            self.mv = np.empty((2, 3, 3, cols), np.int16)
+        else:  # two groups of paths (sgm.sgm_rows)
+            n = 2
+            self.parked = _aligned((h, cols * nd), np.int16)
+            self.locks = np.zeros(h, np.int32)
+            self.done = np.zeros(h, np.int32)
+            self.lbuf = np.full((2, 3 * stride + 6 * cols * stride), 255, np.uint8)
+            self.lbuf[:, 2 * stride + 1:3 * stride - 1] = 0
+            self.mv = np.empty((2, 2, 3, cols), np.int16)
+        # per worker or group of paths: cost row, uint8 path buffers (sgm._aggregate_row; the
+        # padding elements hold 255) and their minima
+        self.cost = _aligned((n, cols * nd), np.uint8)
+        # written at every pixel by every thread: each one's slice 128 bytes away from the
+        # others', never on one cache line (false sharing made two threads slower than one)
+        self.meta = np.zeros((n, 32), np.int64)  # 16 used
+        self.pm = np.zeros((n, 64), np.int16)  # 4 used
+        self.acc = _aligned((n, cols * nd), np.int16)
+        self.rmin = np.empty((n, cols + nd - 1), np.int16)
+        self.rarg = np.zeros((n, cols + nd - 1), np.int16)
+        self.karg = np.empty((n, cols), np.int16)  # winners of a row (left-right check)
         if p.use_speckle:
             self.labels = np.empty((h, w), np.int32)
             self.stack = np.empty((h * w, 2), np.int32)
@@ -110,6 +123,12 @@ class SGMMatcher:
         self.done[:] = 0
         chunk = nb.set_parallel_chunksize(1)
         try:
+            if self.params.paths == 5:
+                _sgm.sgm_single_pass(left, self.cl, self.crr, self.cfg, self.p2tab, self.locks,
+                                     self.done, disp, self.cost, self.lbuf, self.mv,
+                                     self.meta, self.pm, self.acc, self.rmin, self.rarg,
+                                     self.karg, nb.get_num_threads())
+                return
             _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.p2tab, self.parked, self.locks,
                           self.done, disp, self.cost, self.lbuf, self.mv, self.meta, self.pm,
                           self.acc, self.rmin, self.rarg, self.karg)

@@ -16,18 +16,19 @@ from .config_map import ConfigField, check_params, check_rule
 
 PATH_COST_LIMIT = 255  # path costs L <= census bits + p2 are held in uint8
 CENSUS_BITS = 64  # census codes are uint64
+PATH_COUNTS = (4, 5, 8)  # path directions the engine aggregates (sgm_reference.PATHS)
 
 SGM_CONFIG: tuple[ConfigField, ...] = (
     ConfigField("num_disparities"), ConfigField("min_disparity"),
     ConfigField("census_width", protocol_limits=False), ConfigField("census_height", protocol_limits=False),
-    ConfigField("sgm_paths", "paths"), ConfigField("sgm_p1", "p1"),
+    ConfigField("sgm_paths", "paths", protocol_limits=False), ConfigField("sgm_p1", "p1"),
     ConfigField("sgm_p2", "p2", protocol_limits=False), ConfigField("sgm_p2_adapt", "p2_adapt", protocol_limits=False),
     ConfigField("uniqueness_ratio"), ConfigField("disp12_max_diff", "lr_max_diff"),
     ConfigField("speckle_window_size"), ConfigField("speckle_range"),
 )
 """Device configuration key -> SGMParams field. The census window and p2 have the engine's own
 (wider) limits: any census window of up to 64 comparisons, p2 up to what uint8 path costs hold;
-the protocol's ranges lie within them."""
+and the path count (4, 5 or 8); the protocol's ranges lie within them."""
 
 
 @dataclass(frozen=True)
@@ -38,7 +39,8 @@ class SGMParams:
     min_disparity: int = 0
     census_width: int = 9  # census window (odd, width * height - 1 <= 64 comparison bits)
     census_height: int = 7
-    paths: int = 8  # 4 (horizontal + vertical) or 8 (plus the diagonals)
+    paths: int = 8  # 4 (horizontal + vertical), 8 (plus the diagonals) or 5 (one top-down
+    # pass: horizontal, from above and the two upper diagonals)
     p1: int = 15  # penalty for a 1 px disparity change between neighbours along a path
     p2: int = 128  # penalty for a larger change
     p2_adapt: int = 32  # > 0: P2 / (1 + |dI| / p2_adapt) along the path, not below p1 (nor
@@ -59,6 +61,8 @@ class SGMParams:
         if cw < 1 or ch < 1 or cw % 2 == 0 or ch % 2 == 0 or not 2 <= cw * ch <= CENSUS_BITS + 1:
             raise ConfigError(f"census window must be odd by odd with 1..{CENSUS_BITS} comparisons, "
                               f"got {cw}x{ch}")
+        if self.paths not in PATH_COUNTS:
+            raise ConfigError(f"paths must be one of {', '.join(map(str, PATH_COUNTS))}, got {self.paths}")
         if self.p2 < 0 or self.max_cost + self.p2 > PATH_COST_LIMIT:
             raise ConfigError(f"p2 {self.p2} out of range: 0 <= p2 and census bits {self.max_cost} + p2 "
                               f"<= {PATH_COST_LIMIT}")

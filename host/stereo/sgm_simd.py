@@ -35,10 +35,12 @@ def _i16(context, builder, sig, args, i):
 
 @intrinsic
 def add_argmin(typingctx, dst, di, src, si, nd):
-    """dst[di+k] += src[si+k] for k < nd; returns (m, first k with dst[di+k] == m), m the
-    minimum of the new values, in one pass: per lane the first strict minimum and its index,
-    then the smallest index among the lanes holding the overall minimum."""
-    if not _i16_arrays(dst, src):
+    """dst[di+k] += src[si+k] for k < nd (src None: dst as it is); returns (m, first k with
+    dst[di+k] == m), m the minimum of the new values, in one pass: per lane the first strict
+    minimum and its index, then the smallest index among the lanes holding the overall
+    minimum."""
+    add = not isinstance(src, (types.NoneType, types.Omitted))
+    if not (_i16_arrays(dst) and (not add or _i16_arrays(src))):
         return None
     ret = types.UniTuple(types.int64, 2)
 
@@ -52,10 +54,12 @@ def add_argmin(typingctx, dst, di, src, si, nd):
         def body(j0, n):
             vty = ir.VectorType(_I16, n)
             pd = _ptr(context, builder, st[0], args[0], [builder.add(div, j0)])
-            s = _vload(builder, _ptr(context, builder, st[2], args[2], [builder.add(siv, j0)]),
-                       vty)
-            t = builder.add(_vload(builder, pd, vty), s)
-            _vstore(builder, t, pd)
+            t = _vload(builder, pd, vty)
+            if add:
+                s = _vload(builder, _ptr(context, builder, st[2], args[2],
+                                         [builder.add(siv, j0)]), vty)
+                t = builder.add(t, s)
+                _vstore(builder, t, pd)
             ks = builder.add(_splat(builder, builder.trunc(j0, _I16), vty),
                              ir.Constant(vty, list(range(n))))
             if n < 64:  # pad to 64 lanes with values that never win
@@ -197,6 +201,58 @@ def unlock(typingctx, locks, i):
     return types.none(locks, i), codegen
 
 
+@intrinsic
+def fetch_add(typingctx, arr, i, v):
+    """arr[i] += v atomically (int32); returns the value before."""
+    if not (isinstance(arr, types.Array) and arr.dtype == types.int32):
+        return None
+
+    def codegen(context, builder, sig, args):
+        val = context.cast(builder, args[2], sig.args[2], types.int32)
+        old = builder.atomic_rmw("add", _lock_ptr(context, builder, sig, args), val, "monotonic")
+        return builder.sext(old, ir.IntType(64))
+
+    return types.int64(arr, i, v), codegen
+
+
+@intrinsic
+def load_acquire(typingctx, arr, i):
+    """arr[i] (int32), read with acquire ordering."""
+    if not (isinstance(arr, types.Array) and arr.dtype == types.int32):
+        return None
+
+    def codegen(context, builder, sig, args):
+        v = builder.load_atomic(_lock_ptr(context, builder, sig, args), "acquire", 4)
+        return builder.sext(v, ir.IntType(64))
+
+    return types.int64(arr, i), codegen
+
+
+@intrinsic
+def store_release(typingctx, arr, i, v):
+    """arr[i] = v (int32), written with release ordering."""
+    if not (isinstance(arr, types.Array) and arr.dtype == types.int32):
+        return None
+
+    def codegen(context, builder, sig, args):
+        val = context.cast(builder, args[2], sig.args[2], types.int32)
+        builder.store_atomic(val, _lock_ptr(context, builder, sig, args), "release", 4)
+        return context.get_dummy_value()
+
+    return types.none(arr, i, v), codegen
+
+
+@intrinsic
+def spin_pause(typingctx):
+    """A spin-wait hint to the processor (x86 PAUSE; nothing elsewhere)."""
+    def codegen(context, builder, sig, args):
+        if _X86:
+            _call(builder, "llvm.x86.sse2.pause", ir.VoidType(), [])
+        return context.get_dummy_value()
+
+    return types.none(), codegen
+
+
 def _u8_arrays(*tys) -> bool:
     return all(isinstance(t, types.Array) and t.ndim == 1 and t.dtype == types.uint8
                for t in tys)
@@ -206,14 +262,82 @@ def _umin(builder, a, b):
     return builder.select(builder.icmp_unsigned("<", a, b), a, b)
 
 
+def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, p1s):
+    """L[k] for the n disparities from j0 of one path step (pixel_paths), stored at
+    lbuf[oo + j0 + k]; meta = (po, oo, p2m, mprev) as int64 values."""
+    u8 = ir.IntType(8)
+    vty = ir.VectorType(u8, n)
+    po, oo, p2m, mp = meta
+    pj = builder.add(po, j0)
+
+    def at(off):
+        return _ptr(context, builder, lbty, lbuf, [off])
+    # P[k-1] and P[k+1] by shifting the chunk (loaded where it was stored, so a just-written
+    # predecessor forwards) with the neighbouring element (padding 255 at either end of the
+    # run)
+    pv = _vload(builder, at(pj), vty)
+    before = builder.load(at(builder.sub(pj, ir.Constant(pj.type, 1))))
+    after = builder.load(at(builder.add(pj, ir.Constant(pj.type, n))))
+    lo = builder.shuffle_vector(pv, _splat(builder, before, vty), ir.Constant(
+        ir.VectorType(_I32, n), [n] + list(range(n - 1))))
+    hi = builder.shuffle_vector(pv, _splat(builder, after, vty), ir.Constant(
+        ir.VectorType(_I32, n), list(range(1, n)) + [n]))
+    t = _call(builder, f"llvm.uadd.sat.v{n}i8", vty, [_umin(builder, lo, hi), p1s])
+    m = _umin(builder, _umin(builder, pv, t), _splat(builder, builder.trunc(p2m, u8), vty))
+    L = builder.sub(builder.add(c, m), _splat(builder, builder.trunc(mp, u8), vty))
+    _vstore(builder, L, at(builder.add(oo, j0)))
+    return L
+
+
+def _keep_min(builder, best, L, n):
+    """best (a <64 x i8> slot) = lane-wise min(best, L padded with 255 to 64 lanes)."""
+    lw = L if n == 64 else builder.shuffle_vector(
+        L, ir.Constant(L.type, [255] * n),
+        ir.Constant(ir.VectorType(_I32, 64), list(range(n)) + [n] * (64 - n)))
+    builder.store(_umin(builder, builder.load(best), lw), best)
+
+
+@intrinsic
+def path_step(typingctx, cost, ci, lbuf, po, oo, p2m, mprev, p1, nd):
+    """One path step of one pixel (pixel_paths' for a single path, its meta as arguments):
+    lbuf[oo+k] = L[k] for k < nd; returns min_k L[k]."""
+    if not (_u8_arrays(cost, lbuf) and all(isinstance(t, types.Integer)
+                                           for t in (ci, po, oo, p2m, mprev, p1, nd))):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        u8 = ir.IntType(8)
+        civ, pov, oov, p2v, mpv, ndv = (_intp(context, builder, sig, args, i)
+                                        for i in (1, 3, 4, 5, 6, 8))
+        p1v = context.cast(builder, args[7], st[7], types.uint8)
+        best = cgutils.alloca_once_value(builder, ir.Constant(ir.VectorType(u8, 64), [255] * 64))
+
+        def body(j0, n):
+            vty = ir.VectorType(u8, n)
+            c = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(civ, j0)]),
+                       vty)
+            L = _step_chunk(context, builder, st[2], args[2], c, (pov, oov, p2v, mpv), j0, n,
+                            _splat(builder, p1v, vty))
+            _keep_min(builder, best, L, n)
+
+        _chunked(builder, ndv, body)
+        low = _call(builder, "llvm.vector.reduce.umin.v64i8", u8, [builder.load(best)])
+        return builder.zext(low, ir.IntType(64))
+
+    return types.int64(cost, ci, lbuf, po, oo, p2m, mprev, p1, nd), codegen
+
+
 @intrinsic
 def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
-    """All path steps of one pixel (2 or 4 paths) in one pass over the disparities:
+    """All path steps of one pixel (npaths 1, 2, 4, or 5: four and a fifth path's stored
+    L) in one pass over the disparities:
 
-        for path v < npaths, with (po, oo, p2m, mprev) = meta[4v : 4v+4]:
+        for path v < min(npaths, 4), with (po, oo, p2m, mprev) = meta[4v : 4v+4]:
           L_v[k] = cost[ci+k] + min(P, min(P[-1], P[+1]) +sat p1, p2m) - mprev,  P = lbuf[po+k]
           lbuf[oo+k] = L_v[k];  mins[v] = min_k L_v[k]
-        acc[ai+k] = sum_v L_v[k]   (int16)
+        acc[ai+k] = sum_v L_v[k] (+ lbuf[meta[16]+k] when npaths is 5)   (int16; not
+        written when npaths is 1)
 
     Path costs are uint8 (the caller keeps every L <= 255 and passes p2m <= 255; the padding
     elements hold 255, and +p1 saturates), so one 512-bit register holds 64 disparities. The
@@ -226,12 +350,13 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
         st = sig.args
         u8 = ir.IntType(8)
         civ, aiv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 7, 8))
-        nmore = builder.icmp_signed(">", _intp(context, builder, sig, args, 4),
-                                    ir.Constant(ir.IntType(64), 2))
+        npv = _intp(context, builder, sig, args, 4)
+        ntwo = builder.icmp_signed(">", npv, ir.Constant(npv.type, 1))
+        nmore = builder.icmp_signed(">", npv, ir.Constant(npv.type, 2))
+        extra = builder.icmp_signed("==", npv, ir.Constant(npv.type, 5))
         p1v = context.cast(builder, args[5], st[5], types.uint8)
-        one = ir.Constant(civ.type, 1)
         meta_v = [builder.load(_ptr(context, builder, st[3], args[3], [ir.Constant(civ.type, i)]))
-                  for i in range(16)]
+                  for i in range(17)]
         wide = ir.VectorType(u8, 64)
         best = [cgutils.alloca_once_value(builder, ir.Constant(wide, [255] * 64))
                 for _ in range(4)]
@@ -247,37 +372,22 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
             p1s = _splat(builder, p1v, vty)
 
             def step(v):
-                po, oo, p2m, mp = meta_v[4 * v:4 * v + 4]
-                pj = builder.add(po, j0)
-                # P[k-1] and P[k+1] by shifting the chunk (loaded where it was stored, so a
-                # just-written predecessor forwards) with the neighbouring element (padding 255
-                # at either end of the run)
-                pv = lb(pj, vty)
-                before = builder.load(_ptr(context, builder, st[2], args[2],
-                                           [builder.sub(pj, one)]))
-                after = builder.load(_ptr(context, builder, st[2], args[2],
-                                          [builder.add(pj, ir.Constant(pj.type, n))]))
-                lo = builder.shuffle_vector(pv, _splat(builder, before, vty), ir.Constant(
-                    ir.VectorType(_I32, n), [n] + list(range(n - 1))))
-                hi = builder.shuffle_vector(pv, _splat(builder, after, vty), ir.Constant(
-                    ir.VectorType(_I32, n), list(range(1, n)) + [n]))
-                t = _call(builder, f"llvm.uadd.sat.v{n}i8", vty, [_umin(builder, lo, hi), p1s])
-                m = _umin(builder, _umin(builder, pv, t),
-                          _splat(builder, builder.trunc(p2m, u8), vty))
-                L = builder.sub(builder.add(c, m), _splat(builder, builder.trunc(mp, u8), vty))
-                _vstore(builder, L, _ptr(context, builder, st[2], args[2], [builder.add(oo, j0)]))
-                lw = L if n == 64 else builder.shuffle_vector(  # pad with 255 to 64 lanes
-                    L, ir.Constant(vty, [255] * n),
-                    ir.Constant(ir.VectorType(_I32, 64), list(range(n)) + [n] * (64 - n)))
-                builder.store(_umin(builder, builder.load(best[v]), lw), best[v])
+                L = _step_chunk(context, builder, st[2], args[2], c, meta_v[4 * v:4 * v + 4],
+                                j0, n, p1s)
+                _keep_min(builder, best[v], L, n)
                 return builder.zext(L, wty)
 
-            builder.store(builder.add(step(0), step(1)), total)
-            with builder.if_then(nmore, likely=True):
-                builder.store(builder.add(builder.load(total),
-                                          builder.add(step(2), step(3))), total)
-            _vstore(builder, builder.load(total),
-                    _ptr(context, builder, st[6], args[6], [builder.add(aiv, j0)]))
+            first = step(0)
+            with builder.if_then(ntwo, likely=True):
+                builder.store(builder.add(first, step(1)), total)
+                with builder.if_then(nmore, likely=True):
+                    builder.store(builder.add(builder.load(total),
+                                              builder.add(step(2), step(3))), total)
+                with builder.if_then(extra, likely=True):
+                    builder.store(builder.add(builder.load(total), builder.zext(
+                        lb(builder.add(meta_v[16], j0), vty), wty)), total)
+                _vstore(builder, builder.load(total),
+                        _ptr(context, builder, st[6], args[6], [builder.add(aiv, j0)]))
 
         _chunked(builder, ndv, body)
         for v in range(4):
@@ -286,11 +396,11 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
                             [builder.load(best[v])])
                 builder.store(builder.zext(low, _I16), _ptr(context, builder, st[9], args[9],
                                                             [ir.Constant(civ.type, v)]))
-            if v >= 2:
-                with builder.if_then(nmore, likely=True):
-                    put()
-            else:
+            if v == 0:
                 put()
+            else:
+                with builder.if_then(nmore if v >= 2 else ntwo, likely=True):
+                    put()
         return context.get_dummy_value()
 
     return types.none(cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins), codegen

@@ -66,7 +66,7 @@ EDGES = [
 SHAPES = [(23, 97), (37, 121), (50, 131), (31, 160)]
 
 
-@pytest.mark.parametrize("paths", [4, 8])
+@pytest.mark.parametrize("paths", [4, 5, 8])
 @pytest.mark.parametrize("i", range(len(EDGES)))
 def test_random_pairs_bit_exact(i: int, paths: int) -> None:
     p = SGMParams(**{"num_disparities": 32, **EDGES[i], "paths": paths})
@@ -102,7 +102,8 @@ def motorcycle_small(motorcycle):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kw", [dict(), dict(paths=4, uniqueness_ratio=10, lr_max_diff=1)])
+@pytest.mark.parametrize("kw", [dict(), dict(paths=4, uniqueness_ratio=10, lr_max_diff=1),
+                                dict(paths=5)])
 def test_full_size_motorcycle_bit_exact(motorcycle, kw) -> None:
     """Middlebury Motorcycle at 741x500 with 128 disparities, as the benchmark runs it."""
     left, right = motorcycle
@@ -110,6 +111,7 @@ def test_full_size_motorcycle_bit_exact(motorcycle, kw) -> None:
 
 
 @pytest.mark.parametrize("kw", [dict(paths=8), dict(paths=4, uniqueness_ratio=5, lr_max_diff=1),
+                                dict(paths=5, uniqueness_ratio=10, lr_max_diff=1),
                                 dict(min_disparity=-3, census_width=7, census_height=5)])
 def test_motorcycle_bit_exact(motorcycle_small, kw) -> None:
     left, right = motorcycle_small
@@ -123,7 +125,7 @@ def sim_pair():
     return left[5:152, 3:290], right[5:152, 3:290], truth[5:152, 3:290]
 
 
-@pytest.mark.parametrize("paths", [4, 8])
+@pytest.mark.parametrize("paths", [4, 5, 8])
 def test_simulator_scene_bit_exact_and_accurate(sim_pair, paths: int) -> None:
     left, right, truth = sim_pair
     p = SGMParams(num_disparities=48, paths=paths, lr_max_diff=1)
@@ -160,10 +162,12 @@ def test_left_border_is_matched() -> None:
     assert np.mean(np.abs(border - 6) <= 1) > 0.9
 
 
-def test_thread_count_and_reuse_do_not_change_output() -> None:
+@pytest.mark.parametrize("paths", [8, 5])
+def test_thread_count_and_reuse_do_not_change_output(paths: int) -> None:
+    """Two threads: two path groups (8) or rows taken in turn, each waiting on the row above (5)."""
     a = pair(45, 150, 5, seed=11)
     b = pair(45, 150, 9, seed=12)
-    p = SGMParams(num_disparities=32, uniqueness_ratio=5, lr_max_diff=1)
+    p = SGMParams(num_disparities=32, uniqueness_ratio=5, lr_max_diff=1, paths=paths)
     m = SGMMatcher(a[0].shape, p)
     before = numba.get_num_threads()
     try:

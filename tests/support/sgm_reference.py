@@ -11,7 +11,9 @@ x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k 
    rectangle, else L_r(p, k) = C(p, k) + min(L_r(q, k), L_r(q, k-1) + P1, L_r(q, k+1) + P1,
    m_q + P2') - m_q with q = p - r, m_q = min_k L_r(q, k) and P2' = P2, or with p2_adapt = a > 0
    P2' = min(P2, max(P1, P2 * a // (a + |I_L(p) - I_L(q)|))). S = sum of the 4 (horizontal,
-   vertical) or 8 (plus diagonal) paths. (L <= census bits + P2 <= 255, as SGMParams demands.)
+   vertical), 8 (plus diagonal) or 5 paths: the horizontal two and, in rows y < ceil(h / 2),
+   the vertical and both diagonals from above, in the other rows those from below.
+   (L <= census bits + P2 <= 255, as SGMParams demands.)
 4. winner-take-all: k* = first argmin_k S; m = S[k*].
 5. uniqueness (ratio u > 0): invalid when some k with |k - k*| > 1 has S[k] <= m + m * u // 100.
 6. subpixel, equiangular (0 < k* < N-1, a = S[k*-1], b = S[k*+1]): den = max(max(a, b) - m, 1),
@@ -32,6 +34,9 @@ from stereocam.stereo.sgm_params import SGMParams, sgm_geometry
 
 PATHS4 = [(0, 1), (0, -1), (1, 0), (-1, 0)]
 PATHS8 = PATHS4 + [(1, 1), (1, -1), (-1, 1), (-1, -1)]
+PATHS = {4: PATHS4, 8: PATHS8}
+HALVES5 = (PATHS4[:3] + [(1, 1), (1, -1)],  # 5 paths, rows < ceil(h / 2): from above
+           PATHS4[:2] + [(-1, 0), (-1, 1), (-1, -1)])  # the other rows: from below
 
 
 def census(img: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -103,7 +108,15 @@ def aggregate(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray:
     g = sgm_geometry(*left.shape, p)
     cost = cost_volume(left, right, p)
     img = left[:, g.x0:g.x1]
-    paths = PATHS4 if p.paths == 4 else PATHS8
+    if p.paths == 5:
+        top = (g.height + 1) // 2
+        upper, lower = (_path_sum(cost, img, paths, p) for paths in HALVES5)
+        return np.concatenate([upper[:top], lower[top:]])
+    return _path_sum(cost, img, PATHS[p.paths], p)
+
+
+def _path_sum(cost: np.ndarray, img: np.ndarray, paths: list[tuple[int, int]],
+              p: SGMParams) -> np.ndarray:
     path_costs = [aggregate_path(cost, img, dy, dx, p) for dy, dx in paths]
     assert max(L.max() for L in path_costs) <= 255  # the engine holds L in uint8
     return sum(path_costs)

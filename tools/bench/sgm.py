@@ -7,7 +7,9 @@ and 1280x960. Per method: median ms of interleaved runs, the median and range of
 SGBM_3WAY's in the same round, G disparity evaluations/s (W*H*D/t), bad-2.0 and bad-1.0 over
 pixels with known truth (invalid output counts as bad), and peak memory (growth of the process's
 peak resident set over constructing the matcher and its first call). ``--busy`` times beside one
-spinning process. First a subpixel table: pixel-locking bias on slanted planes with exact truth.
+spinning process. First a subpixel table: pixel-locking bias on slanted planes with exact truth;
+``--profile`` adds stage timings, CPU time per scene and, without ``--quick``, a table over image
+sizes and disparity ranges.
 """
 from __future__ import annotations
 
@@ -195,6 +197,52 @@ def cpu_table(scenes, nd: int, repeat: int, variants: dict[str, dict]) -> None:
     print()
 
 
+def size_table(left: np.ndarray, right: np.ndarray, repeat: int, variants: dict[str, dict],
+               threads: int, busy: bool) -> None:
+    """Ours per variant over cv2 SGBM_3WAY on one pair resized to 320x240 .. 1280x960 with 64,
+    128 and 256 disparities: CPU time on one thread, then (threads > 1) the median and range
+    of wall-time ratios of interleaved runs on ``threads`` threads, beside a busy process when
+    ``busy``."""
+    import cv2
+    import numba
+
+    from stereocam.stereo import SGMMatcher, SGMParams
+
+    from .sgm_profile import cpu_ms
+
+    print(f"per size and disparities, ours / cv2 SGBM_3WAY: CPU on 1 thread; wall on {threads} "
+          f"threads{' beside a busy process' if busy else ''} (median, range):")
+    for w, h in ((320, 240), (640, 480), (1280, 960)):
+        pair = [cv2.resize(im, (w, h), interpolation=cv2.INTER_AREA) for im in (left, right)]
+        for nd in (64, 128, 256):
+            if nd >= w // 2:
+                continue
+            three_way = cv2.StereoSGBM_create(0, nd, 5, 8 * 25, 32 * 25, 0, 0, 10, 100, 2,
+                                              SGBM_MODES["SGBM_3WAY"]).compute
+            ours = {label: SGMMatcher((h, w), SGMParams(num_disparities=nd, **kw)).match
+                    for label, kw in variants.items()}
+            t3 = cpu_ms(lambda: three_way(*pair), repeat)
+            cells = [f"{label} {cpu_ms(lambda fn=fn: fn(*pair), repeat) / t3:.2f}x"
+                     for label, fn in ours.items()]
+            if threads > 1:
+                numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+                cv2.setNumThreads(threads)
+                fns = [three_way, *ours.values()]
+                times: list[list[float]] = [[] for _ in fns]
+                with busy_process(busy):
+                    for _ in range(repeat):
+                        for ts, fn in zip(times, fns):
+                            t0 = time.perf_counter()
+                            fn(*pair)
+                            ts.append(time.perf_counter() - t0)
+                for label, ts in zip(ours, times[1:]):
+                    r = [t / t3w for t, t3w in zip(ts, times[0])]
+                    cells.append(f"{label} {statistics.median(r):.2f}x "
+                                 f"({min(r):.2f}-{max(r):.2f})")
+            print(f"  {w}x{h} {nd} disp: 3WAY {t3:.1f} CPU ms; " + "; ".join(cells), flush=True)
+    print()
+
+
 @contextlib.contextmanager
 def busy_process(on: bool) -> Iterator[None]:
     """While the block runs, one other process spins on a CPU (the issue's "beside one busy
@@ -251,7 +299,8 @@ def main(args) -> int:
     print(f"threads={args.threads} (cv2 {cv2.__version__}, numba {numba.__version__}); "
           f"repeat={args.repeat}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus;"
           f" SGM JIT warm-up {time.perf_counter() - t0:.2f} s")
-    variants = {"ours SGM 8 paths": {}, "ours SGM 4 paths": {"paths": 4}}
+    variants = {"ours SGM 8 paths": {}, "ours SGM 4 paths": {"paths": 4},
+                "ours SGM 5 paths": {"paths": 5}}
     subpixel_table(variants)
     scenes = []
     try:
@@ -267,6 +316,8 @@ def main(args) -> int:
         profile(*scenes[0][1:3], nd, args.repeat, variants)
         cpu_table(scenes, nd, args.repeat, variants)
     busy = getattr(args, "busy", False)
+    if args.profile and not args.quick and scenes[0][0].startswith("Motorcycle"):
+        size_table(*scenes[0][1:3], args.repeat, variants, args.threads, busy)
     print(f"timed beside one busy process: {'yes' if busy else 'no'}")
     with busy_process(busy):
         run(scenes, nd, args.repeat, variants)

@@ -1,6 +1,6 @@
 """Single-thread stage timings of the SGM kernel (for ``bench matching --algorithm sgm
 --profile``): the cost rows, the path aggregation and the row selection, each run over every
-row of both path groups, as sgm_rows runs them."""
+row of both path groups, as sgm_rows runs them (4 and 8 paths)."""
 from __future__ import annotations
 
 import statistics
@@ -23,10 +23,14 @@ def _costs(cl, crr, cfg, cost):
 @nb.njit(cache=True)
 def _aggregate(img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc):
     h = img.shape[0]
+    nd, cols = cfg[_sgm.C_ND], cfg[_sgm.C_COLS]
+    npaths = 2 if cfg[_sgm.C_PATHS] == 4 else 4
     for g in range(2):
         for step in range(h):
             y = step if g == 0 else h - 1 - step
-            _sgm._aggregate_row(g, y, step, img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc)
+            _sgm._aggregate_row(g, y, step == 0, npaths, 0, 3 * (nd + 2), step & 1,
+                                1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf, mv, meta,
+                                pm, acc)
 
 
 @nb.njit(cache=True)
@@ -56,7 +60,10 @@ def cpu_ms(fn, repeat: int) -> float:
 
 def stage_ms(m, left: np.ndarray, repeat: int) -> dict[str, float]:
     """Median CPU ms (process time, robust to a busy machine) per stage of SGMMatcher m, after
-    one m.match so that its buffers hold a frame."""
+    one m.match so that its buffers hold a frame; none for the single-pass 5 paths, whose
+    stages run interleaved row by row."""
+    if m.params.paths == 5:
+        return {}
     disp = np.empty(m.shape, np.int16)
     acc = m.acc[0].copy()
     stages = {
