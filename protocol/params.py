@@ -41,6 +41,7 @@ class Param:
     hi: int
     step: int = 1  # value must be lo + k*step ... or: see ``odd``
     odd: bool = False
+    one_of: tuple[int, ...] = ()  # when set, the only values accepted within lo..hi
     unit: str = ""
     live: bool = True  # may change while streaming
     description: str = ""  # one line for humans (Camera.options(), help texts, the viewer)
@@ -54,6 +55,8 @@ class Param:
             return f"{self.name}={value} must be odd"
         if self.step > 1 and value % self.step:
             return f"{self.name}={value} must be a multiple of {self.step}"
+        if self.one_of and value not in self.one_of:
+            return f"{self.name}={value} must be one of {', '.join(map(str, self.one_of))}"
         return None
 
 
@@ -103,7 +106,8 @@ PARAMS: tuple[Param, ...] = (
           description="SGM penalty for larger disparity steps"),
     Param(25, "sgm_p2_adapt", 32, 0, 255,
           description="SGM: p2 / (1 + |intensity step| / this), not below p1 (0: off)"),
-    Param(26, "sgm_paths", 8, 4, 8, step=4, description="SGM aggregation paths: 4 or 8"),
+    Param(26, "sgm_paths", 5, 4, 8, one_of=(4, 5, 8),
+          description="SGM aggregation paths: 4, 5 (one pass per image half) or 8"),
     Param(27, "census_width", 9, 3, 9, odd=True, unit="px", description="SGM census window width (odd)"),
     Param(28, "census_height", 7, 1, 7, odd=True, unit="px", description="SGM census window height (odd)"),
     Param(29, "trigger_output", 0, 0, 1, live=False, values={0: "off", 1: "master"},

@@ -1010,14 +1010,19 @@ def test_check_rejects_even_values_for_odd_params() -> None:
 
 def test_check_rejects_non_multiples_of_step() -> None:
     stepped = {p.name: p for p in PARAMS if p.step > 1}
-    assert {n: p.step for n, p in stepped.items()} == {"width": 16, "height": 8, "num_disparities": 16,
-                                                       "sgm_paths": 4}
+    assert {n: p.step for n, p in stepped.items()} == {"width": 16, "height": 8, "num_disparities": 16}
     for p in stepped.values():
         for v in range(p.lo, p.hi + 1):
             assert (p.check(v) is None) == ((v - p.lo) % p.step == 0), (p.name, v)
     assert "multiple of 16" in BY_NAME["width"].check(650)
     assert BY_NAME["height"].check(484) is not None and BY_NAME["height"].check(488) is None
     assert BY_NAME["min_disparity"].check(-256) is None and BY_NAME["min_disparity"].check(-257) is not None
+
+
+def test_check_accepts_only_the_listed_values_of_a_one_of_parameter() -> None:
+    paths = BY_NAME["sgm_paths"]
+    assert [v for v in range(paths.lo - 1, paths.hi + 2) if paths.check(v) is None] == [4, 5, 8]
+    assert "must be one of 4, 5, 8" in paths.check(6)
 
 
 def test_v1_1_parameters() -> None:

@@ -113,7 +113,7 @@ def methods(nd: int) -> tuple[list[Method], list[str]]:
         return lambda shape: SGMMatcher(shape, p).match
 
     out = [Method("ours bm 9x9", ours_bm, bm.invalid_value)]
-    sgm: dict[int, SGMParams] = {paths: SGMParams(num_disparities=nd, paths=paths) for paths in (8, 4)}
+    sgm: dict[int, SGMParams] = {paths: SGMParams(num_disparities=nd, paths=paths) for paths in (5, 8, 4)}
     out += [Method(f"ours sgm {k} paths", ours_sgm(p), p.invalid_value) for k, p in sgm.items()]
     notes = []
     try:

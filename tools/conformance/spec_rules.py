@@ -62,6 +62,10 @@ def limit_probes(p: Param, hi: int) -> tuple[list[int], list[tuple[int, str]]]:
         refuse.append((p.lo + 1, "even, must be odd"))
     if p.step > 1:
         refuse.append((p.lo + p.step // 2, f"not a multiple of {p.step}"))
+    if p.one_of:
+        accept = sorted(set(accept) | {v for v in p.one_of if v <= hi})
+        refuse.append((next(v for v in range(p.lo, hi + 1) if v not in p.one_of),
+                       f"not one of {', '.join(map(str, p.one_of))}"))
     return accept, refuse
 
 
