@@ -13,7 +13,8 @@ one, or that it could not be read. The camera's own configuration is restored af
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator
+import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,8 @@ import numpy as np
 import stereocam
 from stereocam.calibration_io import id_text
 from stereocam.protocol import messages as m
-from stereocam.tools.calibration.solve import CalibrationError, CalibrationResult, SolveConfig, calibrate_pairs
+from stereocam.tools.calibration.solve import BoardNotFoundError, CalibrationError, CalibrationResult, Progress, \
+    SolveConfig, calibrate_pairs
 from stereocam.tools.exit_codes import EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_UNSUPPORTED, EXIT_WRITE
 
 
@@ -33,6 +35,37 @@ def raw_pairs(cam: stereocam.Camera, count: int, timeout: float) -> Iterator[tup
         if f.rectified:
             raise stereocam.ProtocolError("the camera sent rectified frames in raw mode")
         yield f.left, f.right
+
+
+NO_BOARD_WARN_EVERY = 20
+"""Captures in a row without the board in both images after which the operator is told (2 s at 10 fps)."""
+NO_BOARD_GIVE_UP = 100
+"""Captures without the board ever seen in both images after which the run ends (BoardNotFoundError)."""
+
+
+class BoardWatch:
+    """Wraps the solver's progress: says so when the board has not been seen in both images for
+    NO_BOARD_WARN_EVERY captures, and ends the run when it was never seen in NO_BOARD_GIVE_UP."""
+
+    def __init__(self, inner: Callable[[Progress], None] | None, fps: float,
+                 warn: Callable[[str], None] = lambda text: print(text, file=sys.stderr, flush=True)):
+        self.inner, self.fps, self.warn = inner, fps, warn
+        self.captures = self.missed = self.seen = 0
+
+    def __call__(self, p: Progress) -> None:
+        if self.inner is not None:
+            self.inner(p)
+        self.captures += 1
+        if p.view.status == "dropped" or p.view.status == "no_board":
+            self.missed += 1
+        else:
+            self.missed, self.seen = 0, self.seen + 1
+        if not self.seen and self.captures >= NO_BOARD_GIVE_UP:
+            raise BoardNotFoundError(f"the board was not seen in both images in the first {self.captures} "
+                                     "captures: put it in view of both cameras, or check --board")
+        if self.missed and self.missed % NO_BOARD_WARN_EVERY == 0:
+            self.warn(f"warning: no board in both images in the last {self.missed} captures "
+                      f"({self.missed / self.fps:.0f} s): is it in view of both cameras?")
 
 
 def calibrate_device(cam: stereocam.Camera, board, config: SolveConfig, outdir: Path, *, target: str = "user",
@@ -51,7 +84,8 @@ def calibrate_device(cam: stereocam.Camera, board, config: SolveConfig, outdir: 
     try:
         cam.start()
         try:
-            result = calibrate_pairs(raw_pairs(cam, pairs, frame_timeout), board, config, progress=progress)
+            result = calibrate_pairs(raw_pairs(cam, pairs, frame_timeout), board, config,
+                                     progress=BoardWatch(progress, fps))
         finally:
             cam.stop()
     except CalibrationError as exc:
