@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from stereocam.calibration_io import id_text
 from stereocam.protocol import messages as m
 from stereocam.protocol.params import Output, TriggerMode
 
@@ -114,7 +115,7 @@ def disparity_description(ctx: Context) -> str:
         if b.flags & m.FRAME_RECTIFIED:
             rectified += 1
             expect(b.focal_px > 0 and b.baseline_m > 0 and b.calibration_id,
-                   f"{where}: rectified, but focal {b.focal_px} baseline {b.baseline_m} calibration id {b.calibration_id}")
+                   f"{where}: rectified, but focal {b.focal_px} baseline {b.baseline_m} calibration id {id_text(b.calibration_id)}")
             _check_values(c)
         else:
             expect((b.focal_px, b.cx, b.cy, b.baseline_m) == (0, 0, 0, 0) and not b.planes & Output.DISPARITY,
