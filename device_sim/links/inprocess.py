@@ -6,7 +6,8 @@ units with one serial); a bare ``sim://`` unit 0. ``sim://?serial=S`` (no seed) 
 unattached simulator with that serial in this process (``stereocam.list_devices`` lists them) and
 raises TransportError when there is none: a serial that is not found never makes a new unit.
 ``scene=lab|wall|board`` sets what the unit looks at (a simulator setting, not a device parameter;
-also applied to a live unit). Host writes go straight into the firmware's
+also applied to a live unit); ``lens=standard|wide|fisheye`` the lens class of a unit it makes
+(rig/lens.py; a live unit keeps its lenses). Host writes go straight into the firmware's
 ``receive``; the firmware's output lands in a bounded FIFO the host reads (a full FIFO blocks
 the device, as a full USB or TCP buffer would).
 """
@@ -19,6 +20,7 @@ from urllib.parse import parse_qs, urlsplit
 from stereocam.protocol.errors import ConfigError, DisconnectedError, TransportError
 
 from .. import registry
+from ..rig.lens import LensClass
 from ..rig.scene import Scene
 
 from stereocam.discovery import DeviceEntry
@@ -116,9 +118,9 @@ _handed_over: "weakref.WeakSet[object]" = weakref.WeakSet()  # units whose ownin
 
 def open_transport(url: str, timeout: float) -> InProcessTransport:
     query = parse_qs(urlsplit(url).query, keep_blank_values=True)
-    unknown = set(query) - {"seed", "serial", "scene"}
+    unknown = set(query) - {"seed", "serial", "scene", "lens"}
     if unknown:
-        raise ConfigError(f"sim:// URL: unknown option(s) {sorted(unknown)}; known: seed, serial, scene")
+        raise ConfigError(f"sim:// URL: unknown option(s) {sorted(unknown)}; known: seed, serial, scene, lens")
     if any(len(v) > 1 for v in query.values()):
         raise ConfigError(f"sim:// URL: an option given twice in {url!r}")
     text = query.get("seed", ["0"])[0]
@@ -126,6 +128,7 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
         raise ConfigError(f"sim:// URL: seed must be an integer 0..{SEED_MAX}, got {text!r}")
     seed = int(text)
     scene = Scene.parse(query["scene"][0]) if "scene" in query else None
+    lens = LensClass.parse(query["lens"][0]) if "lens" in query else LensClass.STANDARD
     serial = query.get("serial", [None])[0]
     live = registry.find_free(serial) if serial is not None else None
     if live is not None and not live.powered:
@@ -144,7 +147,7 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
                              f"sim://?seed=N&serial={serial} makes a new one")
     from ..firmware import SimulatedCamera
 
-    return InProcessTransport(SimulatedCamera(serial=serial, seed=seed, scene=scene or Scene.LAB), url)
+    return InProcessTransport(SimulatedCamera(serial=serial, seed=seed, scene=scene or Scene.LAB, lens=lens), url)
 
 
 def discover() -> list[DeviceEntry]:
@@ -158,6 +161,6 @@ def reopen_url(url: str, serial: str) -> str:
     (a unit opened by seed closes with its link) the same seed and serial freshly booted."""
     query = parse_qs(urlsplit(url).query)
     if "seed" in query:
-        scene = f"&scene={query['scene'][0]}" if "scene" in query else ""
-        return f"sim://?seed={query['seed'][0]}&serial={serial}{scene}"
+        extra = "".join(f"&{k}={query[k][0]}" for k in ("scene", "lens") if k in query)
+        return f"sim://?seed={query['seed'][0]}&serial={serial}{extra}"
     return f"sim://?serial={serial}"
