@@ -62,10 +62,11 @@ class SimulatedCamera:
                  flash_size: int = FLASH_SIZE, source: ReplaySource | None = None, timebase: Clock | None = None,
                  lens: LensClass | str = LensClass.STANDARD):
         """``lens``: the unit's lens class ("standard", "wide", "fisheye"; rig/lens.py): the rig renders
-        through those lenses and the factory flash holds their true calibration. ``scene``: what the rig looks at ("lab", "wall", "board"; a simulator setting, changeable
-        at run time through ``scene``, never a device parameter). ``flash_path``: the file behind
-        this unit's flash (kept across runs); None: a private file removed at close (scratch_flash.py:
-a killed process's file is swept by the next simulator). ``factory_calibrated``:
+        through those lenses and the factory flash holds their true calibration. ``scene``: what the
+        rig looks at ("lab", "wall", "board"; a simulator setting, changeable at run time through
+        ``scene``, never a device parameter). ``flash_path``: the file behind this unit's flash (kept
+        across runs); None: a private file removed at close (scratch_flash.py: a killed process's
+        file is swept by the next simulator). ``factory_calibrated``:
         the unit left the factory with its true calibration stored (False: fresh from assembly,
         streams raw images until calibrated). ``vendor_key``: the firmware-signing key whose public half
         the factory line provisions into a blank unit (and signs its shipped image with). ``source``: a

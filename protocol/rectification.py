@@ -21,7 +21,8 @@ stereo_rectify(calib), for a horizontal head (|Tx| > |Ty| after step 1), all in 
      gives the output field of view (EQUIDISTANT_FOV_DEG by default: a 180° or wider lens keeps a
      usable pinhole view), f_in is the smallest focal whose view stays inside the inner rectangle of
      the turned border rays (a ray at ≥ 90° from the rectified axis, z' ≤ 0, or on the far side of
-     the axis bounds nothing), so narrow equidistant lenses still show only valid pixels. Rays: Newton on θ to 1e-12 rad.
+     the axis bounds nothing), so narrow equidistant lenses still show only valid pixels. Rays:
+     Newton on θ to 1e-12 rad.
   4. P1 = [f 0 cx 0; 0 f cy 0; 0 0 1 0], P2 = P1 with P2[0,3] = −f·B;
      Q = [1 0 0 −cx; 0 1 0 −cy; 0 0 0 f; 0 0 1/B 0] (Z = f·B/d).
 rectified_to_raw() is the map each camera's remap table samples (SPEC §12.6, step 5).

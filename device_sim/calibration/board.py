@@ -123,8 +123,9 @@ def board_poses(seed: int, n: int, board: BoardSpec, calib: StereoCalibration,
 
     Each pose: board centre at a uniform image position of the left camera at a distance drawn
     from `distance_m` (plumb_bob: depth along the axis through K⁻¹; other lens models: along the
-    pixel's true viewing ray, so poses reach the whole field of a wide lens), tilted by up to `max_tilt_deg` about a random in-plane axis and rolled by
-    up to `max_roll_deg`. Poses where the board would leave either image are redrawn.
+    pixel's true viewing ray, so poses reach the whole field of a wide lens), tilted by up to
+    `max_tilt_deg` about a random in-plane axis and rolled by up to `max_roll_deg`. Poses where
+    the board would leave either image are redrawn.
     """
     rng = np.random.default_rng([0xB0A2D, int(seed)])
     w, h = calib.image_size

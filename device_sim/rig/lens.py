@@ -60,7 +60,8 @@ def _focal(lens: LensClass, width: int) -> float:
         return (width / 2) / (half * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))))
     k1, k2, _, _, k3, k4, k5, k6 = WIDE_D
     r2 = np.tan(half) ** 2
-    return float((width / 2) / (np.tan(half) * (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))))
+    radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+    return float((width / 2) / (np.tan(half) * radial))
 
 
 def lens_calibration(seed: int, lens: LensClass | str = LensClass.STANDARD,
@@ -76,9 +77,9 @@ def lens_calibration(seed: int, lens: LensClass | str = LensClass.STANDARD,
     cams = []
     for _ in range(2):
         f = _focal(lens, width) * (1.0 + rng.uniform(-0.03, 0.03))
-        K = np.array([[f, 0.0, (width - 1) / 2 + rng.uniform(-0.02, 0.02) * width],
-                      [0.0, f * (1.0 + rng.uniform(-0.003, 0.003)), (height - 1) / 2 + rng.uniform(-0.02, 0.02) * height],
-                      [0.0, 0.0, 1.0]])
+        cx = (width - 1) / 2 + rng.uniform(-0.02, 0.02) * width
+        fy = f * (1.0 + rng.uniform(-0.003, 0.003))
+        K = np.array([[f, 0.0, cx], [0.0, fy, (height - 1) / 2 + rng.uniform(-0.02, 0.02) * height], [0.0, 0.0, 1.0]])
         cams.append((K, nominal * (1.0 + rng.uniform(-0.03, 0.03, nominal.size))))
     model = "rational_polynomial" if lens == LensClass.WIDE else "equidistant"
     return StereoCalibration(sensor_size, cams[0][0], cams[0][1], cams[1][0], cams[1][1], base.R, base.T, model)

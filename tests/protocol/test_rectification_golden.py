@@ -47,7 +47,8 @@ def _accepted() -> list[tuple[str, StereoCalibration]]:
             ("rational_polynomial: simulated 120 deg wide unit, seed 0", lens_calibration(0, LensClass.WIDE)),
             ("equidistant: simulated 180 deg fisheye unit, seed 0", fish),
             ("equidistant: 60 deg lens (the focal that keeps every pixel on the sensor wins over the "
-             f"{EQUIDISTANT_FOV_DEG:g} deg field)", _with(fish, K_left=narrow @ fish.K_left, K_right=narrow @ fish.K_right))]
+             f"{EQUIDISTANT_FOV_DEG:g} deg field)",
+             _with(fish, K_left=narrow @ fish.K_left, K_right=narrow @ fish.K_right))]
 
 
 def _refused() -> list[tuple[str, bytes]]:
