@@ -29,6 +29,7 @@ from .boot.factory import DEV_SIGNING_KEY
 from .firmware import SimulatedCamera
 from .links.inprocess import SEED_MAX
 from .links.servers import PtyServer, TcpServer
+from .rig.lens import LensClass
 from .rig.scene import Scene
 from .shared_line import SharedTriggerLine
 
@@ -95,6 +96,8 @@ def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
                    "[default: a private file removed at exit]")
 @click.option("--scene", type=click.Choice([s.value for s in Scene]), default=Scene.LAB.value, show_default=True,
               help="What the rig looks at (board: the calibration fixture's chessboard).")
+@click.option("--lens", type=click.Choice([c.value for c in LensClass]), default=LensClass.STANDARD.value,
+              show_default=True, help="The unit's lens class (wide: 120 deg rational; fisheye: 180 deg equidistant).")
 @click.option("--trigger-line", metavar="NAME", default=None,
               help="Wire the trigger connector to the machine-wide line NAME (the unit a host sets "
                    "trigger_output=1 on drives it).")
@@ -136,7 +139,7 @@ def serve(args: SimpleNamespace) -> int:
 
         source = ReplaySource(args.replay, realtime=not args.fast, loop=args.loop, start=args.start)
     sim = SimulatedCamera(serial=args.serial, seed=args.seed, scene=args.scene, trigger_line=line, vendor_key=key,
-                          source=source, flash_path=args.flash)
+                          source=source, flash_path=args.flash, lens=args.lens)
     truth_log = open(args.truth_log, "a", buffering=1) if args.truth_log else None
     if truth_log is not None:
         log = truth_log

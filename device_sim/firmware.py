@@ -27,7 +27,6 @@ from .boot.layout import FLASH_SIZE, FlashLayout
 from .boot.slots import Slots
 from .boot.update_service import UpdateService
 from .calibration.flash import NorFlash, PowerLossError
-from .calibration.truth import true_calibration
 from .clock import REAL_CLOCK, Clock, DeviceClock
 from .ground_truth import GroundTruth, TruthLog
 from .handlers.calibration import CalibrationService
@@ -47,6 +46,7 @@ from .replay import ReplayEngine, ReplaySource
 from .rig.scene import Scene
 from .rig.sensor import SensorRig
 from .scratch_flash import ScratchFlash
+from .rig.lens import LensClass, lens_calibration
 from .trigger import Line, TriggerInput, TriggerLine, TriggerOutput
 from .watchdog import WatchdogThread
 
@@ -59,11 +59,14 @@ class SimulatedCamera:
     def __init__(self, serial: str | None = None, seed: int = 0, trigger_line: Line | None = None,
                  flash_path: str | Path | None = None, factory_calibrated: bool = True,
                  scene: Scene | str = Scene.LAB, vendor_key: Ed25519PrivateKey = DEV_SIGNING_KEY,
-                 flash_size: int = FLASH_SIZE, source: ReplaySource | None = None, timebase: Clock | None = None):
-        """``scene``: what the rig looks at ("lab", "wall", "board"; a simulator setting, changeable
-        at run time through ``scene``, never a device parameter). ``flash_path``: the file behind
-        this unit's flash (kept across runs); None: a private file removed at close (scratch_flash.py:
-a killed process's file is swept by the next simulator). ``factory_calibrated``:
+                 flash_size: int = FLASH_SIZE, source: ReplaySource | None = None, timebase: Clock | None = None,
+                 lens: LensClass | str = LensClass.STANDARD):
+        """``lens``: the unit's lens class ("standard", "wide", "fisheye"; rig/lens.py): the rig renders
+        through those lenses and the factory flash holds their true calibration. ``scene``: what the
+        rig looks at ("lab", "wall", "board"; a simulator setting, changeable at run time through
+        ``scene``, never a device parameter). ``flash_path``: the file behind this unit's flash (kept
+        across runs); None: a private file removed at close (scratch_flash.py: a killed process's
+        file is swept by the next simulator). ``factory_calibrated``:
         the unit left the factory with its true calibration stored (False: fresh from assembly,
         streams raw images until calibrated). ``vendor_key``: the firmware-signing key whose public half
         the factory line provisions into a blank unit (and signs its shipped image with). ``source``: a
@@ -79,8 +82,9 @@ a killed process's file is swept by the next simulator). ``factory_calibrated``:
         self.config = ConfigStore()
         self.counters: collections.Counter[str] = collections.Counter()
         self.usb_speed = m.UsbSpeed.NOT_USB  # set by the simulated USB bus while plugged (INFO reports it)
-        self._truth_cal = true_calibration(seed)
-        self.rig = SensorRig(seed, self._truth_cal)
+        self.lens = LensClass.parse(lens)
+        self._truth_cal = lens_calibration(seed, self.lens)
+        self.rig = SensorRig(seed, self._truth_cal, self.lens.board_distance_m)
         self._scratch = None
         if flash_path is None:  # a private file removed at close; a killed process's is swept later
             self._scratch = ScratchFlash(self.serial)

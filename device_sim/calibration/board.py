@@ -17,8 +17,8 @@ import numpy as np
 
 from stereocam.stereo.calibration_board import BoardPose, BoardSpec
 from stereocam.protocol.calibration import StereoCalibration
-from .rays import pixel_rays, project_points
-from stereocam.protocol.rectification import rodrigues
+from .rays import lens_project, lens_rays
+from stereocam.protocol.rectification import rodrigues, viewing_rays
 
 
 @numba.njit(inline="always")
@@ -110,7 +110,7 @@ def _visible(calib: StereoCalibration, pose: BoardPose, board: BoardSpec, border
                       (calib.K_right, calib.D_right, outline @ calib.R.T + calib.T)):
         if np.any(pts[:, 2] <= 0.05):
             return False
-        uv = project_points(K, D, pts)
+        uv = lens_project(K, D, calib.lens_model, pts)
         if np.any(uv < border_px) or np.any(uv[:, 0] > w - 1 - border_px) or np.any(uv[:, 1] > h - 1 - border_px):
             return False
     return True
@@ -122,8 +122,10 @@ def board_poses(seed: int, n: int, board: BoardSpec, calib: StereoCalibration,
     """n varied poses, reproducible from the seed, with the whole board inside both images.
 
     Each pose: board centre at a uniform image position of the left camera at a distance drawn
-    from `distance_m`, tilted by up to `max_tilt_deg` about a random in-plane axis and rolled by
-    up to `max_roll_deg`. Poses where the board would leave either image are redrawn.
+    from `distance_m` (plumb_bob: depth along the axis through K⁻¹; other lens models: along the
+    pixel's true viewing ray, so poses reach the whole field of a wide lens), tilted by up to
+    `max_tilt_deg` about a random in-plane axis and rolled by up to `max_roll_deg`. Poses where
+    the board would leave either image are redrawn.
     """
     rng = np.random.default_rng([0xB0A2D, int(seed)])
     w, h = calib.image_size
@@ -139,7 +141,12 @@ def board_poses(seed: int, n: int, board: BoardSpec, calib: StereoCalibration,
         tilt = np.deg2rad(rng.uniform(0, max_tilt_deg)) * np.array([np.cos(phi), np.sin(phi), 0.0])
         roll = np.deg2rad(rng.uniform(-max_roll_deg, max_roll_deg))
         R = rodrigues(tilt) @ rodrigues(np.array([0.0, 0.0, roll]))
-        pose = BoardPose(R, z * (K_inv @ pixel) - R @ centre)
+        if calib.lens_model == "plumb_bob":
+            ray = K_inv @ pixel
+        else:
+            ray = viewing_rays(calib.K_left, calib.D_left, pixel[None, :2], 200, calib.lens_model)[0]
+            ray = ray / np.linalg.norm(ray)
+        pose = BoardPose(R, z * ray - R @ centre)
         if _visible(calib, pose, board, border_px):
             made += 1
             yield pose
@@ -153,7 +160,7 @@ class StereoBoardRenderer:
     def __init__(self, calib: StereoCalibration, board: BoardSpec, supersample: int = 1) -> None:
         w, h = calib.image_size
         self.calib, self.board, self.supersample = calib, board, supersample
-        self._rays = [pixel_rays(K, D, w, h, supersample)
+        self._rays = [lens_rays(K, D, calib.lens_model, w, h, supersample)
                       for K, D in ((calib.K_left, calib.D_left), (calib.K_right, calib.D_right))]
 
     def render(self, pose: BoardPose, rng: np.random.Generator | None = None,

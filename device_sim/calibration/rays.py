@@ -5,11 +5,15 @@ pixel_rays inverts OpenCV's 5-coefficient distortion model
                    y_d = y (1 + k1 r² + k2 r⁴ + k3 r⁶) + p1 (r² + 2 y²) + 2 p2 x y
     u = fx x_d + cx,  v = fy y_d + cy
 by fixed-point iteration run to convergence (|Δ| < 1e-13 in normalised units, at most 200 steps).
+lens_rays / lens_project do the same for every lens model of SPEC §12.7 (the simulated wide-angle and
+fisheye units, rig/lens.py).
 """
 from __future__ import annotations
 
 import numba
 import numpy as np
+
+from stereocam.protocol.rectification import rectified_to_raw, viewing_rays
 
 _MAX_ITER = 200
 _TOL = 1e-13
@@ -70,3 +74,42 @@ def project_points(K: np.ndarray, D: np.ndarray, points: np.ndarray) -> np.ndarr
     xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
     yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
     return np.column_stack([K[0, 0] * xd + K[0, 2], K[1, 1] * yd + K[1, 2]])
+
+
+def lens_rays(K: np.ndarray, D: np.ndarray, lens_model: str, width: int, height: int,
+              supersample: int = 1) -> np.ndarray:
+    """Viewing rays float32 (H*s, W*s, 3) of a camera of any lens model (SPEC §12.7), sub-pixels as
+    pixel_rays lays them out. plumb_bob: pixel_rays (z = 1); rational_polynomial: (x, y, 1) from the
+    fixed-point inversion run to convergence; equidistant: unit rays from Newton on θ, valid beyond
+    90° off axis (pointing backwards)."""
+    if lens_model == "plumb_bob":
+        return pixel_rays(K, D, width, height, supersample)
+    step = 1.0 / supersample
+    u = 0.5 * step - 0.5 + step * np.arange(width * supersample)
+    v = 0.5 * step - 0.5 + step * np.arange(height * supersample)
+    uu, vv = np.meshgrid(u, v)
+    pts = np.column_stack([uu.ravel(), vv.ravel()])
+    rays = viewing_rays(np.asarray(K, np.float64), np.asarray(D, np.float64), pts, 200, lens_model)
+    return rays.reshape(len(v), len(u), 3).astype(np.float32)
+
+
+def lens_project(K: np.ndarray, D: np.ndarray, lens_model: str, points: np.ndarray) -> np.ndarray:
+    """Pixel positions (N, 2) of camera-frame points (N, 3) through a lens of any model."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if lens_model == "plumb_bob":
+        return project_points(K, D, p)
+    if lens_model == "equidistant":  # any direction, also behind the lens
+        return _project_equidistant(K, D, p)
+    with np.errstate(divide="ignore", invalid="ignore"):  # the identity view's map is the lens projection
+        return rectified_to_raw(K, D, lens_model, np.eye(3), np.hstack([np.eye(3), np.zeros((3, 1))]),
+                                p[:, :2] / p[:, 2:])
+
+
+def _project_equidistant(K: np.ndarray, D: np.ndarray, p: np.ndarray) -> np.ndarray:
+    k1, k2, k3, k4 = np.asarray(D, np.float64).ravel()
+    r = np.hypot(p[:, 0], p[:, 1])
+    theta = np.arctan2(r, p[:, 2])
+    t2 = theta * theta
+    theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+    s = np.where(r > 0, theta_d / np.maximum(r, 1e-300), 0.0)
+    return np.column_stack([K[0, 0] * p[:, 0] * s + K[0, 2], K[1, 1] * p[:, 1] * s + K[1, 2]])

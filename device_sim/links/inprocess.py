@@ -6,9 +6,10 @@ units with one serial); a bare ``sim://`` unit 0. ``sim://?serial=S`` (no seed) 
 unattached simulator with that serial in this process (``stereocam.list_devices`` lists them) and
 raises TransportError when there is none: a serial that is not found never makes a new unit.
 ``scene=lab|wall|board`` sets what the unit looks at (a simulator setting, not a device parameter;
-also applied to a live unit). ``line=NAME`` wires a new unit's trigger connector to the in-process
-line NAME (``sim://?seed=11&line=L`` and ``sim://?seed=12&line=L`` are two heads on one wire, ready
-for a ``CameraGroup``); without it a unit's connector is unplugged. Host writes go straight into the firmware's
+also applied to a live unit); ``lens=standard|wide|fisheye`` the lens class of a unit it makes
+(rig/lens.py; a live unit keeps its lenses). ``line=NAME`` wires a new unit's trigger connector to
+the in-process line NAME (``sim://?seed=11&line=L`` and ``sim://?seed=12&line=L`` are two heads on
+one wire, ready for a ``CameraGroup``); without it a unit's connector is unplugged. Host writes go straight into the firmware's
 ``receive``; the firmware's output lands in a bounded FIFO the host reads (a full FIFO blocks
 the device, as a full USB or TCP buffer would).
 """
@@ -21,6 +22,7 @@ from urllib.parse import parse_qs, urlsplit
 from stereocam.protocol.errors import ConfigError, DisconnectedError, TransportError
 
 from .. import registry
+from ..rig.lens import LensClass
 from ..rig.scene import Scene
 from ..trigger import named_line
 
@@ -119,9 +121,9 @@ _handed_over: "weakref.WeakSet[object]" = weakref.WeakSet()  # units whose ownin
 
 def open_transport(url: str, timeout: float) -> InProcessTransport:
     query = parse_qs(urlsplit(url).query, keep_blank_values=True)
-    unknown = set(query) - {"seed", "serial", "scene", "line"}
+    unknown = set(query) - {"seed", "serial", "scene", "lens", "line"}
     if unknown:
-        raise ConfigError(f"sim:// URL: unknown option(s) {sorted(unknown)}; known: seed, serial, scene, line")
+        raise ConfigError(f"sim:// URL: unknown option(s) {sorted(unknown)}; known: seed, serial, scene, lens, line")
     if any(len(v) > 1 for v in query.values()):
         raise ConfigError(f"sim:// URL: an option given twice in {url!r}")
     text = query.get("seed", ["0"])[0]
@@ -129,6 +131,7 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
         raise ConfigError(f"sim:// URL: seed must be an integer 0..{SEED_MAX}, got {text!r}")
     seed = int(text)
     scene = Scene.parse(query["scene"][0]) if "scene" in query else None
+    lens = LensClass.parse(query["lens"][0]) if "lens" in query else LensClass.STANDARD
     serial = query.get("serial", [None])[0]
     line = named_line(query["line"][0]) if "line" in query else None
     live = registry.find_free(serial) if serial is not None else None
@@ -151,8 +154,8 @@ def open_transport(url: str, timeout: float) -> InProcessTransport:
                              f"sim://?seed=N&serial={serial} makes a new one")
     from ..firmware import SimulatedCamera
 
-    return InProcessTransport(SimulatedCamera(serial=serial, seed=seed, scene=scene or Scene.LAB, trigger_line=line),
-                                url)
+    return InProcessTransport(SimulatedCamera(serial=serial, seed=seed, scene=scene or Scene.LAB, lens=lens,
+                                              trigger_line=line), url)
 
 
 def discover() -> list[DeviceEntry]:
@@ -166,6 +169,6 @@ def reopen_url(url: str, serial: str) -> str:
     (a unit opened by seed closes with its link) the same seed and serial freshly booted."""
     query = parse_qs(urlsplit(url).query)
     if "seed" in query:
-        extra = "".join(f"&{key}={query[key][0]}" for key in ("scene", "line") if key in query)
+        extra = "".join(f"&{key}={query[key][0]}" for key in ("scene", "lens", "line") if key in query)
         return f"sim://?seed={query['seed'][0]}&serial={serial}{extra}"
     return f"sim://?serial={serial}"

@@ -16,7 +16,7 @@ from . import render, scene
 from stereocam.stereo.calibration_board import BoardPose, BoardSpec
 from ..calibration.board import StereoBoardRenderer, board_poses
 from stereocam.protocol.calibration import StereoCalibration
-from ..calibration.rays import pixel_rays
+from ..calibration.rays import lens_rays
 
 SENSOR_W, SENSOR_H = 1280, 960
 EXPOSURE_REF_US = 4000.0
@@ -99,9 +99,11 @@ class SensorRig:
     (R, T as cv2.stereoCalibrate defines them). Images come out raw: distorted, unrectified.
     """
 
-    def __init__(self, seed: int, truth: StereoCalibration):
+    def __init__(self, seed: int, truth: StereoCalibration, board_distance_m: tuple[float, float] = (0.45, 1.2)):
+        """``board_distance_m``: how far the board fixture holds the board (rig/lens.py, per lens class)."""
         self.seed = seed
         self.truth = truth
+        self.board_distance_m = board_distance_m
         self.texture, self.tex_offsets = render.pack_pyramid(render.make_texture(seed))
         self.tex_side = 512
         self._format: tuple[int, int] | None = None
@@ -114,8 +116,8 @@ class SensorRig:
             return
         cal = self.truth.scaled(width, height)
         self.calibration = cal
-        self._rays = [pixel_rays(cal.K_left, cal.D_left, width, height),
-                      pixel_rays(cal.K_right, cal.D_right, width, height)]
+        self._rays = [lens_rays(cal.K_left, cal.D_left, cal.lens_model, width, height),
+                      lens_rays(cal.K_right, cal.D_right, cal.lens_model, width, height)]
         self._cones = [render.ray_cones(r) for r in self._rays]
         self._poses = [(np.zeros(3), np.eye(3)), (self.right_centre, cal.R.T)]
         self._board = None
@@ -136,7 +138,7 @@ class SensorRig:
         if self._board is None:
             self._board = StereoBoardRenderer(self.calibration, BOARD)
             self._board_poses = list(board_poses(self.seed, BOARD_POSES, BOARD, self.calibration,
-                                                 distance_m=(0.45, 1.2)))
+                                                 distance_m=self.board_distance_m))
         pose = self._board_poses[int(t / BOARD_DWELL_S) % len(self._board_poses)]
         return self._board.render(pose, np.random.default_rng(frame_seed))
 

@@ -10,7 +10,8 @@ from stereocam.device_sim.calibration.board import StereoBoardRenderer, board_po
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.device_sim.calibration.rectify import rectification_maps, remap_bilinear, undistort_rectify_map
 from stereocam.device_sim.calibration.truth import true_calibration
-from stereocam.protocol.rectification import _log_rotation, rodrigues, stereo_rectify, undistort_points
+from stereocam.protocol.rectification import (EQUIDISTANT_FOV_DEG, _log_rotation, rectified_to_raw, rodrigues,
+                                               stereo_rectify, undistort_points)
 from stereocam.tools.calibration.boards import detect_all
 
 
@@ -145,3 +146,28 @@ def test_maps_of_every_lens_model_match_opencv(model: str, D: list[float]) -> No
         back = cv2.projectPoints(np.column_stack([norm, np.ones(3)]), np.zeros(3), np.zeros(3), c.K_left,
                                  np.array(D))[0].reshape(-1, 2)
     np.testing.assert_allclose(back, pts, atol=1e-6)
+
+
+@pytest.mark.parametrize("fov", [60, 150, 180, 190])
+def test_equidistant_view_has_the_stated_field_and_only_valid_pixels(fov: int) -> None:
+    """SPEC §12.6 step 3 for fisheye lenses: the principal point at the image centre, f from the output
+    field of view (120° by default) unless a narrower lens needs a longer focal; every pixel sees the sensor."""
+    from tests.support import calib_synth as synth
+    c = synth.rig("equidistant", fov, (320, 240)).truth()
+    m = rectification_maps(c)
+    g = m.geometry
+    assert (g.cx, g.cy) == (159.5, 119.5)
+    f_fov = 160 / np.tan(np.radians(EQUIDISTANT_FOV_DEG) / 2)
+    assert g.focal_px >= f_fov * (1 - 1e-12)
+    if fov in (150, 180):
+        assert g.focal_px == pytest.approx(f_fov, rel=1e-12)
+    if fov == 60:  # the lens sees less than 120°: the view narrows to what it sees
+        assert g.focal_px > 1.3 * f_fov
+    assert stereo_rectify(c, fov_deg=90).focal_px >= 160 * (1 - 1e-12)
+    for mx, my in ((m.left_x, m.left_y), (m.right_x, m.right_y)):
+        assert mx.min() > -0.5 and mx.max() < 319.5 and my.min() > -0.5 and my.max() < 239.5
+    np.testing.assert_allclose(rectified_to_raw(c.K_left, c.D_left, c.lens_model, g.R1, g.P1,
+                                                np.array([[5.0, 7.0], [300.0, 200.0]])),
+                               [[m.left_x[7, 5], m.left_y[7, 5]], [m.left_x[200, 300], m.left_y[200, 300]]], atol=1e-3)
+    with pytest.raises(ValueError, match="field of view"):
+        stereo_rectify(c, fov_deg=180)
