@@ -61,18 +61,15 @@ class SimulatedCamera:
                  scene: Scene | str = Scene.LAB, vendor_key: Ed25519PrivateKey = DEV_SIGNING_KEY,
                  flash_size: int = FLASH_SIZE, source: ReplaySource | None = None, timebase: Clock | None = None,
                  lens: LensClass | str = LensClass.STANDARD):
-        """``lens``: the unit's lens class ("standard", "wide", "fisheye"; rig/lens.py): the rig renders
-        through those lenses and the factory flash holds their true calibration. ``scene``: what the
-        rig looks at ("lab", "wall", "board"; a simulator setting, changeable at run time through
-        ``scene``, never a device parameter). ``flash_path``: the file behind this unit's flash (kept
-        across runs); None: a private file removed at close (scratch_flash.py: a killed process's
-        file is swept by the next simulator). ``factory_calibrated``:
-        the unit left the factory with its true calibration stored (False: fresh from assembly,
-        streams raw images until calibrated). ``vendor_key``: the firmware-signing key whose public half
-        the factory line provisions into a blank unit (and signs its shipped image with). ``source``: a
-        recording that stands in for the sensor rig (replay.py); the unit is then the recorded one:
-        identity, calibration, configuration. ``timebase``: the clock every timed part of the unit reads and
-        waits on (clock.py; default the real one, a replay's its source's; a FakeClock in tests)."""
+        """``lens``: the lens class ("standard", "wide", "fisheye"; rig/lens.py): the rig renders
+        through it and the factory flash holds its true calibration. ``scene``: what the rig looks at
+        ("lab", "wall", "board", a scene class; a simulator setting, never a device parameter).
+        ``flash_path``: the file behind the flash (kept across runs); None: a private file removed at
+        close (scratch_flash.py). ``factory_calibrated``: the unit left the factory with its true
+        calibration stored (False: streams raw images until calibrated). ``vendor_key``: the signing
+        key whose public half the factory provisions. ``source``: a recording that stands in for the
+        rig (replay.py): the unit is the recorded one. ``timebase``: the clock every timed part reads
+        and waits on (clock.py; a FakeClock in tests)."""
         self.seed = seed
         self._source = source
         self.serial = source.serial if source else serial or f"SIM{seed:05d}"
@@ -101,7 +98,6 @@ class SimulatedCamera:
         self._closed = False
         self._epoch = 0
         self.truth = TruthLog(self.rig)
-
         # the engine's callback reaches the pipeline, which itself needs the engine
         self.dispatcher = Dispatcher(self.counters)
         produce = lambda req: self.pipeline.produce(req)  # noqa: E731 - the pipeline is made below

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from . import render, scene
+from . import render, scene, texture
 from stereocam.stereo.calibration_board import BoardPose, BoardSpec
 from ..calibration.board import StereoBoardRenderer, board_poses
 from stereocam.protocol.calibration import StereoCalibration
@@ -104,7 +104,7 @@ class SensorRig:
         self.seed = seed
         self.truth = truth
         self.board_distance_m = board_distance_m
-        self.texture, self.tex_offsets = render.pack_pyramid(render.make_texture(seed))
+        self.texture, self.tex_offsets = texture.pack_pyramid(texture.make_texture(seed))
         self.tex_side = 512
         self._format: tuple[int, int] | None = None
         self._board: StereoBoardRenderer | None = None

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..calibration.truth import NOMINAL_FOCAL_PX, NOMINAL_WIDTH
-from . import render
+from . import render, texture
 from .photometry import Photometry
 from .scene_classes import CLASSES, SceneClass
 from .sensor import LIGHT, Geometry, expose
@@ -64,7 +64,7 @@ def render_primitives(name: str, exposure: list[np.ndarray], at_t: np.ndarray, p
     """The pair for primitive tables ``exposure`` (one per sub-instant the exposure averages) and
     the truth of ``at_t`` (the table at the exposure's middle)."""
     rays = geometry.rays()
-    tex = (*render.pack_pyramid(render.make_texture(seed, TEXTURE_SIDE)), TEXTURE_SIDE)
+    tex = (*texture.pack_pyramid(texture.make_texture(seed, TEXTURE_SIDE)), TEXTURE_SIDE)
     right_origin = np.array([geometry.baseline_m, 0.0, 0.0])
     origins = (np.zeros(3), right_origin)
     eye_rot = np.eye(3)

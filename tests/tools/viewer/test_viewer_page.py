@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import stereocam
+from stereocam.protocol.params import BY_NAME, Output
 from stereocam.tools.viewer.server import ViewerServer
 from stereocam.tools.viewer.session import ViewerSession
 from stereocam.tools.viewer.settings import OTHER, group_of
@@ -142,7 +143,8 @@ def test_settings_are_grouped_with_named_choices_and_proper_units(viewer, page):
     assert names == ["free_run (default)", "software", "external"]
     assert page.js("[...document.querySelectorAll('#in-algorithm option')].map(o => o.value)") == ["0", "1"]
     assert "µs" in page.js("document.querySelector('#param-exposure_us .range').textContent")
-    assert page.js("[...document.querySelectorAll('#in-outputs input')].map(i => i.checked)") == [True, True, True]
+    planes = [bool(BY_NAME["outputs"].default & plane) for plane in Output]  # a box per plane, the default ticked
+    assert page.js("[...document.querySelectorAll('#in-outputs input')].map(i => i.checked)") == planes
     assert group_of("temporal_alpha") == group_of("lr_check") == group_of("hole_fill") == "post-processing"
     assert group_of("a_future_setting") == OTHER
 

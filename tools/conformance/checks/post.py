@@ -31,7 +31,7 @@ FRAMES = 2  # consecutive captures judged per stage (the temporal filter's state
 CAPTURE_BUDGET_S = 10.0  # per triggered capture
 
 
-@check("post.capability")
+@check("post.capability", "R-5.3-1")
 def capability(ctx: Context) -> str:
     """POST_PROCESSING in INFO exactly when CONFIG lists the post-processing parameters, which
     default to every stage off."""
@@ -49,7 +49,7 @@ def capability(ctx: Context) -> str:
     return f"advertised with its {len(listed)} parameters"
 
 
-@family("post.stage")
+@family("post.stage", "R-5.3-2")
 def stages(ctx: Context) -> Iterator[tuple[str, CheckFn]]:
     """One check per stage: its output matches the host's chain on the device's own captures."""
     for name, values in STAGES.items():
