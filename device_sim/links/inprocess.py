@@ -9,9 +9,9 @@ raises TransportError when there is none: a serial that is not found never makes
 also applied to a live unit); ``lens=standard|wide|fisheye`` the lens class of a unit it makes
 (rig/lens.py; a live unit keeps its lenses). ``line=NAME`` wires a new unit's trigger connector to
 the in-process line NAME (``sim://?seed=11&line=L`` and ``sim://?seed=12&line=L`` are two heads on
-one wire, ready for a ``CameraGroup``); without it a unit's connector is unplugged. Host writes go straight into the firmware's
-``receive``; the firmware's output lands in a bounded FIFO the host reads (a full FIFO blocks
-the device, as a full USB or TCP buffer would).
+one wire, ready for a ``CameraGroup``); without it a unit's connector is unplugged. Host writes go
+straight into the firmware's ``receive``; the firmware's output lands in a bounded FIFO the host
+reads (a full FIFO blocks the device, as a full USB or TCP buffer would).
 """
 from __future__ import annotations
 

@@ -133,7 +133,8 @@ def test_camera_record_and_tools(tmp_path, capsys, device_url):
         assert doc["calibration"]["lens_model"] == stored.calibration.lens_model
         assert doc["calibration"]["id"] == stored.calibration_id  # a number, as every number in the JSON
         assert f"id {stored.calibration_id:08x}:" in out_text  # text: 8 hex digits, as info and calibrate print it
-        assert doc["unit"]["capabilities"] == cam_info.capabilities and doc["unit"]["protocol_version"] == "%d.%d" % cam_info.protocol_version
+        assert doc["unit"]["capabilities"] == cam_info.capabilities
+        assert doc["unit"]["protocol_version"] == "%d.%d" % cam_info.protocol_version
     assert cli.main(["recording", "export", str(path), "--out", str(tmp_path / "x"), "--stop", "2"]) == 0
     names = sorted(p.name for p in (tmp_path / "x").iterdir())
     assert names[:5] == ["frame000000_disparity.npy", "frame000000_disparity.png", "frame000000_left.png",
