@@ -118,9 +118,10 @@ def test_gate_failure_writes_nothing_as_passed(image_dir: Path, tmp_path: Path, 
 
 def test_mismatched_pairs_fail_the_gate(pairs, tmp_path: Path) -> None:
     """Right images shifted by one pair: the solve 'converges' but held-out epipolar error exposes it.
-    Ten pairs, not all: on mismatched pairs every stereo solve runs to its iteration cap, and on 24
-    pairs the fit took ~50 s on a loaded machine (past the test timeout beside two busy loops)."""
-    few = pairs[:10]
+    Fourteen pairs, not all: on mismatched pairs every stereo solve runs to its iteration cap, and on 24
+    pairs the fit took ~50 s on a loaded machine (past the test timeout beside two busy loops). On
+    10-12 such pairs no lens model gives a rectifiable fit at all (a CalibrationError, not this gate)."""
+    few = pairs[:14]
     shifted = [(few[i][0], few[(i + 1) % len(few)][1]) for i in range(len(few))]
     res = calibrate_pairs(iter(shifted), BOARD, select=False)
     assert not res.passed and any("stereo RMS" in f for f in res.failures)

@@ -203,12 +203,16 @@ def test_an_unplug_during_the_write_is_followed_by_a_read_back_that_says_what_th
 
 
 @pytest.mark.slow
+@pytest.mark.measurement  # the 640x480 flow is 0.1 to 1.1 % off the truth run to run: `make measure`
 @pytest.mark.parametrize("lens, model, seed", [("wide", "rational_polynomial", 73)])
 def test_wide_angle_units_calibrate_to_their_truth_and_rectify_on_board(tmp_path, lens, model, seed):
     """The whole device flow on a 120° unit: capture, calibrate, write, rectify on board. Small: 640x480,
     the lens model named (cheaper than the automatic choice). The fisheye unit is measured by
     ``stereocam bench device-calibration --lens wide --lens fisheye`` (full size, 0.2 % target): at
-    640x480 its held-out epipolar error varies with the frames caught (0.08 to 0.16 px)."""
+    640x480 its held-out epipolar error varies with the frames caught (0.08 to 0.16 px); the wide
+    unit's from 0.05 to 0.14 px and its focal 0.1 to 1.1 % off, as the frames caught differ run to run
+    (issue 19 not met): measured by `make measure` against the issue's 0.2 % / 0.1 px targets, not
+    part of `make test`."""
     sim = SimulatedCamera(serial=f"LENS-{lens}", seed=seed, flash_path=tmp_path / "u.flash", factory_calibrated=False,
                           scene="board", lens=lens)
     with Camera(InProcessTransport(sim), timeout=2.0) as cam:
@@ -218,8 +222,8 @@ def test_wide_angle_units_calibrate_to_their_truth_and_rectify_on_board(tmp_path
         stored = cam.read_calibration().calibration
         truth = sim.true_calibration().scaled(640, 480)
         for K, T in ((stored.K_left, truth.K_left), (stored.K_right, truth.K_right)):
-            np.testing.assert_allclose(K[[0, 1, 0, 1], [0, 1, 2, 2]], T[[0, 1, 0, 1], [0, 1, 2, 2]], rtol=0.005)
-        assert abs(stored.baseline_m / truth.baseline_m - 1) < 0.005
+            np.testing.assert_allclose(K[[0, 1, 0, 1], [0, 1, 2, 2]], T[[0, 1, 0, 1], [0, 1, 2, 2]], rtol=0.002)
+        assert abs(stored.baseline_m / truth.baseline_m - 1) < 0.002
         cam.configure(rectify=1, width=640, height=480, fps=20)
         cam.start()
         dy = []
