@@ -13,18 +13,16 @@ sizes and disparity ranges.
 """
 from __future__ import annotations
 
-import contextlib
 import os
 import statistics
-import subprocess
-import sys
 import time
 from dataclasses import dataclass
-from typing import Callable, Iterator
+from typing import Callable
 
 import numpy as np
 
 from .matching import bad_rate, motorcycle
+from .matching_report import busy_process
 
 SGBM_MODES = {"SGBM": 0, "HH": 1, "SGBM_3WAY": 2, "HH4": 3}  # cv2.STEREO_SGBM_MODE_*
 
@@ -241,21 +239,6 @@ def size_table(left: np.ndarray, right: np.ndarray, repeat: int, variants: dict[
                                  f"({min(r):.2f}-{max(r):.2f})")
             print(f"  {w}x{h} {nd} disp: 3WAY {t3:.1f} CPU ms; " + "; ".join(cells), flush=True)
     print()
-
-
-@contextlib.contextmanager
-def busy_process(on: bool) -> Iterator[None]:
-    """While the block runs, one other process spins on a CPU (the issue's "beside one busy
-    process" setting); nothing when off."""
-    if not on:
-        yield
-        return
-    proc = subprocess.Popen([sys.executable, "-c", "while True: pass"])
-    try:
-        yield
-    finally:
-        proc.terminate()
-        proc.wait()
 
 
 def subpixel_table(variants: dict[str, dict]) -> None:

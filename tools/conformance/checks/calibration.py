@@ -68,15 +68,7 @@ def read(ctx: Context) -> str:
 def write_restore(ctx: Context) -> str:
     """A user record written, committed and read back byte for byte, in force (INFO and the next
     capture); restore puts the factory record back in force; then the records found are put back."""
-    ctx.require(m.Capability.CALIBRATION)
-    found = _records(ctx)
-    factory, user = found["factory"], found["user"]
-    if factory is None:
-        raise CheckSkipped("no factory record: a test user record could not be removed again")
-    base = (user or factory).calibration
-    k = base.K_left.copy()
-    k[0, 0] += 0.25
-    test = dataclasses.replace(base, K_left=k)
+    factory, user, test = _test_calibration(ctx, nudge_px=0.25)
     try:
         written = write_calibration(ctx.s.call, test, "user")  # byte-for-byte read-back and generation check
         expect(written.body == test.to_bytes() and written.source == "user", "user record read back differs")
@@ -162,9 +154,11 @@ def refusals(ctx: Context) -> str:
     return f"{sum(c is not None for _, c, _ in cases)} bad requests refused with the right codes, records unchanged"
 
 
-def _test_calibration(ctx: Context) -> tuple[StoredCalibration, StoredCalibration | None, StereoCalibration]:
+def _test_calibration(ctx: Context, nudge_px: float = 0.5
+                      ) -> tuple[StoredCalibration, StoredCalibration | None, StereoCalibration]:
     """The factory record, the user record found, and a usable calibration unlike both (a focal
-    length nudged); CheckSkipped without a factory record (a test user record could not be removed)."""
+    length nudged by ``nudge_px``); CheckSkipped without a factory record (a test user record could
+    not be removed)."""
     ctx.require(m.Capability.CALIBRATION)
     found = _records(ctx)
     factory, user = found["factory"], found["user"]
@@ -172,7 +166,7 @@ def _test_calibration(ctx: Context) -> tuple[StoredCalibration, StoredCalibratio
         raise CheckSkipped("no factory record: a test user record could not be removed again")
     base = (user or factory).calibration
     k = base.K_left.copy()
-    k[0, 0] += 0.5
+    k[0, 0] += nudge_px
     return factory, user, dataclasses.replace(base, K_left=k)
 
 
