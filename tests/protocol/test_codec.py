@@ -16,7 +16,7 @@ import struct
 import zlib
 
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from stereocam.protocol import messages as m
@@ -1037,8 +1037,10 @@ def test_v1_1_parameters() -> None:
 
 
 @given(st.integers(-(1 << 31), (1 << 31) - 1))
+@example(6)  # inside sgm_paths' range, not one of its values
 @settings(max_examples=150, deadline=None)
 def test_check_agrees_with_the_table(v: int) -> None:
     for p in PARAMS:
-        ok = p.lo <= v <= p.hi and (not p.odd or v % 2 == 1) and (v - p.lo) % p.step == 0
+        ok = (p.lo <= v <= p.hi and (not p.odd or v % 2 == 1) and (v - p.lo) % p.step == 0
+              and (not p.one_of or v in p.one_of))
         assert (p.check(v) is None) == ok, (p.name, v)
