@@ -72,6 +72,8 @@ def _nearest_legal(prm: Param, v: int) -> int:
         v -= (v - prm.lo) % prm.step
     if prm.odd and v % 2 == 0:
         v = v + 1 if v < prm.hi else v - 1
+    if prm.one_of:
+        v = min(prm.one_of, key=lambda legal: abs(legal - v))
     return v
 
 
