@@ -36,7 +36,7 @@ TEST_WORKERS ?= auto
 # and every CLI or simulator the tests start in a child process, would otherwise compile the package
 # (and pytest re-rewrite every test module) from source again.
 test: lint
-	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q -n $(TEST_WORKERS) --dist load -m "not measurement"
+	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup -m "not measurement"
 
 # Tests that measure a target whose result varies run to run (e.g. a simulated wide-angle unit's
 # device-mode calibration against its truth): reported, not part of `make test`.

@@ -12,12 +12,13 @@ Every test gets its own simulated USB bus, so tests can run in any order.
 from __future__ import annotations
 
 import os
+import re
 
 import pytest
 
 from stereocam.device_sim.process import ServedSimulator
 from stereocam.tools.conformance.budget import TIME_FACTOR_ENV
-from tests.support.device import SMALL
+from tests.support.device import SMALL, url_of
 
 TRANSPORTS = ("sim", "pty", "tcp", "usb")
 BUSY_HOST_TIME_FACTOR = "3"
@@ -27,21 +28,50 @@ firmware's. Set in the environment so child processes (served simulators, CLI ru
 os.environ.setdefault(TIME_FACTOR_ENV, BUSY_HOST_TIME_FACTOR)
 
 
+# Tests that share one expensive run go to one worker (``--dist loadgroup``): node id pattern ->
+# group. (pytest 9 node ids no longer carry xdist_group's "@name" suffix, so the groups are named
+# here, where the scheduler, which sees only node ids, can read them.)
+WORKER_GROUPS = {
+    # the whole conformance suite runs once per transport; each check's outcome is a test of its own
+    re.compile(r"tests/tools/conformance/test_device\.py::\w+\[(\w+)"): "conformance-{0}",
+}
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log):
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadGroupScheduling
+
+    class Grouped(LoadGroupScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            for pattern, group in WORKER_GROUPS.items():
+                if m := pattern.match(nodeid):
+                    return group.format(*m.groups())
+            return super()._split_scope(nodeid)
+
+    return Grouped(config, log)
+
+
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--device", action="store", default=None, metavar="URL",
                      help="run the device tests against this camera URL instead of simulators")
 
 
+DEVICE_FIXTURES = ("device_url", "device_kind")  # parametrised over TRANSPORTS (or --device URL)
+
+
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
-    if "device_url" in metafunc.fixturenames:
-        url = metafunc.config.getoption("--device")
-        metafunc.parametrize("device_url", [url] if url else list(TRANSPORTS), indirect=True)
+    url = metafunc.config.getoption("--device")
+    for name in DEVICE_FIXTURES:
+        if name in metafunc.fixturenames:
+            metafunc.parametrize(name, [url] if url else list(TRANSPORTS), indirect=True)
+            return
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     external = config.getoption("--device")
     for item in items:
-        if "device_url" in getattr(item, "fixturenames", ()):
+        if set(DEVICE_FIXTURES) & set(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.device)
         if "device_sim" in item.path.relative_to(item.config.rootpath).parts:
             item.add_marker(pytest.mark.sim_only("tests the simulator itself"))
@@ -123,15 +153,15 @@ def usb_camera(usb_bus):
 
 
 @pytest.fixture
-def device_url(request, served) -> str:
-    kind = request.param
-    if kind == "sim":
-        return "sim://?seed=7"
-    if kind == "usb":
-        return request.getfixturevalue("usb_camera")
-    if kind in ("pty", "tcp"):
-        return served(kind).url
-    return kind  # an external device URL from --device
+def device_url(request) -> str:
+    return url_of(request.param, request)
+
+
+@pytest.fixture
+def device_kind(request) -> str:
+    """The transport name (or --device's URL) alone, for tests that start the device only when they
+    need it (``url_of``)."""
+    return request.param
 
 
 @pytest.fixture

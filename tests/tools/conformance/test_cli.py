@@ -21,15 +21,12 @@ from stereocam.protocol.framing import Packet
 from stereocam.protocol.params import BY_ID
 from stereocam.tools import cli
 from stereocam.tools.conformance.checks.config import UNUSED_PARAM_ID
+from tests.tools.conformance.test_device import KNOWN_SIMULATOR_GAPS
 from tests.support.broken_devices import (RewritingProxy, blinding_decoder, clamp_into_range, commit_what_is_staged,
                                           counting_stop_discards, dead_trigger_output, first_duplicate_wins,
                                           forget_resend, generations_restart, rescan_timed_decoder, small_sgm_limit,
                                           stale_slot_report, typed_busy_nack, unchanged, without_features)
 
-# Checks the reference simulator fails today, and why. The suite is right about them; the
-# simulator is fixed elsewhere. Remove an entry when its fix lands: the tests then demand a PASS.
-# A camera given with --device gets no such allowance.
-KNOWN_SIMULATOR_GAPS: dict[str, str] = {}  # check name -> why the simulator may fail it (none today)
 # Through the rewriting proxy: the checks the breakage is about, and enough around them to show
 # that everything else still passes (the proxy re-encodes requests, so the decoder-level link
 # checks are judged directly against the devices, not through it).
@@ -52,33 +49,6 @@ def _failures(report: dict) -> set[str]:
 def tcp_sim():
     with ServedSimulator("tcp:127.0.0.1:0", seed=31) as sim:
         yield sim
-
-
-@pytest.mark.slow
-def test_the_device_conforms(device_url, request, tmp_path):
-    """The whole suite, as the command runs it, with JSON on stdout and JUnit XML beside it."""
-    junit = tmp_path / "conformance.xml"
-    rc, out = _run_cli([device_url, "--json", "--junit", str(junit)])
-    report = json.loads(out)
-    failed = _failures(report)
-    external = request.config.getoption("--device")
-    allowed = set() if external else set(KNOWN_SIMULATOR_GAPS)
-    assert failed <= allowed, {c["name"]: c["detail"] for c in report["checks"] if c["name"] in failed}
-    assert rc == (1 if failed else 0) and report["passed"] == (not failed)
-    names = [c["name"] for c in report["checks"]]
-    assert len(names) == len(set(names)) >= 50
-    cases = ET.parse(junit).getroot().findall("./testsuite/testcase")
-    assert sorted(c.get("name") for c in cases) == sorted(names)
-    assert {c.get("name") for c in cases if c.find("failure") is not None} == failed
-    if not external:  # the simulator advertises everything: nothing is skipped but what only TCP shows
-        passed = {c["name"] for c in report["checks"] if c["outcome"] == "PASS"}
-        skipped = {c["name"] for c in report["checks"] if c["outcome"] == "SKIP"}
-        tcp_only = {"link.second_client", "link.first_frame_deadline"}
-        assert skipped == (set() if device_url.startswith("socket://") else tcp_only), skipped
-        assert passed == set(names) - failed - skipped
-        assert {"config.limits.width", "config.cross.exposure_vs_frame_period", "stream.free_run_rate",
-                "trigger.software", "link.watchdog", "link.resend_trigger", "link.garbage", "time.sync",
-                "calib.write_restore", "stream.format.64x48", "session.restored"} <= passed
 
 
 @BUILT_HERE
