@@ -25,6 +25,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .census import census_row_pair
 from .lanes import uidx
 from .sgm_simd import add_argmin, cost_run, count_le, diag_update, fetch_add, load_acquire, \
     path_step, pixel_paths, spin_pause, store_release, stream_copy, try_lock, unlock
@@ -32,8 +33,8 @@ from .sgm_simd import add_argmin, cost_run, count_le, diag_update, fetch_add, lo
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 # layout of the int64 configuration vector passed to sgm_rows
-(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_MAXC,
- C_LEN) = range(11)  # C_INV: params.invalid_value; C_MAXC: params.max_cost
+(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_MAXC, C_CW, C_CH,
+ C_LEN) = range(13)  # C_INV: params.invalid_value; C_MAXC: params.max_cost; C_CW, C_CH: census
 
 
 @nb.njit(**_JIT)
@@ -219,13 +220,15 @@ NXT_STRIDE = 16  # nxt[c * NXT_STRIDE]: chain c's next row, each on its own cach
 
 
 @nb.njit(**_JIT)
-def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, cl: np.ndarray,
-               crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray, prog: np.ndarray,
-               disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndarray,
+               cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray,
+               prog: np.ndarray, disp: np.ndarray, win: np.ndarray, byte: np.ndarray,
+               code: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
                rarg: np.ndarray, karg: np.ndarray) -> None:
     """Row j of chain c (c = 0: the top half top-down, paths from above; c = 1: the bottom
-    half bottom-up, paths from below): cost row, one horizontal path kept per column in lbuf,
+    half bottom-up, paths from below): the row's census codes (census_row_pair; win, byte,
+    code its scratch), cost row, one horizontal path kept per column in lbuf,
     then in the other horizontal direction the other four paths plus the kept one into acc,
     band by band once the chain's previous row has published (prog) the columns the band
     reads; then the selection. hb: this worker's horizontal-path area (cols + 3 runs); vb:
@@ -234,6 +237,7 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, cl: np.ndarray
     cols = cfg[C_COLS]
     dy = 1 - 2 * c
     y = j if c == 0 else h - 1 - j
+    census_row_pair(img, right, y, cfg[C_CW], cfg[C_CH], win, byte, code, cl, crr)
     _kept_row(1 - c, y, hb, img, cl, crr, cfg, p2tab, cost, lbuf)
     i = 0
     while i < cols:
@@ -250,8 +254,9 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, cl: np.ndarray
 
 
 @nb.njit(**_JIT)
-def _single_pass(t: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
-                 p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray, disp: np.ndarray,
+def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.ndarray,
+                 cfg: np.ndarray, p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray,
+                 disp: np.ndarray, win: np.ndarray, byte: np.ndarray, code: np.ndarray,
                  cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
                  pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
                  karg: np.ndarray, workers: int) -> None:
@@ -271,21 +276,25 @@ def _single_pass(t: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: 
             j = fetch_add(nxt, c * NXT_STRIDE, 1)
             if j >= rows:
                 break
-            _chain_row(c, j, hb, vbase + c * 9 * cols * stride, img, cl, crr, cfg, p2tab, prog,
-                       disp, cost, lbuf, mv[c], meta, pm, acc, rmin, rarg, karg)
+            _chain_row(c, j, hb, vbase + c * 9 * cols * stride, img, right, cl, crr, cfg, p2tab,
+                       prog, disp, win, byte, code, cost, lbuf, mv[c], meta, pm, acc, rmin,
+                       rarg, karg)
 
 
 @nb.njit(parallel=True, **_JIT)
-def sgm_single_pass(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
-                    p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray, disp: np.ndarray,
+def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.ndarray,
+                    cfg: np.ndarray, p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray,
+                    disp: np.ndarray, win: np.ndarray, byte: np.ndarray, code: np.ndarray,
                     cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
                     pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
                     karg: np.ndarray, workers: int) -> None:
-    """Disparity rows (before the speckle filter) with five paths in one pass per half: the
+    """Disparity rows (before the speckle filter) of the pair (img left, right) with five
+    paths in one pass per half, each row's census codes (into cl, crr) made on the way: the
     two horizontal ones, and from above (top half, rows < ceil(h / 2)) or from below (the
     rest) the vertical and both diagonals. The halves are independent chains, one per
     worker; more workers share them row by row (_single_pass). Scratch has
     one slice per worker (leading axis, at least ``workers``); nxt and prog must be zero."""
     for t in nb.prange(workers):
-        _single_pass(t, img, cl, crr, cfg, p2tab, nxt, prog, disp, cost[t], lbuf[0],
-                     mv, meta[t], pm[t], acc[t], rmin[t], rarg[t], karg[t], workers)
+        _single_pass(t, img, right, cl, crr, cfg, p2tab, nxt, prog, disp, win[t], byte[t],
+                     code[t], cost[t], lbuf[0], mv, meta[t], pm[t], acc[t], rmin[t], rarg[t],
+                     karg[t], workers)

@@ -38,17 +38,20 @@ class SGMMatcher:
         nd, cols = p.num_disparities, g.cols
         n = max(1, nb.config.NUMBA_NUM_THREADS)  # numba.get_thread_id() < this
         padded = (h + p.census_height - 1, w + p.census_width - 1 + 64)  # + vector slack
-        self.padl = np.zeros(padded, np.uint8)
-        self.padr = np.zeros(padded, np.uint8)
+        if p.paths == 5:  # per worker, the padded window of the row it makes codes for
+            self.win = np.zeros((n, p.census_height, padded[1]), np.uint8)
+        else:
+            self.padl = np.zeros(padded, np.uint8)
+            self.padr = np.zeros(padded, np.uint8)
         self.census_byte = np.zeros((n, w + 64), np.uint8)
         self.census_code = np.empty((n, w), np.uint64)
         self.cl = np.empty((h, w), np.uint64)
         self.crr = np.zeros((h, w + nd), np.uint64)  # + codes left of the image (unused)
         cfg = np.zeros(_sgm.C_LEN, np.int64)
         cfg[[_sgm.C_ND, _sgm.C_MIND, _sgm.C_P1, _sgm.C_URATIO, _sgm.C_LRDIFF, _sgm.C_X0,
-             _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV, _sgm.C_MAXC]] = [
+             _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV, _sgm.C_MAXC, _sgm.C_CW, _sgm.C_CH]] = [
             nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths,
-            p.invalid_value, p.max_cost]
+            p.invalid_value, p.max_cost, p.census_width, p.census_height]
         self.cfg = cfg
         self.p2tab = np.full(256, p.p2, np.int64)  # effective P2 per intensity step |dI|
         if p.p2_adapt > 0:
@@ -99,15 +102,15 @@ class SGMMatcher:
         p = self.params
         disp = np.empty(self.shape, np.int16)
         with self._lock:
-            self.run_census(left, right)
-            self.run_sgm(left, disp)
+            self.run_sgm(left, right, disp)
             if p.use_speckle:
                 filter_speckles(disp, p.invalid_value, p.speckle_window_size, p.speckle_range,
                                 self.labels, self.stack, self.rtype)
         return disp
 
     def run_census(self, left: np.ndarray, right: np.ndarray) -> None:
-        """Census codes of the pair into self.cl and self.crr (mirrored rows)."""
+        """Census codes of the pair into self.cl and self.crr (mirrored rows), for 4 and 8
+        paths (5 paths make them row by row in run_sgm)."""
         p = self.params
         bounds = _stripes(0, self.padl.shape[0], STRIPES_PER_THREAD * nb.get_num_threads())
         chunk = nb.set_parallel_chunksize(1)
@@ -117,15 +120,18 @@ class SGMMatcher:
         finally:
             nb.set_parallel_chunksize(chunk)
 
-    def run_sgm(self, left: np.ndarray, disp: np.ndarray) -> None:
-        """Aggregation and selection on the census codes (disp before the speckle filter)."""
+    def run_sgm(self, left: np.ndarray, right: np.ndarray, disp: np.ndarray) -> None:
+        """Census, aggregation and selection (disp before the speckle filter)."""
+        if self.params.paths != 5:
+            self.run_census(left, right)
         self.locks[:] = 0
         self.done[:] = 0
         chunk = nb.set_parallel_chunksize(1)
         try:
             if self.params.paths == 5:
-                _sgm.sgm_single_pass(left, self.cl, self.crr, self.cfg, self.p2tab, self.locks,
-                                     self.done, disp, self.cost, self.lbuf, self.mv,
+                _sgm.sgm_single_pass(left, right, self.cl, self.crr, self.cfg, self.p2tab,
+                                     self.locks, self.done, disp, self.win, self.census_byte,
+                                     self.census_code, self.cost, self.lbuf, self.mv,
                                      self.meta, self.pm, self.acc, self.rmin, self.rarg,
                                      self.karg, nb.get_num_threads())
                 return
