@@ -27,6 +27,7 @@ import numpy as np
 
 from .census import census_row_pair
 from .lanes import uidx
+from .postfilter import clear_seam, join_seam, label_band
 from .sgm_simd import add_argmin, cost_run, count_le, diag_update, fetch_add, load_acquire, \
     path_step, pixel_paths, spin_pause, store_release, stream_copy, try_lock, unlock
 
@@ -34,7 +35,9 @@ _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 # layout of the int64 configuration vector passed to sgm_rows
 (C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_MAXC, C_CW, C_CH,
- C_LEN) = range(13)  # C_INV: params.invalid_value; C_MAXC: params.max_cost; C_CW, C_CH: census
+ C_SPW, C_SPR, C_LEN) = range(15)
+# C_INV: params.invalid_value; C_MAXC: params.max_cost; C_CW, C_CH: census window; C_SPW,
+# C_SPR: speckle window size (0: no speckle filter) and range
 
 
 @nb.njit(**_JIT)
@@ -216,7 +219,8 @@ def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
 
 
 BAND = 32  # columns a row publishes its progress after (single-pass mode)
-NXT_STRIDE = 16  # nxt[c * NXT_STRIDE]: chain c's next row, each on its own cache line
+NXT_STRIDE = 16  # nxt[c * NXT_STRIDE]: chain c's next row, each on its own cache line;
+# nxt[(2 + c) * NXT_STRIDE]: its rows finished; nxt[4 * NXT_STRIDE]: halves speckle-labelled
 
 
 @nb.njit(**_JIT)
@@ -259,10 +263,11 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
                  disp: np.ndarray, win: np.ndarray, byte: np.ndarray, code: np.ndarray,
                  cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
                  pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
-                 karg: np.ndarray, workers: int) -> None:
+                 karg: np.ndarray, spk: tuple, workers: int) -> None:
     """Worker t: rows of chain t % 2 taken one at a time until none is left (_chain_row),
-    then, when it is the only worker, those of chain 1. A worker never joins the other
-    chain once its own is done: under load it would spin behind a descheduled one."""
+    then, when it is the only worker, those of chain 1; whoever finishes a half's last row
+    filters its speckles (_speckle_half). A worker never joins the other chain once its own
+    is done: under load it would spin behind a descheduled one."""
     h = img.shape[0]
     nd, cols = cfg[C_ND], cfg[C_COLS]
     stride = nd + 2
@@ -279,6 +284,26 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
             _chain_row(c, j, hb, vbase + c * 9 * cols * stride, img, right, cl, crr, cfg, p2tab,
                        prog, disp, win, byte, code, cost, lbuf, mv[c], meta, pm, acc, rmin,
                        rarg, karg)
+            if fetch_add(nxt, (2 + c) * NXT_STRIDE, 1) == rows - 1 and cfg[C_SPW] > 0:
+                _speckle_half(c, top, cfg, nxt, disp, spk)
+
+
+@nb.njit(**_JIT)
+def _speckle_half(c: int, top: int, cfg: np.ndarray, nxt: np.ndarray, disp: np.ndarray,
+                  spk: tuple) -> None:
+    """The speckle filter's part for half c, run by the worker that finished its last row:
+    its regions (postfilter.label_band); the second half to get here also joins the regions
+    across the seam and clears the small joined ones. Nobody waits for the other half."""
+    labels, stack, size, parent, rtype = spk
+    h = disp.shape[0]
+    inv, spw, spr = cfg[C_INV], cfg[C_SPW], cfg[C_SPR]
+    halves = 2 if h > top else 1
+    r0, r1 = (0, top) if c == 0 else (top, h)
+    edge = top - 1 if c == 0 and halves == 2 else top if c == 1 else -1
+    label_band(disp, r0, r1, edge, inv, spw, spr, labels, stack, size, parent, rtype)
+    if fetch_add(nxt, 4 * NXT_STRIDE, 1) == 1:
+        join_seam(disp, top, inv, spr, labels, size, parent)
+        clear_seam(disp, top, inv, spw, labels, stack, size, parent)
 
 
 @nb.njit(parallel=True, **_JIT)
@@ -287,9 +312,10 @@ def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.
                     disp: np.ndarray, win: np.ndarray, byte: np.ndarray, code: np.ndarray,
                     cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
                     pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
-                    karg: np.ndarray, workers: int) -> None:
-    """Disparity rows (before the speckle filter) of the pair (img left, right) with five
-    paths in one pass per half, each row's census codes (into cl, crr) made on the way: the
+                    karg: np.ndarray, spk: tuple, workers: int) -> None:
+    """Disparity map of the pair (img left, right) with five paths in one pass per half,
+    each row's census codes (into cl, crr) made on the way and the speckle filter run per
+    half (spk: its scratch labels, stack, size, parent, rtype, as postfilter.label_band): the
     two horizontal ones, and from above (top half, rows < ceil(h / 2)) or from below (the
     rest) the vertical and both diagonals. The halves are independent chains, one per
     worker; more workers share them row by row (_single_pass). Scratch has
@@ -297,4 +323,4 @@ def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.
     for t in nb.prange(workers):
         _single_pass(t, img, right, cl, crr, cfg, p2tab, nxt, prog, disp, win[t], byte[t],
                      code[t], cost[t], lbuf[0], mv, meta[t], pm[t], acc[t], rmin[t], rarg[t],
-                     karg[t], workers)
+                     karg[t], spk, workers)

@@ -203,13 +203,15 @@ def unlock(typingctx, locks, i):
 
 @intrinsic
 def fetch_add(typingctx, arr, i, v):
-    """arr[i] += v atomically (int32); returns the value before."""
+    """arr[i] += v atomically (int32, acquire and release: what this thread wrote before is
+    seen by a thread whose later fetch_add returns this one's result); returns the value
+    before."""
     if not (isinstance(arr, types.Array) and arr.dtype == types.int32):
         return None
 
     def codegen(context, builder, sig, args):
         val = context.cast(builder, args[2], sig.args[2], types.int32)
-        old = builder.atomic_rmw("add", _lock_ptr(context, builder, sig, args), val, "monotonic")
+        old = builder.atomic_rmw("add", _lock_ptr(context, builder, sig, args), val, "acq_rel")
         return builder.sext(old, ir.IntType(64))
 
     return types.int64(arr, i, v), codegen
