@@ -29,7 +29,7 @@ from .census import census_row_pair
 from .lanes import uidx
 from .postfilter import clear_seam, join_seam, label_band
 from .sgm_simd import add_argmin, cost_run, count_le, diag_update, fetch_add, load_acquire, \
-    path_step, pixel_paths, spin_pause, store_release, stream_copy, try_lock, unlock
+    path_step, pixel_paths, spin_wait, store_release, stream_copy, try_lock, unlock
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
@@ -193,8 +193,10 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
         _aggregate_row(g, y, step == 0, 2 if cfg[C_PATHS] == 4 else 4, 0, 3 * (nd + 2),
                        step & 1, 1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf, mv,
                        meta, pm, acc)
+        n = 0
         while not try_lock(locks, y):
-            pass
+            n += 1
+            spin_wait(n)
         first = done[y] == 0
         if first:
             stream_copy(parked[y], acc, acc.shape[0])
@@ -248,8 +250,10 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndar
         i1 = min(i + BAND, cols)
         if j > 0:
             need = min(i1 + 1, cols)
-            while load_acquire(prog, y - dy) < need:
-                spin_pause()
+            n = 0
+            while load_acquire(prog, y - dy) < need:  # more than two workers share a chain
+                n += 1
+                spin_wait(n)
         _aggregate_row(c, y, j == 0, 5, hb, vb, j % 3, (j + 2) % 3, i, i1, img, cfg, p2tab,
                        cost, lbuf, mv, meta, pm, acc)
         store_release(prog, y, i1)
