@@ -13,12 +13,16 @@ code (group 0, then group 1) with the same result.
 
 5 paths (sgm_single_pass) store no volume: one pass per half of the image, the top half top
 to bottom with the paths from above, the bottom half bottom to top with those from below, each
-row making its cost row once, the right-to-left path kept per column, then left to right the
-other four paths, the sum and the selection. The halves are independent chains (one per
-worker); rows within a chain wait band by band on the row before (a per-row progress count).
+row making its census codes and cost row once, the right-to-left path kept per column, then
+left to right the other four paths, the sum and the selection; whoever finishes a half runs
+its part of the speckle filter (the second also the seam's). Everything runs in that one
+parallel region: the halves are independent chains (one per worker); with more workers, rows
+within a chain wait band by band on the row before (a per-row progress count; a bounded spin,
+then yielding the core).
 
 numba caches this module's kernels on disk keyed on *this* file only: after editing
-sgm_simd.py, touch this file and census.py (or delete __pycache__) so the cache is rebuilt.
+sgm_simd.py, census.py or postfilter.py, touch this file (or delete __pycache__) so the cache
+is rebuilt.
 """
 from __future__ import annotations
 

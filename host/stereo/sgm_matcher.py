@@ -1,5 +1,6 @@
 """Reusable semi-global matcher: validates inputs, owns scratch buffers, runs the pipeline
-census (census.py) -> aggregation and selection (sgm.py) -> speckle filter (postfilter.py)."""
+census (census.py) -> aggregation and selection (sgm.py) -> speckle filter (postfilter.py); with 5
+paths all three in one parallel region per frame (sgm.sgm_single_pass)."""
 from __future__ import annotations
 
 import threading
