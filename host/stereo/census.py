@@ -17,13 +17,15 @@ _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 
 @nb.njit(**_JIT)
-def _pad_rows(img: np.ndarray, y0: int, y1: int, rx: int, ry: int, out: np.ndarray) -> None:
-    """Rows y0 .. y1-1 of the edge-replicated image: out[ry + y, rx + x] = img[y, x], with
-    ry rows above and below and rx columns left and right (plus slack, left as is)."""
+def _pad_rows(img: np.ndarray, y0: int, y1: int, rx: int, ry: int, out: np.ndarray,
+              o: int) -> None:
+    """Rows y0 .. y1-1 of the edge-replicated image into out from row y0 - o: out[ry + y - o,
+    rx + x] = img[y, x], with ry rows above and below and rx columns left and right (plus
+    slack, left as is)."""
     h, w = img.shape
     for yy in range(y0, y1):
         src = img[min(max(yy - ry, 0), h - 1)]
-        row = out[yy]
+        row = out[yy - o]
         for x in range(rx):
             row[x] = src[0]
             row[rx + w + x] = src[w - 1]
@@ -71,8 +73,8 @@ def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, bounds: n
     h, w = left.shape
     rx, ry = cw // 2, ch // 2
     for s in nb.prange(bounds.shape[0] - 1):
-        _pad_rows(left, bounds[s], bounds[s + 1], rx, ry, padl)
-        _pad_rows(right, bounds[s], bounds[s + 1], rx, ry, padr)
+        _pad_rows(left, bounds[s], bounds[s + 1], rx, ry, padl, 0)
+        _pad_rows(right, bounds[s], bounds[s + 1], rx, ry, padr, 0)
     nstripes = bounds.shape[0] - 1
     for s in nb.prange(nstripes):
         t = nb.get_thread_id()
@@ -83,3 +85,21 @@ def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, bounds: n
             c, out = code[t], crr[y]
             for x in range(w):
                 out[w - 1 - x] = c[x]
+
+
+@nb.njit(**_JIT)
+def census_row_pair(left: np.ndarray, right: np.ndarray, y: int, cw: int, ch: int,
+                    win: np.ndarray, byte: np.ndarray, code: np.ndarray, cl: np.ndarray,
+                    crr: np.ndarray) -> None:
+    """Row y of census_pair's output (cl[y], crr[y]) alone, for a worker that makes each row's
+    codes just before it uses them. Scratch: win (ch, w + cw - 1 + 64) uint8 (the row's
+    window of the padded image), byte (w + 64) uint8, code (w) uint64."""
+    w = left.shape[1]
+    rx, ry = cw // 2, ch // 2
+    _pad_rows(left, y, y + ch, rx, ry, win, y)
+    _census_row(win, 0, cw, ch, w, byte, cl[y])
+    _pad_rows(right, y, y + ch, rx, ry, win, y)
+    _census_row(win, 0, cw, ch, w, byte, code)
+    out = crr[y]
+    for x in range(w):
+        out[w - 1 - x] = code[x]

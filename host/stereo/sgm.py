@@ -13,27 +13,35 @@ code (group 0, then group 1) with the same result.
 
 5 paths (sgm_single_pass) store no volume: one pass per half of the image, the top half top
 to bottom with the paths from above, the bottom half bottom to top with those from below, each
-row making its cost row once, the right-to-left path kept per column, then left to right the
-other four paths, the sum and the selection. The halves are independent chains (one per
-worker); rows within a chain wait band by band on the row before (a per-row progress count).
+row making its census codes and cost row once, the right-to-left path kept per column, then
+left to right the other four paths, the sum and the selection; whoever finishes a half runs
+its part of the speckle filter (the second also the seam's). Everything runs in that one
+parallel region: the halves are independent chains (one per worker); with more workers, rows
+within a chain wait band by band on the row before (a per-row progress count; a bounded spin,
+then yielding the core).
 
 numba caches this module's kernels on disk keyed on *this* file only: after editing
-sgm_simd.py, touch this file and census.py (or delete __pycache__) so the cache is rebuilt.
+sgm_simd.py, census.py or postfilter.py, touch this file (or delete __pycache__) so the cache
+is rebuilt.
 """
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
 
+from .census import census_row_pair
 from .lanes import uidx
+from .postfilter import clear_seam, join_seam, label_band
 from .sgm_simd import add_argmin, cost_run, count_le, diag_update, fetch_add, load_acquire, \
-    path_step, pixel_paths, spin_pause, store_release, stream_copy, try_lock, unlock
+    path_step, pixel_paths, spin_wait, store_release, stream_copy, try_lock, unlock
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 # layout of the int64 configuration vector passed to sgm_rows
-(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_MAXC,
- C_LEN) = range(11)  # C_INV: params.invalid_value; C_MAXC: params.max_cost
+(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_MAXC, C_CW, C_CH,
+ C_SPW, C_SPR, C_LEN) = range(15)
+# C_INV: params.invalid_value; C_MAXC: params.max_cost; C_CW, C_CH: census window; C_SPW,
+# C_SPR: speckle window size (0: no speckle filter) and range
 
 
 @nb.njit(**_JIT)
@@ -189,8 +197,10 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
         _aggregate_row(g, y, step == 0, 2 if cfg[C_PATHS] == 4 else 4, 0, 3 * (nd + 2),
                        step & 1, 1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf, mv,
                        meta, pm, acc)
+        n = 0
         while not try_lock(locks, y):
-            pass
+            n += 1
+            spin_wait(n)
         first = done[y] == 0
         if first:
             stream_copy(parked[y], acc, acc.shape[0])
@@ -215,17 +225,20 @@ def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
 
 
 BAND = 32  # columns a row publishes its progress after (single-pass mode)
-NXT_STRIDE = 16  # nxt[c * NXT_STRIDE]: chain c's next row, each on its own cache line
+NXT_STRIDE = 16  # nxt[c * NXT_STRIDE]: chain c's next row, each on its own cache line;
+# nxt[(2 + c) * NXT_STRIDE]: its rows finished; nxt[4 * NXT_STRIDE]: halves speckle-labelled
 
 
 @nb.njit(**_JIT)
-def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, cl: np.ndarray,
-               crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray, prog: np.ndarray,
-               disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndarray,
+               cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray,
+               prog: np.ndarray, disp: np.ndarray, win: np.ndarray, byte: np.ndarray,
+               code: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
                rarg: np.ndarray, karg: np.ndarray) -> None:
     """Row j of chain c (c = 0: the top half top-down, paths from above; c = 1: the bottom
-    half bottom-up, paths from below): cost row, one horizontal path kept per column in lbuf,
+    half bottom-up, paths from below): the row's census codes (census_row_pair; win, byte,
+    code its scratch), cost row, one horizontal path kept per column in lbuf,
     then in the other horizontal direction the other four paths plus the kept one into acc,
     band by band once the chain's previous row has published (prog) the columns the band
     reads; then the selection. hb: this worker's horizontal-path area (cols + 3 runs); vb:
@@ -234,14 +247,17 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, cl: np.ndarray
     cols = cfg[C_COLS]
     dy = 1 - 2 * c
     y = j if c == 0 else h - 1 - j
+    census_row_pair(img, right, y, cfg[C_CW], cfg[C_CH], win, byte, code, cl, crr)
     _kept_row(1 - c, y, hb, img, cl, crr, cfg, p2tab, cost, lbuf)
     i = 0
     while i < cols:
         i1 = min(i + BAND, cols)
         if j > 0:
             need = min(i1 + 1, cols)
-            while load_acquire(prog, y - dy) < need:
-                spin_pause()
+            n = 0
+            while load_acquire(prog, y - dy) < need:  # more than two workers share a chain
+                n += 1
+                spin_wait(n)
         _aggregate_row(c, y, j == 0, 5, hb, vb, j % 3, (j + 2) % 3, i, i1, img, cfg, p2tab,
                        cost, lbuf, mv, meta, pm, acc)
         store_release(prog, y, i1)
@@ -250,14 +266,16 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, cl: np.ndarray
 
 
 @nb.njit(**_JIT)
-def _single_pass(t: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
-                 p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray, disp: np.ndarray,
+def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.ndarray,
+                 cfg: np.ndarray, p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray,
+                 disp: np.ndarray, win: np.ndarray, byte: np.ndarray, code: np.ndarray,
                  cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
                  pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
-                 karg: np.ndarray, workers: int) -> None:
+                 karg: np.ndarray, spk: tuple, workers: int) -> None:
     """Worker t: rows of chain t % 2 taken one at a time until none is left (_chain_row),
-    then, when it is the only worker, those of chain 1. A worker never joins the other
-    chain once its own is done: under load it would spin behind a descheduled one."""
+    then, when it is the only worker, those of chain 1; whoever finishes a half's last row
+    filters its speckles (_speckle_half). A worker never joins the other chain once its own
+    is done: under load it would spin behind a descheduled one."""
     h = img.shape[0]
     nd, cols = cfg[C_ND], cfg[C_COLS]
     stride = nd + 2
@@ -271,21 +289,46 @@ def _single_pass(t: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: 
             j = fetch_add(nxt, c * NXT_STRIDE, 1)
             if j >= rows:
                 break
-            _chain_row(c, j, hb, vbase + c * 9 * cols * stride, img, cl, crr, cfg, p2tab, prog,
-                       disp, cost, lbuf, mv[c], meta, pm, acc, rmin, rarg, karg)
+            _chain_row(c, j, hb, vbase + c * 9 * cols * stride, img, right, cl, crr, cfg, p2tab,
+                       prog, disp, win, byte, code, cost, lbuf, mv[c], meta, pm, acc, rmin,
+                       rarg, karg)
+            if fetch_add(nxt, (2 + c) * NXT_STRIDE, 1) == rows - 1 and cfg[C_SPW] > 0:
+                _speckle_half(c, top, cfg, nxt, disp, spk)
+
+
+@nb.njit(**_JIT)
+def _speckle_half(c: int, top: int, cfg: np.ndarray, nxt: np.ndarray, disp: np.ndarray,
+                  spk: tuple) -> None:
+    """The speckle filter's part for half c, run by the worker that finished its last row:
+    its regions (postfilter.label_band); the second half to get here also joins the regions
+    across the seam and clears the small joined ones. Nobody waits for the other half."""
+    labels, stack, size, parent, rtype = spk
+    h = disp.shape[0]
+    inv, spw, spr = cfg[C_INV], cfg[C_SPW], cfg[C_SPR]
+    halves = 2 if h > top else 1
+    r0, r1 = (0, top) if c == 0 else (top, h)
+    edge = top - 1 if c == 0 and halves == 2 else top if c == 1 else -1
+    label_band(disp, r0, r1, edge, inv, spw, spr, labels, stack, size, parent, rtype)
+    if fetch_add(nxt, 4 * NXT_STRIDE, 1) == 1:
+        join_seam(disp, top, inv, spr, labels, size, parent)
+        clear_seam(disp, top, inv, spw, labels, stack, size, parent)
 
 
 @nb.njit(parallel=True, **_JIT)
-def sgm_single_pass(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
-                    p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray, disp: np.ndarray,
+def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.ndarray,
+                    cfg: np.ndarray, p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray,
+                    disp: np.ndarray, win: np.ndarray, byte: np.ndarray, code: np.ndarray,
                     cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
                     pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
-                    karg: np.ndarray, workers: int) -> None:
-    """Disparity rows (before the speckle filter) with five paths in one pass per half: the
+                    karg: np.ndarray, spk: tuple, workers: int) -> None:
+    """Disparity map of the pair (img left, right) with five paths in one pass per half,
+    each row's census codes (into cl, crr) made on the way and the speckle filter run per
+    half (spk: its scratch labels, stack, size, parent, rtype, as postfilter.label_band): the
     two horizontal ones, and from above (top half, rows < ceil(h / 2)) or from below (the
     rest) the vertical and both diagonals. The halves are independent chains, one per
     worker; more workers share them row by row (_single_pass). Scratch has
     one slice per worker (leading axis, at least ``workers``); nxt and prog must be zero."""
     for t in nb.prange(workers):
-        _single_pass(t, img, cl, crr, cfg, p2tab, nxt, prog, disp, cost[t], lbuf[0],
-                     mv, meta[t], pm[t], acc[t], rmin[t], rarg[t], karg[t], workers)
+        _single_pass(t, img, right, cl, crr, cfg, p2tab, nxt, prog, disp, win[t], byte[t],
+                     code[t], cost[t], lbuf[0], mv, meta[t], pm[t], acc[t], rmin[t], rarg[t],
+                     karg[t], spk, workers)

@@ -1,5 +1,6 @@
 """Reusable semi-global matcher: validates inputs, owns scratch buffers, runs the pipeline
-census (census.py) -> aggregation and selection (sgm.py) -> speckle filter (postfilter.py)."""
+census (census.py) -> aggregation and selection (sgm.py) -> speckle filter (postfilter.py); with 5
+paths all three in one parallel region per frame (sgm.sgm_single_pass)."""
 from __future__ import annotations
 
 import threading
@@ -38,17 +39,22 @@ class SGMMatcher:
         nd, cols = p.num_disparities, g.cols
         n = max(1, nb.config.NUMBA_NUM_THREADS)  # numba.get_thread_id() < this
         padded = (h + p.census_height - 1, w + p.census_width - 1 + 64)  # + vector slack
-        self.padl = np.zeros(padded, np.uint8)
-        self.padr = np.zeros(padded, np.uint8)
+        if p.paths == 5:  # per worker, the padded window of the row it makes codes for
+            self.win = np.zeros((n, p.census_height, padded[1]), np.uint8)
+        else:
+            self.padl = np.zeros(padded, np.uint8)
+            self.padr = np.zeros(padded, np.uint8)
         self.census_byte = np.zeros((n, w + 64), np.uint8)
         self.census_code = np.empty((n, w), np.uint64)
         self.cl = np.empty((h, w), np.uint64)
         self.crr = np.zeros((h, w + nd), np.uint64)  # + codes left of the image (unused)
         cfg = np.zeros(_sgm.C_LEN, np.int64)
         cfg[[_sgm.C_ND, _sgm.C_MIND, _sgm.C_P1, _sgm.C_URATIO, _sgm.C_LRDIFF, _sgm.C_X0,
-             _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV, _sgm.C_MAXC]] = [
+             _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV, _sgm.C_MAXC, _sgm.C_CW, _sgm.C_CH,
+             _sgm.C_SPW, _sgm.C_SPR]] = [
             nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths,
-            p.invalid_value, p.max_cost]
+            p.invalid_value, p.max_cost, p.census_width, p.census_height,
+            p.speckle_window_size if p.use_speckle else 0, p.speckle_range]
         self.cfg = cfg
         self.p2tab = np.full(256, p.p2, np.int64)  # effective P2 per intensity step |dI|
         if p.p2_adapt > 0:
@@ -56,7 +62,7 @@ class SGMMatcher:
             self.p2tab[:] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + np.arange(256))))
         stride = nd + 2
         if p.paths == 5:  # one top-down pass (sgm.sgm_single_pass); per worker n
-            self.locks = np.zeros(2 * _sgm.NXT_STRIDE, np.int32)  # each chain's next row
+            self.locks = np.zeros(5 * _sgm.NXT_STRIDE, np.int32)  # sgm.NXT_STRIDE's counters
             self.done = np.zeros(h, np.int32)  # columns each row has published
             # horizontal-path areas (cols + 3 runs each), then per chain three row slots of
             # three paths
@@ -84,10 +90,13 @@ class SGMMatcher:
         self.rmin = np.empty((n, cols + nd - 1), np.int16)
         self.rarg = np.zeros((n, cols + nd - 1), np.int16)
         self.karg = np.empty((n, cols), np.int16)  # winners of a row (left-right check)
-        if p.use_speckle:
-            self.labels = np.empty((h, w), np.int32)
-            self.stack = np.empty((h * w, 2), np.int32)
-            self.rtype = np.zeros(h * w + 1, np.uint8)
+        m = h * w if p.use_speckle else 0
+        self.labels = np.empty((h, w) if m else (0, 0), np.int32)
+        self.stack = np.empty((m, 2), np.int32)
+        self.rtype = np.zeros(m + 1, np.uint8)
+        if p.paths == 5:  # speckle filter per half (sgm._speckle_half): region sizes and roots
+            self.size = np.empty(m + 1, np.int32)
+            self.parent = np.empty(m + 1, np.int32)
 
     def scratch_bytes(self) -> int:
         """Bytes of scratch this matcher keeps between frames."""
@@ -99,15 +108,15 @@ class SGMMatcher:
         p = self.params
         disp = np.empty(self.shape, np.int16)
         with self._lock:
-            self.run_census(left, right)
-            self.run_sgm(left, disp)
-            if p.use_speckle:
+            self.run_sgm(left, right, disp)
+            if p.use_speckle and p.paths != 5:
                 filter_speckles(disp, p.invalid_value, p.speckle_window_size, p.speckle_range,
                                 self.labels, self.stack, self.rtype)
         return disp
 
     def run_census(self, left: np.ndarray, right: np.ndarray) -> None:
-        """Census codes of the pair into self.cl and self.crr (mirrored rows)."""
+        """Census codes of the pair into self.cl and self.crr (mirrored rows), for 4 and 8
+        paths (5 paths make them row by row in run_sgm)."""
         p = self.params
         bounds = _stripes(0, self.padl.shape[0], STRIPES_PER_THREAD * nb.get_num_threads())
         chunk = nb.set_parallel_chunksize(1)
@@ -117,17 +126,23 @@ class SGMMatcher:
         finally:
             nb.set_parallel_chunksize(chunk)
 
-    def run_sgm(self, left: np.ndarray, disp: np.ndarray) -> None:
-        """Aggregation and selection on the census codes (disp before the speckle filter)."""
+    def run_sgm(self, left: np.ndarray, right: np.ndarray, disp: np.ndarray) -> None:
+        """Census, aggregation and selection (disp before the speckle filter; with 5 paths
+        after it)."""
+        if self.params.paths != 5:
+            self.run_census(left, right)
         self.locks[:] = 0
         self.done[:] = 0
         chunk = nb.set_parallel_chunksize(1)
         try:
             if self.params.paths == 5:
-                _sgm.sgm_single_pass(left, self.cl, self.crr, self.cfg, self.p2tab, self.locks,
-                                     self.done, disp, self.cost, self.lbuf, self.mv,
+                _sgm.sgm_single_pass(left, right, self.cl, self.crr, self.cfg, self.p2tab,
+                                     self.locks, self.done, disp, self.win, self.census_byte,
+                                     self.census_code, self.cost, self.lbuf, self.mv,
                                      self.meta, self.pm, self.acc, self.rmin, self.rarg,
-                                     self.karg, nb.get_num_threads())
+                                     self.karg, (self.labels, self.stack, self.size,
+                                                  self.parent, self.rtype),
+                                     nb.get_num_threads())
                 return
             _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.p2tab, self.parked, self.locks,
                           self.done, disp, self.cost, self.lbuf, self.mv, self.meta, self.pm,

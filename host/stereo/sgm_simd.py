@@ -1,4 +1,5 @@
-"""Vector operations over the disparity axis for the SGM kernels, plus a per-row spin lock.
+"""Vector operations over the disparity axis for the SGM kernels, plus a per-row spin lock,
+atomics and a bounded spin-wait.
 
 Arrays are 1-D (uint8 path costs, int16 sums) with the disparity axis contiguous; ``nd`` is a
 multiple of 16 and each loop walks it in 64/32/16-lane chunks (simd._chunked). Callers guarantee
@@ -203,13 +204,15 @@ def unlock(typingctx, locks, i):
 
 @intrinsic
 def fetch_add(typingctx, arr, i, v):
-    """arr[i] += v atomically (int32); returns the value before."""
+    """arr[i] += v atomically (int32, acquire and release: what this thread wrote before is
+    seen by a thread whose later fetch_add returns this one's result); returns the value
+    before."""
     if not (isinstance(arr, types.Array) and arr.dtype == types.int32):
         return None
 
     def codegen(context, builder, sig, args):
         val = context.cast(builder, args[2], sig.args[2], types.int32)
-        old = builder.atomic_rmw("add", _lock_ptr(context, builder, sig, args), val, "monotonic")
+        old = builder.atomic_rmw("add", _lock_ptr(context, builder, sig, args), val, "acq_rel")
         return builder.sext(old, ir.IntType(64))
 
     return types.int64(arr, i, v), codegen
@@ -242,15 +245,31 @@ def store_release(typingctx, arr, i, v):
     return types.none(arr, i, v), codegen
 
 
+SPINS = 2000  # spin_wait's PAUSEs (some microseconds) before it gives the core away
+
+
 @intrinsic
-def spin_pause(typingctx):
-    """A spin-wait hint to the processor (x86 PAUSE; nothing elsewhere)."""
+def spin_wait(typingctx, n):
+    """One step of a wait loop, the n-th (from 1): a PAUSE for the first SPINS, then
+    sched_yield, which lets a descheduled thread that the loop waits for have the core
+    (spinning beside a busy process would keep it from it). Linux and other POSIX systems."""
+    if not isinstance(n, types.Integer):
+        return None
+
     def codegen(context, builder, sig, args):
-        if _X86:
-            _call(builder, "llvm.x86.sse2.pause", ir.VoidType(), [])
+        n64 = context.cast(builder, args[0], sig.args[0], types.int64)
+        spin = builder.icmp_signed("<=", n64, ir.Constant(n64.type, SPINS))
+        with builder.if_else(spin) as (then, otherwise):
+            with then:
+                if _X86:
+                    _call(builder, "llvm.x86.sse2.pause", ir.VoidType(), [])
+            with otherwise:
+                fn = cgutils.get_or_insert_function(builder.module,
+                                                    ir.FunctionType(_I32, []), "sched_yield")
+                builder.call(fn, [])
         return context.get_dummy_value()
 
-    return types.none(), codegen
+    return types.none(n), codegen
 
 
 def _u8_arrays(*tys) -> bool:

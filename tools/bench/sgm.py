@@ -158,8 +158,8 @@ def profile(left: np.ndarray, right: np.ndarray, nd: int, repeat: int, variants)
                 fn()
                 ts.append((time.perf_counter() - t0) * 1e3)
             return statistics.median(ts)
-        out = {"census (2 threads)": med(lambda: m.run_census(left, right)),
-               "aggregate+select (2 threads)": med(lambda: m.run_sgm(left, disp))}
+        out = {"census+aggregate+select (+speckle with 5 paths, 2 threads)":
+               med(lambda: m.run_sgm(left, right, disp))}
         if p.use_speckle:
             out["speckle (1 thread)"] = med(lambda: filter_speckles(
                 disp.copy(), p.invalid_value, p.speckle_window_size, p.speckle_range,

@@ -1,0 +1,47 @@
+"""The matching engines' numba threads wait passively (OpenMP): a spinning thread takes the
+core from the one it waits for when the machine is busy."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+CHECK = "import os, stereocam.stereo; print(os.environ.get('OMP_WAIT_POLICY'))"
+
+
+def run_with(env: dict[str, str]) -> str:
+    out = subprocess.run([sys.executable, "-c", CHECK], env=env, capture_output=True, text=True,
+                         check=True, timeout=120)
+    return out.stdout.strip()
+
+
+def test_import_sets_passive_waits_unless_the_user_chose() -> None:
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    assert run_with(env) == "PASSIVE"
+    assert run_with({**env, "OMP_WAIT_POLICY": "ACTIVE"}) == "ACTIVE"
+
+
+MATCH = """
+import sys, numpy as np
+from stereocam.stereo import SGMMatcher, SGMParams
+rng = np.random.default_rng(5)
+base = rng.integers(0, 256, (60, 200), dtype=np.uint8)
+left, right = base[:, 8:168].copy(), base[:, 14:174].copy()
+m = SGMMatcher(left.shape, SGMParams(num_disparities=32, paths=5))
+np.save(sys.argv[1], np.stack([m.match(left, right) for _ in range(3)]))
+"""
+
+
+def test_five_paths_on_more_threads_than_cores(tmp_path) -> None:
+    """Four workers on (here) two cores: two per half, each row waiting on the one before
+    (spin, then yield); the output is the one-thread output."""
+    out = {}
+    for n in (1, 4):
+        path = tmp_path / f"{n}.npy"
+        subprocess.run([sys.executable, "-c", MATCH, str(path)], check=True, timeout=300,
+                       env={**os.environ, "NUMBA_NUM_THREADS": str(n)})
+        out[n] = np.load(path)
+    assert np.array_equal(out[4], out[1])
+    assert (out[1] != out[1][0, 0, 0]).any()
