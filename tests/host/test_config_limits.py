@@ -3,15 +3,53 @@
 A refused value gets a NACK with OUT_OF_RANGE naming that parameter, and the device's
 configuration is unchanged (SPEC §5). Values exactly at a limit are accepted unless a
 cross-parameter rule forbids them in the test's configuration.
+
+Every test here leaves the configuration as it found it (that is what each asserts), so one open
+camera per transport serves the whole module; USB's stays per test, as its bus is each test's own.
 """
 from __future__ import annotations
+
+from collections.abc import Iterator
 
 import pytest
 
 import stereocam
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import ErrorCode
-from stereocam.protocol.params import PARAMS, Param
+from stereocam.protocol.params import PARAMS, Param, defaults
+from tests.support.device import SMALL, url_of
+
+
+def _open(url: str) -> stereocam.Camera:
+    camera = stereocam.open(url, timeout=2.0)
+    camera.configure(**{**defaults(), **SMALL})
+    return camera
+
+
+@pytest.fixture(scope="module")
+def opened() -> Iterator[dict[str, stereocam.Camera]]:
+    cameras: dict[str, stereocam.Camera] = {}
+    yield cameras
+    for camera in cameras.values():
+        camera.close()
+
+
+@pytest.fixture
+def cam(device_kind: str, request: pytest.FixtureRequest,
+        opened: dict[str, stereocam.Camera]) -> Iterator[stereocam.Camera]:
+    """An open camera in its default configuration at the small format, shared by the module's
+    tests on this transport (USB: this test's own)."""
+    if device_kind == "usb":
+        camera = _open(url_of(device_kind, request))
+        try:
+            yield camera
+        finally:
+            camera.close()
+        return
+    camera = opened.get(device_kind)
+    if camera is None or not camera.alive:
+        camera = opened[device_kind] = _open(url_of(device_kind, request))
+    yield camera
 
 
 def _bad_values(p: Param) -> list[tuple[str, int]]:

@@ -22,7 +22,7 @@ def test_demo_with_three_heads_prints_sets_and_saves_each_head(tmp_path, capsys)
 
 @pytest.mark.slow
 def test_bench_sync_reports_skew_and_clock_errors_per_transport(capsys):
-    out = bench_sync.command.main(["--seconds", "3", "--transports", "inprocess,tcp"], standalone_mode=False)
+    out = bench_sync.command.main(["--seconds", "1", "--transports", "inprocess,tcp"], standalone_mode=False)
     assert set(out) == {"inprocess", "tcp"}
     for fig in out.values():
         assert fig["sets"] > 0 and 0 <= fig["skew_p50_us"] <= fig["skew_p99_us"] <= fig["skew_max_us"]
