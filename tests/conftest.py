@@ -112,6 +112,16 @@ def factory_db_in_tmp(tmp_path_factory: pytest.TempPathFactory):
         os.environ["STEREOCAM_FACTORY_DB"] = old
 
 
+@pytest.fixture(scope="session", autouse=True)
+def detection_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """One board-detection cache for the session, shared by the xdist workers and the CLI runs they
+    start (tools/calibration/detection_cache.py): the calibration tests detect each image once."""
+    from stereocam.tools.calibration.detection_cache import ENV
+
+    root = tmp_path_factory.getbasetemp()
+    os.environ[ENV] = str((root.parent if os.environ.get("PYTEST_XDIST_WORKER") else root) / "detections")
+
+
 @pytest.fixture(scope="session")
 def served():
     """Lazily started child-process simulators, one per served transport, for the whole session."""

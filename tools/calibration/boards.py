@@ -44,6 +44,7 @@ import cv2
 import numpy as np
 
 from stereocam.stereo.calibration_board import BoardSpec
+from stereocam.tools.calibration import detection_cache
 
 _SUBPIX = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
 MIN_CHARUCO_CORNERS = 8
@@ -270,15 +271,22 @@ def detect_all(img: np.ndarray, board: Board) -> dict[str, Detection]:
     if isinstance(board, CharucoSpec):
         found = detect_charuco(g, board)
         return {} if found is None else {"charuco": found}
+    cache = detection_cache.entry(g, repr(board))  # ChArUco is not cached: it settles the layout
+    hit = detection_cache.load(cache)
+    if hit is not None:
+        return {name: Detection(*arrays) for name, arrays in hit.items()}
+    out = {}
     if isinstance(board, AprilGridSpec):
         found = board.detect(g)
-        return {} if found is None else {"aprilgrid": found}
-    out = {}
-    for name, detector in CHESSBOARD_DETECTORS.items():
-        corners = detector(g, board)
-        if corners is not None:
-            out[name] = Detection(np.arange(board.cols * board.rows), corners.astype(np.float32),
-                                  board.object_points())
+        if found is not None:
+            out["aprilgrid"] = found
+    else:
+        for name, detector in CHESSBOARD_DETECTORS.items():
+            corners = detector(g, board)
+            if corners is not None:
+                out[name] = Detection(np.arange(board.cols * board.rows), corners.astype(np.float32),
+                                      board.object_points())
+    detection_cache.store(cache, {name: (d.ids, d.image_points, d.object_points) for name, d in out.items()})
     return out
 
 
