@@ -27,7 +27,7 @@ from .boot.layout import FLASH_SIZE, FlashLayout
 from .boot.slots import Slots
 from .boot.update_service import UpdateService
 from .calibration.flash import NorFlash, PowerLossError
-from .clock import REAL_CLOCK, Clock, DeviceClock
+from .clock import REAL_CLOCK, Clock, DeviceClock, UnitClock
 from .ground_truth import GroundTruth, TruthLog
 from .handlers.calibration import CalibrationService
 from .handlers.config import ConfigHandlers
@@ -74,7 +74,7 @@ class SimulatedCamera:
         self._source = source
         self.serial = source.serial if source else serial or f"SIM{seed:05d}"
         self.model = source.model if source else MODEL
-        self.clock = source.clock if source else DeviceClock(seed, timebase=timebase or REAL_CLOCK)
+        self.clock: UnitClock = source.clock if source else DeviceClock(seed, timebase=timebase or REAL_CLOCK)
         self.timebase: Clock = self.clock.timebase
         self.config = ConfigStore()
         self.counters: collections.Counter[str] = collections.Counter()
@@ -100,9 +100,8 @@ class SimulatedCamera:
         self.truth = TruthLog(self.rig)
         # the engine's callback reaches the pipeline, which itself needs the engine
         self.dispatcher = Dispatcher(self.counters)
-        produce = lambda req: self.pipeline.produce(req)  # noqa: E731 - the pipeline is made below
-        self.engine = ReplayEngine(source, produce) if source else CaptureEngine(produce, self.timebase)
-        self.repair = FrameRepair(lambda wire: self.link.send(wire, lambda: True))
+        self.engine = ReplayEngine(source, self._produce) if source else CaptureEngine(self._produce, self.timebase)
+        self.repair = FrameRepair(self._resend)
         self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset,
                                timebase=self.timebase)
         self.pipeline = CapturePipeline(seed, self.rig, self.config, self.calibration, self.clock, self.truth,
@@ -232,6 +231,14 @@ class SimulatedCamera:
         """Bytes from the host; replies go to the sink before this returns (nothing while unpowered)."""
         if self.powered:
             self.link.receive(data)
+
+    def _produce(self, req: CaptureRequest) -> None:
+        """The engine's callback (the pipeline is made after the engine it needs)."""
+        self.pipeline.produce(req)
+
+    def _resend(self, wire: bytes) -> bool:
+        """A resent part of a capture (FRAME_RESENT) goes out whatever the stream does meanwhile."""
+        return self.link.send(wire, lambda: True)
 
     def _send_capture_part(self, req: CaptureRequest, wire: bytes) -> bool:
         """A capture whose stream was stopped meanwhile is cut off (the host counts it incomplete)."""
