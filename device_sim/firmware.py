@@ -100,13 +100,14 @@ class SimulatedCamera:
         self.truth = TruthLog(self.rig)
         # the engine's callback reaches the pipeline, which itself needs the engine
         self.dispatcher = Dispatcher(self.counters)
-        self.engine = ReplayEngine(source, self._produce) if source else CaptureEngine(self._produce, self.timebase)
-        self.repair = FrameRepair(self._resend)
-        self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset,
-                               timebase=self.timebase)
-        self.pipeline = CapturePipeline(seed, self.rig, self.config, self.calibration, self.clock, self.truth,
-                                        self._send_capture_part, self.counters, self.repair,
-                                        self.engine.count_drop, source)
+        produce = lambda req: self.pipeline.produce(req)  # noqa: E731 - the pipeline is made below
+        self.engine = ReplayEngine(source, produce) if source else CaptureEngine(produce, self.timebase)
+        self.repair = FrameRepair(lambda wire: self.link.send(wire, lambda: True))
+        self.link: DeviceLink = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset,
+                                           timebase=self.timebase)
+        self.pipeline: CapturePipeline = CapturePipeline(
+            seed, self.rig, self.config, self.calibration, self.clock, self.truth, self._send_capture_part,
+            self.counters, self.repair, self.engine.count_drop, source)
         self.scene = scene
         self.heartbeat = HeartbeatHandlers(self.clock, self.config, self.engine, self.link, self.counters)
         self.streaming = StreamingHandlers(self.config, self.engine, self.counters)
@@ -231,14 +232,6 @@ class SimulatedCamera:
         """Bytes from the host; replies go to the sink before this returns (nothing while unpowered)."""
         if self.powered:
             self.link.receive(data)
-
-    def _produce(self, req: CaptureRequest) -> None:
-        """The engine's callback (the pipeline is made after the engine it needs)."""
-        self.pipeline.produce(req)
-
-    def _resend(self, wire: bytes) -> bool:
-        """A resent part of a capture (FRAME_RESENT) goes out whatever the stream does meanwhile."""
-        return self.link.send(wire, lambda: True)
 
     def _send_capture_part(self, req: CaptureRequest, wire: bytes) -> bool:
         """A capture whose stream was stopped meanwhile is cut off (the host counts it incomplete)."""
