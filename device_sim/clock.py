@@ -1,7 +1,7 @@
 """Time on the device side: the host-monotonic time base every device part reads and waits on
 (``Clock``: ``RealClock`` by default, ``FakeClock`` in tests), and the device's free-running
 microsecond counter built on it (``DeviceClock``: its own epoch, a crystal that drifts, read with
-jitter)."""
+jitter; ``UnitClock``: what the firmware reads of it, which a replay's clock also gives)."""
 from __future__ import annotations
 
 import random
@@ -123,3 +123,29 @@ class DeviceClock:
 
     def uptime_us(self) -> int:
         return int((self.timebase.monotonic() - self.boot) * (1.0 + self.drift) * 1e6)
+
+
+class UnitClock(Protocol):
+    """The firmware's microsecond counter as its parts read it: a simulated crystal (``DeviceClock``)
+    or the recorded unit's clock of a replay (replay.py ``ReplayClock``)."""
+
+    timebase: Clock
+    boot: float  # the host-monotonic instant the counter started from
+    epoch_us: int  # the counter's value at ``boot``
+    drift: float  # the crystal's rate error against ``timebase`` (1e-6 = 1 ppm)
+
+    def now_us(self) -> int:
+        """The counter now."""
+        ...
+
+    def at(self, host_monotonic: float) -> int:
+        """The counter at that host instant."""
+        ...
+
+    def uptime_us(self) -> int:
+        """Microseconds since ``boot`` on this counter."""
+        ...
+
+    def host_period(self, device_seconds: float) -> float:
+        """How long ``device_seconds`` on this counter last on the host's clock."""
+        ...

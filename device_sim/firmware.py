@@ -27,7 +27,7 @@ from .boot.layout import FLASH_SIZE, FlashLayout
 from .boot.slots import Slots
 from .boot.update_service import UpdateService
 from .calibration.flash import NorFlash, PowerLossError
-from .clock import REAL_CLOCK, Clock, DeviceClock
+from .clock import REAL_CLOCK, Clock, DeviceClock, UnitClock
 from .ground_truth import GroundTruth, TruthLog
 from .handlers.calibration import CalibrationService
 from .handlers.config import ConfigHandlers
@@ -74,7 +74,7 @@ class SimulatedCamera:
         self._source = source
         self.serial = source.serial if source else serial or f"SIM{seed:05d}"
         self.model = source.model if source else MODEL
-        self.clock = source.clock if source else DeviceClock(seed, timebase=timebase or REAL_CLOCK)
+        self.clock: UnitClock = source.clock if source else DeviceClock(seed, timebase=timebase or REAL_CLOCK)
         self.timebase: Clock = self.clock.timebase
         self.config = ConfigStore()
         self.counters: collections.Counter[str] = collections.Counter()
@@ -103,11 +103,11 @@ class SimulatedCamera:
         produce = lambda req: self.pipeline.produce(req)  # noqa: E731 - the pipeline is made below
         self.engine = ReplayEngine(source, produce) if source else CaptureEngine(produce, self.timebase)
         self.repair = FrameRepair(lambda wire: self.link.send(wire, lambda: True))
-        self.link = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset,
-                               timebase=self.timebase)
-        self.pipeline = CapturePipeline(seed, self.rig, self.config, self.calibration, self.clock, self.truth,
-                                        self._send_capture_part, self.counters, self.repair,
-                                        self.engine.count_drop, source)
+        self.link: DeviceLink = DeviceLink(self.dispatcher, on_lost=self.engine.stop, on_attach=self.repair.reset,
+                                           timebase=self.timebase)
+        self.pipeline: CapturePipeline = CapturePipeline(
+            seed, self.rig, self.config, self.calibration, self.clock, self.truth, self._send_capture_part,
+            self.counters, self.repair, self.engine.count_drop, source)
         self.scene = scene
         self.heartbeat = HeartbeatHandlers(self.clock, self.config, self.engine, self.link, self.counters)
         self.streaming = StreamingHandlers(self.config, self.engine, self.counters)

@@ -59,6 +59,8 @@ class ReplayClock:
     """The device clock of a replay: it reads the recorded device time of the start frame when the
     replay opens and runs at the speed of ``timebase`` from there (what TIME_SYNC answers)."""
 
+    drift = 0.0  # no crystal of its own: it counts at the time base's rate
+
     def __init__(self, start_us: int, timebase: Clock = REAL_CLOCK):
         self.timebase = timebase
         self.boot = timebase.monotonic()
@@ -72,6 +74,9 @@ class ReplayClock:
 
     def uptime_us(self) -> int:
         return int((self.timebase.monotonic() - self.boot) * 1e6)
+
+    def host_period(self, device_seconds: float) -> float:
+        return device_seconds
 
 
 class ReplaySource:
@@ -163,12 +168,16 @@ class ReplaySource:
         missing, a drop it counts) and logged; None at the end."""
         from stereocam.recording.reader import DamagedRecordingError
 
+        captures = self._iter
+        assert captures is not None, "next_request opens the recording first"
         while True:
             try:
-                return next(self._iter, None)
+                return next(captures, None)
             except DamagedRecordingError as exc:
+                if exc.frame is None:  # not one frame: reading cannot go on
+                    raise
                 _log.warning("replay: %s; skipped", exc)
-                self._iter = self.recording.captures(exc.frame + 1)
+                captures = self._iter = self.recording.captures(exc.frame + 1)
 
     # -- the firmware's side: the planes of that capture ---------------------------------------
     def capture(self, req: CaptureRequest, cfg: dict[str, int], match: Matcher) -> ReplayedCapture:
@@ -188,19 +197,19 @@ class ReplaySource:
         if Output.DISPARITY in wanted and same and cap.disparity is not None:
             planes[Output.DISPARITY] = cap.disparity
             fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)
-        elif Output.DISPARITY in wanted:
+        elif Output.DISPARITY in wanted and cap.left is not None and cap.right is not None:
             planes[Output.DISPARITY] = match(cfg, cap.left, cap.right)
             fmt = (DISPARITY_SUBPIXEL, cfg["min_disparity"], cfg["num_disparities"],
                    invalid_disparity(cfg["min_disparity"]))
         else:
             fmt = (i.subpixel, i.min_disparity, i.num_disparities, i.invalid_disparity)
-        planes = {p: a for p, a in planes.items() if p in wanted and a is not None}
-        outputs = sum(int(p) for p in planes)
+        sent = {p: a for p, a in planes.items() if p in wanted and a is not None}
+        outputs = sum(int(p) for p in sent)
         begin = m.FrameBegin(*ids, i.exposure_us, i.gain, i.width, i.height,
                              outputs, m.FRAME_RECTIFIED if i.rectified else 0, m.DISPARITY_S16_Q4, *fmt,
                              i.calibration_id, i.focal_px, i.cx, i.cy, i.baseline_m)
         self.sent += 1
-        return ReplayedCapture(begin, planes)
+        return ReplayedCapture(begin, sent)
 
     def interrupt(self) -> None:
         """End any wait for a capture's due time (the replay is closing)."""

@@ -19,7 +19,7 @@ from typing import Callable, Protocol
 
 from stereocam.protocol.errors import ConfigError
 
-from .clock import REAL_CLOCK, Clock, DeviceClock
+from .clock import REAL_CLOCK, Clock, UnitClock
 
 OnPulse = Callable[[int, float], None]  # (trigger id, host monotonic instant of the edge)
 LATENCY_RANGE_S = (2e-6, 8e-6)  # exposure start after the edge, fixed per unit
@@ -133,7 +133,7 @@ class TriggerMaster:
     instant, not the (later) moment this thread got to send it. ``fps`` may be a function, read for
     every period (a unit's frame rate is a live parameter)."""
 
-    def __init__(self, line: Line, fps: float | Callable[[], float], clock: DeviceClock | None = None,
+    def __init__(self, line: Line, fps: float | Callable[[], float], clock: UnitClock | None = None,
                  timebase: Clock = REAL_CLOCK):
         rate = fps if callable(fps) else (lambda: fps)
         if not rate() > 0:
@@ -174,7 +174,7 @@ class TriggerOutput:
     output on, it is the line's master, pulsing at its ``fps`` timed by its own crystal. Its own
     trigger input hears the line like every other head's, so it captures on its own pulses."""
 
-    def __init__(self, line: Line, clock: DeviceClock, fps: Callable[[], float]):
+    def __init__(self, line: Line, clock: UnitClock, fps: Callable[[], float]):
         self.line = line
         self._clock = clock
         self._fps = fps

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -54,7 +55,7 @@ def int32_arg(value: object, name: str) -> int:
     return number
 
 
-def config_update(params: dict[str, object]) -> dict[int, int]:
+def config_update(params: Mapping[str, object]) -> dict[int, int]:
     """Parameters by name as a SET_CONFIG update (wire id → int32); ConfigError for an unknown name
     or a value that is not an integer fitting the wire."""
     update = {}

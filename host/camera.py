@@ -6,7 +6,8 @@ import os
 import threading
 import time
 from dataclasses import replace
-from typing import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable, Iterator
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
@@ -25,6 +26,10 @@ from .dispatch import DropPolicy, FrameDispatcher, FrameQueue, Listener
 from .frame_geometry import FrameGeometry
 from .frames import Frame
 from .transports import Transport, open_transport
+
+if TYPE_CHECKING:
+    from .recording.recorder import RecorderStats
+    from .recording.session import Progress
 
 __all__ = ["Camera", "Counters", "DeviceInfo", "DeviceStatus", "open"]
 
@@ -183,7 +188,8 @@ class Camera:
 
     def config(self) -> dict[str, int]:
         r = self.request(m.GetConfig())
-        return config_names(r.values)  # type: ignore[attr-defined]
+        assert isinstance(r, m.Config)
+        return config_names(r.values)
 
     def configure(self, **params: int) -> dict[str, int]:
         """Change parameters by name (protocol/params.py); returns the whole new configuration.
@@ -192,8 +198,9 @@ class Camera:
         """
         update = config_update(params)
         r = self.request(m.SetConfig(update))
+        assert isinstance(r, m.ConfigApplied)
         self._applied.update({BY_ID[k].name: v for k, v in update.items()})
-        return config_names(r.values)  # type: ignore[attr-defined]
+        return config_names(r.values)
 
     def check_config(self, **params: int) -> dict[str, int]:
         """The configuration ``configure(**params)`` would give, checked here against the
@@ -359,11 +366,12 @@ class Camera:
         """Frames whose carried geometry disagreed with the one derived from the stored calibration."""
         return self._geometry.mismatches
 
-    def record(self, path: str | os.PathLike[str], *, frames: int | None = None, seconds: float | None = None, **options):
+    def record(self, path: str | Path, *, frames: int | None = None, seconds: float | None = None,
+               progress: Callable[[Progress], None] | None = None, **options: object) -> RecorderStats:
         """Record to an MCAP file (ROS 2 profile) until ``frames`` or ``seconds``; see stereocam.recording."""
         from .recording import record
 
-        return record(self, path, frames=frames, seconds=seconds, **options)
+        return record(self, path, frames=frames, seconds=seconds, progress=progress, **options)
 
     def __iter__(self) -> Iterator[Frame]:
         """Frames as they come while streaming. Ends when the stream is stopped (``stop()`` from any

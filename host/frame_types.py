@@ -73,13 +73,18 @@ class Frame:
                 f"{'rectified' if self.rectified else 'raw'}, status={self.status.value}, "
                 f"device_time_us={self.device_time_us})")
 
-    def disparity_px(self) -> np.ndarray:
-        """Disparity in pixels, float32, NaN where invalid."""
+    def disparity_plane(self) -> np.ndarray:
+        """The ``disparity`` plane as carried (int16 Q4); MissingPlaneError when the frame has none."""
         if self.disparity is None:
             raise MissingPlaneError("this frame carries no disparity (raw frame of an uncalibrated unit or "
-                             "rectify=0, or the outputs config excludes it)")
-        d = self.disparity.astype(np.float32) / self.disparity_format.subpixel
-        d[self.disparity == self.disparity_format.invalid] = np.nan
+                                    "rectify=0, or the outputs config excludes it)")
+        return self.disparity
+
+    def disparity_px(self) -> np.ndarray:
+        """Disparity in pixels, float32, NaN where invalid."""
+        plane = self.disparity_plane()
+        d = plane.astype(np.float32) / self.disparity_format.subpixel
+        d[plane == self.disparity_format.invalid] = np.nan
         return d
 
     def depth(self) -> np.ndarray:

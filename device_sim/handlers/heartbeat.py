@@ -6,7 +6,7 @@ import collections
 
 from stereocam.protocol import messages as m
 
-from ..clock import DeviceClock
+from ..clock import UnitClock
 from ..link_layer.device_link import DeviceLink
 from ..link_layer.dispatcher import Handler
 from ..pipeline.capture_engine import CaptureEngine
@@ -14,7 +14,7 @@ from .config_store import ConfigStore
 
 
 class HeartbeatHandlers:
-    def __init__(self, clock: DeviceClock, store: ConfigStore, engine: CaptureEngine, link: DeviceLink,
+    def __init__(self, clock: UnitClock, store: ConfigStore, engine: CaptureEngine, link: DeviceLink,
                  counters: collections.Counter[str]):
         self._clock = clock
         self._store = store

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import collections
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -18,7 +18,7 @@ from stereocam.protocol.params import Output
 from stereocam.protocol.segmentation import PlaneSource, capture_messages
 from stereocam.stereo.engines import warm_up as matching_warm_up
 
-from ..clock import DeviceClock
+from ..clock import UnitClock
 from ..ground_truth import Exposure, TruthLog
 from ..handlers.calibration import CalibrationService
 from ..handlers.config_store import ConfigStore
@@ -68,7 +68,7 @@ class StageProfile:
 
 class CapturePipeline:
     def __init__(self, seed: int, rig: SensorRig, store: ConfigStore, calibration: CalibrationService,
-                 clock: DeviceClock, truth: TruthLog, send: Send, counters: collections.Counter[str],
+                 clock: UnitClock, truth: TruthLog, send: Send, counters: collections.Counter[str],
                  repair: FrameRepair, on_drop: Callable[[], None], source: ReplaySource | None = None):
         """``source``: a recording whose captures replace the rig's (replay.py). ``on_drop``: a
         capture the delivery stage failed on (it counts as dropped)."""
@@ -169,7 +169,7 @@ class CapturePipeline:
         self._send_all(req, begin, {Output.LEFT: left, Output.RIGHT: right, Output.DISPARITY: match,
                                     Output.CONFIDENCE: confidence}, t0)
 
-    def _send_all(self, req: CaptureRequest, begin: m.FrameBegin, images: dict[Output, PlaneSource | None],
+    def _send_all(self, req: CaptureRequest, begin: m.FrameBegin, images: Mapping[Output, PlaneSource],
                   t0: float) -> None:
         """Frame and send one capture (``t0``: when its send stage began, for the profile); a plane
         given as a function is computed when its turn comes."""
@@ -177,7 +177,7 @@ class CapturePipeline:
         self._repair.remember(req.sequence, kept)
         matching = 0.0
 
-        def computed(source: PlaneSource | None) -> PlaneSource | None:
+        def computed(source: PlaneSource) -> PlaneSource:
             if not callable(source):
                 return source
 

@@ -16,6 +16,9 @@ timeouts, bus time); errors are libusb1's (``errors``).
 """
 from __future__ import annotations
 
+from functools import wraps
+from typing import Callable, Concatenate, ParamSpec, TypeVar
+
 from .backend import SimBackend
 from .bus import SimUsbBus
 from .descriptors import (EP_IN, EP_OUT, INTERFACE_NUMBER, MAX_PACKET_SIZE, PRODUCT_ID,
@@ -23,15 +26,25 @@ from .descriptors import (EP_IN, EP_OUT, INTERFACE_NUMBER, MAX_PACKET_SIZE, PROD
 from .device import SimHandle, SimUsbDevice, UsbFunction
 from .errors import LibusbError, usb_error
 
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
 BUS = SimUsbBus(number=1)
 """The process-wide bus that ``plug()`` uses and ``stereocam.transports.usb`` scans (``get_backend``
 is the ``stereocam.usb_backends`` entry point)."""
 
 
-def plug(sim: UsbFunction, **options: object) -> SimUsbDevice:
-    """Plug ``sim`` into the default bus; ``handle.unplug()`` pulls it out again.
-    ``options`` go to ``SimUsbBus.plug`` (speed, serial, product, firmware_version, zlp, ...)."""
-    return BUS.plug(sim, **options)  # type: ignore[arg-type]
+def _on_default_bus(method: Callable[Concatenate[SimUsbBus, _P], _R]) -> Callable[_P, _R]:
+    """``method`` of whichever bus ``BUS`` is when called (a test may put its own in place)."""
+    @wraps(method)
+    def call(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        return method(BUS, *args, **kwargs)
+    return call
+
+
+plug = _on_default_bus(SimUsbBus.plug)
+"""Plug a sim into the default bus (``SimUsbBus.plug``: speed, serial, product, firmware_version,
+zlp, ...); ``handle.unplug()`` pulls it out again."""
 
 
 def get_backend() -> SimBackend:

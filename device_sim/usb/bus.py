@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+from functools import partial
 from typing import TYPE_CHECKING
 
 from .descriptors import PRODUCT_ID, VENDOR_ID, bus_speed, camera_descriptors
@@ -69,8 +70,8 @@ class SimUsbBus:
             device = SimUsbDevice(self, sim, descriptors, port, address, link, zlp=zlp,
                                   in_capacity=in_capacity, out_capacity=out_capacity)
             self._devices.append(device)
-        device.plug_options = dict(vendor_id=vendor_id, product_id=product_id, zlp=zlp, speed=speed,
-                                   in_capacity=in_capacity, out_capacity=out_capacity)
+        device.replug = partial(self.plug, sim, vendor_id=vendor_id, product_id=product_id, zlp=zlp, speed=speed,
+                                in_capacity=in_capacity, out_capacity=out_capacity)
         return device
 
     def unplug_all(self) -> None:

@@ -10,7 +10,7 @@ import itertools
 import logging
 import threading
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from .control import control_transfer
 from .descriptors import CONFIGURATION_VALUE, EP_IN, EP_OUT, INTERFACE_NUMBER, BusSpeed, DescriptorSet
@@ -75,7 +75,7 @@ class SimUsbDevice:
                                         name=f"usb-sim-{bus.number}-{address}")
         if hasattr(sim, "usb_speed"):  # firmware that reports its link speed (INFO) reads it from here
             sim.usb_speed = speed.libusb_speed
-        self.plug_options: dict[str, object] = {}  # set by the bus: how to enumerate again after a reboot
+        self.replug: Callable[[], SimUsbDevice] | None = None  # set by the bus: enumerate again after a reboot
         self.successor: SimUsbDevice | None = None  # this unit's next enumeration, after a reboot
         self._cable = threading.Lock()  # a reboot's re-enumeration and a pulled cable never interleave
         self._cable_pulled = False
@@ -101,10 +101,10 @@ class SimUsbDevice:
             self._disconnect()
         elif event == "up":
             with self._cable:
-                if self._cable_pulled or self.successor is not None:
+                if self._cable_pulled or self.successor is not None or self.replug is None:
                     return  # a unit whose cable is out does not enumerate again
                 self._unsubscribe()
-                self.successor = self.bus.plug(self.sim, **self.plug_options)  # type: ignore[arg-type]
+                self.successor = self.replug()
 
     def unplug(self) -> None:
         """Pull the cable (from this unit, whichever enumeration it is in now); idempotent. Never

@@ -43,12 +43,12 @@ def image(ns: int, frame_id: str, plane: np.ndarray) -> dict:
 
 def blob(plane: np.ndarray) -> memoryview:
     """A plane's bytes without a copy."""
-    return memoryview(np.ascontiguousarray(plane)).cast("B")
+    return np.ascontiguousarray(plane).data.cast("B")
 
 
 def disparity_to_float(frame: Frame) -> np.ndarray:
     """The camera's int16 Q4 plane in pixels (exact in float32; invalid → min_disparity - 1)."""
-    return np.multiply(frame.disparity, np.float32(DISPARITY_STEP), dtype=np.float32)
+    return np.multiply(frame.disparity_plane(), np.float32(DISPARITY_STEP), dtype=np.float32)
 
 
 def disparity_from_float(pixels: np.ndarray) -> np.ndarray:
@@ -59,7 +59,7 @@ def disparity_from_float(pixels: np.ndarray) -> np.ndarray:
 def disparity(ns: int, frame: Frame) -> dict:
     """A DisparityImage; its ``image["data"]`` is set by the caller (float32 from ``disparity_to_float``)."""
     fmt, g = frame.disparity_format, frame.geometry
-    h, w = frame.disparity.shape
+    h, w = frame.disparity_plane().shape
     img = {"header": header(ns, FRAME_IDS["left"]), "height": h, "width": w, "encoding": "32FC1",
            "is_bigendian": 0, "step": 4 * w}
     return {"header": header(ns, FRAME_IDS["left"]), "image": img, "f": g.focal_px, "t": g.baseline_m,
@@ -79,10 +79,11 @@ def camera_infos(calibration: StereoCalibration | None, width: int, height: int,
     cal = calibration.scaled(width, height)
     g = stereo_rectify(cal) if rectified else None
     out = []
-    for K, D, R, P in ((cal.K_left, cal.D_left, g and g.R1, g and g.P1), (cal.K_right, cal.D_right, g and g.R2,
-                                                                          g and g.P2)):
-        if P is None:  # raw frames: the identity rotation and the imager's own projection
-            R, P = np.eye(3), np.hstack([K, np.zeros((3, 1))])
+    imagers = ((cal.K_left, cal.D_left), (cal.K_right, cal.D_right))
+    rectifications = ((g.R1, g.P1), (g.R2, g.P2)) if g is not None else (None, None)
+    for (K, D), rectification in zip(imagers, rectifications):
+        # raw frames: the identity rotation and the imager's own projection
+        R, P = rectification if rectification is not None else (np.eye(3), np.hstack([K, np.zeros((3, 1))]))
         out.append({"height": height, "width": width, "distortion_model": "plumb_bob",
                     "d": [float(v) for v in np.ravel(D)], "k": [float(v) for v in np.ravel(K)],
                     "r": [float(v) for v in np.ravel(R)], "p": [float(v) for v in np.ravel(P)],

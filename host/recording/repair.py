@@ -14,6 +14,8 @@ import os
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Callable
 
 import numpy as np
 from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
@@ -72,10 +74,10 @@ class _Rewrite:
         self.channel_ids: dict[int, int] = {}
         self.schema_ids: dict[int, int] = {}
         self.capture_channel: int | None = None
-        self.decode = None
+        self.decode: Callable[[bytes], SimpleNamespace] | None = None
         self.group: list[Message] = []
         self.log_times: list[int] = []
-        self.last_info = None
+        self.last_info: SimpleNamespace | None = None
         self.summary_meta: dict[str, str] | None = None
         self.other_meta: list[Metadata] = []
         self.dropped = 0
@@ -110,7 +112,7 @@ class _Rewrite:
             self.writer.add_attachment(record.name, record.media_type, record.data, record.log_time)
         return True
 
-    def _info(self, group: list[Message]):
+    def _info(self, group: list[Message]) -> SimpleNamespace | None:
         """The decoded CaptureInfo of ``group``, or None (missing or undecodable)."""
         capture = [m for m in group if m.channel_id == self.capture_channel]
         if self.decode is None or len(capture) != 1:
@@ -130,6 +132,7 @@ class _Rewrite:
         if info is None or len(group) != needed or len({m.channel_id for m in group}) != needed:
             self.dropped += 1
             return
+        assert self.writer is not None  # a group is only taken after the header
         for m in group:
             self.writer.add_message(self.channel_ids[m.channel_id], m.log_time, [m.data], m.publish_time, m.sequence)
         self.log_times.append(group[0].log_time)
@@ -139,6 +142,7 @@ class _Rewrite:
         """Metadata, the summary metadata (counters from the last capture if the recorder never wrote
         it), the frame index, the MCAP summary."""
         w = self.writer
+        assert w is not None, "finish after the header"
         self.flush_group()
         w.flush()
         for m in self.other_meta:

@@ -6,8 +6,18 @@ as the C code they mirror), letting the vectoriser use 16-bit lanes.
 """
 from __future__ import annotations
 
+from typing import Any, Callable, Concatenate, ParamSpec, cast
+
 from numba.core import types
-from numba.extending import intrinsic
+from numba.extending import intrinsic as numba_intrinsic
+
+_P = ParamSpec("_P")
+
+
+def intrinsic(typer: Callable[Concatenate[Any, _P], object]) -> Callable[_P, Any]:
+    """``numba.extending.intrinsic``, typed as jitted code calls the result: without the typing
+    context (numba passes it), returning a value of the type ``typer`` picks when compiling."""
+    return cast("Callable[_P, Any]", numba_intrinsic(typer))
 
 
 def _same_int(*tys) -> bool:

@@ -107,7 +107,8 @@ class Matcher:
             return
         if self._threads == 0:
             g, nd = self.geom, self.params.num_disparities
-            n = max(1, nb.config.NUMBA_NUM_THREADS)  # numba.get_thread_id() < this
+            # numba.get_thread_id() < this; numba.config sets its NUMBA_* names at run time (no stub has them)
+            n = max(1, nb.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
             ncols, wide = self.lc.shape[0], max(self.shape[1], g.lofs + g.width1)
             self.vs = _aligned((n, ncols, nd), self.acc)
             self.ts = np.empty((n, ncols), np.int32)

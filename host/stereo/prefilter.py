@@ -7,10 +7,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-_JIT = dict(nogil=True, cache=True, boundscheck=False)
+from .jit import KERNEL
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def _clip(v: int, cap: int) -> int:
     if v < -cap:
         return 0
@@ -19,7 +19,7 @@ def _clip(v: int, cap: int) -> int:
     return v + cap
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def _xsobel_pair_rows(src: np.ndarray, dst: np.ndarray, y: int, cap: int) -> None:
     """Output rows y and y+1 (y even): P = clip(d[y-1] + 2 d[y] + d[y+1]), d = I[x+1] - I[x-1]."""
     h, w = src.shape
@@ -40,7 +40,7 @@ def _xsobel_pair_rows(src: np.ndarray, dst: np.ndarray, y: int, cap: int) -> Non
         o1[x] = np.uint8(min(max(d1 + 2 * d2 + d3, -cap), cap) + cap)
 
 
-@nb.njit(parallel=True, **_JIT)
+@nb.njit(parallel=True, **KERNEL)
 def xsobel_pair(left: np.ndarray, right: np.ndarray, dst_l: np.ndarray, dst_r: np.ndarray,
                 cap: int) -> None:
     """XSOBEL on both images in one parallel region (rows in pairs, as OpenCV does them);
@@ -57,7 +57,7 @@ def xsobel_pair(left: np.ndarray, right: np.ndarray, dst_l: np.ndarray, dst_r: n
         dst_r[h - 1, :] = cap
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def _normalized_rows(src: np.ndarray, dst: np.ndarray, winsize: int, cap: int,
                      buf: np.ndarray) -> None:
     """OpenCV prefilterNorm: vertical running box sums, horizontal box sum by prefix sums
@@ -108,7 +108,7 @@ def _normalized_rows(src: np.ndarray, dst: np.ndarray, winsize: int, cap: int,
         out[x] = np.uint8(_clip((c5 * scale_g - sx * scale_s) >> 10, cap))
 
 
-@nb.njit(parallel=True, **_JIT)
+@nb.njit(parallel=True, **KERNEL)
 def normalized_pair(left: np.ndarray, right: np.ndarray, dst_l: np.ndarray,
                     dst_r: np.ndarray, winsize: int, cap: int, buf: np.ndarray) -> None:
     """NORMALIZED_RESPONSE on both images (one per thread).

@@ -17,17 +17,16 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .jit import C_ARITHMETIC
 from .lanes import absdiff_u8, cast_like, cdiv, nadd, nsub, uidx
 from .simd import slide_all, step_all, wta_all
-
-_JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 # layout of the int64 configuration vector passed to match_rows
 (C_R, C_CAP, C_ND, C_MIND, C_TEX, C_URATIO, C_MAXDIFF, C_LOFS, C_WIDTH1, C_ROIX0, C_ROIX1,
  C_LRX0, C_LRX1, C_INV, C_LEN) = range(15)  # C_INV: the invalid code, params.invalid_value
 
 
-@nb.njit(**_JIT)
+@nb.njit(**C_ARITHMETIC)
 def _init_columns(pl: np.ndarray, pr: np.ndarray, y: int, r: int, cap: int, lc: np.ndarray,
                   rb: np.ndarray, nd: int, vs: np.ndarray, ts: np.ndarray, zero) -> None:
     """Full vertical sums of every virtual column for the window centred on row y."""
@@ -44,7 +43,7 @@ def _init_columns(pl: np.ndarray, pr: np.ndarray, y: int, r: int, cap: int, lc: 
         ts[ci] = t
 
 
-@nb.njit(**_JIT)
+@nb.njit(**C_ARITHMETIC)
 def _slide_column(ci: int, pl: np.ndarray, pr: np.ndarray, ya: int, ys: int, cap: int,
                   lc: np.ndarray, rb: np.ndarray, nd: int, vs: np.ndarray, ts: np.ndarray,
                   zero) -> None:
@@ -58,7 +57,7 @@ def _slide_column(ci: int, pl: np.ndarray, pr: np.ndarray, ya: int, ys: int, cap
     ts[ci] += abs(np.int32(a) - cap) - abs(np.int32(s) - cap)
 
 
-@nb.njit(**_JIT)
+@nb.njit(**C_ARITHMETIC)
 def _row(pl: np.ndarray, pr: np.ndarray, y: int, upd: bool, cfg: np.ndarray, lc: np.ndarray,
          rb: np.ndarray, vs: np.ndarray, ts: np.ndarray, sad: np.ndarray, big,
          pix: np.ndarray) -> None:
@@ -116,7 +115,7 @@ def _row(pl: np.ndarray, pr: np.ndarray, y: int, upd: bool, cfg: np.ndarray, lc:
         pix[4, xu] = sad[uidx(mind - 1 if mind > 0 else 1)]
 
 
-@nb.njit(**_JIT)
+@nb.njit(**C_ARITHMETIC)
 def _finish_row(cfg: np.ndarray, big, pix: np.ndarray, drow: np.ndarray,
                 crow: np.ndarray) -> None:
     """Pass B (vectorised over x): uniqueness verdict, subpixel offset, output values."""
@@ -147,7 +146,7 @@ def _finish_row(cfg: np.ndarray, big, pix: np.ndarray, drow: np.ndarray,
         crow[X] = m
 
 
-@nb.njit(**_JIT)
+@nb.njit(**C_ARITHMETIC)
 def _lr_check(drow: np.ndarray, crow: np.ndarray, x0: int, x1: int, inv: int, maxdiff: int,
               d2buf: np.ndarray, d2cost: np.ndarray) -> None:
     """OpenCV validateDisparity on one row (in place)."""
@@ -176,7 +175,7 @@ def _lr_check(drow: np.ndarray, crow: np.ndarray, x0: int, x1: int, inv: int, ma
             drow[x] = inv
 
 
-@nb.njit(parallel=True, **_JIT)
+@nb.njit(parallel=True, **C_ARITHMETIC)
 def match_rows(pl: np.ndarray, pr: np.ndarray, disp: np.ndarray, bounds: np.ndarray,
                cfg: np.ndarray, lc: np.ndarray, rb: np.ndarray, big, vs: np.ndarray,
                ts: np.ndarray, sad: np.ndarray, pix: np.ndarray, drow: np.ndarray,

@@ -12,6 +12,7 @@ import pytest
 import stereocam
 from stereocam.device_sim import TriggerLine
 from stereocam.device_sim.clock import DeviceClock
+from stereocam.device_sim.replay import ReplayClock
 from stereocam.device_sim.shared_line import SharedTriggerLine
 from stereocam.device_sim.trigger import LATENCY_RANGE_S, TriggerInput, TriggerMaster
 
@@ -96,3 +97,15 @@ def test_master_rate_is_counted_on_its_own_crystal():
     gaps = [b[1] - a[1] for a, b in zip(heard.pulses, heard.pulses[1:])]
     assert all(g == pytest.approx(master.period, abs=1e-9) for g in gaps)  # scheduled edges, not wake-ups
     assert [t for t, _ in heard.pulses] == list(range(1, len(heard.pulses) + 1))
+
+
+def test_a_replayed_unit_masters_the_line_at_its_nominal_rate():
+    """A replay's clock counts at the time base's rate: a replayed unit driving the line pulses at
+    exactly its fps (its clock gives everything a unit's clock gives, host_period included)."""
+    line = TriggerLine()
+    heard = Heard()
+    line.attach(heard)
+    with TriggerMaster(line, 50, ReplayClock(start_us=123_456)) as master:
+        heard.wait(3)
+    assert master.period == 0.02
+    assert len(heard.pulses) >= 3

@@ -166,7 +166,7 @@ def test_depth_of_a_frame_without_disparity_is_a_typed_error():
         camera.configure(width=160, height=120, outputs=int(stereocam.Output.LEFT))
         camera.start()
         frame = camera.get_frame(timeout=20)
-    for method in (frame.depth, frame.points, frame.disparity_px):
+    for method in (frame.depth, frame.points, frame.disparity_px, frame.disparity_plane):
         with pytest.raises(stereocam.MissingPlaneError, match="no disparity"):
             method()
     assert issubclass(stereocam.MissingPlaneError, ValueError)

@@ -21,11 +21,14 @@ ALWAYS = ("identity.connect", "session.restored")
 """Results every run reports, whatever -k selects."""
 
 
-def _pattern(ctx: click.Context, param: click.Parameter, value: str | None) -> Callable[[str], object] | None:
+def _pattern(ctx: click.Context, param: click.Parameter, value: str | None) -> Callable[[str], bool] | None:
+    if not value:
+        return None
     try:
-        return re.compile(value).search if value else None
+        pattern = re.compile(value)
     except re.error as exc:
         raise click.BadParameter(f"not a regular expression: {exc}") from None
+    return lambda name: pattern.search(name) is not None
 
 
 @click.command("conformance", context_settings=CONTEXT,
@@ -39,7 +42,7 @@ def _pattern(ctx: click.Context, param: click.Parameter, value: str | None) -> C
               help="Reply deadline the device is held to, seconds (SPEC §7: well inside 1 s).")
 @click.option("-k", "only", metavar="REGEX", default=None, callback=_pattern,
               help="Run only the checks whose name matches.  [default: every check]")
-def command(url: str, junit: Path | None, as_json: bool, timeout: float, only: Callable[[str], object] | None) -> int:
+def command(url: str, junit: Path | None, as_json: bool, timeout: float, only: Callable[[str], bool] | None) -> int:
     """Hold a camera to the protocol: one line per check (PASS / FAIL / SKIP with the reason), then a
     summary. The device is left stopped, configured and calibrated as found. URL: usb://?serial=...,
     socket://HOST:PORT, /dev/ttyACM0, ..."""

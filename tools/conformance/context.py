@@ -123,7 +123,7 @@ class Context:
         self.s.call(m.Stop())
         self.apply(**self.working_config())
 
-    def restore_found(self) -> dict[str, int]:
+    def restore_found(self) -> dict[int, int]:
         """Put back every parameter the suite may have changed; returns the ids still different."""
         self.s.call(m.Stop())
         now = self.s.call(m.GetConfig())

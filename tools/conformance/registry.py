@@ -14,8 +14,7 @@ FamilyFn = Callable[["Context"], Iterable[tuple[str, CheckFn]]]
 @dataclass(frozen=True)
 class Check:
     name: str  # "area.what"
-    fn: Callable[["Context"], object]
-    family: bool  # fn returns (suffix, check) pairs, each run and reported as name.suffix
+    fn: CheckFn
     rules: tuple[str, ...]  # the SPEC rule ids ("R-4.3-1") this check enforces
 
     @property
@@ -23,14 +22,25 @@ class Check:
         return self.name.split(".", 1)[0]
 
 
-CHECKS: list[Check] = []
+@dataclass(frozen=True)
+class Family:
+    name: str  # "area.what"
+    fn: FamilyFn  # lists (suffix, check) pairs, each run and reported as name.suffix
+    rules: tuple[str, ...]  # the SPEC rule ids ("R-4.3-1") its checks enforce
+
+    @property
+    def area(self) -> str:
+        return self.name.split(".", 1)[0]
+
+
+CHECKS: list[Check | Family] = []
 
 
 def check(name: str, *rules: str) -> Callable[[CheckFn], CheckFn]:
     """Register a check enforcing SPEC ``rules``: it returns a detail line (or None) on pass,
     raises CheckFailed/CheckSkipped."""
     def register(fn: CheckFn) -> CheckFn:
-        CHECKS.append(Check(name, fn, family=False, rules=rules))
+        CHECKS.append(Check(name, fn, rules))
         return fn
     return register
 
@@ -39,6 +49,6 @@ def family(name: str, *rules: str) -> Callable[[FamilyFn], FamilyFn]:
     """Register a family enforcing SPEC ``rules``: called once, it lists (suffix, check) pairs,
     e.g. one per parameter."""
     def register(fn: FamilyFn) -> FamilyFn:
-        CHECKS.append(Check(name, fn, family=True, rules=rules))
+        CHECKS.append(Family(name, fn, rules))
         return fn
     return register

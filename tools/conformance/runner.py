@@ -9,7 +9,7 @@ from stereocam.protocol.errors import StereoCamError
 
 from . import checks  # noqa: F401 - importing the check modules registers them, in order
 from .context import Context
-from .registry import CHECKS
+from .registry import CHECKS, Family
 from .results import CheckFailed, CheckResult, CheckSkipped, Outcome, SuiteResult
 from .wire import WireSession
 
@@ -51,7 +51,7 @@ def run_suite(url: str, timeout: float = 1.0, on_result: OnResult | None = None,
 def _run_all(ctx: Context, record: OnResult, only: Callable[[str], bool]) -> None:
     dead: str | None = None
     for chk in CHECKS:
-        if chk.family:
+        if isinstance(chk, Family):
             try:
                 members = [(f"{chk.name}.{suffix}", fn) for suffix, fn in chk.fn(ctx)]
             except CheckSkipped as exc:

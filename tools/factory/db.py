@@ -20,9 +20,13 @@ import os
 import sqlite3
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from stereocam.protocol.errors import StereoCamError
+
+if TYPE_CHECKING:
+    import psycopg
+    from psycopg.rows import TupleRow
 
 SCHEMA_VERSION = 2
 _TYPES = {"sqlite": {"id": "INTEGER PRIMARY KEY AUTOINCREMENT", "blob": "BLOB", "bool": "INTEGER"},
@@ -132,6 +136,7 @@ class FactoryDB:
         that is not a factory database is left as it was."""
         self.url = url or default_url()
         self.unreadable: list[str] = []  # rows the last ``attempts()`` skipped, and why
+        self._conn: sqlite3.Connection | psycopg.Connection[TupleRow]
         scheme = self.url.split("://", 1)[0] if "://" in self.url else ""
         if scheme not in ("", "sqlite", "postgresql", "postgres"):
             raise FactoryDBError(f"factory database {self.url}: unknown scheme {scheme!r} "
@@ -177,7 +182,8 @@ class FactoryDB:
             cur.execute("SELECT to_regclass(%s) IS NOT NULL", (name,))
         else:
             cur.execute("SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = ?", (name,))
-        return bool(cur.fetchone()[0])
+        row = cur.fetchone()
+        return row is not None and bool(row[0])
 
     def version(self) -> int:
         """The schema version applied; 0 where there is no schema_version table (any other error,
@@ -215,13 +221,13 @@ class FactoryDB:
             raise
 
     def _commit(self) -> None:
-        if self.dialect == "postgresql":
+        if not isinstance(self._conn, sqlite3.Connection):
             self._conn.commit()
         elif self._conn.in_transaction:
             self._conn.execute("COMMIT")
 
     def _rollback(self) -> None:
-        if self.dialect == "postgresql":
+        if not isinstance(self._conn, sqlite3.Connection):
             self._conn.rollback()
         elif self._conn.in_transaction:
             self._conn.execute("ROLLBACK")
@@ -235,12 +241,15 @@ class FactoryDB:
         try:
             cur = self._conn.cursor()
             sql = f"INSERT INTO attempts ({names}) VALUES ({marks})"
-            if self.dialect == "postgresql":
-                cur.execute(self._sql(sql) + " RETURNING id", [row[c] for c in COLUMNS])
-                new_id = cur.fetchone()[0]
-            else:
+            if isinstance(cur, sqlite3.Cursor):
                 cur.execute(sql, [row[c] for c in COLUMNS])
                 new_id = cur.lastrowid
+            else:
+                cur.execute(self._sql(sql) + " RETURNING id", [row[c] for c in COLUMNS])
+                returned = cur.fetchone()
+                new_id = None if returned is None else returned[0]
+            if new_id is None:
+                raise FactoryDBError("the database gave the new row no id")
             self._commit()
         except Exception as exc:
             self._rollback()

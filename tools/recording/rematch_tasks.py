@@ -107,6 +107,8 @@ def join(source: str, parts: list[str], out: str, provenance: dict[str, str], re
             with open(part, "rb") as f:
                 reader = make_reader(f)
                 s = reader.get_summary()
+                if s is None:
+                    raise ValueError(f"{part} has no MCAP summary (a part cut short)")
                 if writer is None:
                     writer = ChunkedWriter(tmp, profile=reader.get_header().profile, library=reader.get_header().library,
                                            exclusive=True)
@@ -137,8 +139,8 @@ def join(source: str, parts: list[str], out: str, provenance: dict[str, str], re
             os.link(tmp, target)  # never over a file that appeared meanwhile
     finally:
         tmp.unlink(missing_ok=True)
-    for part in map(Path, parts):
-        part.unlink(missing_ok=True)
-        for leftover in part.parent.glob(f".{part.name}.*.tmp"):  # of attempts whose worker was killed
+    for joined in map(Path, parts):
+        joined.unlink(missing_ok=True)
+        for leftover in joined.parent.glob(f".{joined.name}.*.tmp"):  # of attempts whose worker was killed
             leftover.unlink(missing_ok=True)
     return len(index)

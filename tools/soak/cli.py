@@ -16,6 +16,9 @@ flipped, 50 % at 1 in 10^4).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
+
 import click
 
 from stereocam.tools.options import CONTEXT, epilog
@@ -34,11 +37,19 @@ def _print(rep: Report) -> None:
 DELIVERY_GOALS = {1e-5: 0.95, 1e-4: 0.50}  # byte flip rate -> share of the frames sent that must arrive
 
 
+def _number(rep: Report, key: str) -> float:
+    """A figure its run always counts: a number."""
+    value = rep.figures[key]
+    if not isinstance(value, (int, float)):
+        raise TypeError(f"{rep.name}: figure {key!r} is {value!r}, not a number")
+    return value
+
+
 def _failed(rep: Report, flip: float | None = None) -> bool:
     f = rep.figures
     corrupted = f.get("corrupted", 0)
     goal = DELIVERY_GOALS.get(flip) if flip is not None else None
-    short = goal is not None and f["delivered"] < goal * max(f["frames sent"], 1)
+    short = goal is not None and _number(rep, "delivered") < goal * max(_number(rep, "frames sent"), 1)
     if short:
         f["delivery goal"] = f"NOT MET (at least {goal:.0%})"
     elif goal is not None:
@@ -51,7 +62,7 @@ def _failed(rep: Report, flip: float | None = None) -> bool:
 
 
 def _memory_goal(rep: Report, limit_mib: int) -> Report:
-    peak = rep.figures["peak memory MiB"]
+    peak = _number(rep, "peak memory MiB")
     rep.figures["memory"] = f"{'met' if peak <= limit_mib else 'NOT met'} (at most {limit_mib} MiB)"
     return rep
 
@@ -93,10 +104,10 @@ def command(url: str, decoder_inputs: int, device_inputs: int, seconds: float, f
     the device's and host's counters add up. Delivery goals (VGA frames on a serial-class link): 95 %
     at 1 byte in 10^5 flipped, 50 % at 1 in 10^4; (4) compression bombs and fuzzed recordings through
     export, repair, replay and rematch; (5) a camera group with a head lying about its trigger ids."""
-    runs = [(None, lambda: fuzz_decoder(decoder_inputs, seed)),
-            (None, lambda: fuzz_device(url, device_inputs, seed))]
-    runs += [(flip, lambda flip=flip: stream_with_faults(url, seconds, flip, drop, latency, split, chunk or None,
-                                                         seed=seed))
+    runs: list[tuple[float | None, Callable[[], Report]]] = [
+        (None, lambda: fuzz_decoder(decoder_inputs, seed)),
+        (None, lambda: fuzz_device(url, device_inputs, seed))]
+    runs += [(flip, partial(stream_with_faults, url, seconds, flip, drop, latency, split, chunk or None, seed=seed))
              for flip in flips or (1e-5, 1e-4)]
     if recording_files > 0:
         runs.append((None, lambda: _memory_goal(fuzz_recordings(recording_files, seed), max_memory_mib)))

@@ -143,7 +143,7 @@ class ViewerServer(ThreadingHTTPServer):
     @property
     def url(self) -> str:
         host, port = self.server_address[:2]
-        return f"http://{host}:{port}/"
+        return f"http://{host.decode() if isinstance(host, bytes) else host}:{port}/"
 
 
 class _Handler(BaseHTTPRequestHandler):
@@ -218,7 +218,7 @@ class _Handler(BaseHTTPRequestHandler):
         if path not in pages:
             return False
         name, ctype = pages[path]
-        self._send(resources.files(__package__).joinpath("static", name).read_bytes(), ctype)
+        self._send((resources.files(__package__) / "static" / name).read_bytes(), ctype)
         return True
 
     def _camera_get(self, session: ViewerSession, path: str, query: dict[str, str]) -> None:

@@ -326,7 +326,7 @@ class ViewerSession(Feed):
             if restart:
                 self.cam.start()
 
-    def _preset_path(self, name: str) -> Path:
+    def _preset_path(self, name: object) -> Path:
         if not isinstance(name, str) or not PRESET_NAME.match(name) or name.startswith("."):
             raise ValueError(f"a preset name is 1..64 letters, digits, '_', '-' or '.', got {name!r}")
         return self.record_dir / f"{name}{PRESET_SUFFIX}"
@@ -338,12 +338,12 @@ class ViewerSession(Feed):
         except OSError:
             return []
 
-    def save_preset(self, name: str) -> dict[str, Any]:
+    def save_preset(self, name: object) -> dict[str, Any]:
         """The whole configuration to ``record_dir``/NAME.preset.json (the SDK's preset file)."""
         path = self._preset_path(name)
         return {"preset": name, "path": str(path), "config": self.cam.save_preset(path)}
 
-    def load_preset(self, name: str) -> dict[str, Any]:
+    def load_preset(self, name: object) -> dict[str, Any]:
         """Apply a saved preset (all or nothing); returns the new configuration."""
         path = self._preset_path(name)
         if not path.exists():

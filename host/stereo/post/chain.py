@@ -23,7 +23,8 @@ from .temporal import TemporalState, temporal_filter
 STAGES = ("lr_check", "hole_fill", "spatial", "temporal", "median", "decimation")
 """The stages, in the order they run."""
 
-Match = Callable[[np.ndarray, np.ndarray], np.ndarray]
+RightView = Callable[[], np.ndarray]
+"""Computes the right view's disparity when the left-right check asks for it."""
 
 
 class PostChain:
@@ -40,7 +41,7 @@ class PostChain:
         """Forget the temporal filter's past (a configuration change, a trigger gap)."""
         self.temporal.reset()
 
-    def run(self, disparity: np.ndarray, right_view: Match | None = None, with_confidence: bool = False
+    def run(self, disparity: np.ndarray, right_view: RightView | None = None, with_confidence: bool = False
             ) -> np.ndarray:
         """The filtered copy of ``disparity`` (int16, disparity * 16). ``right_view`` gives the right
         view's disparity when the left-right check is on (ConfigError when it is missing);

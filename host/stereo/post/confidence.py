@@ -8,10 +8,10 @@ import numpy as np
 from stereocam.protocol.frame_messages import (CONFIDENCE_BASE, CONFIDENCE_FILLED, CONFIDENCE_PER_NEIGHBOUR,
                                                DISPARITY_SUBPIXEL)
 
-_JIT = dict(nogil=True, cache=True, boundscheck=False)
+from ..jit import KERNEL
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def confidence(matched: np.ndarray, final: np.ndarray, invalid: int, out: np.ndarray) -> None:
     """out (uint8): 0 where ``final`` is invalid, CONFIDENCE_FILLED where ``matched`` is (a filled hole),
     else CONFIDENCE_BASE + CONFIDENCE_PER_NEIGHBOUR * (8-neighbours of ``matched`` within 1 px)."""

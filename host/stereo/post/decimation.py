@@ -6,10 +6,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-_JIT = dict(nogil=True, cache=True, boundscheck=False)
+from ..jit import KERNEL
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def decimate(disp: np.ndarray, n: int, invalid: int) -> None:
     """In place."""
     h, w = disp.shape

@@ -10,9 +10,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-_JIT = dict(nogil=True, cache=True, boundscheck=False)
+from ..jit import KERNEL
 
-@nb.njit(**_JIT)
+
+@nb.njit(**KERNEL)
 def fill_nearest(disp: np.ndarray, invalid: int) -> None:
     """In place: every invalid pixel takes the nearest valid disparity of its row."""
     h, w = disp.shape
@@ -39,7 +40,7 @@ def fill_nearest(disp: np.ndarray, invalid: int) -> None:
                 disp[y, x] = min(disp[y, lx], disp[y, nxt])
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def _seen(disp: np.ndarray, invalid: int, dy: int, dx: int, out: np.ndarray) -> None:
     """out[y, x]: the first valid disparity from (y, x) stepping (dy, dx) (invalid: none)."""
     h, w = disp.shape
@@ -57,7 +58,7 @@ def _seen(disp: np.ndarray, invalid: int, dy: int, dx: int, out: np.ndarray) -> 
             out[y, x] = v
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def fill_background(disp: np.ndarray, invalid: int, seen: np.ndarray) -> None:
     """In place: Hirschmueller background interpolation. Scratch: seen int16 (8, h, w)."""
     h, w = disp.shape

@@ -6,10 +6,9 @@ from collections.abc import Callable
 
 import numba as nb
 import numpy as np
-
 from stereocam.protocol.frame_messages import DISPARITY_SUBPIXEL
 
-_JIT = dict(nogil=True, cache=True, boundscheck=False)
+from ..jit import KERNEL
 
 
 def right_view_disparity(match: Callable[[np.ndarray, np.ndarray], np.ndarray],
@@ -20,7 +19,7 @@ def right_view_disparity(match: Callable[[np.ndarray, np.ndarray], np.ndarray],
     return np.ascontiguousarray(mirrored[:, ::-1])
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def lr_check(disp: np.ndarray, right_disp: np.ndarray, tolerance: int, invalid: int) -> None:
     """In place: invalidate left pixel x (disparity d) unless the right view's disparity at
     x - round(d) is valid and within ``tolerance`` px of d."""

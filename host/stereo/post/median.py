@@ -5,7 +5,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-_JIT = dict(nogil=True, cache=True, boundscheck=False)
+from ..jit import KERNEL
 
 
 @nb.njit(inline="always")
@@ -13,7 +13,7 @@ def _med3(a: np.int16, b: np.int16, c: np.int16) -> np.int16:
     return max(min(a, b), min(max(a, b), c))
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def _median3(padded: np.ndarray, out: np.ndarray) -> None:
     """3 x 3: each column's three values sorted, then the median of (the largest low, the middle
     middle, the smallest high) of three neighbouring columns, which is the median of the nine."""
@@ -32,7 +32,7 @@ def _median3(padded: np.ndarray, out: np.ndarray) -> None:
                               min(hi[x], hi[x + 1], hi[x + 2]))
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def _median(padded: np.ndarray, size: int, out: np.ndarray) -> None:
     """Any odd size: each column's ``size`` values sorted once per row, then the window's median
     picked by merging its ``size`` sorted columns up to the middle element."""

@@ -7,16 +7,17 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-_JIT = dict(nogil=True, cache=True, boundscheck=False)
+from ..jit import KERNEL
+
 ALPHA_ONE = 256  # spatial_alpha / temporal_alpha are in 1/256
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def _blend(cur: np.int32, prev: np.int32, alpha: int) -> np.int32:
     return (alpha * cur + (ALPHA_ONE - alpha) * prev + ALPHA_ONE // 2) // ALPHA_ONE
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def spatial_filter(disp: np.ndarray, alpha: int, delta: int, iterations: int, invalid: int) -> None:
     """In place; invalid pixels stay invalid and break the sweep."""
     h, w = disp.shape

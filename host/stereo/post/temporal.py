@@ -9,9 +9,8 @@ from dataclasses import dataclass, field
 import numba as nb
 import numpy as np
 
+from ..jit import KERNEL
 from .spatial import _blend
-
-_JIT = dict(nogil=True, cache=True, boundscheck=False)
 
 
 @dataclass
@@ -27,7 +26,7 @@ class TemporalState:
         self.history = None
 
 
-@nb.njit(**_JIT)
+@nb.njit(**KERNEL)
 def _temporal(disp: np.ndarray, last: np.ndarray, history: np.ndarray, alpha: int, delta: int,
               persistence: int, invalid: int) -> None:
     h, w = disp.shape

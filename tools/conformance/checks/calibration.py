@@ -43,7 +43,7 @@ def read(ctx: Context) -> str:
     recs = _records(ctx)
     ctx.memo["calibration_found"] = recs
     active, want = recs["active"], recs["user"] or recs["factory"]
-    expect(_id(active) == _id(want) and (active is None or active.body == want.body),  # type: ignore[union-attr]
+    expect(_id(active) == _id(want) and (active is None or want is not None and active.body == want.body),
            f"active record {_id(active):08x}, expected {_id(want):08x} (user if stored, else factory)")
     expect(_info_id(ctx) == _id(active), f"INFO calibration_id {_info_id(ctx):08x}, active {_id(active):08x}")
     if active is not None:

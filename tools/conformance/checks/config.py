@@ -120,7 +120,9 @@ def all_or_nothing(ctx: Context) -> str:
     r = ctx.s.exchange(m.SetConfig({}))
     expect(isinstance(r, m.ConfigApplied), f"empty SET_CONFIG answered {r!r}")
     assert isinstance(r, m.ConfigApplied)
-    expect(r.values == ctx.s.call(m.GetConfig()).values, "empty SET_CONFIG: CONFIG_APPLIED differs from CONFIG")
+    current = ctx.s.call(m.GetConfig())
+    assert isinstance(current, m.Config)
+    expect(r.values == current.values, "empty SET_CONFIG: CONFIG_APPLIED differs from CONFIG")
     return "a bad entry first or last refuses the whole update; empty update = CONFIG"
 
 

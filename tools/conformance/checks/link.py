@@ -101,11 +101,12 @@ def resend_trigger(ctx: Context) -> str:
     finally:
         ctx.stop()
     expect(isinstance(first.message, m.Triggered), f"TRIGGER answered {first.message!r}")
+    assert isinstance(first.message, m.Triggered)
     expect(again.packet == first.packet, f"resent TRIGGER executed twice: answered {again.message!r}, first {first.message!r}")
     d = after.counters["triggers"] - before.counters["triggers"]
     expect(d == 1, f"triggers counter +{d} for one TRIGGER and its RESEND")
     caps = s.captures.snapshot()
     ctx.note_captures(caps)
     expect(len(caps) == 1, f"{len(caps)} captures for one TRIGGER and its RESEND")
-    return f"one trigger (id {first.message.trigger_id}), one capture, replay identical"  # type: ignore[union-attr]
+    return f"one trigger (id {first.message.trigger_id}), one capture, replay identical"
 
