@@ -45,13 +45,21 @@ _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 
 @nb.njit(**_JIT)
+def _inside(X: int, md: int, nd: int) -> int:
+    """Disparities of left column X whose right pixel is in the image (k <= X - md), rounded
+    up to cost_run's 16 lanes, at most nd: the rest are the constant maxc, not computed."""
+    return min(nd, (X - md + 16) & ~15)
+
+
+@nb.njit(**_JIT)
 def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int, cols: int,
               maxc: int, out: np.ndarray) -> None:
     """out[x * nd + k] = popcount(cl[y, x0 + x] ^ census_R[y, x0 + x - md - k]), or maxc where
     that right pixel is left of the image (crr's rows run nd codes past it)."""
     w = cl.shape[1]
     for x in range(cols):
-        cost_run(cl[y, uidx(x0 + x)], crr[y], w - 1 - x0 - x + md, out, x * nd, nd)
+        cost_run(cl[y, uidx(x0 + x)], crr[y], w - 1 - x0 - x + md, out, x * nd,
+                 _inside(x0 + x, md, nd))
     for x in range(min(cols, nd - 1 - x0 + md)):  # k > x0 + x - md is outside
         out[x * nd + x0 + x - md + 1:(x + 1) * nd] = maxc
 
@@ -128,7 +136,7 @@ def _kept_row(g: int, y: int, hb: int, img: np.ndarray, cl: np.ndarray, crr: np.
     for i in range(cols):
         x = i if g == 0 else cols - 1 - i
         X = x0 + x
-        cost_run(cl[y, uidx(X)], crr[y], w - 1 - X + md, cost, x * nd, nd)
+        cost_run(cl[y, uidx(X)], crr[y], w - 1 - X + md, cost, x * nd, _inside(X, md, nd))
         if x < outside:
             cost[x * nd + X - md + 1:(x + 1) * nd] = maxc
         if i == 0:
