@@ -240,14 +240,14 @@ NXT_STRIDE = 16  # nxt[c * NXT_STRIDE]: chain c's next row, each on its own cach
 @nb.njit(**_JIT)
 def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndarray,
                cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray,
-               prog: np.ndarray, disp: np.ndarray, win: np.ndarray, byte: np.ndarray,
-               code: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+               prog: np.ndarray, disp: np.ndarray, win: np.ndarray, offs: np.ndarray,
+               cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
                rarg: np.ndarray, karg: np.ndarray) -> None:
     """Row j of chain c (c = 0: the top half top-down, paths from above; c = 1: the bottom
-    half bottom-up, paths from below): the row's census codes (census_row_pair; win, byte,
-    code its scratch), cost row, one horizontal path kept per column in lbuf,
-    then in the other horizontal direction the other four paths plus the kept one into acc,
+    half bottom-up, paths from below): the row's census codes (census_row_pair; win its
+    scratch, offs its table), cost row, one horizontal path kept per column in lbuf, then
+    in the other horizontal direction the other four paths plus the kept one into acc,
     band by band once the chain's previous row has published (prog) the columns the band
     reads; then the selection. hb: this worker's horizontal-path area (cols + 3 runs); vb:
     the chain's three row slots of three paths."""
@@ -255,7 +255,7 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndar
     cols = cfg[C_COLS]
     dy = 1 - 2 * c
     y = j if c == 0 else h - 1 - j
-    census_row_pair(img, right, y, cfg[C_CW], cfg[C_CH], win, byte, code, cl, crr)
+    census_row_pair(img, right, y, cfg[C_CW], cfg[C_CH], win, offs, cl, crr)
     _kept_row(1 - c, y, hb, img, cl, crr, cfg, p2tab, cost, lbuf)
     i = 0
     while i < cols:
@@ -276,7 +276,7 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndar
 @nb.njit(**_JIT)
 def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.ndarray,
                  cfg: np.ndarray, p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray,
-                 disp: np.ndarray, win: np.ndarray, byte: np.ndarray, code: np.ndarray,
+                 disp: np.ndarray, win: np.ndarray, offs: np.ndarray,
                  cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
                  pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
                  karg: np.ndarray, spk: tuple, workers: int) -> None:
@@ -298,7 +298,7 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
             if j >= rows:
                 break
             _chain_row(c, j, hb, vbase + c * 9 * cols * stride, img, right, cl, crr, cfg, p2tab,
-                       prog, disp, win, byte, code, cost, lbuf, mv[c], meta, pm, acc, rmin,
+                       prog, disp, win, offs, cost, lbuf, mv[c], meta, pm, acc, rmin,
                        rarg, karg)
             if fetch_add(nxt, (2 + c) * NXT_STRIDE, 1) == rows - 1 and cfg[C_SPW] > 0:
                 _speckle_half(c, top, cfg, nxt, disp, spk)
@@ -325,7 +325,7 @@ def _speckle_half(c: int, top: int, cfg: np.ndarray, nxt: np.ndarray, disp: np.n
 @nb.njit(parallel=True, **_JIT)
 def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.ndarray,
                     cfg: np.ndarray, p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray,
-                    disp: np.ndarray, win: np.ndarray, byte: np.ndarray, code: np.ndarray,
+                    disp: np.ndarray, win: np.ndarray, offs: np.ndarray,
                     cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
                     pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
                     karg: np.ndarray, spk: tuple, workers: int) -> None:
@@ -337,6 +337,6 @@ def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.
     worker; more workers share them row by row (_single_pass). Scratch has
     one slice per worker (leading axis, at least ``workers``); nxt and prog must be zero."""
     for t in nb.prange(workers):
-        _single_pass(t, img, right, cl, crr, cfg, p2tab, nxt, prog, disp, win[t], byte[t],
-                     code[t], cost[t], lbuf[0], mv, meta[t], pm[t], acc[t], rmin[t], rarg[t],
+        _single_pass(t, img, right, cl, crr, cfg, p2tab, nxt, prog, disp, win[t], offs,
+                     cost[t], lbuf[0], mv, meta[t], pm[t], acc[t], rmin[t], rarg[t],
                      karg[t], spk, workers)
