@@ -83,8 +83,7 @@ class SGMMatcher:
         # padding elements hold 255) and their minima
         self.cost = _aligned((n, cols * nd), np.uint8)
         # written at every pixel by every thread: each one's slice 128 bytes away from the
-        # others', never on one cache line (false sharing made two threads slower than one)
-        self.meta = np.zeros((n, 32), np.int64)  # 16 used
+        # others' (path minima), never on one cache line (false sharing made two threads slower than one)
         self.pm = np.zeros((n, 64), np.int16)  # 4 used
         self.acc = _aligned((n, cols * nd), np.int16)
         self.rmin = np.empty((n, cols + nd - 1), np.int16)
@@ -139,13 +138,13 @@ class SGMMatcher:
                 _sgm.sgm_single_pass(left, right, self.cl, self.crr, self.cfg, self.p2tab,
                                      self.locks, self.done, disp, self.win, self.census_offs,
                                      self.cost, self.lbuf, self.mv,
-                                     self.meta, self.pm, self.acc, self.rmin, self.rarg,
+                                     self.pm, self.acc, self.rmin, self.rarg,
                                      self.karg, (self.labels, self.stack, self.size,
                                                   self.parent, self.rtype),
                                      nb.get_num_threads())
                 return
             _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.p2tab, self.parked, self.locks,
-                          self.done, disp, self.cost, self.lbuf, self.mv, self.meta, self.pm,
+                          self.done, disp, self.cost, self.lbuf, self.mv, self.pm,
                           self.acc, self.rmin, self.rarg, self.karg)
         finally:
             nb.set_parallel_chunksize(chunk)

@@ -358,7 +358,7 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
     """All path steps of one pixel (npaths 1, 2, 4, or 5: four and a fifth path's stored
     L) in one pass over the disparities:
 
-        for path v < min(npaths, 4), with (po, oo, p2m, mprev) = meta[4v : 4v+4]:
+        for path v < min(npaths, 4), (po, oo, p2m, mprev) = meta[4v : 4v+4] (meta: 17 ints):
           L_v[k] = cost[ci+k] + min(P, min(P[-1], P[+1]) +sat p1, p2m) - mprev,  P = lbuf[po+k]
           lbuf[oo+k] = L_v[k];  mins[v] = min_k L_v[k]
         acc[ai+k] = sum_v L_v[k] (+ lbuf[meta[16]+k] when npaths is 5)   (int16; not
@@ -367,8 +367,9 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
     Path costs are uint8 (the caller keeps every L <= 255 and passes p2m <= 255; the padding
     elements hold 255, and +p1 saturates), so one 512-bit register holds 64 disparities. The
     cost and the sum stay in registers across the paths."""
-    if not (_u8_arrays(cost, lbuf) and _i16_arrays(acc, mins) and isinstance(meta, types.Array)
-            and meta.dtype == types.int64):
+    if not (_u8_arrays(cost, lbuf) and _i16_arrays(acc, mins)
+            and isinstance(meta, types.UniTuple) and meta.count == 17
+            and isinstance(meta.dtype, types.Integer)):
         return None
 
     def codegen(context, builder, sig, args):
@@ -380,8 +381,8 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
         nmore = builder.icmp_signed(">", npv, ir.Constant(npv.type, 2))
         extra = builder.icmp_signed("==", npv, ir.Constant(npv.type, 5))
         p1v = context.cast(builder, args[5], st[5], types.uint8)
-        meta_v = [builder.load(_ptr(context, builder, st[3], args[3], [ir.Constant(civ.type, i)]))
-                  for i in range(17)]
+        meta_v = [context.cast(builder, builder.extract_value(args[3], i), st[3].dtype,
+                               types.intp) for i in range(17)]
         wide = ir.VectorType(u8, 64)
         best = [cgutils.alloca_once_value(builder, ir.Constant(wide, [255] * 64))
                 for _ in range(4)]
