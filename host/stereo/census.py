@@ -2,7 +2,8 @@
 
 Bit per window neighbour (centre excluded): neighbour darker than the centre; the image is
 extended by edge replication. Comparisons are made 64 pixels at a time into bytes (8
-neighbours per byte), which are then shifted into place in the uint64 codes. The right image's
+neighbours per byte) kept in registers, then shuffled into the uint64 codes
+(sgm_simd.census_codes). The right image's
 codes are stored mirrored along each row, so that the right pixels X - d of a left pixel X are
 contiguous and ascending in d.
 """
@@ -11,7 +12,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .sgm_simd import census_bits
+from .sgm_simd import census_codes
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
@@ -33,43 +34,30 @@ def _pad_rows(img: np.ndarray, y0: int, y1: int, rx: int, ry: int, out: np.ndarr
             row[rx + x] = src[x]
 
 
-@nb.njit(**_JIT)
-def _flush(byte: np.ndarray, group: int, w: int, code: np.ndarray) -> None:
-    s = np.uint64(8 * group)
-    for x in range(w):
-        code[x] |= np.uint64(byte[x]) << s
-
-
-@nb.njit(**_JIT)
-def _census_row(pad: np.ndarray, y: int, cw: int, ch: int, w: int, byte: np.ndarray,
-                code: np.ndarray) -> None:
-    """Census codes of row y into code[0:w] from the padded image."""
+def census_offsets(cw: int, ch: int, stride: int) -> np.ndarray:
+    """census_codes' table for a cw x ch window over rows of ``stride`` bytes: the centre's
+    offset, then the neighbours' in window order (row by row, the centre skipped)."""
     rx, ry = cw // 2, ch // 2
-    centre = pad[y + ry]
-    code[:w] = 0
-    n = 0  # comparisons so far; bit n of the code
-    for q in range(cw * ch):
-        i, j = q // cw, q % cw
-        if i == ry and j == rx:
-            continue
-        if n & 7 == 0:
-            byte[:] = 0
-        census_bits(byte, pad[y + i], j, centre, rx, np.uint8(1 << (n & 7)), w)
-        n += 1
-        if n & 7 == 0:
-            _flush(byte, (n - 1) >> 3, w, code)
-    if n & 7 != 0:
-        _flush(byte, (n - 1) >> 3, w, code)
+    nbrs = [i * stride + j for i in range(ch) for j in range(cw) if (i, j) != (ry, rx)]
+    return np.array([ry * stride + rx, *nbrs], np.int64)
+
+
+@nb.njit(**_JIT)
+def _census_row(pad: np.ndarray, y: int, offs: np.ndarray, out: np.ndarray, rev: bool) -> None:
+    """Census codes of row y of the padded image into out (its length, a multiple of 64, of
+    them; rev: mirrored, pixel x at out[len - 1 - x])."""
+    census_codes(pad.ravel(), y * pad.shape[1], offs, offs.shape[0] - 1, out.shape[0], out, rev)
 
 
 @nb.njit(parallel=True, **_JIT)
 def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, bounds: np.ndarray,
-                padl: np.ndarray, padr: np.ndarray, byte: np.ndarray, code: np.ndarray,
-                cl: np.ndarray, crr: np.ndarray) -> None:
-    """cl[y, x] = census of left; crr[y, w-1-x] = census of right (mirrored rows).
+                padl: np.ndarray, padr: np.ndarray, offs: np.ndarray, cl: np.ndarray,
+                crr: np.ndarray) -> None:
+    """cl[y, x] = census of left; crr[y, W-1-x] = census of right (mirrored rows), W =
+    cl.shape[1]: the width rounded up to 64 (codes past the image are made too).
 
-    padl, padr: (h + ch - 1, w + cw - 1 + 64) uint8; per-thread scratch byte (n, w + 64)
-    uint8 and code (n, w) uint64; bounds: row stripes of the padded height."""
+    padl, padr: (h + ch - 1, w + cw - 1 + 64) uint8; offs: census_offsets over their rows;
+    bounds: row stripes of the padded height."""
     h, w = left.shape
     rx, ry = cw // 2, ch // 2
     for s in nb.prange(bounds.shape[0] - 1):
@@ -77,29 +65,20 @@ def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, bounds: n
         _pad_rows(right, bounds[s], bounds[s + 1], rx, ry, padr, 0)
     nstripes = bounds.shape[0] - 1
     for s in nb.prange(nstripes):
-        t = nb.get_thread_id()
         y0, y1 = h * s // nstripes, h * (s + 1) // nstripes
         for y in range(y0, y1):
-            _census_row(padl, y, cw, ch, w, byte[t], cl[y])
-            _census_row(padr, y, cw, ch, w, byte[t], code[t])
-            c, out = code[t], crr[y]
-            for x in range(w):
-                out[w - 1 - x] = c[x]
+            _census_row(padl, y, offs, cl[y], False)
+            _census_row(padr, y, offs, crr[y, :cl.shape[1]], True)
 
 
 @nb.njit(**_JIT)
 def census_row_pair(left: np.ndarray, right: np.ndarray, y: int, cw: int, ch: int,
-                    win: np.ndarray, byte: np.ndarray, code: np.ndarray, cl: np.ndarray,
-                    crr: np.ndarray) -> None:
+                    win: np.ndarray, offs: np.ndarray, cl: np.ndarray, crr: np.ndarray) -> None:
     """Row y of census_pair's output (cl[y], crr[y]) alone, for a worker that makes each row's
     codes just before it uses them. Scratch: win (ch, w + cw - 1 + 64) uint8 (the row's
-    window of the padded image), byte (w + 64) uint8, code (w) uint64."""
-    w = left.shape[1]
+    window of the padded image); offs: census_offsets over win's rows."""
     rx, ry = cw // 2, ch // 2
     _pad_rows(left, y, y + ch, rx, ry, win, y)
-    _census_row(win, 0, cw, ch, w, byte, cl[y])
+    _census_row(win, 0, offs, cl[y], False)
     _pad_rows(right, y, y + ch, rx, ry, win, y)
-    _census_row(win, 0, cw, ch, w, byte, code)
-    out = crr[y]
-    for x in range(w):
-        out[w - 1 - x] = code[x]
+    _census_row(win, 0, offs, crr[y, :cl.shape[1]], True)

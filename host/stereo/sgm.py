@@ -45,13 +45,21 @@ _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 
 @nb.njit(**_JIT)
+def _inside(X: int, md: int, nd: int) -> int:
+    """Disparities of left column X whose right pixel is in the image (k <= X - md), rounded
+    up to cost_run's 16 lanes, at most nd: the rest are the constant maxc, not computed."""
+    return min(nd, (X - md + 16) & ~15)
+
+
+@nb.njit(**_JIT)
 def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int, cols: int,
               maxc: int, out: np.ndarray) -> None:
     """out[x * nd + k] = popcount(cl[y, x0 + x] ^ census_R[y, x0 + x - md - k]), or maxc where
     that right pixel is left of the image (crr's rows run nd codes past it)."""
     w = cl.shape[1]
     for x in range(cols):
-        cost_run(cl[y, uidx(x0 + x)], crr[y], w - 1 - x0 - x + md, out, x * nd, nd)
+        cost_run(cl[y, uidx(x0 + x)], crr[y], w - 1 - x0 - x + md, out, x * nd,
+                 _inside(x0 + x, md, nd))
     for x in range(min(cols, nd - 1 - x0 + md)):  # k > x0 + x - md is outside
         out[x * nd + x0 + x - md + 1:(x + 1) * nd] = maxc
 
@@ -60,7 +68,7 @@ def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int
 def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, cur: int,
                    prv: int, i0: int, i1: int, img: np.ndarray, cfg: np.ndarray,
                    p2tab: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
-                   meta: np.ndarray, pm: np.ndarray, acc: np.ndarray) -> None:
+                   pm: np.ndarray, acc: np.ndarray) -> None:
     """acc = sum of the paths of L at row y, pixels i0 .. i1-1 in path order: the horizontal
     path (left to right for g = 0, right to left for g = 1), then (npaths 2 or 4) the
     vertical and diagonal paths arriving from the row above (g = 0) or below (g = 1), none
@@ -82,33 +90,40 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
         x = i if g == 0 else cols - 1 - i
         X = x0 + x
         # horizontal path (0, dy): predecessor x - dy on this row
-        meta[1] = hb + (i & 1) * stride + 1
-        meta[0] = hb + (1 - (i & 1)) * stride + 1
-        if npaths == 5:
-            meta[16] = kept + x * stride
-        if i == 0:
-            meta[0], meta[2], meta[3] = zero, 255, 0
-        else:
-            hm = np.int64(pm[0])
-            meta[2] = min(hm + p2tab[uidx(abs(np.int64(img[y, uidx(X)])
-                                              - img[y, uidx(X - dy)]))], 255)
-            meta[3] = hm
-        for v in range(1, vpaths):  # (dy, 0), (dy, 1), (dy, -1): predecessor (y-dy, x-dx)
-            dx = v - 1 if v < 3 else -1
-            xq = x - dx
-            o = 4 * v
-            meta[o + 1] = vb + ((cur * 3 + v - 1) * cols + x) * stride + 1
-            if first or xq < 0 or xq >= cols:
-                meta[o], meta[o + 2], meta[o + 3] = zero, 255, 0
-            else:
-                mp = np.int64(mv[prv, v - 1, uidx(xq)])
-                meta[o] = vb + ((prv * 3 + v - 1) * cols + xq) * stride + 1
-                meta[o + 2] = min(mp + p2tab[uidx(abs(np.int64(img[y, uidx(X)])
-                                                      - img[uidx(y - dy), uidx(X - dx)]))], 255)
-                meta[o + 3] = mp
-        pixel_paths(cost, x * nd, lbuf, meta, npaths, p1, acc, x * nd, nd, pm)
+        po, pv, mp = zero, np.int64(255), np.int64(0)
+        if i > 0:
+            mp = np.int64(pm[0])
+            po = hb + (1 - (i & 1)) * stride + 1
+            pv = min(mp + p2tab[uidx(abs(np.int64(img[y, uidx(X)]) - img[y, uidx(X - dy)]))],
+                     255)
+        hz = (po, hb + (i & 1) * stride + 1, pv, mp)
+        # (dy, 0), (dy, 1), (dy, -1): predecessor (y - dy, x - dx)
+        v1 = _vertical_meta(1, 0, first, x, X, y, dy, cur, prv, vb, zero, cols, stride, img,
+                            p2tab, mv)
+        v2 = v3 = v1
+        if vpaths > 2:
+            v2 = _vertical_meta(2, 1, first, x, X, y, dy, cur, prv, vb, zero, cols, stride,
+                                img, p2tab, mv)
+            v3 = _vertical_meta(3, -1, first, x, X, y, dy, cur, prv, vb, zero, cols, stride,
+                                img, p2tab, mv)
+        pixel_paths(cost, x * nd, lbuf, hz + v1 + v2 + v3 + (kept + x * stride,), npaths, p1, acc, x * nd, nd, pm)
         for v in range(1, vpaths):
             mv[cur, v - 1, uidx(x)] = pm[v]
+
+
+@nb.njit(inline="always", **_JIT)
+def _vertical_meta(v: int, dx: int, first: bool, x: int, X: int, y: int, dy: int, cur: int,
+                   prv: int, vb: int, zero: int, cols: int, stride: int, img: np.ndarray,
+                   p2tab: np.ndarray, mv: np.ndarray) -> tuple[int, int, int, int]:
+    """pixel_paths' (po, oo, p2m, mprev) of vertical/diagonal path v (_aggregate_row)."""
+    xq = x - dx
+    oo = vb + ((cur * 3 + v - 1) * cols + x) * stride + 1
+    if first or xq < 0 or xq >= cols:
+        return zero, oo, np.int64(255), np.int64(0)
+    mp = np.int64(mv[prv, v - 1, uidx(xq)])
+    return (vb + ((prv * 3 + v - 1) * cols + xq) * stride + 1, oo,
+            min(mp + p2tab[uidx(abs(np.int64(img[y, uidx(X)])
+                                    - img[uidx(y - dy), uidx(X - dx)]))], 255), mp)
 
 
 @nb.njit(**_JIT)
@@ -128,7 +143,7 @@ def _kept_row(g: int, y: int, hb: int, img: np.ndarray, cl: np.ndarray, crr: np.
     for i in range(cols):
         x = i if g == 0 else cols - 1 - i
         X = x0 + x
-        cost_run(cl[y, uidx(X)], crr[y], w - 1 - X + md, cost, x * nd, nd)
+        cost_run(cl[y, uidx(X)], crr[y], w - 1 - X + md, cost, x * nd, _inside(X, md, nd))
         if x < outside:
             cost[x * nd + X - md + 1:(x + 1) * nd] = maxc
         if i == 0:
@@ -186,7 +201,7 @@ def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray | N
 def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
            p2tab: np.ndarray, parked: np.ndarray, locks: np.ndarray, done: np.ndarray,
            disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
-           meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
+           pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
            rarg: np.ndarray, karg: np.ndarray) -> None:
     """Every row of group g (see the module docstring)."""
     h = img.shape[0]
@@ -196,7 +211,7 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
         _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
         _aggregate_row(g, y, step == 0, 2 if cfg[C_PATHS] == 4 else 4, 0, 3 * (nd + 2),
                        step & 1, 1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf, mv,
-                       meta, pm, acc)
+                       pm, acc)
         n = 0
         while not try_lock(locks, y):
             n += 1
@@ -213,7 +228,7 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
 @nb.njit(parallel=True, **_JIT)
 def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
              p2tab: np.ndarray, parked: np.ndarray, locks: np.ndarray, done: np.ndarray,
-             disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
+             disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
              pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
              karg: np.ndarray) -> None:
     """Disparity rows (before the speckle filter) of the census pair (cl, crr mirrored).
@@ -221,7 +236,7 @@ def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
     Scratch has one slice per group (leading axis 2); locks and done must be zero."""
     for g in nb.prange(2):
         _group(g, img, cl, crr, cfg, p2tab, parked, locks, done, disp, cost[g], lbuf[g], mv[g],
-               meta[g], pm[g], acc[g], rmin[g], rarg[g], karg[g])
+               pm[g], acc[g], rmin[g], rarg[g], karg[g])
 
 
 BAND = 32  # columns a row publishes its progress after (single-pass mode)
@@ -232,14 +247,14 @@ NXT_STRIDE = 16  # nxt[c * NXT_STRIDE]: chain c's next row, each on its own cach
 @nb.njit(**_JIT)
 def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndarray,
                cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray,
-               prog: np.ndarray, disp: np.ndarray, win: np.ndarray, byte: np.ndarray,
-               code: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
-               meta: np.ndarray, pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
+               prog: np.ndarray, disp: np.ndarray, win: np.ndarray, offs: np.ndarray,
+               cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+               pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
                rarg: np.ndarray, karg: np.ndarray) -> None:
     """Row j of chain c (c = 0: the top half top-down, paths from above; c = 1: the bottom
-    half bottom-up, paths from below): the row's census codes (census_row_pair; win, byte,
-    code its scratch), cost row, one horizontal path kept per column in lbuf,
-    then in the other horizontal direction the other four paths plus the kept one into acc,
+    half bottom-up, paths from below): the row's census codes (census_row_pair; win its
+    scratch, offs its table), cost row, one horizontal path kept per column in lbuf, then
+    in the other horizontal direction the other four paths plus the kept one into acc,
     band by band once the chain's previous row has published (prog) the columns the band
     reads; then the selection. hb: this worker's horizontal-path area (cols + 3 runs); vb:
     the chain's three row slots of three paths."""
@@ -247,7 +262,7 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndar
     cols = cfg[C_COLS]
     dy = 1 - 2 * c
     y = j if c == 0 else h - 1 - j
-    census_row_pair(img, right, y, cfg[C_CW], cfg[C_CH], win, byte, code, cl, crr)
+    census_row_pair(img, right, y, cfg[C_CW], cfg[C_CH], win, offs, cl, crr)
     _kept_row(1 - c, y, hb, img, cl, crr, cfg, p2tab, cost, lbuf)
     i = 0
     while i < cols:
@@ -259,7 +274,7 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndar
                 n += 1
                 spin_wait(n)
         _aggregate_row(c, y, j == 0, 5, hb, vb, j % 3, (j + 2) % 3, i, i1, img, cfg, p2tab,
-                       cost, lbuf, mv, meta, pm, acc)
+                       cost, lbuf, mv, pm, acc)
         store_release(prog, y, i1)
         i = i1
     _finish_row(y, cfg, acc, None, rmin, rarg, karg, disp[y])
@@ -268,8 +283,8 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndar
 @nb.njit(**_JIT)
 def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.ndarray,
                  cfg: np.ndarray, p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray,
-                 disp: np.ndarray, win: np.ndarray, byte: np.ndarray, code: np.ndarray,
-                 cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
+                 disp: np.ndarray, win: np.ndarray, offs: np.ndarray,
+                 cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                  pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
                  karg: np.ndarray, spk: tuple, workers: int) -> None:
     """Worker t: rows of chain t % 2 taken one at a time until none is left (_chain_row),
@@ -290,7 +305,7 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
             if j >= rows:
                 break
             _chain_row(c, j, hb, vbase + c * 9 * cols * stride, img, right, cl, crr, cfg, p2tab,
-                       prog, disp, win, byte, code, cost, lbuf, mv[c], meta, pm, acc, rmin,
+                       prog, disp, win, offs, cost, lbuf, mv[c], pm, acc, rmin,
                        rarg, karg)
             if fetch_add(nxt, (2 + c) * NXT_STRIDE, 1) == rows - 1 and cfg[C_SPW] > 0:
                 _speckle_half(c, top, cfg, nxt, disp, spk)
@@ -317,8 +332,8 @@ def _speckle_half(c: int, top: int, cfg: np.ndarray, nxt: np.ndarray, disp: np.n
 @nb.njit(parallel=True, **_JIT)
 def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.ndarray,
                     cfg: np.ndarray, p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray,
-                    disp: np.ndarray, win: np.ndarray, byte: np.ndarray, code: np.ndarray,
-                    cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, meta: np.ndarray,
+                    disp: np.ndarray, win: np.ndarray, offs: np.ndarray,
+                    cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                     pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
                     karg: np.ndarray, spk: tuple, workers: int) -> None:
     """Disparity map of the pair (img left, right) with five paths in one pass per half,
@@ -329,6 +344,6 @@ def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.
     worker; more workers share them row by row (_single_pass). Scratch has
     one slice per worker (leading axis, at least ``workers``); nxt and prog must be zero."""
     for t in nb.prange(workers):
-        _single_pass(t, img, right, cl, crr, cfg, p2tab, nxt, prog, disp, win[t], byte[t],
-                     code[t], cost[t], lbuf[0], mv, meta[t], pm[t], acc[t], rmin[t], rarg[t],
+        _single_pass(t, img, right, cl, crr, cfg, p2tab, nxt, prog, disp, win[t], offs,
+                     cost[t], lbuf[0], mv, pm[t], acc[t], rmin[t], rarg[t],
                      karg[t], spk, workers)

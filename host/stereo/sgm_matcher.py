@@ -9,7 +9,7 @@ import numba as nb
 import numpy as np
 
 from . import sgm as _sgm
-from .census import census_pair
+from .census import census_offsets, census_pair
 from .matcher import STRIPES_PER_THREAD, _aligned, _stripes, prepared_pair
 from .postfilter import filter_speckles
 from .sgm_params import SGMGeometry, SGMParams, sgm_geometry
@@ -44,10 +44,10 @@ class SGMMatcher:
         else:
             self.padl = np.zeros(padded, np.uint8)
             self.padr = np.zeros(padded, np.uint8)
-        self.census_byte = np.zeros((n, w + 64), np.uint8)
-        self.census_code = np.empty((n, w), np.uint64)
-        self.cl = np.empty((h, w), np.uint64)
-        self.crr = np.zeros((h, w + nd), np.uint64)  # + codes left of the image (unused)
+        self.census_offs = census_offsets(p.census_width, p.census_height, padded[1])
+        wc = (w + 63) & ~63  # census codes per row (census.census_pair)
+        self.cl = np.empty((h, wc), np.uint64)
+        self.crr = np.zeros((h, wc + nd), np.uint64)  # + codes left of the image (unused)
         cfg = np.zeros(_sgm.C_LEN, np.int64)
         cfg[[_sgm.C_ND, _sgm.C_MIND, _sgm.C_P1, _sgm.C_URATIO, _sgm.C_LRDIFF, _sgm.C_X0,
              _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV, _sgm.C_MAXC, _sgm.C_CW, _sgm.C_CH,
@@ -83,8 +83,7 @@ class SGMMatcher:
         # padding elements hold 255) and their minima
         self.cost = _aligned((n, cols * nd), np.uint8)
         # written at every pixel by every thread: each one's slice 128 bytes away from the
-        # others', never on one cache line (false sharing made two threads slower than one)
-        self.meta = np.zeros((n, 32), np.int64)  # 16 used
+        # others' (path minima), never on one cache line (false sharing made two threads slower than one)
         self.pm = np.zeros((n, 64), np.int16)  # 4 used
         self.acc = _aligned((n, cols * nd), np.int16)
         self.rmin = np.empty((n, cols + nd - 1), np.int16)
@@ -122,7 +121,7 @@ class SGMMatcher:
         chunk = nb.set_parallel_chunksize(1)
         try:
             census_pair(left, right, p.census_width, p.census_height, bounds, self.padl,
-                        self.padr, self.census_byte, self.census_code, self.cl, self.crr)
+                        self.padr, self.census_offs, self.cl, self.crr)
         finally:
             nb.set_parallel_chunksize(chunk)
 
@@ -137,15 +136,15 @@ class SGMMatcher:
         try:
             if self.params.paths == 5:
                 _sgm.sgm_single_pass(left, right, self.cl, self.crr, self.cfg, self.p2tab,
-                                     self.locks, self.done, disp, self.win, self.census_byte,
-                                     self.census_code, self.cost, self.lbuf, self.mv,
-                                     self.meta, self.pm, self.acc, self.rmin, self.rarg,
+                                     self.locks, self.done, disp, self.win, self.census_offs,
+                                     self.cost, self.lbuf, self.mv,
+                                     self.pm, self.acc, self.rmin, self.rarg,
                                      self.karg, (self.labels, self.stack, self.size,
                                                   self.parent, self.rtype),
                                      nb.get_num_threads())
                 return
             _sgm.sgm_rows(left, self.cl, self.crr, self.cfg, self.p2tab, self.parked, self.locks,
-                          self.done, disp, self.cost, self.lbuf, self.mv, self.meta, self.pm,
+                          self.done, disp, self.cost, self.lbuf, self.mv, self.pm,
                           self.acc, self.rmin, self.rarg, self.karg)
         finally:
             nb.set_parallel_chunksize(chunk)

@@ -37,9 +37,9 @@ def _i16(context, builder, sig, args, i):
 @intrinsic
 def add_argmin(typingctx, dst, di, src, si, nd):
     """dst[di+k] += src[si+k] for k < nd (src None: dst as it is); returns (m, first k with
-    dst[di+k] == m), m the minimum of the new values, in one pass: per lane the first strict
-    minimum and its index, then the smallest index among the lanes holding the overall
-    minimum."""
+    dst[di+k] == m), m the minimum of the new values: the minimum in one pass, then the
+    first chunk holding it and its first lane (a compare mask's trailing zeros), reading
+    the new values again (from L1)."""
     add = not isinstance(src, (types.NoneType, types.Omitted))
     if not (_i16_arrays(dst) and (not add or _i16_arrays(src))):
         return None
@@ -48,9 +48,9 @@ def add_argmin(typingctx, dst, di, src, si, nd):
     def codegen(context, builder, sig, args):
         st = sig.args
         div, siv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 3, 4))
+        i64 = ir.IntType(64)
         wide = ir.VectorType(_I16, 64)
         best = cgutils.alloca_once_value(builder, ir.Constant(wide, [32767] * 64))
-        bidx = cgutils.alloca_once_value(builder, ir.Constant(wide, [32767] * 64))
 
         def body(j0, n):
             vty = ir.VectorType(_I16, n)
@@ -61,25 +61,31 @@ def add_argmin(typingctx, dst, di, src, si, nd):
                                          [builder.add(siv, j0)]), vty)
                 t = builder.add(t, s)
                 _vstore(builder, t, pd)
-            ks = builder.add(_splat(builder, builder.trunc(j0, _I16), vty),
-                             ir.Constant(vty, list(range(n))))
             if n < 64:  # pad to 64 lanes with values that never win
                 pad = ir.Constant(ir.VectorType(_I32, 64), list(range(n)) + [n] * (64 - n))
                 t = builder.shuffle_vector(t, ir.Constant(vty, [32767] * n), pad)
-                ks = builder.shuffle_vector(ks, ir.Constant(vty, [32767] * n), pad)
             b = builder.load(best)
-            lt = builder.icmp_signed("<", t, b)
-            builder.store(builder.select(lt, t, b), best)
-            builder.store(builder.select(lt, ks, builder.load(bidx)), bidx)
+            builder.store(builder.select(builder.icmp_signed("<", t, b), t, b), best)
 
         _chunked(builder, ndv, body)
-        b = builder.load(best)
-        m = _reduce_min(builder, b)
-        hit = builder.icmp_signed("==", b, _splat(builder, m, wide))
-        k = _call(builder, "llvm.vector.reduce.umin.v64i16", _I16,
-                  [builder.select(hit, builder.load(bidx), ir.Constant(wide, [32767] * 64))])
-        i64 = ir.IntType(64)
-        return context.make_tuple(builder, ret, [builder.sext(m, i64), builder.zext(k, i64)])
+        m = _reduce_min(builder, builder.load(best))
+        k = cgutils.alloca_once_value(builder, ir.Constant(i64, 1 << 20))
+
+        def first(j0, n):
+            vty = ir.VectorType(_I16, n)
+            t = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(div, j0)]),
+                       vty)
+            hit = builder.zext(builder.bitcast(builder.icmp_signed("==", t, _splat(builder, m, vty)),
+                                               ir.IntType(n)), i64)
+            at = builder.add(builder.zext(j0, i64), _call(builder, "llvm.cttz.i64", i64,
+                                                          [hit, ir.Constant(ir.IntType(1), 0)]))
+            kk = builder.select(builder.icmp_unsigned("!=", hit, ir.Constant(i64, 0)), at,
+                                ir.Constant(i64, 1 << 20))
+            old = builder.load(k)
+            builder.store(builder.select(builder.icmp_unsigned("<", kk, old), kk, old), k)
+
+        _chunked(builder, ndv, first)
+        return context.make_tuple(builder, ret, [builder.sext(m, i64), builder.load(k)])
 
     return ret(dst, di, src, si, nd), codegen
 
@@ -352,7 +358,7 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
     """All path steps of one pixel (npaths 1, 2, 4, or 5: four and a fifth path's stored
     L) in one pass over the disparities:
 
-        for path v < min(npaths, 4), with (po, oo, p2m, mprev) = meta[4v : 4v+4]:
+        for path v < min(npaths, 4), (po, oo, p2m, mprev) = meta[4v : 4v+4] (meta: 17 ints):
           L_v[k] = cost[ci+k] + min(P, min(P[-1], P[+1]) +sat p1, p2m) - mprev,  P = lbuf[po+k]
           lbuf[oo+k] = L_v[k];  mins[v] = min_k L_v[k]
         acc[ai+k] = sum_v L_v[k] (+ lbuf[meta[16]+k] when npaths is 5)   (int16; not
@@ -361,8 +367,9 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
     Path costs are uint8 (the caller keeps every L <= 255 and passes p2m <= 255; the padding
     elements hold 255, and +p1 saturates), so one 512-bit register holds 64 disparities. The
     cost and the sum stay in registers across the paths."""
-    if not (_u8_arrays(cost, lbuf) and _i16_arrays(acc, mins) and isinstance(meta, types.Array)
-            and meta.dtype == types.int64):
+    if not (_u8_arrays(cost, lbuf) and _i16_arrays(acc, mins)
+            and isinstance(meta, types.UniTuple) and meta.count == 17
+            and isinstance(meta.dtype, types.Integer)):
         return None
 
     def codegen(context, builder, sig, args):
@@ -374,8 +381,8 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
         nmore = builder.icmp_signed(">", npv, ir.Constant(npv.type, 2))
         extra = builder.icmp_signed("==", npv, ir.Constant(npv.type, 5))
         p1v = context.cast(builder, args[5], st[5], types.uint8)
-        meta_v = [builder.load(_ptr(context, builder, st[3], args[3], [ir.Constant(civ.type, i)]))
-                  for i in range(17)]
+        meta_v = [context.cast(builder, builder.extract_value(args[3], i), st[3].dtype,
+                               types.intp) for i in range(17)]
         wide = ir.VectorType(u8, 64)
         best = [cgutils.alloca_once_value(builder, ir.Constant(wide, [255] * 64))
                 for _ in range(4)]
@@ -451,29 +458,79 @@ def cost_run(typingctx, a, crow, base, out, oi, nd):
     return types.none(a, crow, base, out, oi, nd), codegen
 
 
+def _zip(builder, a, b, lanes, half):
+    """Lanes half*lanes/2 .. of a and b interleaved: (a[i], b[i]) for lanes/2 indices i from
+    half * lanes / 2, as one lanes-lane vector (a two-source shuffle)."""
+    n = lanes // 2
+    idx = [k for i in range(half * n, half * n + n) for k in (i, lanes + i)]
+    return builder.shuffle_vector(a, b, ir.Constant(ir.VectorType(_I32, lanes), idx))
+
+
 @intrinsic
-def census_bits(typingctx, byte, row, ro, centre, co, bit, n):
-    """byte[x] |= bit where row[ro+x] < centre[co+x], for x < n rounded up to 64 (uint8
-    arrays; the caller pads them so that the rounded range is readable and writable)."""
-    if not (_u8_arrays(byte, row, centre) and isinstance(bit, types.Integer)):
+def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
+    """out[x] (uint64; rev: out[w - 1 - x]) for x < w, a multiple of 64: bit n set where
+    src[base + offs[1 + n] + x] < src[base + offs[0] + x], n < ncmp <= 64 (uint8 src). Per
+    64 pixels the comparisons go into eight byte vectors (one per 8 bits, in registers),
+    which three rounds of two-source shuffles turn into the 64 codes."""
+    if not (_u8_arrays(src) and isinstance(offs, types.Array) and offs.dtype == types.int64
+            and isinstance(out, types.Array) and out.dtype == types.uint64
+            and isinstance(rev, types.Boolean)):
         return None
 
     def codegen(context, builder, sig, args):
         st = sig.args
-        u8 = ir.IntType(8)
-        rov, cov, nv = (_intp(context, builder, sig, args, i) for i in (2, 4, 6))
-        bitv = context.cast(builder, args[5], st[5], types.uint8)
+        u8, i64 = ir.IntType(8), ir.IntType(64)
+        bv, ncv, wv = (_intp(context, builder, sig, args, i) for i in (1, 3, 4))
         vty = ir.VectorType(u8, 64)
-        bits, zero = _splat(builder, bitv, vty), ir.Constant(vty, None)
-        with cgutils.for_range_slice(builder, ir.Constant(nv.type, 0), nv,
-                                     ir.Constant(nv.type, 64)) as (x, _):
-            r = _vload(builder, _ptr(context, builder, st[1], args[1], [builder.add(rov, x)]),
-                       vty)
-            c = _vload(builder, _ptr(context, builder, st[3], args[3], [builder.add(cov, x)]),
-                       vty)
-            pb = _ptr(context, builder, st[0], args[0], [x])
-            hit = builder.select(builder.icmp_unsigned("<", r, c), bits, zero)
-            _vstore(builder, builder.or_(_vload(builder, pb, vty), hit), pb)
+        zero = ir.Constant(vty, None)
+        groups = builder.udiv(builder.add(ncv, ir.Constant(ncv.type, 7)),
+                              ir.Constant(ncv.type, 8))
+        last = builder.sub(ncv, ir.Constant(ncv.type, 1))
+
+        def off(n):  # base + offs[n]
+            return builder.add(bv, builder.load(_ptr(context, builder, st[2], args[2], [n])))
+
+        with cgutils.for_range_slice(builder, ir.Constant(wv.type, 0), wv,
+                                     ir.Constant(wv.type, 64)) as (x0, _):
+            centre = _vload(builder, _ptr(context, builder, st[0], args[0],
+                                          [builder.add(off(ir.Constant(ncv.type, 0)), x0)]), vty)
+            acc = []
+            for g in range(8):
+                slot = cgutils.alloca_once_value(builder, zero)
+                with builder.if_then(builder.icmp_signed(">", groups, ir.Constant(ncv.type, g))):
+                    a = zero
+                    for b in range(8):
+                        n = ir.Constant(ncv.type, 8 * g + b)
+                        ok = builder.icmp_signed("<", n, ncv)
+                        k = builder.select(ok, n, last)  # a valid comparison, masked off
+                        r = _vload(builder, _ptr(context, builder, st[0], args[0], [
+                            builder.add(off(builder.add(k, ir.Constant(ncv.type, 1))), x0)]),
+                            vty)
+                        bit = builder.select(ok, ir.Constant(u8, 1 << b), ir.Constant(u8, 0))
+                        a = builder.or_(a, builder.select(builder.icmp_unsigned("<", r, centre),
+                                                          _splat(builder, bit, vty), zero))
+                    builder.store(a, slot)
+                acc.append(builder.load(slot))
+            # bytes -> 16-bit pairs -> 32-bit quads -> 64-bit codes: code x = (acc[g][x])_g
+            pairs = [_zip(builder, acc[g], acc[g + 1], 64, h) for g in (0, 2, 4, 6)
+                     for h in (0, 1)]  # [pair][half]: 32 pixels each, 2 bytes per pixel
+            w16 = ir.VectorType(_I16, 32)
+            pairs = [builder.bitcast(v, w16) for v in pairs]
+            quads = [_zip(builder, pairs[2 * p + q // 2], pairs[2 * p + 2 + q // 2], 32, q % 2)
+                     for p in (0, 2) for q in range(4)]  # 16 pixels each, 4 bytes per pixel
+            w32 = ir.VectorType(_I32, 16)
+            quads = [builder.bitcast(v, w32) for v in quads]
+            q8 = ir.VectorType(i64, 8)
+            for c in range(8):  # 8 pixels each
+                code = builder.bitcast(_zip(builder, quads[c // 2], quads[4 + c // 2], 16, c % 2),
+                                       q8)
+                x = builder.add(x0, ir.Constant(x0.type, 8 * c))
+                flip = builder.shuffle_vector(code, code, ir.Constant(ir.VectorType(_I32, 8),
+                                                                      list(range(7, -1, -1))))
+                at = builder.select(args[6], builder.sub(builder.sub(wv, x), ir.Constant(
+                    x.type, 8)), x)
+                _vstore(builder, builder.select(args[6], flip, code),
+                        _ptr(context, builder, st[5], args[5], [at]))
         return context.get_dummy_value()
 
-    return types.none(byte, row, ro, centre, co, bit, n), codegen
+    return types.none(src, base, offs, ncmp, w, out, rev), codegen

@@ -21,7 +21,7 @@ def _costs(cl, crr, cfg, cost):
 
 
 @nb.njit(cache=True)
-def _aggregate(img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc):
+def _aggregate(img, cfg, p2tab, cost, lbuf, mv, pm, acc):
     h = img.shape[0]
     nd, cols = cfg[_sgm.C_ND], cfg[_sgm.C_COLS]
     npaths = 2 if cfg[_sgm.C_PATHS] == 4 else 4
@@ -29,7 +29,7 @@ def _aggregate(img, cfg, p2tab, cost, lbuf, mv, meta, pm, acc):
         for step in range(h):
             y = step if g == 0 else h - 1 - step
             _sgm._aggregate_row(g, y, step == 0, npaths, 0, 3 * (nd + 2), step & 1,
-                                1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf, mv, meta,
+                                1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf, mv,
                                 pm, acc)
 
 
@@ -69,7 +69,7 @@ def stage_ms(m, left: np.ndarray, repeat: int) -> dict[str, float]:
     stages = {
         "cost rows": lambda: _costs(m.cl, m.crr, m.cfg, m.cost[0]),
         "path aggregation": lambda: _aggregate(left, m.cfg, m.p2tab, m.cost[0], m.lbuf[0],
-                                               m.mv[0], m.meta[0], m.pm[0], m.acc[0]),
+                                               m.mv[0], m.pm[0], m.acc[0]),
         "sum+wta+uniq+subpix+lr": lambda: _select(m.cfg, acc, m.parked, m.rmin[0], m.rarg[0],
                                                   m.karg[0], disp),
     }
