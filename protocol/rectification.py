@@ -37,7 +37,7 @@ from .calibration import StereoCalibration
 from .params import BY_NAME
 
 _OPENCV_UNDISTORT_STEPS = 5
-_CONVERGED_STEPS = 200  # fixed-point steps stop earlier once a step moves < 1e-14
+CONVERGED_STEPS = 200  # fixed-point steps stop earlier once a step moves < 1e-14
 EQUIDISTANT_FOV_DEG = float(BY_NAME["rectified_fov"].default)
 """Default horizontal field of view (edge to edge of the image width) of a rectified equidistant view
 (the device parameter ``rectified_fov`` picks another)."""
@@ -196,7 +196,7 @@ def _pinhole_view(calib: StereoCalibration, R1: np.ndarray, R2: np.ndarray) -> t
     """Step 3 for plumb_bob / rational_polynomial: (f, cx, cy)."""
     w, h = calib.image_size
     model = calib.lens_model
-    steps = _OPENCV_UNDISTORT_STEPS if model == "plumb_bob" else _CONVERGED_STEPS
+    steps = _OPENCV_UNDISTORT_STEPS if model == "plumb_bob" else CONVERGED_STEPS
     cams = ((calib.K_left, calib.D_left, R1), (calib.K_right, calib.D_right, R2))
     f = (calib.K_left[1, 1] + calib.K_right[1, 1]) * 0.5
     corners = np.array([[0.0, 0.0], [w - 1, 0.0], [0.0, h - 1], [w - 1, h - 1]])

@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from stereocam.protocol.calibration import N_DIST
+from stereocam.protocol.rectification import CONVERGED_STEPS, viewing_rays
 
 _Args = ParamSpec("_Args")
 _Result = TypeVar("_Result")
@@ -165,6 +166,19 @@ def folds(model: str, fit: MonoFit, size: tuple[int, int]) -> bool:
     return bool(np.max(rd[:turn + 1]) < reach)
 
 
+def border_rays_finite(model: str, fit: MonoFit, size: tuple[int, int]) -> bool:
+    """Whether every border pixel (9 per side) undistorts to a finite viewing ray as the
+    rectification computes it (SPEC §12.6 step 2). A rational fit can put a pole of its distortion
+    inside the image, beyond the corners the views reached: that head has no rectification."""
+    w, h = size
+    t = np.linspace(0.0, 1.0, 9)
+    pts = np.concatenate([np.column_stack([t * (w - 1), np.zeros(9)]), np.column_stack([t * (w - 1), np.full(9, h - 1.0)]),
+                          np.column_stack([np.zeros(9), t * (h - 1)]), np.column_stack([np.full(9, w - 1.0), t * (h - 1)])])
+    with np.errstate(all="ignore"):
+        rays = viewing_rays(fit.K, fit.D, pts, CONVERGED_STEPS, model)
+    return bool(np.all(np.isfinite(rays)))
+
+
 @_one_thread
 def calibrate_mono(model: str, obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int],
                    start: MonoFit | None = None) -> MonoFit:
@@ -197,7 +211,8 @@ def calibrate_mono(model: str, obj: list[np.ndarray], img: list[np.ndarray], siz
         if not _plausible(fit, size):
             failures.append("the fit diverged")
             continue
-        rank = (folds(model, fit, size), fit.rms)  # a start whose lens folds the image loses to any other
+        # a start whose lens folds the image, or has no ray for some border pixel, loses to any other
+        rank = (folds(model, fit, size) or not border_rays_finite(model, fit, size), fit.rms)
         if best is None or rank < best[0]:
             best = (rank, fit)
     if best is None:
