@@ -1,13 +1,18 @@
 """The geometry a host gives rectified frames: derived here from the calibration read from the
 device when it changes (on open, after a calibration is written, after a reconnect), never while a
-frame is handed out, and cross-checked against what the device put in each frame."""
+frame is handed out, and cross-checked against what the device put in each frame.
+
+An equidistant (fisheye) calibration's rectified focal length also depends on the device parameter
+``rectified_fov`` (SPEC §12.6 step 3), which may change while streaming: its field of view is read
+from the focal length the frame carries, f = max(f_fov, f_in) — so a carried f below the f_in
+the calibration demands still counts as a mismatch — and cx, cy and B are checked as for every model."""
 from __future__ import annotations
 
 import math
 import threading
 
 from stereocam.protocol.calibration import StereoCalibration
-from stereocam.protocol.rectification import stereo_rectify
+from stereocam.protocol.rectification import EQUIDISTANT_FOV_DEG, stereo_rectify
 
 from .calibration_io import StoredCalibration
 from .frame_types import Frame, StereoGeometry
@@ -19,7 +24,7 @@ class FrameGeometry:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._stored: StoredCalibration | None = None
-        self._cache: dict[tuple[int, int], tuple[StereoCalibration, StereoGeometry]] = {}
+        self._cache: dict[tuple[int, int, float], tuple[StereoCalibration, StereoGeometry]] = {}
         self.mismatches = 0  # frames whose carried geometry disagreed with the stored calibration
 
     def resolve(self, stored: StoredCalibration | None) -> None:
@@ -41,13 +46,18 @@ class FrameGeometry:
             stored = self._stored
             if not frame.rectified or not cid or stored is None or stored.calibration_id != cid:
                 return frame
-            key = (frame.width, frame.height)
+            carried = frame.geometry
+            fov = EQUIDISTANT_FOV_DEG
+            if stored.calibration.lens_model == "equidistant" and carried.focal_px > 0:
+                fov = math.degrees(2.0 * math.atan(frame.width / 2 / carried.focal_px))
+            key = (frame.width, frame.height, fov)
             if key not in self._cache:
+                if len(self._cache) > 16:  # a field of view swept while streaming
+                    self._cache.clear()
                 cal = stored.calibration.scaled(frame.width, frame.height)
-                g = stereo_rectify(cal)
+                g = stereo_rectify(cal, fov)
                 self._cache[key] = (cal, StereoGeometry(g.focal_px, g.cx, g.cy, g.baseline_m, cid))
             cal, geometry = self._cache[key]
-            carried = frame.geometry
             if not (math.isclose(carried.focal_px, geometry.focal_px, rel_tol=1e-5)
                     and math.isclose(carried.baseline_m, geometry.baseline_m, rel_tol=1e-5)
                     and abs(carried.cx - geometry.cx) < 1e-3 and abs(carried.cy - geometry.cy) < 1e-3):

@@ -131,6 +131,8 @@ PARAMS: tuple[Param, ...] = (
     Param(38, "median_size", 1, 1, 5, odd=True, unit="px", description="median filter window side: 3 or 5 (1: off)"),
     Param(39, "decimation", 1, 1, 4, unit="px",
           description="median of the valid pixels of each n x n block, written to the whole block (1: off)"),
+    Param(40, "rectified_fov", 120, 30, 170, unit="deg",
+          description="equidistant (fisheye) lenses: field of view across the width of the rectified images"),
 )
 
 BY_ID: dict[int, Param] = {p.pid: p for p in PARAMS}

@@ -18,11 +18,11 @@ stereo_rectify(calib), for a horizontal head (|Tx| > |Ty| after step 1), all in 
      the sensor. plumb_bob rays come from OpenCV's 5 fixed-point steps, rational_polynomial rays from
      fixed-point steps to convergence (|Δ| < 1e-14).
      equidistant: (cx, cy) = ((W−1)/2, (H−1)/2); f = max(f_fov, f_in): f_fov = (W/2)/tan(fov/2)
-     gives the output field of view (EQUIDISTANT_FOV_DEG by default: a 180° or wider lens keeps a
-     usable pinhole view), f_in is the smallest focal whose view stays inside the inner rectangle of
-     the turned border rays (a ray at ≥ 90° from the rectified axis, z' ≤ 0, or on the far side of
-     the axis bounds nothing), so narrow equidistant lenses still show only valid pixels. Rays:
-     Newton on θ to 1e-12 rad.
+     gives the output field of view (the device parameter ``rectified_fov``, SPEC §5.1; its default
+     EQUIDISTANT_FOV_DEG lets a 180° or wider lens keep a usable pinhole view), f_in is the
+     smallest focal whose view stays inside the inner rectangle of the turned border rays (a ray
+     at ≥ 90° from the rectified axis, z' ≤ 0, or on the far side of the axis bounds nothing), so
+     narrow equidistant lenses still show only valid pixels. Rays: Newton on θ to 1e-12 rad.
   4. P1 = [f 0 cx 0; 0 f cy 0; 0 0 1 0], P2 = P1 with P2[0,3] = −f·B;
      Q = [1 0 0 −cx; 0 1 0 −cy; 0 0 0 f; 0 0 1/B 0] (Z = f·B/d).
 rectified_to_raw() is the map each camera's remap table samples (SPEC §12.6, step 5).
@@ -34,11 +34,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .calibration import StereoCalibration
+from .params import BY_NAME
 
 _OPENCV_UNDISTORT_STEPS = 5
-_CONVERGED_STEPS = 200  # fixed-point steps stop earlier once a step moves < 1e-14
-EQUIDISTANT_FOV_DEG = 120.0
-"""Default horizontal field of view (edge to edge of the image width) of a rectified equidistant view."""
+CONVERGED_STEPS = 200  # fixed-point steps stop earlier once a step moves < 1e-14
+EQUIDISTANT_FOV_DEG = float(BY_NAME["rectified_fov"].default)
+"""Default horizontal field of view (edge to edge of the image width) of a rectified equidistant view
+(the device parameter ``rectified_fov`` picks another)."""
 BORDER_SAMPLES = 9  # points per image side, corners included (OpenCV's sampling)
 
 
@@ -194,7 +196,7 @@ def _pinhole_view(calib: StereoCalibration, R1: np.ndarray, R2: np.ndarray) -> t
     """Step 3 for plumb_bob / rational_polynomial: (f, cx, cy)."""
     w, h = calib.image_size
     model = calib.lens_model
-    steps = _OPENCV_UNDISTORT_STEPS if model == "plumb_bob" else _CONVERGED_STEPS
+    steps = _OPENCV_UNDISTORT_STEPS if model == "plumb_bob" else CONVERGED_STEPS
     cams = ((calib.K_left, calib.D_left, R1), (calib.K_right, calib.D_right, R2))
     f = (calib.K_left[1, 1] + calib.K_right[1, 1]) * 0.5
     corners = np.array([[0.0, 0.0], [w - 1, 0.0], [0.0, h - 1], [w - 1, h - 1]])
@@ -232,7 +234,7 @@ def _equidistant_view(calib: StereoCalibration, R1: np.ndarray, R2: np.ndarray,
 
 def stereo_rectify(calib: StereoCalibration, fov_deg: float = EQUIDISTANT_FOV_DEG) -> RectifiedGeometry:
     """Rectified geometry of a horizontal head (see the module docstring); ``fov_deg`` is the
-    equidistant output field of view (the other models ignore it)."""
+    equidistant output field of view (the device's ``rectified_fov``; the other models ignore it)."""
     if not 0.0 < fov_deg < 180.0:
         raise ValueError(f"the rectified field of view must lie in (0, 180) degrees, got {fov_deg}")
     R1, R2, tx = _rotations(calib)

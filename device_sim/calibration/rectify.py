@@ -16,7 +16,7 @@ import numba
 import numpy as np
 
 from stereocam.protocol.calibration import StereoCalibration
-from stereocam.protocol.rectification import RectifiedGeometry, stereo_rectify
+from stereocam.protocol.rectification import EQUIDISTANT_FOV_DEG, RectifiedGeometry, stereo_rectify
 
 
 INSIDE_NONE, INSIDE_BORDER = -1, -2  # RemapPlan.index: sampled at no raw pixel / partly outside
@@ -109,9 +109,9 @@ def undistort_rectify_map(K: np.ndarray, D: np.ndarray, R: np.ndarray, P: np.nda
     return _map(ir, K[0, 0], K[1, 1], K[0, 2], K[1, 2], d, lens_model == "equidistant", size[0], size[1])
 
 
-def rectification_maps(calib: StereoCalibration) -> RectificationMaps:
-    """Geometry and remap tables for both cameras."""
-    g = stereo_rectify(calib)
+def rectification_maps(calib: StereoCalibration, fov_deg: float = EQUIDISTANT_FOV_DEG) -> RectificationMaps:
+    """Geometry and remap tables for both cameras (``fov_deg``: an equidistant lens's rectified field of view)."""
+    g = stereo_rectify(calib, fov_deg)
     lx, ly = undistort_rectify_map(calib.K_left, calib.D_left, g.R1, g.P1, g.image_size, calib.lens_model)
     rx, ry = undistort_rectify_map(calib.K_right, calib.D_right, g.R2, g.P2, g.image_size, calib.lens_model)
     return RectificationMaps(g, lx, ly, rx, ry)

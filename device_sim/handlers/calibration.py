@@ -15,6 +15,7 @@ from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import CalibrationFormatError, StereoCalibration
 from stereocam.protocol.calibration_limits import PlausibilityLimits
 from stereocam.protocol.errors import ErrorCode
+from stereocam.protocol.rectification import EQUIDISTANT_FOV_DEG
 
 from ..calibration.acceptance import usable_calibration
 from ..calibration.flash import FlashError, NorFlash
@@ -40,7 +41,7 @@ class CalibrationService:
             self.store.lock_factory()
         self._staging = bytearray()
         self._staging_total = 0
-        self._maps: dict[tuple[int, int], RectificationMaps] = {}
+        self._maps: dict[tuple[int, int, int | None], RectificationMaps] = {}
         self._lock = threading.Lock()  # the capture thread reads what requests change
         self.record: StoredRecord | None = None
         self.calibration: StereoCalibration | None = None
@@ -74,16 +75,20 @@ class CalibrationService:
     def calibration_id(self) -> int:
         return m.calib_id(self.record.body) if self.record else 0
 
-    def maps(self, width: int, height: int) -> tuple[RectificationMaps | None, int]:
-        """Rectification maps for this output format from the calibration in force (cached), and
-        that calibration's id — one consistent pair even while a write is being committed."""
+    def maps(self, width: int, height: int, fov_deg: int = int(EQUIDISTANT_FOV_DEG)
+             ) -> tuple[RectificationMaps | None, int]:
+        """Rectification maps for this output format and rectified field of view (``rectified_fov``:
+        equidistant lenses only) from the calibration in force (cached: the maps of one field of view
+        at a time), and that calibration's id — one consistent pair even while a write is being committed."""
         with self._lock:
             record, calibration = self.record, self.calibration  # set together (or neither)
             if record is None or calibration is None:
                 return None, 0
-            key = (width, height)
+            fov = fov_deg if calibration.lens_model == "equidistant" else None
+            key = (width, height, fov)
             if key not in self._maps:
-                self._maps[key] = rectification_maps(calibration.scaled(width, height))
+                self._maps = {k: v for k, v in self._maps.items() if k[2] == fov}
+                self._maps[key] = rectification_maps(calibration.scaled(width, height), fov or EQUIDISTANT_FOV_DEG)
             return self._maps[key], m.calib_id(record.body)
 
     def _state(self, cls: type[m.CalibState]) -> m.CalibState:

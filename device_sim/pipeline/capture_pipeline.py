@@ -127,7 +127,7 @@ class CapturePipeline:
         req, cfg, t, view = exp.req, exp.cfg, exp.scene_time, exp.view
         w, h = cfg["width"], cfg["height"]
         left, right = exp.left, exp.right
-        maps, calib_id = self._calibration.maps(w, h)
+        maps, calib_id = self._calibration.maps(w, h, cfg["rectified_fov"])
         if not cfg["rectify"]:
             maps = None
         outputs = Output(cfg["outputs"])

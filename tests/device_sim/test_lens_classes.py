@@ -70,3 +70,28 @@ def test_board_corners_land_where_the_lens_puts_them_and_rectify_to_equal_rows(l
     assert len(dy) >= 3
     assert np.sqrt(np.mean(np.concatenate(raw_err) ** 2)) < 0.1
     assert np.sqrt(np.mean(np.concatenate(dy) ** 2)) < 0.1
+
+
+@pytest.mark.parametrize("lens", ["fisheye", "standard"])
+def test_the_rectified_field_of_view_sets_the_focal_length_frames_carry(lens: str) -> None:
+    """Device parameter rectified_fov (SPEC §5.1, §12.6 step 3): a fisheye unit's FRAME_BEGIN f is
+    (W/2)/tan(fov/2), changed while streaming; the host derives the same geometry (no mismatch).
+    A pinhole unit ignores it."""
+    transport = open_transport(f"sim://?seed=3&lens={lens}", 2.0)
+    with Camera(transport, timeout=2.0) as cam:
+        cam.configure(width=320, height=240, num_disparities=16, block_size=5, trigger_mode=1, outputs=4)
+        cam.start()
+        focal = {}
+        for fov in (60, 90):
+            cam.configure(rectified_fov=fov)
+            cam.trigger()
+            f = cam.get_frame(timeout=30)
+            assert f.rectified
+            focal[fov] = f.geometry.focal_px
+        cam.stop()
+        assert cam.geometry_mismatches == 0
+    if lens == "fisheye":
+        for fov, f in focal.items():
+            assert f == pytest.approx(160 / np.tan(np.radians(fov) / 2), rel=1e-5)
+    else:
+        assert focal[60] == focal[90]

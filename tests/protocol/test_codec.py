@@ -960,8 +960,8 @@ def test_stats_dropped_sums_every_loss_counter() -> None:
 def test_param_ids_and_names_are_unique_and_sane() -> None:
     ids = [p.pid for p in PARAMS]
     names = [p.name for p in PARAMS]
-    assert len(set(ids)) == len(ids) == 38
-    assert ids == [*range(1, 20), *range(21, 40)]  # 1.1 appended 21 and retired 20, 1.2 22..29, 1.3 30..39
+    assert len(set(ids)) == len(ids) == 39
+    assert ids == [*range(1, 20), *range(21, 41)]  # 1.1 appended 21 and retired 20, 1.2 22..29, 1.3 30..40
     assert len(set(names)) == len(names)
     assert all(1 <= i <= 0xFFFF for i in ids)  # 0 means "no parameter" in a NACK
     assert BY_ID[10].name == "min_disparity" and BY_NAME["width"].pid == 1

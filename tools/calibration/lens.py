@@ -10,7 +10,8 @@ Each model is fitted on its own terms, from several starts, and the start with t
                        K of an equidistant fit of the same views (the start that holds on
                        strongly distorted wide-angle lenses, where a 5-coefficient fit fails);
   equidistant          the caller's K, OpenCV's fisheye start (f = max(W, H) / pi, a ~180 degree
-                       lens) and the focal length of the board homographies (narrow lenses).
+                       lens; given as a guess, fisheye_start) and the focal length of the board
+                       homographies (narrow lenses).
 Stereo: cv2.stereoCalibrate / cv2.fisheye.stereoCalibrate with fixed intrinsics. Points are
 undistorted to convergence (100 iterations or 1e-12), never with OpenCV's default few steps.
 """
@@ -25,6 +26,7 @@ import cv2
 import numpy as np
 
 from stereocam.protocol.calibration import N_DIST
+from stereocam.protocol.rectification import CONVERGED_STEPS, viewing_rays
 
 _Args = ParamSpec("_Args")
 _Result = TypeVar("_Result")
@@ -100,15 +102,26 @@ def homography_K(obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, 
     return K
 
 
-def _fisheye_once(obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int], K0: np.ndarray | None
-                  ) -> MonoFit:
+def _fisheye_once(obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int], K0: np.ndarray | None,
+                  D0: np.ndarray | None = None) -> MonoFit:
     flags = _fisheye_flag("CALIB_RECOMPUTE_EXTRINSIC") | _fisheye_flag("CALIB_FIX_SKEW")
     if K0 is not None:
         flags |= _fisheye_flag("CALIB_USE_INTRINSIC_GUESS")
         K0 = np.array(K0, np.float64)
     o, i = _fisheye_pts(obj, 3), _fisheye_pts(img, 2)
-    rms, K, D, rvecs, tvecs = cv2.fisheye.calibrate(o, i, size, K0, np.zeros(4), flags=flags, criteria=SOLVE)
+    d0 = np.zeros(4) if D0 is None else np.array(D0, np.float64).reshape(4)
+    rms, K, D, rvecs, tvecs = cv2.fisheye.calibrate(o, i, size, K0, d0, flags=flags, criteria=SOLVE)
     return MonoFit(float(rms), K, D.ravel(), _per_view_fisheye(o, i, rvecs, tvecs, K, D))
+
+
+def fisheye_start(size: tuple[int, int]) -> np.ndarray:
+    """OpenCV's fisheye start, f = max(W, H) / pi (a ~180 degree lens) at the image centre, as an
+    explicit guess: left to OpenCV (no CALIB_USE_INTRINSIC_GUESS) the same start failed one solve in
+    three on random subsets of a 180 degree unit's 640x480 views (InitExtrinsics asserts when an
+    iteration steps the lens to where a view's corners have no pinhole image); given, none of 30."""
+    w, h = size
+    f = max(w, h) / np.pi
+    return np.array([[f, 0.0, (w - 1) / 2], [0.0, f, (h - 1) / 2], [0.0, 0.0, 1.0]])
 
 
 def _pinhole_once(model: str, obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int],
@@ -153,6 +166,19 @@ def folds(model: str, fit: MonoFit, size: tuple[int, int]) -> bool:
     return bool(np.max(rd[:turn + 1]) < reach)
 
 
+def border_rays_finite(model: str, fit: MonoFit, size: tuple[int, int]) -> bool:
+    """Whether every border pixel (9 per side) undistorts to a finite viewing ray as the
+    rectification computes it (SPEC §12.6 step 2). A rational fit can put a pole of its distortion
+    inside the image, beyond the corners the views reached: that head has no rectification."""
+    w, h = size
+    t = np.linspace(0.0, 1.0, 9)
+    pts = np.concatenate([np.column_stack([t * (w - 1), np.zeros(9)]), np.column_stack([t * (w - 1), np.full(9, h - 1.0)]),
+                          np.column_stack([np.zeros(9), t * (h - 1)]), np.column_stack([np.full(9, w - 1.0), t * (h - 1)])])
+    with np.errstate(all="ignore"):
+        rays = viewing_rays(fit.K, fit.D, pts, CONVERGED_STEPS, model)
+    return bool(np.all(np.isfinite(rays)))
+
+
 @_one_thread
 def calibrate_mono(model: str, obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int],
                    start: MonoFit | None = None) -> MonoFit:
@@ -170,7 +196,7 @@ def calibrate_mono(model: str, obj: list[np.ndarray], img: list[np.ndarray], siz
     elif model == "equidistant":
         if start is not None:
             starts.append(lambda: _fisheye_once(obj, img, size, start.K))
-        starts.append(lambda: _fisheye_once(obj, img, size, None))
+        starts.append(lambda: _fisheye_once(obj, img, size, fisheye_start(size)))
         starts.append(lambda: _fisheye_once(obj, img, size, homography_K(obj, img, size)))
     else:
         raise LensSolveError(f"unknown lens model {model!r}")
@@ -185,7 +211,8 @@ def calibrate_mono(model: str, obj: list[np.ndarray], img: list[np.ndarray], siz
         if not _plausible(fit, size):
             failures.append("the fit diverged")
             continue
-        rank = (folds(model, fit, size), fit.rms)  # a start whose lens folds the image loses to any other
+        # a start whose lens folds the image, or has no ray for some border pixel, loses to any other
+        rank = (folds(model, fit, size) or not border_rays_finite(model, fit, size), fit.rms)
         if best is None or rank < best[0]:
             best = (rank, fit)
     if best is None:

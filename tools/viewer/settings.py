@@ -12,7 +12,7 @@ GROUPS = ("capture", "matching", "post-processing", "trigger", "link")
 OTHER = "other"
 _BY_NAME = {
     "width": "capture", "height": "capture", "fps": "capture", "exposure_us": "capture", "gain": "capture",
-    "outputs": "capture", "rectify": "capture",
+    "outputs": "capture", "rectify": "capture", "rectified_fov": "capture",
     "algorithm": "matching", "num_disparities": "matching", "block_size": "matching", "min_disparity": "matching",
     "texture_threshold": "matching", "uniqueness_ratio": "matching",
     "speckle_window_size": "post-processing", "speckle_range": "post-processing",

@@ -16,7 +16,8 @@ from stereocam.device_sim.calibration.truth import true_calibration
 from stereocam.tools import cli
 from stereocam.tools.calibration import calibrate
 from stereocam.tools.calibration.solve import (
-    BoardNotFoundError, CalibrationError, SolveConfig, TooFewViewsError, calibrate_pairs,
+    BoardNotFoundError, CalibrationError, SolveConfig, TooFewViewsError, calibrate_pairs, choose_detector,
+    match_detections,
 )
 from stereocam.tools.calibration.coverage import CoverageSelector, view_params
 from stereocam.tools.calibration.boards import detect_all
@@ -76,10 +77,10 @@ def test_metric_definitions(pairs) -> None:
     # all-pairs epipolar RMS: recompute from scratch with the stored geometry, converged undistortion
     c, r = res.calibration, res.rectification
     dy = []
-    for v in used:
-        cl, cr = (detect_all(img, BOARD)["classic"].image_points for img in pairs[v.index])
-        if np.dot(cl[-1] - cl[0], cr[-1] - cr[0]) < 0:
-            cr = cr[::-1]
+    found = [(v.index, v.label, *(detect_all(img, BOARD) for img in pairs[v.index])) for v in used]
+    order = (choose_detector(found, c.image_size),)  # the detector the solver used for the set
+    for _, _, dl, dr in found:
+        _, cl, cr = match_detections(dl, dr, BOARD, order)
         crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
         yl = cv2.undistortPoints(cl.reshape(-1, 1, 2).astype(float), c.K_left, c.D_left,
                                  R=r.R1, criteria=crit)[:, 0, 1]

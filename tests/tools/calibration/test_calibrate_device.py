@@ -203,16 +203,19 @@ def test_an_unplug_during_the_write_is_followed_by_a_read_back_that_says_what_th
 
 
 @pytest.mark.slow
-@pytest.mark.measurement  # the 640x480 flow is 0.1 to 1.1 % off the truth run to run: `make measure`
-@pytest.mark.parametrize("lens, model, seed", [("wide", "rational_polynomial", 73)])
+@pytest.mark.measurement  # `make measure`: see the docstring
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("lens, model, seed", [("wide", "rational_polynomial", 73), ("fisheye", "equidistant", 73)])
 def test_wide_angle_units_calibrate_to_their_truth_and_rectify_on_board(tmp_path, lens, model, seed):
-    """The whole device flow on a 120° unit: capture, calibrate, write, rectify on board. Small: 640x480,
-    the lens model named (cheaper than the automatic choice). The fisheye unit is measured by
-    ``stereocam bench device-calibration --lens wide --lens fisheye`` (full size, 0.2 % target): at
-    640x480 its held-out epipolar error varies with the frames caught (0.08 to 0.16 px); the wide
-    unit's from 0.05 to 0.14 px and its focal 0.1 to 1.1 % off, as the frames caught differ run to run
-    (issue 19 not met): measured by `make measure` against the issue's 0.2 % / 0.1 px targets, not
-    part of `make test`."""
+    """Issue 19 on a 120° and a 180° unit: the whole device flow (capture, calibrate, write, rectify on
+    board) within 0.2 % of the truth, held-out epipolar < 0.1 px, rectified board corners < 0.1 px
+    apart vertically. Small: 640x480, the lens model named (cheaper than the automatic choice).
+    Other seeds: ``stereocam bench device-calibration --size 640x480 --lens wide --lens fisheye``.
+    A measurement, out of `make test`: the bench's 6 units (seeds 1, 2, 73 of both lenses) and 22
+    sets of frames solved offline all met the targets (at worst 0.09 % / 0.09 px), and the fisheye
+    case here passes; but 2 of 4 runs of the wide case here (20 fps, other frames caught) ended in
+    rational fits whose border pixels have no usable ray ("rectification gives no usable view": the
+    solver fails, nothing written), and on a loaded 2-core host the fisheye case takes ~5 minutes."""
     sim = SimulatedCamera(serial=f"LENS-{lens}", seed=seed, flash_path=tmp_path / "u.flash", factory_calibrated=False,
                           scene="board", lens=lens)
     with Camera(InProcessTransport(sim), timeout=2.0) as cam:
