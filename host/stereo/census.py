@@ -1,19 +1,71 @@
 """Census transform of a stereo pair (numba, parallel over row stripes).
 
 Bit per window neighbour (centre excluded): neighbour darker than the centre; the image is
-extended by edge replication. Comparisons are made 64 pixels at a time into bytes (8
-neighbours per byte), which are then shifted into place in the uint64 codes. The right image's
-codes are stored mirrored along each row, so that the right pixels X - d of a left pixel X are
-contiguous and ascending in d.
+extended by edge replication. With a margin t > 0 a bit is kept only where the 3x3 binomial
+smoothing of the image differs between neighbour and centre by more than t: on flat,
+noise-dominated areas the codes are then mostly zero in both eyes, so the matching cost is flat
+there and the paths carry the disparity in from the edges instead of summing noise.
+``noise_margin`` picks t from the image's own noise (median |3x3 Laplacian| //
+MARGIN_DIVISOR): 0 on a clean image (plain census), 2-3 DN on the simulator's sensor.
+
+Comparisons are made 64 pixels at a time into bytes (8 neighbours per byte), which are then
+shifted into place in the uint64 codes. The right image's codes are stored mirrored along each
+row, so that the right pixels X - d of a left pixel X are contiguous and ascending in d.
 """
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
 
+from .sgm_params import MARGIN_DIVISOR
 from .sgm_simd import census_bits
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
+LAPLACIAN_MAX = 16 * 255  # largest |3x3 Laplacian| of a uint8 image
+
+
+@nb.njit(**_JIT)
+def laplacian_median(img: np.ndarray) -> int:
+    """Lower median of |L| over the interior pixels, L the 3x3 Laplacian [1 -2 1; -2 4 -2;
+    1 -2 1] (Immerkaer's noise operator: sigma ~ 0.247 * median); 0 without interior."""
+    h, w = img.shape
+    n = (h - 2) * (w - 2)
+    if h < 3 or w < 3:
+        return 0
+    hist = np.zeros(LAPLACIAN_MAX + 1, np.int64)
+    for y in range(1, h - 1):
+        a, b, c = img[y - 1], img[y], img[y + 1]
+        for x in range(1, w - 1):
+            r = (np.int32(a[x - 1]) - 2 * np.int32(a[x]) + np.int32(a[x + 1])
+                 - 2 * np.int32(b[x - 1]) + 4 * np.int32(b[x]) - 2 * np.int32(b[x + 1])
+                 + np.int32(c[x - 1]) - 2 * np.int32(c[x]) + np.int32(c[x + 1]))
+            hist[abs(r)] += 1
+    seen = 0
+    for v in range(LAPLACIAN_MAX + 1):
+        seen += hist[v]
+        if 2 * seen >= n:
+            return v
+    return LAPLACIAN_MAX
+
+
+def noise_margin(img: np.ndarray) -> int:
+    """The automatic census margin of ``img`` (SGMParams.census_margin < 0)."""
+    return int(laplacian_median(img)) // MARGIN_DIVISOR
+
+
+@nb.njit(**_JIT)
+def _smooth_rows(img: np.ndarray, y0: int, y1: int, out: np.ndarray) -> None:
+    """Rows y0 .. y1-1 of the 3x3 binomial smoothing ((sum + 8) >> 4), edges replicated."""
+    h, w = img.shape
+    for y in range(y0, y1):
+        a, b, c = img[max(y - 1, 0)], img[y], img[min(y + 1, h - 1)]
+        row = out[y]
+        for x in range(w):
+            xm, xp = max(x - 1, 0), min(x + 1, w - 1)
+            s = (np.int32(a[xm]) + 2 * np.int32(a[x]) + np.int32(a[xp])
+                 + 2 * (np.int32(b[xm]) + 2 * np.int32(b[x]) + np.int32(b[xp]))
+                 + np.int32(c[xm]) + 2 * np.int32(c[x]) + np.int32(c[xp]))
+            row[x] = np.uint8((s + 8) >> 4)
 
 
 @nb.njit(**_JIT)
@@ -32,18 +84,32 @@ def _pad_rows(img: np.ndarray, y0: int, y1: int, rx: int, ry: int, out: np.ndarr
 
 
 @nb.njit(**_JIT)
-def _flush(byte: np.ndarray, group: int, w: int, code: np.ndarray) -> None:
+def _flush(byte: np.ndarray, mbyte: np.ndarray, masked: bool, group: int, w: int,
+           code: np.ndarray) -> None:
     s = np.uint64(8 * group)
-    for x in range(w):
-        code[x] |= np.uint64(byte[x]) << s
+    if masked:
+        for x in range(w):
+            code[x] |= np.uint64(byte[x] & mbyte[x]) << s
+    else:
+        for x in range(w):
+            code[x] |= np.uint64(byte[x]) << s
 
 
 @nb.njit(**_JIT)
-def _census_row(pad: np.ndarray, y: int, cw: int, ch: int, w: int, byte: np.ndarray,
+def _census_row(pad: np.ndarray, spad: np.ndarray, y: int, cw: int, ch: int, w: int, t: int,
+                byte: np.ndarray, mbyte: np.ndarray, hi: np.ndarray, lo: np.ndarray,
                 code: np.ndarray) -> None:
-    """Census codes of row y into code[0:w] from the padded image."""
+    """Census codes of row y into code[0:w] from the padded image (and, margin t > 0, the
+    padded smoothed image spad: a bit needs |spad neighbour - spad centre| > t)."""
     rx, ry = cw // 2, ch // 2
     centre = pad[y + ry]
+    masked = t > 0
+    if masked:
+        sc = spad[y + ry]
+        for x in range(sc.shape[0]):
+            v = np.int32(sc[x])
+            hi[x] = np.uint8(min(v + t, 255))
+            lo[x] = np.uint8(max(v - t, 0))
     code[:w] = 0
     n = 0  # comparisons so far; bit n of the code
     for q in range(cw * ch):
@@ -52,34 +118,56 @@ def _census_row(pad: np.ndarray, y: int, cw: int, ch: int, w: int, byte: np.ndar
             continue
         if n & 7 == 0:
             byte[:] = 0
-        census_bits(byte, pad[y + i], j, centre, rx, np.uint8(1 << (n & 7)), w)
+            if masked:
+                mbyte[:] = 0
+        bit = np.uint8(1 << (n & 7))
+        census_bits(byte, pad[y + i], j, centre, rx, bit, w)
+        if masked:
+            census_bits(mbyte, hi, rx, spad[y + i], j, bit, w)  # smoothed neighbour > centre + t
+            census_bits(mbyte, spad[y + i], j, lo, rx, bit, w)  # smoothed neighbour < centre - t
         n += 1
         if n & 7 == 0:
-            _flush(byte, (n - 1) >> 3, w, code)
+            _flush(byte, mbyte, masked, (n - 1) >> 3, w, code)
     if n & 7 != 0:
-        _flush(byte, (n - 1) >> 3, w, code)
+        _flush(byte, mbyte, masked, (n - 1) >> 3, w, code)
 
 
 @nb.njit(parallel=True, **_JIT)
-def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, bounds: np.ndarray,
-                padl: np.ndarray, padr: np.ndarray, byte: np.ndarray, code: np.ndarray,
-                cl: np.ndarray, crr: np.ndarray) -> None:
-    """cl[y, x] = census of left; crr[y, w-1-x] = census of right (mirrored rows).
+def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, tl: int, tr: int,
+                bounds: np.ndarray, padl: np.ndarray, padr: np.ndarray, smooth: np.ndarray,
+                spadl: np.ndarray, spadr: np.ndarray, byte: np.ndarray, mbyte: np.ndarray,
+                hilo: np.ndarray, code: np.ndarray, cl: np.ndarray, crr: np.ndarray) -> None:
+    """cl[y, x] = census of left with margin tl; crr[y, w-1-x] = census of right with margin tr
+    (mirrored rows).
 
-    padl, padr: (h + ch - 1, w + cw - 1 + 64) uint8; per-thread scratch byte (n, w + 64)
-    uint8 and code (n, w) uint64; bounds: row stripes of the padded height."""
+    padl, padr, spadl, spadr: (h + ch - 1, w + cw - 1 + 64) uint8; smooth: (2, h, w) uint8;
+    per-thread scratch byte and mbyte (n, w + 64) uint8, hilo (n, 2, padded width) uint8 and
+    code (n, w) uint64; bounds: row stripes of the padded height."""
     h, w = left.shape
     rx, ry = cw // 2, ch // 2
-    for s in nb.prange(bounds.shape[0] - 1):
+    nstripes = bounds.shape[0] - 1
+    for s in nb.prange(nstripes):
         _pad_rows(left, bounds[s], bounds[s + 1], rx, ry, padl)
         _pad_rows(right, bounds[s], bounds[s + 1], rx, ry, padr)
-    nstripes = bounds.shape[0] - 1
+        y0, y1 = h * s // nstripes, h * (s + 1) // nstripes
+        if tl > 0:
+            _smooth_rows(left, y0, y1, smooth[0])
+        if tr > 0:
+            _smooth_rows(right, y0, y1, smooth[1])
+    if tl > 0 or tr > 0:
+        for s in nb.prange(nstripes):
+            if tl > 0:
+                _pad_rows(smooth[0], bounds[s], bounds[s + 1], rx, ry, spadl)
+            if tr > 0:
+                _pad_rows(smooth[1], bounds[s], bounds[s + 1], rx, ry, spadr)
     for s in nb.prange(nstripes):
         t = nb.get_thread_id()
         y0, y1 = h * s // nstripes, h * (s + 1) // nstripes
         for y in range(y0, y1):
-            _census_row(padl, y, cw, ch, w, byte[t], cl[y])
-            _census_row(padr, y, cw, ch, w, byte[t], code[t])
+            _census_row(padl, spadl, y, cw, ch, w, tl, byte[t], mbyte[t], hilo[t, 0],
+                        hilo[t, 1], cl[y])
+            _census_row(padr, spadr, y, cw, ch, w, tr, byte[t], mbyte[t], hilo[t, 0],
+                        hilo[t, 1], code[t])
             c, out = code[t], crr[y]
             for x in range(w):
                 out[w - 1 - x] = c[x]

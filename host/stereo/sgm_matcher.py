@@ -8,7 +8,7 @@ import numba as nb
 import numpy as np
 
 from . import sgm as _sgm
-from .census import census_pair
+from .census import census_pair, noise_margin
 from .matcher import STRIPES_PER_THREAD, _aligned, _stripes, prepared_pair
 from .postfilter import filter_speckles
 from .sgm_params import SGMGeometry, SGMParams, sgm_geometry
@@ -40,7 +40,12 @@ class SGMMatcher:
         padded = (h + p.census_height - 1, w + p.census_width - 1 + 64)  # + vector slack
         self.padl = np.zeros(padded, np.uint8)
         self.padr = np.zeros(padded, np.uint8)
+        self.smooth = np.zeros((2, h, w), np.uint8)  # census margin: the smoothed pair
+        self.spadl = np.zeros(padded, np.uint8)
+        self.spadr = np.zeros(padded, np.uint8)
         self.census_byte = np.zeros((n, w + 64), np.uint8)
+        self.census_mbyte = np.zeros((n, w + 64), np.uint8)
+        self.census_hilo = np.zeros((n, 2, padded[1]), np.uint8)
         self.census_code = np.empty((n, w), np.uint64)
         self.cl = np.empty((h, w), np.uint64)
         self.crr = np.zeros((h, w + nd), np.uint64)  # + codes left of the image (unused)
@@ -106,14 +111,21 @@ class SGMMatcher:
                                 self.labels, self.stack, self.rtype)
         return disp
 
+    def margins(self, left: np.ndarray, right: np.ndarray) -> tuple[int, int]:
+        """The census margins of the left and right image (SGMParams.census_margin)."""
+        m = self.params.census_margin
+        return (noise_margin(left), noise_margin(right)) if m < 0 else (m, m)
+
     def run_census(self, left: np.ndarray, right: np.ndarray) -> None:
         """Census codes of the pair into self.cl and self.crr (mirrored rows)."""
         p = self.params
+        tl, tr = self.margins(left, right)
         bounds = _stripes(0, self.padl.shape[0], STRIPES_PER_THREAD * nb.get_num_threads())
         chunk = nb.set_parallel_chunksize(1)
         try:
-            census_pair(left, right, p.census_width, p.census_height, bounds, self.padl,
-                        self.padr, self.census_byte, self.census_code, self.cl, self.crr)
+            census_pair(left, right, p.census_width, p.census_height, tl, tr, bounds, self.padl,
+                        self.padr, self.smooth, self.spadl, self.spadr, self.census_byte,
+                        self.census_mbyte, self.census_hilo, self.census_code, self.cl, self.crr)
         finally:
             nb.set_parallel_chunksize(chunk)
 
