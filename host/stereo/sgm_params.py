@@ -72,7 +72,8 @@ class SGMParams:
         if self.p2 < 0 or self.max_cost + self.p2 > PATH_COST_LIMIT:
             raise ConfigError(f"p2 {self.p2} out of range: 0 <= p2 and census bits {self.max_cost} + p2 "
                               f"<= {PATH_COST_LIMIT}")
-        if not -1 <= self.census_margin <= MARGIN_MAX:
+        if isinstance(self.census_margin, bool) or not isinstance(self.census_margin, int) \
+                or not -1 <= self.census_margin <= MARGIN_MAX:
             raise ConfigError(f"census_margin must be -1 (from the image's noise) or 0..{MARGIN_MAX}, "
                               f"got {self.census_margin}")
         if self.p2_adapt < 0:
