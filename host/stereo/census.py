@@ -18,22 +18,25 @@ import numba as nb
 import numpy as np
 
 from .sgm_params import MARGIN_DIVISOR
+from .census_simd import census_bits_masked
 from .sgm_simd import census_bits
 
 _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 LAPLACIAN_MAX = 16 * 255  # largest |3x3 Laplacian| of a uint8 image
+LAPLACIAN_ROW_STEP = 4  # the noise estimate reads every 4th row
 
 
 @nb.njit(**_JIT)
 def laplacian_median(img: np.ndarray) -> int:
-    """Lower median of |L| over the interior pixels, L the 3x3 Laplacian [1 -2 1; -2 4 -2;
-    1 -2 1] (Immerkaer's noise operator: sigma ~ 0.247 * median); 0 without interior."""
+    """Lower median of |L| over the interior pixels of rows 1, 1 + LAPLACIAN_ROW_STEP, ...,
+    L the 3x3 Laplacian [1 -2 1; -2 4 -2; 1 -2 1] (Immerkaer's noise operator: sigma ~ 0.247 *
+    median); 0 without interior."""
     h, w = img.shape
-    n = (h - 2) * (w - 2)
     if h < 3 or w < 3:
         return 0
+    n = ((h - 3) // LAPLACIAN_ROW_STEP + 1) * (w - 2)
     hist = np.zeros(LAPLACIAN_MAX + 1, np.int64)
-    for y in range(1, h - 1):
+    for y in range(1, h - 1, LAPLACIAN_ROW_STEP):
         a, b, c = img[y - 1], img[y], img[y + 1]
         for x in range(1, w - 1):
             r = (np.int32(a[x - 1]) - 2 * np.int32(a[x]) + np.int32(a[x + 1])
@@ -57,15 +60,15 @@ def noise_margin(img: np.ndarray) -> int:
 def _smooth_rows(img: np.ndarray, y0: int, y1: int, out: np.ndarray) -> None:
     """Rows y0 .. y1-1 of the 3x3 binomial smoothing ((sum + 8) >> 4), edges replicated."""
     h, w = img.shape
+    v = np.empty(w + 2, np.int16)  # the column sums, one replicated each side
     for y in range(y0, y1):
         a, b, c = img[max(y - 1, 0)], img[y], img[min(y + 1, h - 1)]
+        for x in range(w):
+            v[x + 1] = np.int16(a[x]) + 2 * np.int16(b[x]) + np.int16(c[x])
+        v[0], v[w + 1] = v[1], v[w]
         row = out[y]
         for x in range(w):
-            xm, xp = max(x - 1, 0), min(x + 1, w - 1)
-            s = (np.int32(a[xm]) + 2 * np.int32(a[x]) + np.int32(a[xp])
-                 + 2 * (np.int32(b[xm]) + 2 * np.int32(b[x]) + np.int32(b[xp]))
-                 + np.int32(c[xm]) + 2 * np.int32(c[x]) + np.int32(c[xp]))
-            row[x] = np.uint8((s + 8) >> 4)
+            row[x] = np.uint8((v[x] + 2 * v[x + 1] + v[x + 2] + 8) >> 4)
 
 
 @nb.njit(**_JIT)
@@ -84,32 +87,19 @@ def _pad_rows(img: np.ndarray, y0: int, y1: int, rx: int, ry: int, out: np.ndarr
 
 
 @nb.njit(**_JIT)
-def _flush(byte: np.ndarray, mbyte: np.ndarray, masked: bool, group: int, w: int,
-           code: np.ndarray) -> None:
+def _flush(byte: np.ndarray, group: int, w: int, code: np.ndarray) -> None:
     s = np.uint64(8 * group)
-    if masked:
-        for x in range(w):
-            code[x] |= np.uint64(byte[x] & mbyte[x]) << s
-    else:
-        for x in range(w):
-            code[x] |= np.uint64(byte[x]) << s
+    for x in range(w):
+        code[x] |= np.uint64(byte[x]) << s
 
 
 @nb.njit(**_JIT)
 def _census_row(pad: np.ndarray, spad: np.ndarray, y: int, cw: int, ch: int, w: int, t: int,
-                byte: np.ndarray, mbyte: np.ndarray, hi: np.ndarray, lo: np.ndarray,
-                code: np.ndarray) -> None:
+                byte: np.ndarray, code: np.ndarray) -> None:
     """Census codes of row y into code[0:w] from the padded image (and, margin t > 0, the
     padded smoothed image spad: a bit needs |spad neighbour - spad centre| > t)."""
     rx, ry = cw // 2, ch // 2
-    centre = pad[y + ry]
-    masked = t > 0
-    if masked:
-        sc = spad[y + ry]
-        for x in range(sc.shape[0]):
-            v = np.int32(sc[x])
-            hi[x] = np.uint8(min(v + t, 255))
-            lo[x] = np.uint8(max(v - t, 0))
+    centre, scentre = pad[y + ry], spad[y + ry]
     code[:w] = 0
     n = 0  # comparisons so far; bit n of the code
     for q in range(cw * ch):
@@ -118,31 +108,29 @@ def _census_row(pad: np.ndarray, spad: np.ndarray, y: int, cw: int, ch: int, w: 
             continue
         if n & 7 == 0:
             byte[:] = 0
-            if masked:
-                mbyte[:] = 0
         bit = np.uint8(1 << (n & 7))
-        census_bits(byte, pad[y + i], j, centre, rx, bit, w)
-        if masked:
-            census_bits(mbyte, hi, rx, spad[y + i], j, bit, w)  # smoothed neighbour > centre + t
-            census_bits(mbyte, spad[y + i], j, lo, rx, bit, w)  # smoothed neighbour < centre - t
+        if t > 0:
+            census_bits_masked(byte, pad[y + i], centre, spad[y + i], scentre, j, rx, t, bit, w)
+        else:
+            census_bits(byte, pad[y + i], j, centre, rx, bit, w)
         n += 1
         if n & 7 == 0:
-            _flush(byte, mbyte, masked, (n - 1) >> 3, w, code)
+            _flush(byte, (n - 1) >> 3, w, code)
     if n & 7 != 0:
-        _flush(byte, mbyte, masked, (n - 1) >> 3, w, code)
+        _flush(byte, (n - 1) >> 3, w, code)
 
 
 @nb.njit(parallel=True, **_JIT)
 def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, tl: int, tr: int,
                 bounds: np.ndarray, padl: np.ndarray, padr: np.ndarray, smooth: np.ndarray,
-                spadl: np.ndarray, spadr: np.ndarray, byte: np.ndarray, mbyte: np.ndarray,
-                hilo: np.ndarray, code: np.ndarray, cl: np.ndarray, crr: np.ndarray) -> None:
+                spadl: np.ndarray, spadr: np.ndarray, byte: np.ndarray, code: np.ndarray,
+                cl: np.ndarray, crr: np.ndarray) -> None:
     """cl[y, x] = census of left with margin tl; crr[y, w-1-x] = census of right with margin tr
     (mirrored rows).
 
     padl, padr, spadl, spadr: (h + ch - 1, w + cw - 1 + 64) uint8; smooth: (2, h, w) uint8;
-    per-thread scratch byte and mbyte (n, w + 64) uint8, hilo (n, 2, padded width) uint8 and
-    code (n, w) uint64; bounds: row stripes of the padded height."""
+    per-thread scratch byte (n, w + 64) uint8 and code (n, w) uint64; bounds: row stripes of
+    the padded height."""
     h, w = left.shape
     rx, ry = cw // 2, ch // 2
     nstripes = bounds.shape[0] - 1
@@ -164,10 +152,8 @@ def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, tl: int, 
         t = nb.get_thread_id()
         y0, y1 = h * s // nstripes, h * (s + 1) // nstripes
         for y in range(y0, y1):
-            _census_row(padl, spadl, y, cw, ch, w, tl, byte[t], mbyte[t], hilo[t, 0],
-                        hilo[t, 1], cl[y])
-            _census_row(padr, spadr, y, cw, ch, w, tr, byte[t], mbyte[t], hilo[t, 0],
-                        hilo[t, 1], code[t])
+            _census_row(padl, spadl, y, cw, ch, w, tl, byte[t], cl[y])
+            _census_row(padr, spadr, y, cw, ch, w, tr, byte[t], code[t])
             c, out = code[t], crr[y]
             for x in range(w):
                 out[w - 1 - x] = c[x]

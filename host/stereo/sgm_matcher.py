@@ -44,8 +44,6 @@ class SGMMatcher:
         self.spadl = np.zeros(padded, np.uint8)
         self.spadr = np.zeros(padded, np.uint8)
         self.census_byte = np.zeros((n, w + 64), np.uint8)
-        self.census_mbyte = np.zeros((n, w + 64), np.uint8)
-        self.census_hilo = np.zeros((n, 2, padded[1]), np.uint8)
         self.census_code = np.empty((n, w), np.uint64)
         self.cl = np.empty((h, w), np.uint64)
         self.crr = np.zeros((h, w + nd), np.uint64)  # + codes left of the image (unused)
@@ -125,7 +123,7 @@ class SGMMatcher:
         try:
             census_pair(left, right, p.census_width, p.census_height, tl, tr, bounds, self.padl,
                         self.padr, self.smooth, self.spadl, self.spadr, self.census_byte,
-                        self.census_mbyte, self.census_hilo, self.census_code, self.cl, self.crr)
+                        self.census_code, self.cl, self.crr)
         finally:
             nb.set_parallel_chunksize(chunk)
 

@@ -8,7 +8,8 @@ x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k 
    margin t > 0 a bit is kept only where S, the image's 3x3 binomial smoothing ((sum + 8) >> 4,
    edges replicated), differs between neighbour and centre by more than t (also edge-replicated).
    t = census_margin, or with census_margin < 0 per image median |3x3 Laplacian| //
-   MARGIN_DIVISOR (the lower median over interior pixels; 0 for images without any).
+   MARGIN_DIVISOR (the lower median over the interior pixels of rows 1, 1 + LAPLACIAN_ROW_STEP,
+   ...; 0 for images without interior pixels).
 2. cost C[y, x, k] = popcount(census_L[y, X] ^ census_R[y, X - d]) (Hamming distance), or the
    number of census bits (the largest cost) where X - d < 0, left of the right image.
 3. for each path direction r = (dy, dx): L_r(p) = C(p) where p - r leaves the matched
@@ -34,6 +35,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from stereocam.stereo.census import LAPLACIAN_ROW_STEP
 from stereocam.stereo.sgm_params import MARGIN_DIVISOR, SGMParams, sgm_geometry
 
 PATHS4 = [(0, 1), (0, -1), (1, 0), (-1, 0)]
@@ -50,6 +52,7 @@ def laplacian_median(img: np.ndarray) -> int:
     i = img.astype(np.int64)
     lap = (i[:-2, :-2] - 2 * i[:-2, 1:-1] + i[:-2, 2:] - 2 * i[1:-1, :-2] + 4 * i[1:-1, 1:-1]
            - 2 * i[1:-1, 2:] + i[2:, :-2] - 2 * i[2:, 1:-1] + i[2:, 2:])
+    lap = lap[::LAPLACIAN_ROW_STEP]
     return int(np.sort(np.abs(lap).ravel())[(lap.size - 1) // 2])
 
 
