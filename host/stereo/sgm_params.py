@@ -47,8 +47,9 @@ class SGMParams:
     # (census.noise_margin), 0: plain census
     paths: int = 5  # 5 (one pass per image half from its outer edge: horizontal, vertical and the
     # two diagonals from that edge), 4 (horizontal + vertical) or 8 (every direction)
-    p1: int = 15  # penalty for a 1 px disparity change between neighbours along a path
-    p2: int = 128  # penalty for a larger change
+    p1: int = 25  # penalty for a 1 px disparity change between neighbours along a path
+    p2: int = 190  # penalty for a larger change (both scaled to the margin census's
+    # cost range: bad-2.0 lower on Motorcycle and every scene class than 15 / 128)
     p2_adapt: int = 32  # > 0: P2 / (1 + |dI| / p2_adapt) along the path, not below p1 (nor
     # above p2); 0: off
     uniqueness_ratio: int = 0  # percent margin the best cost must keep over others (0: off)
