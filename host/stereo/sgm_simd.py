@@ -466,7 +466,7 @@ def _zip(builder, a, b, lanes, half):
     return builder.shuffle_vector(a, b, ir.Constant(ir.VectorType(_I32, lanes), idx))
 
 
-_USUB = "llvm.usub.sat.v64i8"  # saturating a - b: |a - b| = usub(a, b) | usub(b, a)
+_SAT = ("llvm.uadd.sat.v64i8", "llvm.usub.sat.v64i8")  # saturating a + b, a - b
 
 
 def _census_codegen(masked: bool):
@@ -496,8 +496,9 @@ def _census_codegen(masked: bool):
                                      ir.Constant(wv.type, 64)) as (x0, _):
             c0 = ir.Constant(ncv.type, 0)
             centre = load(0, bv, c0, x0)
-            if masked:
+            if masked:  # |s - sc| > t <=> s > sat(sc + t) or s < sat(sc - t)
                 scentre = load(7, sbv, c0, x0)
+                hi, lo = (_call(builder, f, vty, [scentre, tv]) for f in _SAT)
             acc = []
             for g in range(8):
                 slot = cgutils.alloca_once_value(builder, zero)
@@ -511,9 +512,8 @@ def _census_codegen(masked: bool):
                         hit = builder.icmp_unsigned("<", load(0, bv, k, x0), centre)
                         if masked:  # and |smoothed neighbour - smoothed centre| > t
                             s = load(7, sbv, k, x0)
-                            diff = builder.or_(_call(builder, _USUB, vty, [s, scentre]),
-                                               _call(builder, _USUB, vty, [scentre, s]))
-                            hit = builder.and_(hit, builder.icmp_unsigned(">", diff, tv))
+                            hit = builder.and_(hit, builder.or_(
+                                builder.icmp_unsigned(">", s, hi), builder.icmp_unsigned("<", s, lo)))
                         bit = builder.select(ok, ir.Constant(u8, 1 << b), ir.Constant(u8, 0))
                         a = builder.or_(a, builder.select(hit, _splat(builder, bit, vty), zero))
                     builder.store(a, slot)
