@@ -101,8 +101,8 @@ PARAMS: tuple[Param, ...] = (
     Param(22, "algorithm", Algorithm.BLOCK_MATCHING, min(Algorithm), max(Algorithm),
           values={Algorithm.BLOCK_MATCHING: "block_matching", Algorithm.SEMI_GLOBAL: "sgm"},
           description="0 block matching, 1 semi-global matching (census + SGM)"),
-    Param(23, "sgm_p1", 15, 0, 255, description="SGM penalty for a 1 px disparity step along a path"),
-    Param(24, "sgm_p2", 128, 0, 193,  # census bits + p2 <= 255
+    Param(23, "sgm_p1", 25, 0, 255, description="SGM penalty for a 1 px disparity step along a path"),
+    Param(24, "sgm_p2", 190, 0, 193,  # census bits + p2 <= 255
           description="SGM penalty for larger disparity steps"),
     Param(25, "sgm_p2_adapt", 32, 0, 255,
           description="SGM: p2 / (1 + |intensity step| / this), not below p1 (0: off)"),

@@ -39,9 +39,10 @@ _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 # layout of the int64 configuration vector passed to sgm_rows
 (C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_MAXC, C_CW, C_CH,
- C_SPW, C_SPR, C_LEN) = range(15)
+ C_SPW, C_SPR, C_TL, C_TR, C_LEN) = range(17)
 # C_INV: params.invalid_value; C_MAXC: params.max_cost; C_CW, C_CH: census window; C_SPW,
-# C_SPR: speckle window size (0: no speckle filter) and range
+# C_SPR: speckle window size (0: no speckle filter) and range; C_TL, C_TR: the frame's census
+# margins of the left and right image (set per frame)
 
 
 @nb.njit(**_JIT)
@@ -247,7 +248,7 @@ NXT_STRIDE = 16  # nxt[c * NXT_STRIDE]: chain c's next row, each on its own cach
 @nb.njit(**_JIT)
 def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndarray,
                cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray,
-               prog: np.ndarray, disp: np.ndarray, win: np.ndarray, offs: np.ndarray,
+               prog: np.ndarray, disp: np.ndarray, win: tuple, offs: np.ndarray,
                cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
                rarg: np.ndarray, karg: np.ndarray) -> None:
@@ -262,7 +263,8 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndar
     cols = cfg[C_COLS]
     dy = 1 - 2 * c
     y = j if c == 0 else h - 1 - j
-    census_row_pair(img, right, y, cfg[C_CW], cfg[C_CH], win, offs, cl, crr)
+    census_row_pair(img, right, y, cfg[C_CW], cfg[C_CH], cfg[C_TL], cfg[C_TR], win, offs, cl,
+                    crr)
     _kept_row(1 - c, y, hb, img, cl, crr, cfg, p2tab, cost, lbuf)
     i = 0
     while i < cols:
@@ -283,7 +285,7 @@ def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndar
 @nb.njit(**_JIT)
 def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.ndarray,
                  cfg: np.ndarray, p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray,
-                 disp: np.ndarray, win: np.ndarray, offs: np.ndarray,
+                 disp: np.ndarray, win: tuple, offs: np.ndarray,
                  cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                  pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
                  karg: np.ndarray, spk: tuple, workers: int) -> None:
@@ -332,7 +334,7 @@ def _speckle_half(c: int, top: int, cfg: np.ndarray, nxt: np.ndarray, disp: np.n
 @nb.njit(parallel=True, **_JIT)
 def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.ndarray,
                     cfg: np.ndarray, p2tab: np.ndarray, nxt: np.ndarray, prog: np.ndarray,
-                    disp: np.ndarray, win: np.ndarray, offs: np.ndarray,
+                    disp: np.ndarray, win: tuple, offs: np.ndarray,
                     cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                     pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
                     karg: np.ndarray, spk: tuple, workers: int) -> None:
@@ -342,8 +344,10 @@ def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.
     two horizontal ones, and from above (top half, rows < ceil(h / 2)) or from below (the
     rest) the vertical and both diagonals. The halves are independent chains, one per
     worker; more workers share them row by row (_single_pass). Scratch has
-    one slice per worker (leading axis, at least ``workers``); nxt and prog must be zero."""
+    one slice per worker (leading axis, at least ``workers``; win: census_row_pair's raw,
+    smooth and key, keys -1); nxt and prog must be zero."""
     for t in nb.prange(workers):
-        _single_pass(t, img, right, cl, crr, cfg, p2tab, nxt, prog, disp, win[t], offs,
+        _single_pass(t, img, right, cl, crr, cfg, p2tab, nxt, prog, disp,
+                     (win[0][t], win[1][t], win[2][t]), offs,
                      cost[t], lbuf[0], mv, pm[t], acc[t], rmin[t], rarg[t],
                      karg[t], spk, workers)

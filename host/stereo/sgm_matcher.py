@@ -9,7 +9,7 @@ import numba as nb
 import numpy as np
 
 from . import sgm as _sgm
-from .census import census_offsets, census_pair
+from .census import census_offsets, census_pair, noise_margin
 from .matcher import STRIPES_PER_THREAD, _aligned, _stripes, prepared_pair
 from .postfilter import filter_speckles
 from .sgm_params import SGMGeometry, SGMParams, sgm_geometry
@@ -39,11 +39,16 @@ class SGMMatcher:
         nd, cols = p.num_disparities, g.cols
         n = max(1, nb.config.NUMBA_NUM_THREADS)  # numba.get_thread_id() < this
         padded = (h + p.census_height - 1, w + p.census_width - 1 + 64)  # + vector slack
-        if p.paths == 5:  # per worker, the padded window of the row it makes codes for
+        if p.paths == 5:  # per worker, the padded window of the row it makes codes for, and
+            # with a census margin the smoothed rows' ring (census.census_row_pair)
             self.win = np.zeros((n, p.census_height, padded[1]), np.uint8)
+            self.swin = np.zeros((n, 2, 2 * p.census_height, padded[1]), np.uint8)
+            self.skey = np.full((n, p.census_height), -1, np.int64)
         else:
             self.padl = np.zeros(padded, np.uint8)
             self.padr = np.zeros(padded, np.uint8)
+            self.spadl = np.zeros(padded, np.uint8)  # census margin: the smoothed pair
+            self.spadr = np.zeros(padded, np.uint8)
         self.census_offs = census_offsets(p.census_width, p.census_height, padded[1])
         wc = (w + 63) & ~63  # census codes per row (census.census_pair)
         self.cl = np.empty((h, wc), np.uint64)
@@ -113,15 +118,21 @@ class SGMMatcher:
                                 self.labels, self.stack, self.rtype)
         return disp
 
+    def margins(self, left: np.ndarray, right: np.ndarray) -> tuple[int, int]:
+        """The census margins of the left and right image (SGMParams.census_margin)."""
+        m = self.params.census_margin
+        return (noise_margin(left), noise_margin(right)) if m < 0 else (m, m)
+
     def run_census(self, left: np.ndarray, right: np.ndarray) -> None:
         """Census codes of the pair into self.cl and self.crr (mirrored rows), for 4 and 8
         paths (5 paths make them row by row in run_sgm)."""
         p = self.params
+        tl, tr = self.margins(left, right)
         bounds = _stripes(0, self.padl.shape[0], STRIPES_PER_THREAD * nb.get_num_threads())
         chunk = nb.set_parallel_chunksize(1)
         try:
-            census_pair(left, right, p.census_width, p.census_height, bounds, self.padl,
-                        self.padr, self.census_offs, self.cl, self.crr)
+            census_pair(left, right, p.census_width, p.census_height, tl, tr, bounds, self.padl,
+                        self.padr, self.spadl, self.spadr, self.census_offs, self.cl, self.crr)
         finally:
             nb.set_parallel_chunksize(chunk)
 
@@ -135,8 +146,11 @@ class SGMMatcher:
         chunk = nb.set_parallel_chunksize(1)
         try:
             if self.params.paths == 5:
+                self.cfg[_sgm.C_TL], self.cfg[_sgm.C_TR] = self.margins(left, right)
+                self.skey[:] = -1
                 _sgm.sgm_single_pass(left, right, self.cl, self.crr, self.cfg, self.p2tab,
-                                     self.locks, self.done, disp, self.win, self.census_offs,
+                                     self.locks, self.done, disp,
+                                     (self.win, self.swin, self.skey), self.census_offs,
                                      self.cost, self.lbuf, self.mv,
                                      self.pm, self.acc, self.rmin, self.rarg,
                                      self.karg, (self.labels, self.stack, self.size,

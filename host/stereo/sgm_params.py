@@ -17,6 +17,8 @@ from .config_map import ConfigField, check_params, check_rule
 PATH_COST_LIMIT = 255  # path costs L <= census bits + p2 are held in uint8
 CENSUS_BITS = 64  # census codes are uint64
 PATH_COUNTS = (4, 5, 8)  # path directions the engine aggregates (sgm_reference.PATHS)
+MARGIN_DIVISOR = 10  # automatic census margin: median |3x3 Laplacian| // this (~0.4 noise sigma)
+MARGIN_MAX = 255
 
 SGM_CONFIG: tuple[ConfigField, ...] = (
     ConfigField("num_disparities"), ConfigField("min_disparity"),
@@ -40,10 +42,14 @@ class SGMParams:
     min_disparity: int = 0
     census_width: int = 9  # census window (odd, width * height - 1 <= 64 comparison bits)
     census_height: int = 7
+    census_margin: int = -1  # census bits only where the 3x3-smoothed neighbour and centre differ
+    # by more than this many DN (flat, noisy areas get a flat cost); -1: from each image's noise
+    # (census.noise_margin), 0: plain census
     paths: int = 5  # 5 (one pass per image half from its outer edge: horizontal, vertical and the
     # two diagonals from that edge), 4 (horizontal + vertical) or 8 (every direction)
-    p1: int = 15  # penalty for a 1 px disparity change between neighbours along a path
-    p2: int = 128  # penalty for a larger change
+    p1: int = 25  # penalty for a 1 px disparity change between neighbours along a path
+    p2: int = 190  # penalty for a larger change (both scaled to the margin census's
+    # cost range: bad-2.0 lower on Motorcycle and every scene class than 15 / 128)
     p2_adapt: int = 32  # > 0: P2 / (1 + |dI| / p2_adapt) along the path, not below p1 (nor
     # above p2); 0: off
     uniqueness_ratio: int = 0  # percent margin the best cost must keep over others (0: off)
@@ -67,6 +73,10 @@ class SGMParams:
         if self.p2 < 0 or self.max_cost + self.p2 > PATH_COST_LIMIT:
             raise ConfigError(f"p2 {self.p2} out of range: 0 <= p2 and census bits {self.max_cost} + p2 "
                               f"<= {PATH_COST_LIMIT}")
+        if isinstance(self.census_margin, bool) or not isinstance(self.census_margin, int) \
+                or not -1 <= self.census_margin <= MARGIN_MAX:
+            raise ConfigError(f"census_margin must be -1 (from the image's noise) or 0..{MARGIN_MAX}, "
+                              f"got {self.census_margin}")
         if self.p2_adapt < 0:
             raise ConfigError(f"p2_adapt must be non-negative, got {self.p2_adapt}")
 

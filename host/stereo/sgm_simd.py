@@ -466,17 +466,12 @@ def _zip(builder, a, b, lanes, half):
     return builder.shuffle_vector(a, b, ir.Constant(ir.VectorType(_I32, lanes), idx))
 
 
-@intrinsic
-def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
-    """out[x] (uint64; rev: out[w - 1 - x]) for x < w, a multiple of 64: bit n set where
-    src[base + offs[1 + n] + x] < src[base + offs[0] + x], n < ncmp <= 64 (uint8 src). Per
-    64 pixels the comparisons go into eight byte vectors (one per 8 bits, in registers),
-    which three rounds of two-source shuffles turn into the 64 codes."""
-    if not (_u8_arrays(src) and isinstance(offs, types.Array) and offs.dtype == types.int64
-            and isinstance(out, types.Array) and out.dtype == types.uint64
-            and isinstance(rev, types.Boolean)):
-        return None
+_SAT = ("llvm.uadd.sat.v64i8", "llvm.usub.sat.v64i8")  # saturating a + b, a - b
 
+
+def _census_codegen(masked: bool):
+    """census_codes' code generator; masked: census_codes_masked's (args 7, 8, 9: the
+    smoothed source, its base and the margin t)."""
     def codegen(context, builder, sig, args):
         st = sig.args
         u8, i64 = ir.IntType(8), ir.IntType(64)
@@ -486,14 +481,24 @@ def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
         groups = builder.udiv(builder.add(ncv, ir.Constant(ncv.type, 7)),
                               ir.Constant(ncv.type, 8))
         last = builder.sub(ncv, ir.Constant(ncv.type, 1))
+        if masked:
+            sbv = _intp(context, builder, sig, args, 8)
+            tv = _splat(builder, context.cast(builder, args[9], st[9], types.uint8), vty)
 
-        def off(n):  # base + offs[n]
-            return builder.add(bv, builder.load(_ptr(context, builder, st[2], args[2], [n])))
+        def offs(n):  # offs[n]
+            return builder.load(_ptr(context, builder, st[2], args[2], [n]))
+
+        def load(i, b, n, x0):  # the 64 bytes of array arg i at b + offs[n] + x0
+            return _vload(builder, _ptr(context, builder, st[i], args[i], [
+                builder.add(builder.add(b, offs(n)), x0)]), vty)
 
         with cgutils.for_range_slice(builder, ir.Constant(wv.type, 0), wv,
                                      ir.Constant(wv.type, 64)) as (x0, _):
-            centre = _vload(builder, _ptr(context, builder, st[0], args[0],
-                                          [builder.add(off(ir.Constant(ncv.type, 0)), x0)]), vty)
+            c0 = ir.Constant(ncv.type, 0)
+            centre = load(0, bv, c0, x0)
+            if masked:  # |s - sc| > t <=> s > sat(sc + t) or s < sat(sc - t)
+                scentre = load(7, sbv, c0, x0)
+                hi, lo = (_call(builder, f, vty, [scentre, tv]) for f in _SAT)
             acc = []
             for g in range(8):
                 slot = cgutils.alloca_once_value(builder, zero)
@@ -502,13 +507,15 @@ def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
                     for b in range(8):
                         n = ir.Constant(ncv.type, 8 * g + b)
                         ok = builder.icmp_signed("<", n, ncv)
-                        k = builder.select(ok, n, last)  # a valid comparison, masked off
-                        r = _vload(builder, _ptr(context, builder, st[0], args[0], [
-                            builder.add(off(builder.add(k, ir.Constant(ncv.type, 1))), x0)]),
-                            vty)
+                        k = builder.add(builder.select(ok, n, last),  # a valid comparison,
+                                        ir.Constant(ncv.type, 1))     # masked off
+                        hit = builder.icmp_unsigned("<", load(0, bv, k, x0), centre)
+                        if masked:  # and |smoothed neighbour - smoothed centre| > t
+                            s = load(7, sbv, k, x0)
+                            hit = builder.and_(hit, builder.or_(
+                                builder.icmp_unsigned(">", s, hi), builder.icmp_unsigned("<", s, lo)))
                         bit = builder.select(ok, ir.Constant(u8, 1 << b), ir.Constant(u8, 0))
-                        a = builder.or_(a, builder.select(builder.icmp_unsigned("<", r, centre),
-                                                          _splat(builder, bit, vty), zero))
+                        a = builder.or_(a, builder.select(hit, _splat(builder, bit, vty), zero))
                     builder.store(a, slot)
                 acc.append(builder.load(slot))
             # bytes -> 16-bit pairs -> 32-bit quads -> 64-bit codes: code x = (acc[g][x])_g
@@ -533,4 +540,33 @@ def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
                         _ptr(context, builder, st[5], args[5], [at]))
         return context.get_dummy_value()
 
-    return types.none(src, base, offs, ncmp, w, out, rev), codegen
+    return codegen
+
+
+def _census_types(src, offs, out, rev) -> bool:
+    return (_u8_arrays(src) and isinstance(offs, types.Array) and offs.dtype == types.int64
+            and isinstance(out, types.Array) and out.dtype == types.uint64
+            and isinstance(rev, types.Boolean))
+
+
+@intrinsic
+def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
+    """out[x] (uint64; rev: out[w - 1 - x]) for x < w, a multiple of 64: bit n set where
+    src[base + offs[1 + n] + x] < src[base + offs[0] + x], n < ncmp <= 64 (uint8 src). Per
+    64 pixels the comparisons go into eight byte vectors (one per 8 bits, in registers),
+    which three rounds of two-source shuffles turn into the 64 codes."""
+    if not _census_types(src, offs, out, rev):
+        return None
+    return types.none(src, base, offs, ncmp, w, out, rev), _census_codegen(False)
+
+
+@intrinsic
+def census_codes_masked(typingctx, src, base, offs, ncmp, w, out, rev, ssrc, sbase, t):
+    """census_codes with a margin: bit n also needs |ssrc[sbase + offs[1 + n] + x] -
+    ssrc[sbase + offs[0] + x]| > t (ssrc uint8, the smoothed image laid out as src; 0 <= t
+    <= 255), one more pair of loads and a fused compare per comparison."""
+    if not (_census_types(src, offs, out, rev) and _u8_arrays(ssrc)
+            and isinstance(t, types.Integer)):
+        return None
+    return (types.none(src, base, offs, ncmp, w, out, rev, ssrc, sbase, t),
+            _census_codegen(True))

@@ -62,6 +62,9 @@ EDGES = [
     dict(min_disparity=-20, num_disparities=16),  # the whole range negative
     dict(num_disparities=48, speckle_window_size=20, speckle_range=16),
     dict(num_disparities=80, lr_max_diff=1),  # 64 + 16 lanes
+    dict(census_margin=0),  # plain census
+    dict(census_margin=3, census_width=3, census_height=1),  # a window one row high
+    dict(census_margin=255, speckle_window_size=0),  # every bit masked: cost 0 everywhere
 ]
 SHAPES = [(23, 97), (37, 121), (50, 131), (31, 160)]
 
@@ -194,6 +197,9 @@ def test_thread_count_and_reuse_do_not_change_output(paths: int) -> None:
     (dict(speckle_range=-1), "speckle_range"),
     (dict(p1=1.5), "must be an int"),
     (dict(min_disparity=-2100), "min_disparity=-2100 outside"),
+    (dict(census_margin=-2), "census_margin must be -1"),
+    (dict(census_margin=256), "census_margin must be -1 .* 0..255, got 256"),
+    (dict(census_margin=2.0), "census_margin"),
 ])
 def test_bad_params(kw, msg) -> None:
     with pytest.raises(ValueError, match=msg):

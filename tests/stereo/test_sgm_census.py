@@ -1,5 +1,6 @@
-"""Census codes (census.py, sgm_simd.census_codes) against the numpy reference, in the layout
-the SGM kernels read: left codes per row, right codes mirrored, rows padded to 64 codes."""
+"""Census codes (census.py, sgm_simd.census_codes and census_codes_masked) against the numpy
+reference, in the layout the SGM kernels read: left codes per row, right codes mirrored, rows
+padded to 64 codes; with and without the census margin."""
 from __future__ import annotations
 
 import numpy as np
@@ -10,15 +11,22 @@ from stereocam.stereo import SGMMatcher, SGMParams
 from tests.support import sgm_reference as ref
 
 
-@pytest.mark.parametrize("w, cw, ch, paths", [(70, 9, 7, 5), (64, 13, 5, 8), (131, 3, 1, 4),
-                                              (33, 1, 3, 5)])
-def test_census_codes_match_the_reference(w: int, cw: int, ch: int, paths: int) -> None:
+@pytest.mark.parametrize("w, cw, ch, paths, margin", [
+    (70, 9, 7, 5, 0), (64, 13, 5, 8, 0), (131, 3, 1, 4, 0), (33, 1, 3, 5, 0),
+    (70, 9, 7, 5, 9), (64, 13, 5, 8, 9), (131, 3, 1, 4, 9), (33, 1, 3, 5, 9), (17, 3, 3, 5, 9),
+    (18, 9, 7, 4, 9), (70, 9, 7, 5, -1), (65, 9, 7, 8, -1)])
+def test_census_codes_match_the_reference(w: int, cw: int, ch: int, paths: int,
+                                          margin: int) -> None:
     rng = np.random.default_rng(w)
-    left, right = (rng.integers(0, 256, (9, w), dtype=np.uint8) for _ in range(2))
-    m = SGMMatcher(left.shape, SGMParams(num_disparities=16, census_width=cw,
-                                         census_height=ch, paths=paths))
+    left = rng.integers(0, 256, (9, w), dtype=np.uint8)
+    right = (left // 2 + rng.integers(0, 128, (9, w))).astype(np.uint8)  # another noise level
+    p = SGMParams(num_disparities=16, census_width=cw, census_height=ch, paths=paths,
+                  census_margin=margin)
+    m = SGMMatcher(left.shape, p)
     m.match(left, right)
     wc = m.cl.shape[1]
     assert wc % 64 == 0 and wc >= w
-    np.testing.assert_array_equal(m.cl[:, :w], ref.census(left, cw, ch))
-    np.testing.assert_array_equal(m.crr[:, wc - w:wc][:, ::-1], ref.census(right, cw, ch))
+    tl, tr = ref.margin(left, p), ref.margin(right, p)
+    assert margin >= 0 or 0 < tl != tr
+    np.testing.assert_array_equal(m.cl[:, :w], ref.census(left, cw, ch, tl))
+    np.testing.assert_array_equal(m.crr[:, wc - w:wc][:, ::-1], ref.census(right, cw, ch, tr))

@@ -4,7 +4,12 @@ Every step is written for reading, not speed. Notation: the matched columns are 
 x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k in [0, N).
 
 1. census: per pixel one bit per window neighbour (width x height, centre excluded), set when
-   the neighbour is darker than the centre; the image is extended by edge replication.
+   the neighbour is darker than the centre; the image is extended by edge replication. With a
+   margin t > 0 a bit is kept only where S, the image's 3x3 binomial smoothing ((sum + 8) >> 4,
+   edges replicated), differs between neighbour and centre by more than t (also edge-replicated).
+   t = census_margin, or with census_margin < 0 per image median |3x3 Laplacian| //
+   MARGIN_DIVISOR (the lower median over the interior pixels of rows 1, 1 + LAPLACIAN_ROW_STEP,
+   ...; 0 for images without interior pixels).
 2. cost C[y, x, k] = popcount(census_L[y, X] ^ census_R[y, X - d]) (Hamming distance), or the
    number of census bits (the largest cost) where X - d < 0, left of the right image.
 3. for each path direction r = (dy, dx): L_r(p) = C(p) where p - r leaves the matched
@@ -30,7 +35,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from stereocam.stereo.sgm_params import SGMParams, sgm_geometry
+from stereocam.stereo.census import LAPLACIAN_ROW_STEP
+from stereocam.stereo.sgm_params import MARGIN_DIVISOR, SGMParams, sgm_geometry
 
 PATHS4 = [(0, 1), (0, -1), (1, 0), (-1, 0)]
 PATHS8 = PATHS4 + [(1, 1), (1, -1), (-1, 1), (-1, -1)]
@@ -39,10 +45,35 @@ HALVES5 = (PATHS4[:3] + [(1, 1), (1, -1)],  # 5 paths, rows < ceil(h / 2): from 
            PATHS4[:2] + [(-1, 0), (-1, 1), (-1, -1)])  # the other rows: from below
 
 
-def census(img: np.ndarray, width: int, height: int) -> np.ndarray:
+def laplacian_median(img: np.ndarray) -> int:
+    h, w = img.shape
+    if h < 3 or w < 3:
+        return 0
+    i = img.astype(np.int64)
+    lap = (i[:-2, :-2] - 2 * i[:-2, 1:-1] + i[:-2, 2:] - 2 * i[1:-1, :-2] + 4 * i[1:-1, 1:-1]
+           - 2 * i[1:-1, 2:] + i[2:, :-2] - 2 * i[2:, 1:-1] + i[2:, 2:])
+    lap = lap[::LAPLACIAN_ROW_STEP]
+    return int(np.sort(np.abs(lap).ravel())[(lap.size - 1) // 2])
+
+
+def margin(img: np.ndarray, p: SGMParams) -> int:
+    return p.census_margin if p.census_margin >= 0 else laplacian_median(img) // MARGIN_DIVISOR
+
+
+def smooth(img: np.ndarray) -> np.ndarray:
+    k = np.array([1, 2, 1])
+    padded = np.pad(img.astype(np.int64), 1, mode="edge")
+    h, w = img.shape
+    s = sum(k[a] * k[b] * padded[a:a + h, b:b + w] for a in range(3) for b in range(3))
+    return ((s + 8) >> 4).astype(np.uint8)
+
+
+def census(img: np.ndarray, width: int, height: int, t: int = 0) -> np.ndarray:
     rx, ry = width // 2, height // 2
     h, w = img.shape
     padded = np.pad(img, ((ry, ry), (rx, rx)), mode="edge")
+    sm = smooth(img).astype(np.int64)
+    spadded = np.pad(sm, ((ry, ry), (rx, rx)), mode="edge")
     code = np.zeros((h, w), np.uint64)
     bit = 0
     for dy in range(-ry, ry + 1):
@@ -50,15 +81,18 @@ def census(img: np.ndarray, width: int, height: int) -> np.ndarray:
             if dy == 0 and dx == 0:
                 continue
             neighbour = padded[ry + dy:ry + dy + h, rx + dx:rx + dx + w]
-            code |= (neighbour < img).astype(np.uint64) << np.uint64(bit)
+            on = neighbour < img
+            if t > 0:
+                on &= np.abs(spadded[ry + dy:ry + dy + h, rx + dx:rx + dx + w] - sm) > t
+            code |= on.astype(np.uint64) << np.uint64(bit)
             bit += 1
     return code
 
 
 def cost_volume(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray:
     g = sgm_geometry(*left.shape, p)
-    cl = census(left, p.census_width, p.census_height)
-    cr = census(right, p.census_width, p.census_height)
+    cl = census(left, p.census_width, p.census_height, margin(left, p))
+    cr = census(right, p.census_width, p.census_height, margin(right, p))
     cost = np.empty((g.height, g.cols, p.num_disparities), np.int32)
     xs = np.arange(g.x0, g.x1)
     for k in range(p.num_disparities):
