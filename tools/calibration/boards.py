@@ -12,12 +12,9 @@ Board syntax (``--board``):
   FILE.yaml                               a Kalibr target yaml (target_type aprilgrid or checkerboard)
 
 Chessboards are looked for with both OpenCV detectors: cv2.findChessboardCorners (adaptive
-threshold, normalised) and, where that finds nothing (no white margin, strong distortion, dot-coded
-squares), the sector-based cv2.findChessboardCornersSB (plain, then exhaustive). Both detectors'
-corners are refined by cv2.cornerSubPix with a half-window of 0.4 × the smallest corner spacing,
-2..15 px (unrefined, the sector-based corners of a 120° lens at 640x480 are 0.3-4 px off; refined,
-within 0.25 px like the other's), and a detection with a corner the refinement could not place is
-not used (a wide lens's squeezed outer corner, started pixels off: a 3 px error). Both run on
+threshold, normalised; then cv2.cornerSubPix with a half-window of 0.4 × the smallest corner
+spacing, 2..15 px) and, where that finds nothing (no white margin, strong distortion, dot-coded
+squares), the sector-based cv2.findChessboardCornersSB (plain, then exhaustive). Both run on
 every image; the solver uses, for the whole set, the detector whose corners fit a camera model
 best (tools/calibration/solve.py), and the other one for the images only it finds. A chessboard looks
 the same turned by 180 degrees (a square one also turned by 90 degrees or mirrored), so the
@@ -248,31 +245,21 @@ def gray(img: np.ndarray) -> np.ndarray:
 def _classic(g: np.ndarray, board: BoardSpec) -> np.ndarray | None:
     size = (board.cols, board.rows)
     found, corners = cv2.findChessboardCorners(g, size, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
-    return _refine(g, corners, board) if found else None
+    if not found:
+        return None
+    grid = corners.reshape(board.rows, board.cols, 2)
+    spacing = min(np.linalg.norm(np.diff(grid, axis=0), axis=2).min(),
+                  np.linalg.norm(np.diff(grid, axis=1), axis=2).min())
+    half = int(np.clip(0.4 * spacing, 2, 15))
+    return cv2.cornerSubPix(g, corners, (half, half), (-1, -1), _SUBPIX).reshape(-1, 2)
 
 
 def _sector_based(g: np.ndarray, board: BoardSpec) -> np.ndarray | None:
     for flags in (0, cv2.CALIB_CB_EXHAUSTIVE):  # normalising the image costs accuracy here
         found, corners = cv2.findChessboardCornersSB(g, (board.cols, board.rows), flags=flags)
         if found:
-            return _refine(g, corners, board)
+            return corners.reshape(-1, 2)
     return None
-
-
-def _refine(g: np.ndarray, corners: np.ndarray, board: BoardSpec) -> np.ndarray | None:
-    """Corners refined by cv2.cornerSubPix (half-window 0.4 x the smallest corner spacing, 2..15 px);
-    None when a corner could not be placed: cornerSubPix puts a corner that runs out of its window
-    back where it started, exactly (seen at the squeezed outer corners of a wide-angle lens, where
-    the detector's start is off by pixels)."""
-    start = np.asarray(corners, np.float32).reshape(-1, 1, 2)
-    grid = start.reshape(board.rows, board.cols, 2)
-    spacing = min(np.linalg.norm(np.diff(grid, axis=0), axis=2).min(),
-                  np.linalg.norm(np.diff(grid, axis=1), axis=2).min())
-    half = int(np.clip(0.4 * spacing, 2, 15))
-    refined = cv2.cornerSubPix(g, start.copy(), (half, half), (-1, -1), _SUBPIX).reshape(-1, 2)
-    if np.any(np.all(refined == start.reshape(-1, 2), axis=1)):
-        return None
-    return refined
 
 
 CHESSBOARD_DETECTORS = {"classic": _classic, "sector": _sector_based}
