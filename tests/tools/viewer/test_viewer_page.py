@@ -184,7 +184,12 @@ def test_counters_table_histogram_and_near_far_range(viewer, page):
     assert fps_rate > 0
     hist = page.js("current.histogram")
     assert sum(hist["counts"]) > 0 and hist["near_m"] < hist["far_m"]
-    page.js("document.getElementById('near').value = 1; document.getElementById('far').value = 3")
+    for field, value in (("near", 1), ("far", 3)):  # typed: each an input event, near losing focus to far
+        page.js(f"(() => {{ const e = document.getElementById('{field}'); e.focus(); e.value = {value}; "
+                f"e.dispatchEvent(new Event('input')); }})()")
+    page.js("document.activeElement.blur()")  # the user looks at the image before pressing Apply
+    page.refreshes(3)  # the redraws of new frames must not put the typed values back
+    assert page.js("[document.getElementById('near').value, document.getElementById('far').value]") == ["1", "3"]
     page.click("range-apply")
     wait_until(lambda: viewer.session.span_m == (1.0, 3.0), timeout=10, what="the range applied")
     page.wait("current.histogram.near_m === 1 && current.histogram.far_m === 3")

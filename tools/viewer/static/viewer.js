@@ -92,7 +92,7 @@ function drawHistogram(h) {
   g.fillText(`${h.near_m} m`, 2, c.height - 2);
   g.fillText(`${h.far_m} m`, c.width - 60, c.height - 2);
   $("hist-note").textContent = `${h.nearer} nearer, ${h.farther} farther, ${h.invalid} without depth`;
-  if (document.activeElement !== $("near") && document.activeElement !== $("far")) {
+  if (!rangeEdited && document.activeElement !== $("near") && document.activeElement !== $("far")) {
     $("near").value = h.near_m; $("far").value = h.far_m;
   }
 }
@@ -179,7 +179,12 @@ $("preset-load").addEventListener("click", () =>
   configAction("/api/preset/load", {name: $("preset-list").value}, `loaded preset ${$("preset-list").value}`));
 
 // -- near/far range ---------------------------------------------------------------------------
+// A value the user typed stays until Apply or "Searched range", even after its field loses focus
+// (typing near, then far: the refresh must not put near back before Apply).
+let rangeEdited = false;
+["near", "far"].forEach(id => $(id).addEventListener("input", () => { rangeEdited = true; }));
 async function setRange(body) {
+  rangeEdited = false;
   const {ok, doc} = await api("/api/range", body);
   $("range-reason").textContent = ok ? "" : doc.reason || doc.error;
   lastSeq = -1; // the same frame again, coloured anew
