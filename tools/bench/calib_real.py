@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, cast
 
 import click
 import cv2
@@ -30,7 +30,7 @@ from stereocam.protocol.rectification import stereo_rectify
 from stereocam.tools import cli
 from stereocam.tools.calibration.boards import detect_all, parse_board
 from stereocam.tools.calibration.files import find_pairs
-from stereocam.tools.calibration.fit import PairPoints, epipolar_dy, rms
+from stereocam.tools.calibration.fit import HeadFit, PairPoints, epipolar_dy, rms
 from stereocam.tools.calibration.lens import SOLVE, calibrate_mono, calibrate_stereo
 from stereocam.tools.calibration.solve import choose_detector, match_detections
 from stereocam.tools.options import CONTEXT, epilog
@@ -55,13 +55,20 @@ def opencv_all_pairs(directory: Path, board_text: str, square: str | None, model
     """OpenCV's solution on every pair where both boards are found (same detections as the tool)."""
     board = parse_board(board_text, None if square is None else float(square))
     found = []
+    size = (0, 0)
     for n, lp, rp in find_pairs(directory):
-        dl, dr = (detect_all(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), board) for p in (lp, rp))
+        left, right = _gray(lp), _gray(rp)
+        size = left.shape[::-1]
+        dl, dr = detect_all(left, board), detect_all(right, board)
         if match_detections(dl, dr, board, ()) is not None:
             found.append((n, lp.name, dl, dr))
-    size = cv2.imread(str(lp), cv2.IMREAD_GRAYSCALE).shape[::-1]
     order = (choose_detector(found, size),)
-    pairs = [PairPoints(n, name, *match_detections(dl, dr, board, order)) for n, name, dl, dr in found]
+    pairs = []
+    for n, name, dl, dr in found:
+        matched = match_detections(dl, dr, board, order)
+        if matched is None:
+            raise click.ClickException(f"{directory}: pair {name}: no corners of the chosen detector {order[0]}")
+        pairs.append(PairPoints(n, name, *matched))
     obj = [p.obj for p in pairs]
     if model == "equidistant":  # cv2.fisheye has no cold start that converges reliably: seed it as the tool does
         fl, fr = (calibrate_mono(model, obj, pts, size, calibrate_mono("plumb_bob", obj, pts, size))
@@ -80,9 +87,17 @@ def opencv_all_pairs(directory: Path, board_text: str, square: str | None, model
     return StereoCalibration(size, K1, np.ravel(D1)[:n], K2, np.ravel(D2)[:n], R, np.ravel(T), model), pairs
 
 
+def _gray(path: Path) -> np.ndarray:
+    """An image file as grey levels; a ClickException naming a file OpenCV cannot read."""
+    img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise click.ClickException(f"{path}: not an image OpenCV can read")
+    return img
+
+
 def epipolar_all(calibration: StereoCalibration, pairs: list[PairPoints]) -> float:
     """Epipolar RMS (px) of a solution over every pair."""
-    head = _Head(calibration)
+    head = cast(HeadFit, _Head(calibration))  # epipolar_dy reads only .calibration and .geometry
     return rms(np.concatenate([epipolar_dy(head, p.left, p.right) for p in pairs]))
 
 

@@ -27,7 +27,7 @@ from stereocam.tools.options import CONTEXT, epilog
 YARDSTICK_MBPS = 1280 * 960 * 3 * 30 / 1e6  # the issue's "1280x960, three planes, 30 fps"
 
 
-def _frames(n: int, width: int, height: int) -> tuple[list[stereocam.Frame], object]:
+def _frames(n: int, width: int, height: int) -> tuple[list[stereocam.Frame], UnitDescription]:
     with stereocam.open("sim://?seed=3", timeout=3.0) as cam:
         cam.configure(width=width, height=height, fps=30)
         cam.start()
@@ -38,12 +38,12 @@ def _frames(n: int, width: int, height: int) -> tuple[list[stereocam.Frame], obj
 
 def _zstd_alone(frame: stereocam.Frame, level: int, seconds: float = 1.0) -> float:
     """Captures/s that zstd alone compresses on one thread: the recorder's work per capture, minus I/O."""
-    pieces = [frame.left, frame.right, convert.disparity_to_float(frame)]
+    pieces = [p for p in (frame.left, frame.right, convert.disparity_to_float(frame)) if p is not None]
     n, t0 = 0, time.perf_counter()
     while time.perf_counter() - t0 < seconds:
         z = zstandard.ZstdCompressor(level=level).compressobj()
         for p in pieces:
-            z.compress(p)
+            z.compress(p.data)
         z.flush()
         n += 1
     return n / (time.perf_counter() - t0)

@@ -97,13 +97,13 @@ def report(kind: str, run: Run, truth: Callable[[str, int], float | None]) -> di
     errs: dict[str, list[float]] = {}
     true_skew = []
     for _, heads in run.sets:
-        instants = {n: truth(n, seq) for n, (seq, _) in heads.items()}
+        known = {n: instant for n, (seq, _) in heads.items() if (instant := truth(n, seq)) is not None}
         for n, (_, t) in heads.items():
-            if instants[n] is not None:
-                errs.setdefault(n, []).append((t - instants[n]) * 1e6)
-        if all(v is not None for v in instants.values()):
-            true_skew.append((max(instants.values()) - min(instants.values())) * 1e6)
-    out = {"sets": len(run.sets), "incomplete": len(run.incomplete)}
+            if n in known:
+                errs.setdefault(n, []).append((t - known[n]) * 1e6)
+        if len(known) == len(heads):
+            true_skew.append((max(known.values()) - min(known.values())) * 1e6)
+    out: dict[str, float] = {"sets": len(run.sets), "incomplete": len(run.incomplete)}
     if len(skew):
         out.update(skew_p50_us=float(np.percentile(skew, 50)), skew_p99_us=float(np.percentile(skew, 99)),
                    skew_max_us=float(skew.max()))
