@@ -2,27 +2,26 @@
 from __future__ import annotations
 
 import logging
-import os
 import threading
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Iterator
+from typing import TYPE_CHECKING, Callable
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
-from stereocam.protocol.config_rules import merge
-from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, DisconnectedError, EndOfRecordingError,
-                                      StereoCamError, StreamStalledError, StreamStoppedError, TransportError)
-from stereocam.protocol.params import BY_ID, BY_NAME, PARAMS, Param, TriggerMode
+from stereocam.protocol.errors import ConfigError, StereoCamError, StreamStoppedError
+from stereocam.protocol.params import BY_NAME
 
-from . import calibration_io, firmware_update, presets
-from .arguments import config_update, count_arg, flag_arg, timeout_arg
+from . import calibration_io, firmware_update
+from .arguments import count_arg, flag_arg, timeout_arg
 from .calibration_io import StoredCalibration
-from .callbacks import FrameCallback, FrameCallbacks
+from .callbacks import FrameCallbacks
+from .camera_frames import FrameDelivery
+from .camera_settings import CameraSettings
 from .connection import HEARTBEAT_INTERVAL, MIN_HEARTBEAT_INTERVAL, Connection, Counters
-from .device_types import DeviceInfo, DeviceStatus, config_names
-from .dispatch import DropPolicy, FrameDispatcher, FrameQueue, Listener
+from .device_types import DeviceInfo, DeviceStatus
+from .dispatch import DropPolicy, FrameDispatcher, FrameQueue
 from .frame_geometry import FrameGeometry
 from .frames import Frame
 from .transports import Transport, open_transport
@@ -37,12 +36,14 @@ OPEN_OPTIONS = frozenset({"retries", "heartbeat_interval", "queue_depth", "deliv
 _log = logging.getLogger(__name__)
 
 
-class Camera:
+class Camera(CameraSettings, FrameDelivery):
     """One connected camera. Use ``stereocam.open(url)``; close it (or use ``with``) when done.
 
     The user API over a Connection (link, heartbeat, clock map, reconnect, frame repair) and a
     FrameDispatcher that hands every frame to each listener: the ``get_frame`` queue (or the
-    ``on_frame`` callbacks), and any added with ``add_listener`` (a recorder, a viewer)."""
+    ``on_frame`` callbacks), and any added with ``add_listener`` (a recorder, a viewer). Here: the
+    link, the stream, calibration and firmware; its configuration is CameraSettings's
+    (camera_settings.py), the frames it hands out FrameDelivery's (camera_frames.py)."""
 
     def __init__(self, transport: Transport, *, timeout: float = 1.0, retries: int = 2,
                  heartbeat_interval: float = HEARTBEAT_INTERVAL, queue_depth: int = 8, deliver_incomplete: bool = False,
@@ -98,8 +99,9 @@ class Camera:
         until ``timeout``; DisconnectedError if the unit does not come back in time. ``expected``: the
         caller made the unit reset (a firmware update): logged at INFO, not as a WARNING."""
         self.connection.reconnect(timeout, backoff, expected)
-        _log.log(logging.INFO if expected else logging.WARNING, "%s: reconnected to serial %s; re-applying %d parameters%s", self.url, self.connection.info.serial,
-                     len(self._applied), ", resuming the stream" if self._streaming else "")
+        _log.log(logging.INFO if expected else logging.WARNING, "%s: reconnected to serial %s; re-applying %d "
+                 "parameters%s", self.url, self.connection.info.serial, len(self._applied),
+                 ", resuming the stream" if self._streaming else "")
         self._resolve_geometry()
         # the unit may not have noticed the lost link yet and still stream for it (SPEC §4.6: STOP is
         # always answered, streaming or not); a stream must be stopped before its format changes
@@ -186,47 +188,6 @@ class Camera:
             raise ConfigError(f"a firmware image is bytes (the signed file's contents), got {type(image).__name__}")
         return firmware_update.update(self, bytes(image), progress=progress, replace=replace)
 
-    def config(self) -> dict[str, int]:
-        r = self.request(m.GetConfig())
-        assert isinstance(r, m.Config)
-        return config_names(r.values)
-
-    def configure(self, **params: int) -> dict[str, int]:
-        """Change parameters by name (protocol/params.py); returns the whole new configuration.
-
-        All or nothing: the device checks the whole set and a refusal changes nothing.
-        """
-        update = config_update(params)
-        r = self.request(m.SetConfig(update))
-        assert isinstance(r, m.ConfigApplied)
-        self._applied.update({BY_ID[k].name: v for k, v in update.items()})
-        return config_names(r.values)
-
-    def check_config(self, **params: int) -> dict[str, int]:
-        """The configuration ``configure(**params)`` would give, checked here against the
-        protocol's rules (protocol/config_rules.py) without changing the device; ConfigRejected
-        (a ConfigError naming the parameter, ``.param``, and the NACK code) if the device would
-        refuse it (also a value needing a capability this device does not advertise, or a format
-        beyond the selected matcher's INFO stage limit). The device stays the authority:
-        ``configure`` still sends the request."""
-        info = self.connection.info
-        limits = {m.Stage.BLOCK_MATCHING: info.stage_limit(m.Stage.BLOCK_MATCHING),
-                  m.Stage.SEMI_GLOBAL: info.stage_limit(m.Stage.SEMI_GLOBAL)}
-        return merge(self.config(), config_update(params), self._streaming, info.effective_capabilities, limits)
-
-    def set_trigger_mode(self, mode: TriggerMode | str) -> None:
-        """``mode``: a TriggerMode, its name ("free_run", "software", "external") or its number."""
-        if isinstance(mode, str):
-            try:
-                mode = TriggerMode[mode.upper().replace("-", "_")]
-            except KeyError as exc:
-                raise ConfigError(f"unknown trigger mode {mode!r}; known: free_run, software, external") from exc
-        if isinstance(mode, int) and not isinstance(mode, (bool, TriggerMode)) and mode in set(TriggerMode):
-            mode = TriggerMode(mode)
-        if not isinstance(mode, TriggerMode):
-            raise ConfigError(f"trigger mode must be a TriggerMode, its name or its number, got {mode!r}")
-        self.configure(trigger_mode=int(mode))
-
     def trigger(self) -> int:
         """Software trigger; returns the trigger id the resulting frame will carry."""
         r = self.request(m.Trigger())
@@ -259,108 +220,6 @@ class Camera:
         """The device's state, asked for now (HEARTBEAT)."""
         return self.connection.status()
 
-    def get_frame(self, timeout: float | None = None) -> Frame:
-        """The next complete frame; CameraTimeoutError (a TimeoutError) if none within ``timeout``
-        (finite seconds >= 0; ConfigError otherwise). ``timeout=0`` polls: a queued frame at once, or
-        the error at once. EndOfRecordingError (naming the file) once a replayed recording's last frame
-        has been taken. StreamStoppedError if the device stopped the stream and would not restart
-        (see ``_restart_stopped_stream``). Not streaming with no frame queued: the CameraTimeoutError
-        at once, saying so (no frame would come: call ``start`` first)."""
-        if self._callbacks is not None and len(self._callbacks):
-            raise StereoCamError("frames go to the on_frame callbacks; remove them (cam.remove_callback) "
-                                 "before calling get_frame")
-        timeout = self.timeout if timeout is None else timeout_arg(timeout)
-        if not self._streaming and len(self._frames) == 0 and not self.connection.closed:
-            raise CameraTimeoutError(f"no frame from {self.url}: it is not streaming (call start() before get_frame(); "
-                                     "no frame would come)")
-        frame = self._next_frame(timeout)
-        if frame is None:
-            raise CameraTimeoutError(f"no frame from {self.url} within {timeout:.3g} s")
-        return frame
-
-    def try_get_frame(self) -> Frame | None:
-        """A queued frame, or None at once if there is none (never waits)."""
-        return self._next_frame(0.0)
-
-    def _next_frame(self, timeout: float) -> Frame | None:
-        """The next frame of the get_frame queue within ``timeout`` (a queued one first, even at 0),
-        else None. No request goes to the device (a reconnect with ``auto_reconnect`` aside)."""
-        deadline = time.monotonic() + timeout
-        while True:
-            if self._stream_error is not None:
-                raise self._stream_error
-            try:
-                self.connection.check_alive()
-            except DisconnectedError:
-                if not self.auto_reconnect or self.connection.closed:
-                    raise
-                self.reconnect(timeout=max(deadline - time.monotonic(), 0.0))
-            left = deadline - time.monotonic()
-            frame = self._frames.get(min(left, 0.1) if left > 0 else 0.0)
-            if frame is None and self._streaming and (path := self.connection.ended()) is not None:
-                frame = self._last_of_recording(path)
-            if frame is not None or left <= 0:
-                return frame
-
-    def _last_of_recording(self, path: str) -> Frame:
-        """A frame still on its way from a replay that reached its end, else EndOfRecordingError: a
-        round trip first (every frame sent before the reply has then been delivered)."""
-        self.connection.status()
-        frame = self._frames.get(0.0)
-        if frame is None:
-            raise EndOfRecordingError(f"{self.url}: end of recording {path} (every frame was delivered; "
-                                      "?loop=1 plays it again)", path)
-        return frame
-
-    @property
-    def frames(self) -> FrameQueue:
-        """The get_frame queue: ``len`` is how many frames wait, ``dropped`` how many it discarded."""
-        return self._frames
-
-    def add_listener(self, listener: Listener) -> None:
-        """Hand every frame from now on to ``listener.put`` too, which must not block: a FrameQueue
-        (dispatch.py, its own size and drop policy), a RecordingListener, ... (python-can's Notifier)."""
-        if not callable(getattr(listener, "put", None)):
-            raise ConfigError(f"a frame listener has a put(frame) method, got {listener!r}")
-        self._dispatcher.add(listener)
-
-    def remove_listener(self, listener: Listener) -> None:
-        self._dispatcher.remove(listener)
-
-    def on_frame(self, fn: FrameCallback) -> FrameCallback:
-        """Call ``fn(frame)`` for every frame, on a thread of this Camera's (not the link's reader).
-        While any callback is registered frames go to the callbacks, not to ``get_frame``. A callback
-        that raises is logged and counted (``callback_errors``); ``check_callbacks()`` re-raises it.
-        Returns ``fn``, so it also works as a decorator."""
-        if not callable(fn):
-            raise ConfigError(f"a frame callback must be callable, got {fn!r}")
-        if self.connection.closed:
-            raise TransportError(f"{self.url}: camera closed")
-        if self._callbacks is None:
-            self._callbacks = FrameCallbacks(self._queue_depth)
-        self._callbacks.add(fn)
-        self._dispatcher.remove(self._frames)
-        self._dispatcher.add(self._callbacks)
-        return fn
-
-    def remove_callback(self, fn: FrameCallback) -> None:
-        if self._callbacks is None or not self._callbacks.remove(fn):
-            raise ConfigError(f"{fn!r} is not a registered frame callback")
-        if not len(self._callbacks):  # frames go to get_frame again
-            self._dispatcher.remove(self._callbacks)
-            self._callbacks.queue.clear()
-            self._dispatcher.add(self._frames)
-
-    @property
-    def callback_errors(self) -> int:
-        """How many callback calls raised."""
-        return 0 if self._callbacks is None else self._callbacks.errors
-
-    def check_callbacks(self) -> None:
-        """Raise CallbackError (from the callback's exception) if a frame callback has raised."""
-        if self._callbacks is not None:
-            self._callbacks.check()
-
     @property
     def geometry_mismatches(self) -> int:
         """Frames whose carried geometry disagreed with the one derived from the stored calibration."""
@@ -372,47 +231,6 @@ class Camera:
         from .recording import record
 
         return record(self, path, frames=frames, seconds=seconds, progress=progress, **options)
-
-    def __iter__(self) -> Iterator[Frame]:
-        """Frames as they come while streaming. Ends when the stream is stopped (``stop()`` from any
-        thread, ``close()``) and the queued frames are taken, or when a replayed recording's last frame
-        was taken; raises StreamStalledError (a CameraTimeoutError) when streaming but no frame came
-        for ``timeout`` seconds."""
-        if not self._streaming:
-            raise StereoCamError("not streaming: call start() before iterating over the camera")
-        while True:
-            deadline = time.monotonic() + self.timeout
-            while True:
-                try:
-                    frame = self._next_frame(min(0.1, max(deadline - time.monotonic(), 0.0)))
-                except EndOfRecordingError:
-                    return
-                if frame is not None:
-                    break
-                if not self._streaming or self.connection.closed:
-                    return
-                if time.monotonic() >= deadline:
-                    raise StreamStalledError(f"{self.url} is streaming but sent no frame for {self.timeout:.3g} s "
-                                             "(software trigger mode waits for trigger())")
-            yield frame
-
-    # -- configuration ------------------------------------------------------------------------
-    @staticmethod
-    def options() -> list[Param]:
-        """Every parameter: name, range (lo..hi, step, odd), unit, default, description, live."""
-        return list(PARAMS)
-
-    def save_preset(self, path: str | os.PathLike) -> dict[str, int]:
-        """Write the whole current configuration to ``path`` as JSON; returns it."""
-        config = self.config()
-        presets.write_preset(path, config, self.connection.info.model)
-        return config
-
-    def load_preset(self, preset: str | os.PathLike) -> dict[str, int]:
-        """Apply a named preset ('high_density', 'high_accuracy', 'off': the values it names) or one
-        written by ``save_preset`` (all or nothing: a refusal changes nothing); returns the new
-        configuration. ConfigError for a file that is not a preset."""
-        return self.configure(**presets.preset_values(preset))
 
     def counters(self) -> Counters:
         """Host-side counters (link, decoder, frame assembly, delivery), one consistent snapshot."""
@@ -443,7 +261,7 @@ class Camera:
         self.close()
 
 
-def open(url: str, timeout: float = 1.0, **kwargs) -> Camera:  # noqa: A001 - mirrors serial_for_url
+def open(url: str, timeout: float = 1.0, **kwargs) -> Camera:  # the builtin open's name, as serial_for_url
     """Open the camera at ``url`` (sim://, usb://, socket://host:port, a device path, ...); the
     keyword arguments are ``Camera``'s (retries, heartbeat_interval, queue_depth, ...)."""
     timeout = timeout_arg(timeout)
