@@ -28,6 +28,9 @@ GET  /image/CAMERA/PLANE.jpg  a head's left or colour-mapped disparity image: it
 POST /api/group/config      {"name": value, ...} on every head (a refusal names the head, changes none)
 POST /api/group/start|stop  every head (the master last on start, first on stop)
 POST /api/group/trigger     one matched set from a stopped group (start, the master's first pulse, stop)
+
+Here: the HTTP (the Host and token checks, connection limits, reading a POST body); what each
+endpoint answers is routes.py's.
 """
 from __future__ import annotations
 
@@ -40,22 +43,14 @@ import threading
 from http.cookies import SimpleCookie
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from importlib import resources
 from typing import Any, Iterable
 from urllib.parse import parse_qs, urlsplit
 
 import stereocam
-from stereocam.recording import RecordingError
-from .cloud import cloud_bytes, sampled_points
 from .group_session import GroupViewerSession
+from .routes import Answer, camera_get, camera_post, group_get, group_post, json_answer
 from .session import ViewerSession
-from .snapshots import MEDIA, SNAPSHOTS, MissingSnapshot, snapshot
 
-STATIC = {"/": ("index.html", "text/html; charset=utf-8"), "/viewer.js": ("viewer.js", "text/javascript"),
-          "/cloud3d.js": ("cloud3d.js", "text/javascript"), "/settings.js": ("settings.js", "text/javascript"),
-          "/viewer.css": ("viewer.css", "text/css")}
-GROUP_STATIC = {"/": ("group.html", "text/html; charset=utf-8"), "/group.js": ("group.js", "text/javascript"),
-                "/settings.js": ("settings.js", "text/javascript"), "/viewer.css": ("viewer.css", "text/css")}
 MAX_BODY = 64 * 1024  # bytes of a POST body: a configuration is a few hundred
 _log = logging.getLogger(__name__)
 
@@ -69,14 +64,6 @@ REFUSAL_LINGER_S = 0.2  # how long a refused connection's request is read before
 
 def _no_constant(name: str) -> None:
     raise ValueError(f"{name} is not a number a setting can take")
-
-
-def _settings(body: dict[str, Any]) -> dict[str, int]:
-    """``body`` as parameter settings: every value an integer (not true, 320.7 or 1e400)."""
-    for name, value in body.items():
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"{name}: {json.dumps(value)[:40]} is not an integer")
-    return body
 
 
 class ViewerServer(ThreadingHTTPServer):
@@ -155,20 +142,20 @@ class _Handler(BaseHTTPRequestHandler):
     def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 - the base class's name
         _log.debug("%s %s", self.address_string(), format % args)
 
-    def _send(self, body: bytes, ctype: str, status: int = 200, headers: dict[str, str] | None = None) -> None:
-        self.send_response(status)
-        self.send_header("Content-Type", ctype)
-        self.send_header("Content-Length", str(len(body)))
+    def _send(self, answer: Answer) -> None:
+        self.send_response(answer.status)
+        self.send_header("Content-Type", answer.ctype)
+        self.send_header("Content-Length", str(len(answer.body)))
         self.send_header("Cache-Control", "no-store")
-        for k, v in (headers or {}).items():
+        for k, v in answer.headers.items():
             self.send_header(k, v)
         if self._set_cookie:
             self.send_header("Set-Cookie", self._set_cookie)
         self.end_headers()
-        self.wfile.write(body)
+        self.wfile.write(answer.body)
 
-    def _json(self, doc: Any, status: int = 200) -> None:
-        self._send(json.dumps(doc).encode(), "application/json", status)
+    def _json(self, doc: Any, status: int = HTTPStatus.OK) -> None:
+        self._send(json_answer(doc, status))
 
     def _foreign_host(self) -> bool:
         """A request whose Host is not one of this viewer's names (DNS rebinding: another site's
@@ -206,83 +193,14 @@ class _Handler(BaseHTTPRequestHandler):
         session = self.server.session
         try:
             if isinstance(session, GroupViewerSession):
-                self._group_get(session, url.path, query)
+                answer = group_get(session, url.path, query)
             else:
-                self._camera_get(session, url.path, query)
+                answer = camera_get(session, url.path, query)
         except (KeyError, ValueError) as exc:
-            self._json({"error": f"bad request: {exc}"}, HTTPStatus.BAD_REQUEST)
+            answer = json_answer({"error": f"bad request: {exc}"}, HTTPStatus.BAD_REQUEST)
         except stereocam.StereoCamError as exc:
-            self._json({"error": str(exc)}, HTTPStatus.BAD_GATEWAY)
-
-    def _static(self, pages: dict[str, tuple[str, str]], path: str) -> bool:
-        if path not in pages:
-            return False
-        name, ctype = pages[path]
-        self._send((resources.files(__package__) / "static" / name).read_bytes(), ctype)
-        return True
-
-    def _camera_get(self, session: ViewerSession, path: str, query: dict[str, str]) -> None:
-        if self._static(STATIC, path):
-            return
-        if path == "/api/state":
-            self._json(session.state())
-        elif path == "/api/frame":
-            frame = session.newest(int(query.get("after", -1)), wait=1.0)
-            self._json(None if frame is None else session.frame_meta(frame))
-        elif path.startswith("/image/") and path.endswith(".jpg"):
-            got = session.jpeg(path[len("/image/"):-4])
-            if got is None:
-                self._json({"error": "no such image in the newest frame"}, HTTPStatus.NOT_FOUND)
-            else:
-                self._send(got[1], "image/jpeg", headers={"X-Sequence": str(got[0]),
-                                                          "X-Stale": "1" if session.stale else "0"})
-        elif path == "/api/point":
-            self._json(session.point(int(query["x"]), int(query["y"])))
-        elif path == "/api/points.bin":
-            self._cloud(session, int(query.get("step", 2)), query.get("colour", "depth"))
-        elif path.startswith("/snapshot/") and path[len("/snapshot/"):] in SNAPSHOTS:
-            self._snapshot(session, path[len("/snapshot/"):], query.get("colour", "left"))
-        else:
-            self._json({"error": f"no such page {path}"}, HTTPStatus.NOT_FOUND)
-
-    def _group_get(self, session: GroupViewerSession, path: str, query: dict[str, str]) -> None:
-        if self._static(GROUP_STATIC, path):
-            return
-        if path == "/api/group/state":
-            self._json(session.state())
-        elif path == "/api/group/set":
-            s = session.newest(int(query.get("after", -1)), wait=1.0)
-            self._json(None if s is None else session.set_meta(s))
-        elif path.startswith("/image/") and path.endswith(".jpg") and path.count("/") == 3:
-            camera, plane = path[len("/image/"):-4].split("/")
-            got = session.jpeg(camera, plane)
-            if got is None:
-                self._json({"error": f"no {plane} image of {camera} in the newest set"}, HTTPStatus.NOT_FOUND)
-            else:
-                self._send(got[1], "image/jpeg", headers={"X-Trigger": str(got[0])})
-        else:
-            self._json({"error": f"no such page {path}"}, HTTPStatus.NOT_FOUND)
-
-    def _snapshot(self, session: ViewerSession, name: str, colour: str) -> None:
-        frame = session.newest(wait=0)
-        if frame is None:
-            self._json({"error": "no frame yet"}, HTTPStatus.NOT_FOUND)
-            return
-        try:
-            body = snapshot(frame, name, colour, session.span(frame) if frame.disparity is not None else (0, 1))
-        except MissingSnapshot as exc:
-            self._json({"error": f"no {name}: {exc}"}, HTTPStatus.NOT_FOUND)
-            return
-        self._send(body, MEDIA[name[name.rindex("."):]], headers={
-            "Content-Disposition": f'attachment; filename="frame{frame.sequence:06d}_{name}"'})
-
-    def _cloud(self, session: ViewerSession, step: int, colour: str) -> None:
-        frame = session.newest(wait=0)
-        if frame is None or frame.disparity is None:
-            self._json({"error": "the newest frame has no disparity"}, HTTPStatus.NOT_FOUND)
-            return
-        body = cloud_bytes(*sampled_points(frame, step, colour, session.span(frame)))
-        self._send(body, "application/octet-stream", headers={"X-Sequence": str(frame.sequence)})
+            answer = json_answer({"error": str(exc)}, HTTPStatus.BAD_GATEWAY)
+        self._send(answer)
 
     def _refuse_action(self) -> bool:
         """Actions change the camera: only the viewer's own page may ask. A request another web page
@@ -319,37 +237,6 @@ class _Handler(BaseHTTPRequestHandler):
             raise ValueError(f"the body must be a JSON object, not {type(body).__name__}")
         return body
 
-    def _group_post(self, session: GroupViewerSession, path: str, body: dict[str, Any]) -> None:
-        try:
-            if path == "/api/group/config":
-                self._json({"config": session.configure(_settings(body))})
-            elif path == "/api/group/start":
-                session.start()
-                self._json({"streaming": True})
-            elif path == "/api/group/stop":
-                session.stop()
-                self._json({"streaming": False})
-            elif path == "/api/group/trigger":
-                self._json(session.one_set())
-            else:
-                self._json({"error": f"no such action {path}"}, HTTPStatus.NOT_FOUND)
-        except stereocam.DeviceError as exc:
-            self._json({"error": str(exc), "reason": exc.device_message, "param": exc.param,
-                        "config": session.shared_config()}, HTTPStatus.CONFLICT)
-        except (stereocam.ConfigError, ValueError, TypeError) as exc:
-            self._json({"error": str(exc), "reason": str(exc), "config": session.shared_config()},
-                       HTTPStatus.BAD_REQUEST)
-        except stereocam.StereoCamError as exc:
-            self._json({"error": str(exc), "reason": str(exc)}, HTTPStatus.BAD_GATEWAY)
-
-    @staticmethod
-    def _kept(cam: stereocam.Camera) -> dict[str, Any]:
-        """The configuration the camera kept after a refusal (the page shows it, not the refused value)."""
-        try:
-            return {"config": cam.config()}
-        except stereocam.StereoCamError:
-            return {}
-
     def do_POST(self) -> None:  # noqa: N802 - http.server's name
         session = self.server.session
         try:
@@ -366,38 +253,6 @@ class _Handler(BaseHTTPRequestHandler):
             self._json({"error": f"bad request: {exc}", "reason": str(exc)}, HTTPStatus.BAD_REQUEST)
             return
         if isinstance(session, GroupViewerSession):
-            self._group_post(session, path, body)
-            return
-        cam = session.cam
-        try:
-            if path == "/api/config":
-                self._json({"config": cam.configure(**_settings(body))})
-            elif path == "/api/config/reset":
-                self._json({"config": session.reset()})
-            elif path == "/api/preset/save":
-                self._json(session.save_preset(body.get("name")))
-            elif path == "/api/preset/load":
-                self._json(session.load_preset(body.get("name")))
-            elif path == "/api/range":
-                self._json({"span": session.set_span(body.get("near_m"), body.get("far_m"))})
-            elif path == "/api/start":
-                cam.start()
-                self._json({"streaming": True})
-            elif path == "/api/stop":
-                cam.stop()
-                self._json({"streaming": False})
-            elif path == "/api/trigger":
-                self._json({"trigger_id": cam.trigger()})
-            elif path == "/api/record/start":
-                self._json({"recording": session.start_recording()})
-            elif path == "/api/record/stop":
-                self._json({"recording": session.stop_recording()})
-            else:
-                self._json({"error": f"no such action {path}"}, HTTPStatus.NOT_FOUND)
-        except stereocam.DeviceError as exc:
-            self._json({"error": str(exc), "reason": exc.device_message, "param": exc.param,
-                        "code": getattr(exc.code, "name", exc.code), **self._kept(cam)}, HTTPStatus.CONFLICT)
-        except (stereocam.ConfigError, RecordingError, ValueError, TypeError, OSError) as exc:
-            self._json({"error": str(exc), "reason": str(exc), **self._kept(cam)}, HTTPStatus.BAD_REQUEST)
-        except stereocam.StereoCamError as exc:
-            self._json({"error": str(exc), "reason": str(exc)}, HTTPStatus.BAD_GATEWAY)
+            self._send(group_post(session, path, body))
+        else:
+            self._send(camera_post(session, path, body))
