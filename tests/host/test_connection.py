@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import threading
-import time
 
 import stereocam
 from stereocam.camera import Camera
@@ -15,6 +14,7 @@ from stereocam.protocol import messages as m
 from stereocam.recording.reader import Recording
 from tests.support.device import SMALL
 from tests.support.faults import FaultyTransport, PacketFilter, as_v1_1_info
+from tests.support.waiting import wait_until
 
 CAMERA_THREADS = ("stereocam-link", "stereocam-heartbeat", "stereocam-repair", "stereocam-callbacks")
 
@@ -24,10 +24,7 @@ def _camera_threads() -> list[str]:
 
 
 def _wait_queued(cam: Camera, n: int, timeout: float = 30.0) -> None:
-    deadline = time.monotonic() + timeout
-    while len(cam.frames) < n:
-        assert time.monotonic() < deadline, f"{len(cam.frames)} frames queued, waited for {n}"
-        time.sleep(0.01)
+    wait_until(lambda: len(cam.frames) >= n, timeout, f"{n} frames queued")
 
 
 def test_an_open_camera_without_repair_runs_two_threads():

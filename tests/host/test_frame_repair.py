@@ -19,6 +19,7 @@ from stereocam.tools.conformance.budget import budget
 
 from stereocam.tools.soak.parts import PlaneTruth  # what the device sent, by plane CRC
 from tests.support.faults import FaultyTransport, LineNoise, PacketFilter
+from tests.support.waiting import wait_until
 
 
 def test_coverage_lists_missing_runs_in_order():
@@ -100,9 +101,7 @@ def test_a_host_that_never_asks_gets_the_1_1_chunks():
     try:
         lk.request(m.SetConfig({1: 640, 2: 480, 14: 10}))
         lk.request(m.Start())
-        deadline = time.monotonic() + 20
-        while len(sizes) < 3 and time.monotonic() < deadline:
-            time.sleep(0.05)
+        wait_until(lambda: len(sizes) >= 3, 20, "three frame chunks")
         assert sizes[0] == m.MAX_FRAME_CHUNK
     finally:
         lk.close()
@@ -173,9 +172,7 @@ def test_a_socket_url_asks_for_repair_chunks_when_it_says_so():
         with stereocam.open(server.url, timeout=2.0) as cam:
             link = cam.connection.link
             assert link.transport.frame_chunk is None and sim.repair.chunk == m.MAX_FRAME_CHUNK  # TCP default
-        deadline = time.monotonic() + 5
-        while sim.attached and time.monotonic() < deadline:
-            time.sleep(0.02)
+        wait_until(lambda: not sim.attached, 5, "the first host detached")
         with stereocam.open(f"{server.url}?frame_chunk=1024", timeout=2.0) as cam:
             assert sim.repair.chunk == 1024
             cam.configure(width=160, height=120, num_disparities=16, block_size=9, fps=10)

@@ -16,7 +16,7 @@ from stereocam.protocol import messages as m
 
 from stereocam.device_sim.link_layer.refusal import Refusal
 from tests.support.faults import FaultyTransport
-from tests.support.waiting import stays
+from tests.support.waiting import stays, wait_until
 
 
 def _begin(width: int, height: int, planes: int = 7, sequence: int = 1) -> m.FrameBegin:
@@ -46,10 +46,7 @@ def test_an_exception_in_the_event_path_ends_the_link_with_a_typed_error():
     try:
         assert isinstance(lk.request(m.GetInfo()), m.Info)
         link_t.set_manipulator(read=_inject_once(m.encode(_begin(64, 48))))
-        deadline = time.monotonic() + 5
-        while lk.alive and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert not lk.alive
+        wait_until(lambda: not lk.alive, 5, "the link down after its event path failed")
         assert isinstance(lk.error, stereocam.DisconnectedError)  # auto_reconnect acts on it
         assert isinstance(lk.error.__cause__, MemoryError)
         with pytest.raises(stereocam.DisconnectedError, match="MemoryError"):
@@ -106,10 +103,8 @@ def test_a_camera_survives_a_huge_frame_begin_and_keeps_streaming():
 def _watchdog_stop(cam: Camera, t: FaultyTransport, sim: SimulatedCamera) -> None:
     """Lose every host-to-device byte until the device's watchdog stops the stream, then heal."""
     t.set_manipulator(write=lambda b: b"")
-    deadline = time.monotonic() + 10
-    while sim.counters["heartbeat_timeouts"] == 0 and time.monotonic() < deadline:
-        time.sleep(0.02)
-    assert sim.counters["heartbeat_timeouts"] == 1 and not sim.engine.streaming
+    wait_until(lambda: sim.counters["heartbeat_timeouts"] and not sim.engine.streaming, 10, "the watchdog's stop")
+    assert sim.counters["heartbeat_timeouts"] == 1
     t.set_manipulator(write=lambda b: b)
 
 

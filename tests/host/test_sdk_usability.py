@@ -13,6 +13,7 @@ import stereocam
 from stereocam.protocol.params import PARAMS
 from stereocam.tools.conformance.budget import budget
 from tests.support.device import SMALL
+from tests.support.waiting import wait_until
 
 
 @pytest.fixture
@@ -26,10 +27,7 @@ def device_cam(device_url):
 
 
 def _wait_queued(cam, n: int = 1, timeout: float = 30.0) -> None:
-    deadline = time.monotonic() + timeout
-    while len(cam.frames) < n:
-        assert time.monotonic() < deadline, "no frame queued"
-        time.sleep(0.01)
+    wait_until(lambda: len(cam.frames) >= n, timeout, f"{n} frames queued")
 
 
 def test_get_frame_timeout_zero_polls(device_cam):
@@ -63,9 +61,7 @@ def test_callbacks_run_off_the_reader_thread_and_report_errors(device_cam, caplo
     with caplog.at_level(logging.ERROR):
         device_cam.start()
         assert got.wait(30)
-        deadline = time.monotonic() + 10
-        while device_cam.callback_errors == 0 and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_until(lambda: device_cam.callback_errors, 10, "a callback error counted")
     assert seen and all(name != device_cam.connection.link._reader.name for _, name in seen)
     assert device_cam.callback_errors >= 1
     assert any("boom on" in r.getMessage() for r in caplog.records)

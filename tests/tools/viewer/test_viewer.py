@@ -6,10 +6,8 @@ import os
 import subprocess
 import sys
 import threading
-import time
 import urllib.error
 import urllib.request
-from typing import Callable
 from pathlib import Path
 
 import cv2
@@ -242,12 +240,8 @@ def test_group_view_serves_the_newest_matched_set_and_names_a_missed_head(group_
     assert int(headers["X-Trigger"]) >= first["trigger_id"]
     assert cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_COLOR).shape == (120, 160, 3)
     sims[1].trigger_input.miss_next = 1  # this head misses the next edge
-    deadline = time.monotonic() + 20
-    while time.monotonic() < deadline:
-        state = json.loads(_get(server.url + "api/group/state")[1])
-        if state["missed"]:
-            break
-        time.sleep(0.2)
+    state = wait_until(lambda: (s := json.loads(_get(server.url + "api/group/state")[1]))["missed"] and s, 20,
+                       "a missed set reported")
     assert state["missed"][0]["missing"] == ["VIEW1"] and state["sets"]["incomplete"] >= 1
     assert [c["name"] for c in state["cameras"]] == ["VIEW0", "VIEW1", "VIEW2"]
     assert all(0 < c["clock_sigma_us"] < 1000 for c in state["cameras"])
@@ -382,9 +376,7 @@ def test_idle_half_sent_connections_time_out_and_are_limited(tmp_path, monkeypat
             s = socket.create_connection(server.server_address[:2], timeout=10)
             s.sendall(b"POST /api/config HTTP/1.1\r\nHost: 127.0.0.1\r\n")  # and then nothing
             idle.append(s)
-        deadline = time.monotonic() + 5
-        while server._slots._value and time.monotonic() < deadline:  # every slot taken by a silent peer
-            time.sleep(0.01)
+        wait_until(lambda: not server._slots._value, 5, "every slot taken by a silent peer")
         assert _raw(server, b"GET /api/state HTTP/1.1\r\n\r\n").startswith(b"HTTP/1.1 503")  # one more: refused
         for s in idle:  # each silent connection is closed by the server after its timeout
             assert returns_within(10, s.recv, 100) == b""
@@ -460,12 +452,6 @@ def test_the_viewer_marks_the_last_frame_stale_and_reconnects_after_the_camera_r
     threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
     cam.start()
 
-    def until(what: Callable[[], bool], seconds: float) -> None:
-        deadline = time.monotonic() + seconds
-        while not what():
-            assert time.monotonic() < deadline, f"not within {seconds} s"
-            time.sleep(0.05)
-
     def frame() -> dict:
         return json.loads(_get(server.url + "api/frame")[1])
 
@@ -476,16 +462,16 @@ def test_the_viewer_marks_the_last_frame_stale_and_reconnects_after_the_camera_r
             return False
 
     try:
-        until(lambda: frame() is not None, 20)
+        wait_until(lambda: frame() is not None, 20, "a frame")
         assert frame()["stale"] is False
         sim.stop()
-        until(lambda: frame()["stale"], 20)  # the last frame is served, said to be stale
+        wait_until(lambda: frame()["stale"], 20, "the last frame said to be stale")  # the last frame is served, said to be stale
         headers, _ = _get(server.url + "image/left.jpg")
         assert headers["X-Stale"] == "1"
         last = frame()["sequence"]
         sim = ServedSimulator(f"tcp:127.0.0.1:{port}", seed=44)  # the same unit, back on its address
-        until(state_ok, 30)  # reconnected: state answers again
-        until(lambda: (f := frame())["stale"] is False and f["sequence"] != last, 30)  # and frames are live
+        wait_until(state_ok, 30, "the state answered again")  # reconnected: state answers again
+        wait_until(lambda: (f := frame())["stale"] is False and f["sequence"] != last, 30, "live frames")  # and frames are live
         assert json.loads(_get(server.url + "api/state")[1])["config"]["fps"] == 10  # with the viewer's settings
     finally:
         server.shutdown()
