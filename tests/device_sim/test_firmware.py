@@ -65,10 +65,11 @@ def test_external_trigger_line_shared_by_two_heads():
         for cam in heads:
             cam.set_trigger_mode("external")
             cam.start()
-        for _ in range(3):
+        got: list[list[int]] = [[], []]
+        for _ in range(3):  # the next edge once both heads delivered this one's frame
             line.pulse()
-            time.sleep(0.05)
-        got = [[cam.get_frame(timeout=20).trigger_id for _ in range(3)] for cam in heads]
+            for ids, cam in zip(got, heads):
+                ids.append(cam.get_frame(timeout=20).trigger_id)
         assert got[0] == got[1] == [1, 2, 3]
         with pytest.raises(stereocam.DeviceError):
             heads[0].trigger()  # software trigger is refused in external mode

@@ -174,15 +174,9 @@ def test_a_pty_host_that_dies_mid_stream_blocks_nothing_and_leaves_nothing(pty) 
     dead = serial.Serial(server.url, timeout=0.5)
     # a watchdog long enough that a loaded machine captures before it fires
     dead.write(set_config(1, **SMALL, outputs=7, heartbeat_timeout_ms=1500) + m.encode(m.Start(), 2))
-    deadline = time.monotonic() + 10
-    while sim.engine.captured < 1 and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert sim.engine.captured >= 1
+    wait_until(lambda: sim.engine.captured >= 1, 10, "a capture")
     # the host stops reading and writing (hung, or died with the pty still open somewhere)
-    deadline = time.monotonic() + 10
-    while sim.engine.streaming and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert not sim.engine.streaming, "the watchdog must stop the stream even while a send is blocked"
+    wait_until(lambda: not sim.engine.streaming, 10, "the watchdog must stop the stream even while a send is blocked")
     assert sim.counters["heartbeat_timeouts"] + sim.counters["link_send_timeouts"] >= 1
     dead.close()
     wait_until(lambda: not sim.attached, what="the silent host's link is dropped (twice the heartbeat timeout)")
@@ -202,13 +196,9 @@ def test_a_usb_host_that_went_silent_is_dropped_and_the_next_one_served() -> Non
     try:
         with open_transport("usb://?serial=IDLE-USB", timeout=1.0) as t:
             t.write(set_config(1, **SMALL, heartbeat_timeout_ms=200) + m.encode(m.Start(), 2))
-            deadline = time.monotonic() + 10
-            while sim.engine.captured < 1 and time.monotonic() < deadline:
-                time.sleep(0.05)
-            deadline = time.monotonic() + 5  # silent and not reading: the stream stops, the link drops
-            while (sim.attached or sim.engine.streaming) and time.monotonic() < deadline:
-                time.sleep(0.05)
-            assert not sim.attached and not sim.engine.streaming
+            wait_until(lambda: sim.engine.captured >= 1, 10, "a capture")
+            # silent and not reading: the stream stops, the link drops
+            wait_until(lambda: not sim.attached and not sim.engine.streaming, 5, "the silent host dropped")
             t.write(m.encode(m.GetInfo(), 3))  # the next host on the wire
             decoder, got = Decoder(), []
             deadline = time.monotonic() + 5
@@ -300,9 +290,7 @@ def test_a_host_that_sent_a_lot_and_closed_does_not_keep_the_next_one_out(tcp) -
         assert isinstance(got[0], m.Info), (attempt, got[:1])
         assert time.monotonic() - sent < WAIT_FOR_SLOT_S
         host.close()
-        deadline = time.monotonic() + 5
-        while sim.attached and time.monotonic() < deadline:
-            time.sleep(0.02)
+        wait_until(lambda: not sim.attached, 5, f"attempt {attempt}: the closed host detached")
 
 
 def test_the_sdk_says_the_device_is_busy_when_another_host_holds_it(tcp) -> None:

@@ -15,6 +15,7 @@ from stereocam.device_sim.clock import DeviceClock
 from stereocam.device_sim.replay import ReplayClock
 from stereocam.device_sim.shared_line import SharedTriggerLine
 from stereocam.device_sim.trigger import LATENCY_RANGE_S, TriggerInput, TriggerMaster
+from tests.support.waiting import wait_until
 
 
 class Heard:
@@ -27,10 +28,7 @@ class Heard:
         self.event.set()
 
     def wait(self, n: int, timeout: float = 5.0) -> None:
-        end = time.monotonic() + timeout
-        while len(self.pulses) < n and time.monotonic() < end:
-            time.sleep(0.01)
-        assert len(self.pulses) >= n
+        wait_until(lambda: len(self.pulses) >= n, timeout, f"{n} pulses heard")
 
 
 def test_each_unit_exposes_its_own_latency_after_the_edge():

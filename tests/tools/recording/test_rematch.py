@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 import signal
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -19,6 +18,7 @@ from stereocam.stereo.engines import engine_named, matcher_for
 from stereocam.recording.reader import Recording
 from stereocam.tools import cli
 from stereocam.tools.recording.rematch import rematch
+from tests.support.waiting import wait_until
 
 N = 16
 
@@ -79,9 +79,7 @@ def test_killed_worker_loses_no_output(source, tmp_path):
         run = threading.Thread(target=lambda: result.update(rematch([source], out, {"block_size": 17},
                                                                     client=client)))
         run.start()
-        deadline = time.monotonic() + 60
-        while not any(out.glob(".run.*")) and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_until(lambda: any(out.glob(".run.*")), 60, "the run's first output")
         os.kill(pids[0], signal.SIGKILL)  # a worker dies with tasks on it
         run.join(timeout=240)
         assert not run.is_alive() and result["frames"] == N
