@@ -16,8 +16,9 @@ driving      a street at 1:8 scale (the rig 20 cm above the road, as a car's 1.6
 clutter      forty boxes, boards, balls and tubes at 0.7-3.5 m in front of each other
 
 Depths keep every disparity below ``SceneClass.disparities`` (64 but for driving's 128) at 640x480
-on the ideal rig of ``stereo_pair`` (f = 480 px, B = 8 cm). ``build(t, seed)`` gives the rows at scene time ``t``; ``moving`` names the rows that
-change with ``t``; the placement drawn from ``seed`` never depends on ``t``.
+on the ideal rig of ``stereo_pair`` (f = 480 px, B = 8 cm). ``build(t, seed)`` gives the rows at
+scene time ``t``; ``moving`` names the rows that change with ``t``; the placement drawn from ``seed``
+never depends on ``t``.
 """
 from __future__ import annotations
 
