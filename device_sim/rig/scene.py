@@ -8,7 +8,7 @@ never a device parameter:
 "board" — a chessboard a fixture moves through varied poses (rendered by ``calibration.board``;
     ``sensor.BOARD*`` give its size, pose count and dwell time);
 and the scene classes of ``scene_classes`` (slanted, curved, thin, low-texture, repetitive, exposure,
-vignetting, noise, motion-blur), each with its own photometry, at placement seed 0.
+vignetting, noise, motion-blur, driving, clutter), each with its own photometry, at placement seed 0.
 """
 from __future__ import annotations
 
@@ -41,6 +41,8 @@ class Scene(str, enum.Enum):
     VIGNETTING = "vignetting"
     NOISE = "noise"
     MOTION_BLUR = "motion-blur"
+    DRIVING = "driving"
+    CLUTTER = "clutter"
 
     @classmethod
     def parse(cls, name: "str | Scene") -> "Scene":

@@ -10,7 +10,7 @@ from stereocam.device_sim.calibration.truth import true_calibration
 from stereocam.device_sim.rig import render
 from stereocam.device_sim.rig.photometry import PLAIN, Photometry
 from stereocam.device_sim.rig.scene import Scene
-from stereocam.device_sim.rig.scene_classes import CLASSES
+from stereocam.device_sim.rig.scene_classes import CLASSES, DISPARITIES_WIDTH
 from stereocam.device_sim.rig.sensor import LIGHT, SensorRig
 from stereocam.device_sim.rig.shapes import cylinder, rect
 from stereocam.device_sim.rig.stereo_pair import ideal_geometry, render_pair, render_primitives, scene_class
@@ -97,12 +97,27 @@ def test_occlusion_mask_is_the_panels_shadow_in_the_right_view():
 def test_every_class_has_seeded_truth_within_the_disparity_range(name):
     pair = render_pair(name, W, H, seed=2)
     assert np.isfinite(pair.disparity).all()  # every class fills the view
-    assert 0 < np.nanmax(pair.disparity) < 64 * W / 640  # below 64 disparities at 640x480
+    assert 0 < np.nanmax(pair.disparity) < CLASSES[name].disparities * W / DISPARITIES_WIDTH  # within its range
     assert 0 < pair.occluded.mean() < 0.3
     assert explained_occlusions(pair.disparity, pair.occluded) > 0.99
     again, other = render_pair(name, W, H, seed=2), render_pair(name, W, H, seed=3)
     assert np.array_equal(again.left, pair.left) and np.array_equal(again.disparity, pair.disparity)
     assert not np.array_equal(other.left, pair.left)
+
+
+def test_driving_disparity_grows_down_the_road_to_most_of_its_range_and_the_sky_is_far():
+    pair = render_pair("driving", W, H, seed=1)
+    road = pair.disparity[:, 8]  # the left column: road (or kerb) below the horizon, facades above it
+    full = CLASSES["driving"].disparities * W / DISPARITIES_WIDTH
+    assert road[-1] > 0.7 * full and np.all(np.diff(road[-H // 4:]) > 0)  # nearer every row down
+    assert np.nanmin(pair.disparity) < 0.1 and pair.left[:H // 8].max() > 200  # a bright sky at ~0 px
+
+
+def test_clutter_has_depth_edges_everywhere():
+    def edges(name: str) -> float:  # share of horizontal steps that jump more than 1 px at 640 wide
+        d = render_pair(name, W, H, seed=1).disparity
+        return float((np.abs(np.diff(d, axis=1)) > W / DISPARITIES_WIDTH).mean())
+    assert edges("clutter") > 3 * edges("exposure")  # the everyday boxes, board and ball
 
 
 def test_unknown_class_is_named():

@@ -1,8 +1,9 @@
 """``stereocam bench matching --algorithm sgm``: every engine on every scene, one table per scene.
 
 Scenes: Middlebury Motorcycle (scikit-image, 128 disparities) and each simulator scene class
-(device_sim/rig/scene_classes.py, rendered by an ideal rectified rig with exact truth, 64
-disparities). Rows: our block matcher, our SGM with 8 and 4 paths, each post-processing preset
+(device_sim/rig/scene_classes.py, rendered by an ideal rectified rig with exact truth, the class's
+disparity range scaled to the width: 64 at 640 px, driving 128), with its dense truth or (``sparse``)
+a LiDAR-like subset of it (``lidar_subset``). Rows: our block matcher, our SGM with 8 and 4 paths, each post-processing preset
 after our SGM (when ``stereocam.stereo.post`` is installed), cv2.StereoSGBM in every mode, cv2.StereoBM
 and cv2's WLS filter (when cv2.ximgproc is installed). Columns: density (valid % of all pixels),
 bad-2.0 over every pixel with truth (invalid counts as bad), bad-2.0 over the pixels the method
@@ -30,8 +31,9 @@ SGBM_MODES = {"SGBM": 0, "HH": 1, "SGBM_3WAY": 2, "HH4": 3}  # cv2.STEREO_SGBM_M
 REFERENCE = "cv2 SGBM_3WAY"
 CV2_INVALID = -16  # cv2's (minDisparity - 1) * 16 at minDisparity 0
 MOTORCYCLE = "motorcycle"
-SIM_DISPARITIES = 64
 MOTORCYCLE_DISPARITIES = 128
+LIDAR_FRACTION = 0.07  # share of all pixels a sparse truth keeps
+LIDAR_MIN_PX = 1.0  # no LiDAR return from farther than this disparity (the sky, far trees)
 COLUMNS = ("method", "density %", "bad2 all %", "bad2 rep %", "EPE px", "ms", "spread", "x3WAY")
 
 MatchFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -83,12 +85,30 @@ def score(disp: np.ndarray, invalid: int, truth: np.ndarray) -> tuple[float, flo
             100.0 * float((reported & bad).sum()) / n_rep, float(err[reported].sum()) / n_rep)
 
 
-def class_scene(name: str, width: int, height: int, seed: int) -> BenchScene:
-    """A scene class rendered by the ideal rig (device_sim/rig/stereo_pair.py)."""
-    from stereocam.device_sim.rig.stereo_pair import render_pair
+def class_scene(name: str, width: int, height: int, seed: int, sparse: bool = False) -> BenchScene:
+    """A scene class rendered by the ideal rig (device_sim/rig/stereo_pair.py), at the class's
+    disparity range for ``width`` (a multiple of 16); ``sparse``: scored on ``lidar_subset`` of the truth."""
+    from stereocam.device_sim.rig.scene_classes import DISPARITIES_WIDTH
+    from stereocam.device_sim.rig.stereo_pair import render_pair, scene_class
 
     pair = render_pair(name, width, height, seed=seed)
-    return BenchScene(f"{name} {width}x{height}", pair.left, pair.right, pair.disparity, SIM_DISPARITIES)
+    nd = max(16, -(-scene_class(name).disparities * width // (16 * DISPARITIES_WIDTH)) * 16)
+    truth = lidar_subset(pair.disparity, seed) if sparse else pair.disparity
+    return BenchScene(f"{name} {width}x{height}{' sparse' if sparse else ''}", pair.left,
+                      pair.right, truth, nd)
+
+
+def lidar_subset(truth: np.ndarray, seed: int, fraction: float = LIDAR_FRACTION) -> np.ndarray:
+    """``truth`` kept on a random ``fraction`` of all pixels (NaN elsewhere), as a LiDAR sees a
+    street: a pixel's chance grows with the square of its row (mostly the lower image), and no
+    return where the truth is below ``LIDAR_MIN_PX`` (sky, far background)."""
+    h, w = truth.shape
+    rows = ((np.arange(h) + 0.5) / h) ** 2
+    seen = np.isfinite(truth) & (np.nan_to_num(truth) >= LIDAR_MIN_PX)
+    weight = np.where(seen, rows[:, None], 0.0)
+    chance = np.minimum(1.0, fraction * h * w * weight / max(float(weight.sum()), 1e-9))
+    keep = np.random.default_rng([0x11DA2, seed]).random((h, w)) < chance
+    return np.where(keep, truth, np.nan).astype(np.float32)
 
 
 def motorcycle_scene() -> BenchScene:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stereocam.tools.bench.matching_report import (CV2_INVALID, COLUMNS, REFERENCE, SGBM_MODES, report, score,
-                                                   class_scene)
+from stereocam.tools.bench.matching_report import (CV2_INVALID, COLUMNS, LIDAR_FRACTION, LIDAR_MIN_PX, REFERENCE,
+                                                   SGBM_MODES, class_scene, lidar_subset, report, score)
 from tests.tools.test_cli import stereocam as run
 
 NAME_W, CELL_W = 24, 11  # format_table's column widths
@@ -61,6 +61,28 @@ def test_cli_runs_the_report_for_the_scenes_asked_and_beside_a_busy_process():
     assert r.returncode == 0, r.stderr
     assert "beside a busy process" in r.stdout and "threads 2" in r.stdout
     assert list(parse_tables(r.stdout)) == ["slanted 128x96"]
+
+
+def test_lidar_subset_keeps_a_sparse_share_mostly_low_in_the_image_and_nothing_from_the_sky():
+    truth = np.full((120, 160), 20.0, np.float32)
+    truth[:30] = LIDAR_MIN_PX / 10  # sky
+    truth[100:, :10] = np.nan  # no truth
+    sparse = lidar_subset(truth, seed=3)
+    kept = np.isfinite(sparse)
+    assert kept.mean() == pytest.approx(LIDAR_FRACTION, rel=0.15)
+    assert not kept[:30].any() and not kept[100:, :10].any()
+    assert kept[60:].sum() > 2 * kept[:60].sum()  # mostly the lower image
+    assert np.array_equal(sparse[kept], truth[kept])
+    assert np.array_equal(kept, np.isfinite(lidar_subset(truth, seed=3)))
+    assert not np.array_equal(kept, np.isfinite(lidar_subset(truth, seed=4)))
+
+
+def test_cli_scores_driving_on_its_range_and_on_a_sparse_truth():
+    r = run("bench", "matching", "--algorithm", "sgm", "--scenes", "driving", "--size", "160", "120",
+            "--repeat", "1", "--threads", "1", "--sparse-truth")
+    assert r.returncode == 0, r.stderr
+    assert "== driving 160x120 sparse, 32 disparities, truth on 7 % of 160x120 ==" in r.stdout
+    assert "ours sgm 5 paths" in parse_tables(r.stdout)["driving 160x120 sparse"]
 
 
 def test_cli_names_an_unknown_scene():
