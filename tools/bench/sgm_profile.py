@@ -115,32 +115,39 @@ def stage_ms(m, left: np.ndarray, right: np.ndarray, repeat: int) -> dict[str, f
     return {name: cpu_ms(fn, repeat) for name, fn in stages.items()}
 
 
+def single_pass_rows(m, left: np.ndarray, right: np.ndarray, stages: int,
+                     out: np.ndarray) -> None:
+    """SGMMatcher m's 5-path row loop on one worker with the census margins its last match
+    set, cut after the first ``stages`` of SINGLE_PASS_STAGES; with all of them out holds the
+    disparity map before the speckle filter."""
+    m.skey[:] = -1
+    _single_pass_upto(stages, left, right, m.cl, m.crr, m.cfg, m.p2tab, out,
+                      (m.win[0], m.swin[0], m.skey[0]), m.census_offs, m.cost[0], m.lbuf[0],
+                      m.mv, m.pm[0], m.acc[0], m.rmin[0], m.rarg[0], m.karg[0])
+
+
+def speckle_halves(m, disp: np.ndarray) -> None:
+    """The speckle filter of SGMMatcher m (5 paths) on disp, half by half as its workers run it."""
+    _speckle_halves(m.cfg, disp, (m.labels, m.stack, m.size, m.parent, m.rtype))
+
+
 def single_pass_stage_ms(m, left: np.ndarray, right: np.ndarray,
                          repeat: int) -> dict[str, float]:
     """stage_ms for 5 paths: cumulative cuts of the row loop, differenced; then the speckle
-    filter over the matcher's output and what m.match spends beyond the stages (margins,
+    filter over the rows' output and what m.match spends beyond the stages (census margins,
     dispatch, parallel region)."""
-    disp = m.match(left, right)
-    m.cfg[_sgm.C_TL], m.cfg[_sgm.C_TR] = m.margins(left, right)
-    scratch = np.empty_like(disp)
-
-    def upto(stages):
-        def run():
-            m.skey[:] = -1
-            _single_pass_upto(stages, left, right, m.cl, m.crr, m.cfg, m.p2tab, scratch,
-                              (m.win[0], m.swin[0], m.skey[0]), m.census_offs, m.cost[0],
-                              m.lbuf[0], m.mv, m.pm[0], m.acc[0], m.rmin[0], m.rarg[0],
-                              m.karg[0])
-        return run
-    cuts = [cpu_ms(upto(k), repeat) for k in range(1, len(SINGLE_PASS_STAGES) + 1)]
+    m.match(left, right)
+    rows = np.empty(m.shape, np.int16)
+    cuts = [cpu_ms(lambda k=k: single_pass_rows(m, left, right, k, rows), repeat)
+            for k in range(1, len(SINGLE_PASS_STAGES) + 1)]
     out = {name: t - (cuts[i - 1] if i else 0.0)
            for i, (name, t) in enumerate(zip(SINGLE_PASS_STAGES, cuts))}
     if m.params.use_speckle:
-        spk = (m.labels, m.stack, m.size, m.parent, m.rtype)
+        scratch = np.empty_like(rows)
 
         def speckle():
-            scratch[:] = disp
-            _speckle_halves(m.cfg, scratch, spk)
+            scratch[:] = rows
+            speckle_halves(m, scratch)
         out["speckle (halves)"] = cpu_ms(speckle, repeat)
     out["rest of match"] = cpu_ms(lambda: m.match(left, right), repeat) - sum(out.values())
     return out
