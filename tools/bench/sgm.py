@@ -288,7 +288,7 @@ def main(args) -> int:
     print(f"threads={args.threads} (cv2 {cv2.__version__}, numba {numba.__version__}); "
           f"repeat={args.repeat}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus;"
           f" SGM JIT warm-up {time.perf_counter() - t0:.2f} s")
-    variants = {"ours SGM 8 paths": {}, "ours SGM 4 paths": {"paths": 4},
+    variants = {"ours SGM 8 paths": {"paths": 8}, "ours SGM 4 paths": {"paths": 4},
                 "ours SGM 5 paths": {"paths": 5}}
     subpixel_table(variants)
     scenes = []
