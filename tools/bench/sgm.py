@@ -164,8 +164,9 @@ def profile(left: np.ndarray, right: np.ndarray, nd: int, repeat: int, variants)
             out["speckle (1 thread)"] = med(lambda: filter_speckles(
                 disp.copy(), p.invalid_value, p.speckle_window_size, p.speckle_range,
                 m.labels, m.stack, m.rtype))
-        stages = stage_ms(m, left, repeat)
-        out.update({f"{k} (CPU, 1 thread, both groups)": v for k, v in stages.items()})
+        stages = stage_ms(m, left, right, repeat)
+        both = "" if p.paths == 5 else ", both groups"
+        out.update({f"{k} (CPU, 1 thread{both})": v for k, v in stages.items()})
         out["total (2 threads)"] = med(lambda: m.match(left, right))
         out["total (CPU, 1 thread)"] = cpu_ms(lambda: m.match(left, right), repeat)
         print(f"profile {label} {left.shape[1]}x{left.shape[0]}x{nd} (ms): "
@@ -200,13 +201,13 @@ def size_table(left: np.ndarray, right: np.ndarray, repeat: int, variants: dict[
     """Ours per variant over cv2 SGBM_3WAY on one pair resized to 320x240 .. 1280x960 with 64,
     128 and 256 disparities: CPU time on one thread, then (threads > 1) the median and range
     of wall-time ratios of interleaved runs on ``threads`` threads, beside a busy process when
-    ``busy``."""
+    ``busy``; under each size the 5-path variant's CPU ms per stage (sgm_profile.stage_ms)."""
     import cv2
     import numba
 
     from stereocam.stereo import SGMMatcher, SGMParams
 
-    from .sgm_profile import cpu_ms
+    from .sgm_profile import cpu_ms, stage_ms
 
     print(f"per size and disparities, ours / cv2 SGBM_3WAY: CPU on 1 thread; wall on {threads} "
           f"threads{' beside a busy process' if busy else ''} (median, range):")
@@ -238,6 +239,11 @@ def size_table(left: np.ndarray, right: np.ndarray, repeat: int, variants: dict[
                     cells.append(f"{label} {statistics.median(r):.2f}x "
                                  f"({min(r):.2f}-{max(r):.2f})")
             print(f"  {w}x{h} {nd} disp: 3WAY {t3:.1f} CPU ms; " + "; ".join(cells), flush=True)
+            for label, kw in variants.items():
+                m = SGMMatcher((h, w), SGMParams(num_disparities=nd, **kw))
+                if m.params.paths == 5:  # where its time goes (CPU ms on 1 thread)
+                    print(f"    {label} stages: " + ", ".join(
+                        f"{k} {v:.2f}" for k, v in stage_ms(m, *pair, repeat).items()), flush=True)
     print()
 
 
@@ -282,7 +288,7 @@ def main(args) -> int:
     print(f"threads={args.threads} (cv2 {cv2.__version__}, numba {numba.__version__}); "
           f"repeat={args.repeat}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus;"
           f" SGM JIT warm-up {time.perf_counter() - t0:.2f} s")
-    variants = {"ours SGM 8 paths": {}, "ours SGM 4 paths": {"paths": 4},
+    variants = {"ours SGM 8 paths": {"paths": 8}, "ours SGM 4 paths": {"paths": 4},
                 "ours SGM 5 paths": {"paths": 5}}
     subpixel_table(variants)
     scenes = []

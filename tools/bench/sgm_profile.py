@@ -1,6 +1,9 @@
 """Single-thread stage timings of the SGM kernel (for ``bench matching --algorithm sgm
---profile``): the cost rows, the path aggregation and the row selection, each run over every
-row of both path groups, as sgm_rows runs them (4 and 8 paths)."""
+--profile``): for 4 and 8 paths the cost rows, the path aggregation and the row selection,
+each run over every row of both path groups, as sgm_rows runs them; for 5 paths, whose stages
+run interleaved row by row, the chains' row loop cut after each stage (census, cost row and
+kept path, the other four paths and their sum, selection), each stage's time the difference
+of two cuts, and the speckle filter per half."""
 from __future__ import annotations
 
 import statistics
@@ -10,6 +13,10 @@ import numba as nb
 import numpy as np
 
 from stereocam.stereo import sgm as _sgm
+from stereocam.stereo.census import census_row_pair
+
+SINGLE_PASS_STAGES = ("census rows", "cost row + kept path", "four paths + sum",
+                      "wta+uniq+subpix+lr")
 
 
 @nb.njit(cache=True)
@@ -39,6 +46,39 @@ def _select(cfg, acc, parked, rmin, rarg, karg, disp):
         _sgm._finish_row(y, cfg, acc, parked[y], rmin, rarg, karg, disp[y])
 
 
+@nb.njit(cache=True)
+def _single_pass_upto(stages, img, right, cl, crr, cfg, p2tab, disp, win, offs, cost, lbuf,
+                      mv, pm, acc, rmin, rarg, karg):
+    """sgm_single_pass's rows on one worker (chain 0, then 1), only their first ``stages``
+    stages (SINGLE_PASS_STAGES)."""
+    h = img.shape[0]
+    nd, cols = cfg[_sgm.C_ND], cfg[_sgm.C_COLS]
+    stride = nd + 2
+    vbase = lbuf.shape[0] - 18 * cols * stride
+    top = (h + 1) // 2
+    for c in range(2):
+        for j in range(top if c == 0 else h - top):
+            y = j if c == 0 else h - 1 - j
+            census_row_pair(img, right, y, cfg[_sgm.C_CW], cfg[_sgm.C_CH], cfg[_sgm.C_TL],
+                            cfg[_sgm.C_TR], win, offs, cl, crr)
+            if stages > 1:
+                _sgm._kept_row(1 - c, y, 0, img, cl, crr, cfg, p2tab, cost, lbuf)
+            if stages > 2:
+                _sgm._aggregate_row(c, y, j == 0, 5, 0, vbase + c * 9 * cols * stride, j % 3,
+                                    (j + 2) % 3, 0, cols, img, cfg, p2tab, cost, lbuf, mv[c],
+                                    pm, acc)
+            if stages > 3:
+                _sgm._finish_row(y, cfg, acc, None, rmin, rarg, karg, disp[y])
+
+
+@nb.njit(cache=True)
+def _speckle_halves(cfg, disp, spk):
+    nxt = np.zeros(5 * _sgm.NXT_STRIDE, np.int32)
+    top = (disp.shape[0] + 1) // 2
+    for c in range(2 if disp.shape[0] > top else 1):
+        _sgm._speckle_half(c, top, cfg, nxt, disp, spk)
+
+
 def cpu_ms(fn, repeat: int) -> float:
     """Median CPU ms (process time) of fn() on one thread, numba's and OpenCV's."""
     import cv2
@@ -58,12 +98,11 @@ def cpu_ms(fn, repeat: int) -> float:
         cv2.setNumThreads(threads[1])
 
 
-def stage_ms(m, left: np.ndarray, repeat: int) -> dict[str, float]:
+def stage_ms(m, left: np.ndarray, right: np.ndarray, repeat: int) -> dict[str, float]:
     """Median CPU ms (process time, robust to a busy machine) per stage of SGMMatcher m, after
-    one m.match so that its buffers hold a frame; none for the single-pass 5 paths, whose
-    stages run interleaved row by row."""
+    one m.match so that its buffers hold a frame."""
     if m.params.paths == 5:
-        return {}
+        return single_pass_stage_ms(m, left, right, repeat)
     disp = np.empty(m.shape, np.int16)
     acc = m.acc[0].copy()
     stages = {
@@ -74,3 +113,41 @@ def stage_ms(m, left: np.ndarray, repeat: int) -> dict[str, float]:
                                                   m.karg[0], disp),
     }
     return {name: cpu_ms(fn, repeat) for name, fn in stages.items()}
+
+
+def single_pass_rows(m, left: np.ndarray, right: np.ndarray, stages: int,
+                     out: np.ndarray) -> None:
+    """SGMMatcher m's 5-path row loop on one worker with the census margins its last match
+    set, cut after the first ``stages`` of SINGLE_PASS_STAGES; with all of them out holds the
+    disparity map before the speckle filter."""
+    m.skey[:] = -1
+    _single_pass_upto(stages, left, right, m.cl, m.crr, m.cfg, m.p2tab, out,
+                      (m.win[0], m.swin[0], m.skey[0]), m.census_offs, m.cost[0], m.lbuf[0],
+                      m.mv, m.pm[0], m.acc[0], m.rmin[0], m.rarg[0], m.karg[0])
+
+
+def speckle_halves(m, disp: np.ndarray) -> None:
+    """The speckle filter of SGMMatcher m (5 paths) on disp, half by half as its workers run it."""
+    _speckle_halves(m.cfg, disp, (m.labels, m.stack, m.size, m.parent, m.rtype))
+
+
+def single_pass_stage_ms(m, left: np.ndarray, right: np.ndarray,
+                         repeat: int) -> dict[str, float]:
+    """stage_ms for 5 paths: cumulative cuts of the row loop, differenced; then the speckle
+    filter over the rows' output and what m.match spends beyond the stages (census margins,
+    dispatch, parallel region)."""
+    m.match(left, right)
+    rows = np.empty(m.shape, np.int16)
+    cuts = [cpu_ms(lambda k=k: single_pass_rows(m, left, right, k, rows), repeat)
+            for k in range(1, len(SINGLE_PASS_STAGES) + 1)]
+    out = {name: t - (cuts[i - 1] if i else 0.0)
+           for i, (name, t) in enumerate(zip(SINGLE_PASS_STAGES, cuts))}
+    if m.params.use_speckle:
+        scratch = np.empty_like(rows)
+
+        def speckle():
+            scratch[:] = rows
+            speckle_halves(m, scratch)
+        out["speckle (halves)"] = cpu_ms(speckle, repeat)
+    out["rest of match"] = cpu_ms(lambda: m.match(left, right), repeat) - sum(out.values())
+    return out
