@@ -26,7 +26,7 @@ def _warm(_: int = 0) -> None:
     warm_up()
 
 
-RUNS: tuple[tuple[str, dict[str, int], str], ...] = (("bm", {"block_size": 21}, "block matching, block_size 15 -> 21"), ("sgm", {}, "SGM, 8 paths"))
+RUNS: tuple[tuple[str, dict[str, int], str], ...] = (("bm", {"block_size": 21}, "block matching, block_size 15 -> 21"), ("sgm", {}, "SGM, 5 paths (the default)"))
 
 
 @click.command("rematch", context_settings=CONTEXT, epilog=epilog())
