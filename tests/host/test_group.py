@@ -18,6 +18,7 @@ from stereocam.frame_sets import MatchedSet, sync_problems
 from stereocam.protocol import messages as m
 from stereocam.protocol.firmware_image import build_image
 from tests.support.firmware import build
+from stereocam.tools.conformance.budget import budget
 from tests.support.waiting import stays
 
 pytestmark = pytest.mark.sim_only("checks capture times against the simulator's truth")
@@ -114,7 +115,8 @@ def test_a_master_that_cannot_drive_the_line_or_is_not_in_the_group_is_refused(h
 
 def test_a_missed_frame_is_reported_by_camera_and_trigger_id(heads):
     line, sims = heads
-    with stereocam.CameraGroup(group_urls(sims), config=SMALL, master=None, settle=0.2, deadline=0.5) as group:
+    # a late frame is not a missed one: the deadline is stretched by the suite's time factor (a busy host)
+    with stereocam.CameraGroup(group_urls(sims), config=SMALL, master=None, settle=0.2, deadline=budget(1.0)) as group:
         pulse(line, 3)
         sims[1].trigger_input.miss_next = 1  # this head misses the next edge
         pulse(line, 4)

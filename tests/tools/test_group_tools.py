@@ -8,6 +8,7 @@ import pytest
 
 from stereocam.tools import cli
 from stereocam.tools.bench import sync as bench_sync
+from stereocam.tools.conformance.budget import budget
 
 
 def test_demo_with_three_heads_prints_sets_and_saves_each_head(tmp_path, capsys):
@@ -22,7 +23,9 @@ def test_demo_with_three_heads_prints_sets_and_saves_each_head(tmp_path, capsys)
 
 @pytest.mark.slow
 def test_bench_sync_reports_skew_and_clock_errors_per_transport(capsys):
-    out = bench_sync.command.main(["--seconds", "1", "--transports", "inprocess,tcp"], standalone_mode=False)
+    # the deadline stretched by the suite's time factor: under load a head's frames come late, not never
+    out = bench_sync.command.main(["--seconds", "1", "--transports", "inprocess,tcp", "--deadline", str(budget(1.0))],
+                                  standalone_mode=False)
     assert set(out) == {"inprocess", "tcp"}
     for fig in out.values():
         assert fig["sets"] > 0 and 0 <= fig["skew_p50_us"] <= fig["skew_p99_us"] <= fig["skew_max_us"]

@@ -127,6 +127,9 @@ def report(kind: str, run: Run, truth: Callable[[str, int], float | None]) -> di
 @click.option("--fps", type=click.IntRange(1, 120), default=30, show_default=True, help="The master head's frame rate.")
 @click.option("--transports", default="inprocess,tcp,pty", show_default=True,
               help="Comma-separated: inprocess, tcp, pty.")
+@click.option("--deadline", type=click.FloatRange(min=0, min_open=True), default=0.5, show_default=True,
+              help="Seconds a set waits for its last head; a head is silent after no frame for this long "
+                   "(at least 1 s). A busy host may need more.")
 def command(**params: Any) -> dict[str, dict[str, float]]:
     """Several heads on one trigger line, how well their capture times agree."""
     args = SimpleNamespace(**params)
@@ -140,5 +143,5 @@ def command(**params: Any) -> dict[str, dict[str, float]]:
     for kind in kinds:
         heads = inprocess_heads() if kind == "inprocess" else served_heads(kind)
         with heads as (urls, truth):  # a frame's truth is logged before the frame is sent
-            out[kind] = report(kind, capture(urls, args.seconds, args.fps), truth)
+            out[kind] = report(kind, capture(urls, args.seconds, args.fps, args.deadline), truth)
     return out
