@@ -83,8 +83,9 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
     nd, p1 = cfg[C_ND], cfg[C_P1]
     x0, cols = cfg[C_X0], cfg[C_COLS]
     dy = 1 if g == 0 else -1
-    # vertical/diagonal paths: the ground's step (disparity growing downwards) costs C_P1G
-    p1v = (cfg[C_P1G], p1) if dy > 0 else (p1, cfg[C_P1G])
+    # vertical/diagonal paths in the lower half: the ground's step (disparity growing downwards)
+    # costs C_P1G
+    p1v = (p1, p1) if 2 * y < img.shape[0] else (cfg[C_P1G], p1) if dy > 0 else (p1, cfg[C_P1G])
     stride = nd + 2
     zero = hb + 2 * stride + 1
     kept = hb + 3 * stride + 1  # + x * stride: the kept horizontal path's run of column x

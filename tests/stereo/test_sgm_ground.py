@@ -1,6 +1,7 @@
 """SGM's ground step (SGMParams.p1_ground_percent): on a textured floor, whose disparity grows
 downwards, the 5-path default's vertical and diagonal paths (all from below in the lower half)
-no longer lag behind the disparity; a ceiling (the same pair upside down) is no worse."""
+no longer lag behind the disparity; a ceiling (the same pair upside down) is no worse; the price,
+with 5 paths, is a small shift of walls in the lower half toward smaller disparities."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,6 +10,7 @@ import pytest
 cv2 = pytest.importorskip("cv2")
 
 from stereocam.stereo import SGMMatcher, SGMParams  # noqa: E402
+from stereocam.tools.bench.sgm_scenes import slanted_plane  # noqa: E402
 
 H, W, SLOPE = 96, 160, 0.3  # a floor from row H / 4 down, its disparity growing 0.3 px per row
 
@@ -53,3 +55,24 @@ def test_a_ceiling_is_no_worse(paths: int) -> None:
         p = SGMParams(num_disparities=48, paths=paths, p1_ground_percent=pct)
         err[pct] = median_error(SGMMatcher(left.shape, p).match(left, right), truth, slice(0, 24), p)
     assert abs(err[SGMParams().p1_ground_percent]) <= abs(err[100]) + 0.05
+
+
+@pytest.mark.parametrize("paths, most", [(5, 0.12), (8, 0.01)])
+def test_walls_in_the_lower_half_shift_little(paths: int, most: float) -> None:
+    """A wall (disparity constant down each column, slanted across) is not a floor: with 5
+    paths the lower half's paths, all from below, pull it toward smaller disparities (0.09 px
+    at 50 %); with 8, paths from above balance them. The upper half stays as without the step."""
+    shift = {}
+    for pct in (100, SGMParams().p1_ground_percent):
+        p = SGMParams(num_disparities=48, paths=paths, p1_ground_percent=pct)
+        err = []
+        for seed, (slope, d0) in enumerate(((0.05, 10.3), (-0.09, 36.4))):
+            left, right, truth = slanted_plane(48, 200, d0, slope, seed)
+            disp = SGMMatcher(left.shape, p).match(left, right)
+            assert (disp[4:-4, 52:-4] != p.invalid_value).mean() > 0.95
+            err.append(disp[4:-4, 52:-4] / 16.0 - truth[4:-4, 52:-4])
+        e = np.concatenate(err, axis=1)
+        shift[pct] = (float(e[:20].mean()), float(e[20:].mean()))  # upper, lower half
+    off, on = shift[100], shift[SGMParams().p1_ground_percent]
+    assert abs(on[0] - off[0]) < 0.01
+    assert -most < on[1] - off[1] <= 0.01
