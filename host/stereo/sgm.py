@@ -39,10 +39,10 @@ _JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
 
 # layout of the int64 configuration vector passed to sgm_rows
 (C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_MAXC, C_CW, C_CH,
- C_SPW, C_SPR, C_TL, C_TR, C_LEN) = range(17)
+ C_SPW, C_SPR, C_TL, C_TR, C_P1G, C_LEN) = range(18)
 # C_INV: params.invalid_value; C_MAXC: params.max_cost; C_CW, C_CH: census window; C_SPW,
 # C_SPR: speckle window size (0: no speckle filter) and range; C_TL, C_TR: the frame's census
-# margins of the left and right image (set per frame)
+# margins of the left and right image (set per frame); C_P1G: params.p1_ground_step
 
 
 @nb.njit(**_JIT)
@@ -83,6 +83,9 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
     nd, p1 = cfg[C_ND], cfg[C_P1]
     x0, cols = cfg[C_X0], cfg[C_COLS]
     dy = 1 if g == 0 else -1
+    # vertical/diagonal paths in the lower half: the ground's step (disparity growing downwards)
+    # costs C_P1G
+    p1v = (p1, p1) if 2 * y < img.shape[0] else (cfg[C_P1G], p1) if dy > 0 else (p1, cfg[C_P1G])
     stride = nd + 2
     zero = hb + 2 * stride + 1
     kept = hb + 3 * stride + 1  # + x * stride: the kept horizontal path's run of column x
@@ -107,7 +110,8 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
                                 img, p2tab, mv)
             v3 = _vertical_meta(3, -1, first, x, X, y, dy, cur, prv, vb, zero, cols, stride,
                                 img, p2tab, mv)
-        pixel_paths(cost, x * nd, lbuf, hz + v1 + v2 + v3 + (kept + x * stride,), npaths, p1, acc, x * nd, nd, pm)
+        pixel_paths(cost, x * nd, lbuf, hz + v1 + v2 + v3 + (kept + x * stride,), npaths, p1, acc, x * nd, nd, pm,
+                    p1v)
         for v in range(1, vpaths):
             mv[cur, v - 1, uidx(x)] = pm[v]
 

@@ -287,9 +287,10 @@ def _umin(builder, a, b):
     return builder.select(builder.icmp_unsigned("<", a, b), a, b)
 
 
-def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, p1s):
+def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, p1s, p1hi=None):
     """L[k] for the n disparities from j0 of one path step (pixel_paths), stored at
-    lbuf[oo + j0 + k]; meta = (po, oo, p2m, mprev) as int64 values."""
+    lbuf[oo + j0 + k]; meta = (po, oo, p2m, mprev) as int64 values; p1hi: the step from
+    P[k+1]'s own P1 (None: p1s, the step from P[k-1]'s, for both)."""
     u8 = ir.IntType(8)
     vty = ir.VectorType(u8, n)
     po, oo, p2m, mp = meta
@@ -307,7 +308,12 @@ def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, p1s):
         ir.VectorType(_I32, n), [n] + list(range(n - 1))))
     hi = builder.shuffle_vector(pv, _splat(builder, after, vty), ir.Constant(
         ir.VectorType(_I32, n), list(range(1, n)) + [n]))
-    t = _call(builder, f"llvm.uadd.sat.v{n}i8", vty, [_umin(builder, lo, hi), p1s])
+    sat = f"llvm.uadd.sat.v{n}i8"
+    if p1hi is None:
+        t = _call(builder, sat, vty, [_umin(builder, lo, hi), p1s])
+    else:  # a ground step: one neighbour's P1 is cheaper
+        t = _umin(builder, _call(builder, sat, vty, [lo, p1s]),
+                  _call(builder, sat, vty, [hi, p1hi]))
     m = _umin(builder, _umin(builder, pv, t), _splat(builder, builder.trunc(p2m, u8), vty))
     L = builder.sub(builder.add(c, m), _splat(builder, builder.trunc(mp, u8), vty))
     _vstore(builder, L, at(builder.add(oo, j0)))
@@ -354,12 +360,13 @@ def path_step(typingctx, cost, ci, lbuf, po, oo, p2m, mprev, p1, nd):
 
 
 @intrinsic
-def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
+def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, p1pair):
     """All path steps of one pixel (npaths 1, 2, 4, or 5: four and a fifth path's stored
     L) in one pass over the disparities:
 
         for path v < min(npaths, 4), (po, oo, p2m, mprev) = meta[4v : 4v+4] (meta: 17 ints):
-          L_v[k] = cost[ci+k] + min(P, min(P[-1], P[+1]) +sat p1, p2m) - mprev,  P = lbuf[po+k]
+          L_v[k] = cost[ci+k] + min(P, min(P[-1] +sat a, P[+1] +sat b), p2m) - mprev,
+          P = lbuf[po+k], (a, b) = (p1, p1) for v = 0 (horizontal), else p1pair
           lbuf[oo+k] = L_v[k];  mins[v] = min_k L_v[k]
         acc[ai+k] = sum_v L_v[k] (+ lbuf[meta[16]+k] when npaths is 5)   (int16; not
         written when npaths is 1)
@@ -369,7 +376,8 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
     cost and the sum stay in registers across the paths."""
     if not (_u8_arrays(cost, lbuf) and _i16_arrays(acc, mins)
             and isinstance(meta, types.UniTuple) and meta.count == 17
-            and isinstance(meta.dtype, types.Integer)):
+            and isinstance(meta.dtype, types.Integer)
+            and isinstance(p1pair, types.UniTuple) and p1pair.count == 2):
         return None
 
     def codegen(context, builder, sig, args):
@@ -381,6 +389,8 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
         nmore = builder.icmp_signed(">", npv, ir.Constant(npv.type, 2))
         extra = builder.icmp_signed("==", npv, ir.Constant(npv.type, 5))
         p1v = context.cast(builder, args[5], st[5], types.uint8)
+        p1lo, p1hi = (context.cast(builder, builder.extract_value(args[10], i), st[10].dtype,
+                                   types.uint8) for i in range(2))
         meta_v = [context.cast(builder, builder.extract_value(args[3], i), st[3].dtype,
                                types.intp) for i in range(17)]
         wide = ir.VectorType(u8, 64)
@@ -396,10 +406,11 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
                        vty)
             total = cgutils.alloca_once(builder, wty)
             p1s = _splat(builder, p1v, vty)
+            p1ground = (_splat(builder, p1lo, vty), _splat(builder, p1hi, vty))
 
             def step(v):
                 L = _step_chunk(context, builder, st[2], args[2], c, meta_v[4 * v:4 * v + 4],
-                                j0, n, p1s)
+                                j0, n, *((p1s,) if v == 0 else p1ground))
                 _keep_min(builder, best[v], L, n)
                 return builder.zext(L, wty)
 
@@ -429,7 +440,7 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins):
                     put()
         return context.get_dummy_value()
 
-    return types.none(cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins), codegen
+    return types.none(cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, p1pair), codegen
 
 
 @intrinsic

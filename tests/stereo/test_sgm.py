@@ -65,6 +65,9 @@ EDGES = [
     dict(census_margin=0),  # plain census
     dict(census_margin=3, census_width=3, census_height=1),  # a window one row high
     dict(census_margin=255, speckle_window_size=0),  # every bit masked: cost 0 everywhere
+    dict(p1_ground_percent=48),  # the ground step cheaper on vertical/diagonal paths
+    dict(p1=255, p2=20, p1_ground_percent=0, lr_max_diff=1),  # a free ground step; saturating
+    dict(p1=40, p2=60, p1_ground_percent=75, min_disparity=-9, num_disparities=32),
 ]
 SHAPES = [(23, 97), (37, 121), (50, 131), (31, 160)]
 
@@ -200,6 +203,8 @@ def test_thread_count_and_reuse_do_not_change_output(paths: int) -> None:
     (dict(census_margin=-2), "census_margin must be -1"),
     (dict(census_margin=256), "census_margin must be -1 .* 0..255, got 256"),
     (dict(census_margin=2.0), "census_margin"),
+    (dict(p1_ground_percent=101), "p1_ground_percent must be 0..100, got 101"),
+    (dict(p1_ground_percent=-1), "p1_ground_percent"),
 ])
 def test_bad_params(kw, msg) -> None:
     with pytest.raises(ValueError, match=msg):

@@ -15,7 +15,11 @@ x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k 
 3. for each path direction r = (dy, dx): L_r(p) = C(p) where p - r leaves the matched
    rectangle, else L_r(p, k) = C(p, k) + min(L_r(q, k), L_r(q, k-1) + P1, L_r(q, k+1) + P1,
    m_q + P2') - m_q with q = p - r, m_q = min_k L_r(q, k) and P2' = P2, or with p2_adapt = a > 0
-   P2' = min(P2, max(P1, P2 * a // (a + |I_L(p) - I_L(q)|))). S = sum of the 4 (horizontal,
+   P2' = min(P2, max(P1, P2 * a // (a + |I_L(p) - I_L(q)|))). On the vertical and diagonal
+   paths, for p in rows y >= ceil(h / 2), the ground's step, a disparity growing downwards,
+   costs P1g = p1_ground_step instead of P1: from L_r(q, k-1) walking down (dy = 1), from
+   L_r(q, k+1) walking up (dy = -1).
+   S = sum of the 4 (horizontal,
    vertical), 8 (plus diagonal) or 5 paths: the horizontal two and, in rows y < ceil(h / 2),
    the vertical and both diagonals from above, in the other rows those from below.
    (L <= census bits + P2 <= 255, as SGMParams demands.)
@@ -103,8 +107,9 @@ def cost_volume(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray
     return cost
 
 
-def _step(cost: np.ndarray, prev: np.ndarray, grad: np.ndarray, p: SGMParams) -> np.ndarray:
-    """One path step for a batch of pixels: cost, prev (n, N); grad (n,) = |I(p) - I(q)|."""
+def _step(cost: np.ndarray, prev: np.ndarray, grad: np.ndarray, p: SGMParams, dy: int = 0) -> np.ndarray:
+    """One path step for a batch of pixels: cost, prev (n, N); grad (n,) = |I(p) - I(q)|; dy:
+    the direction of a ground step's path (0: none)."""
     big = np.iinfo(np.int32).max // 2
     m = prev.min(axis=1, keepdims=True)
     p2 = np.full(grad.shape, p.p2, np.int64)
@@ -112,7 +117,9 @@ def _step(cost: np.ndarray, prev: np.ndarray, grad: np.ndarray, p: SGMParams) ->
         p2 = np.minimum(p.p2, np.maximum(p.p1, p.p2 * p.p2_adapt // (p.p2_adapt + grad)))
     lower = np.pad(prev, ((0, 0), (1, 0)), constant_values=big)[:, :-1]  # L(q, k-1)
     upper = np.pad(prev, ((0, 0), (0, 1)), constant_values=big)[:, 1:]  # L(q, k+1)
-    best = np.minimum(np.minimum(prev, np.minimum(lower, upper) + p.p1), m + p2[:, None])
+    p1_lower = p.p1_ground_step if dy > 0 else p.p1  # the ground step walking down
+    p1_upper = p.p1_ground_step if dy < 0 else p.p1  # and walking up
+    best = np.minimum(np.minimum(prev, np.minimum(lower + p1_lower, upper + p1_upper)), m + p2[:, None])
     return cost + best - m
 
 
@@ -128,12 +135,13 @@ def aggregate_path(cost: np.ndarray, img: np.ndarray, dy: int, dx: int, p: SGMPa
             out[:, x] = _step(cost[:, x], out[:, q], np.abs(img[:, x] - img[:, q]), p)
         return out
     order = range(1, h) if dy > 0 else range(h - 2, -1, -1)
+    top = (h + 1) // 2  # the ground step in rows from top only
     for y in order:
         xs = np.arange(w)
         inside = (xs - dx >= 0) & (xs - dx < w)
         x, q = xs[inside], xs[inside] - dx
         grad = np.abs(img[y, x] - img[y - dy, q])
-        out[y, x] = _step(cost[y, x], out[y - dy, q], grad, p)
+        out[y, x] = _step(cost[y, x], out[y - dy, q], grad, p, dy if y >= top else 0)
     return out
 
 
