@@ -21,7 +21,8 @@ def test_single_pass_stages_rebuild_the_match(h: int) -> None:
     single_pass_rows(m, left, right, len(SINGLE_PASS_STAGES), rows)
     speckle_halves(m, rows)
     assert np.array_equal(rows, want)
-    assert np.median(want[:, 40:]) == 6 * 16
+    # a wall at disparity 6 (in 1/16 px); the ground step may pull the lower half by < 0.12 px (test_sgm_ground)
+    assert abs(np.median(want[:, 40:]) - 6 * 16) <= 1
 
 
 def test_stage_names() -> None:
