@@ -10,13 +10,13 @@ from dataclasses import dataclass
 
 from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.frame_messages import invalid_disparity
-from stereocam.protocol.params import Algorithm
+from stereocam.protocol.params import BY_NAME, Algorithm
 
 from .config_map import ConfigField, check_params, check_rule
 
 PATH_COST_LIMIT = 255  # path costs L <= census bits + p2 are held in uint8
 CENSUS_BITS = 64  # census codes are uint64
-PATH_COUNTS = (4, 5, 8)  # path directions the engine aggregates (sgm_reference.PATHS)
+PATH_COUNTS = BY_NAME["sgm_paths"].one_of  # path directions the engine aggregates (sgm_reference.PATHS)
 MARGIN_DIVISOR = 10  # automatic census margin: median |3x3 Laplacian| // this (~0.4 noise sigma)
 MARGIN_MAX = 255
 
@@ -33,6 +33,11 @@ SGM_CONFIG: tuple[ConfigField, ...] = (
 and the path count (4, 5 or 8); the protocol's ranges lie within them."""
 
 
+def _default(name: str) -> int:
+    """The protocol's default for an SGM row: the engine's own default is the device's."""
+    return int(BY_NAME[name].default)
+
+
 @dataclass(frozen=True)
 class SGMParams:
     """SGM parameters; the defaults are a good general setting (census 9x7, 5 paths in one pass per
@@ -40,18 +45,18 @@ class SGMParams:
 
     num_disparities: int = 128  # disparities min_disparity .. min_disparity + N - 1
     min_disparity: int = 0
-    census_width: int = 9  # census window (odd, width * height - 1 <= 64 comparison bits)
-    census_height: int = 7
+    census_width: int = _default("census_width")  # census window (odd, width * height - 1 <= 64 bits)
+    census_height: int = _default("census_height")
     census_margin: int = -1  # census bits only where the 3x3-smoothed neighbour and centre differ
     # by more than this many DN (flat, noisy areas get a flat cost); -1: from each image's noise
     # (census.noise_margin), 0: plain census
-    paths: int = 5  # 5 (one pass per image half from its outer edge: horizontal, vertical and the
-    # two diagonals from that edge), 4 (horizontal + vertical) or 8 (every direction)
-    p1: int = 25  # penalty for a 1 px disparity change between neighbours along a path
-    p2: int = 190  # penalty for a larger change (both scaled to the margin census's
+    paths: int = _default("sgm_paths")  # 5 (one pass per image half from its outer edge: horizontal,
+    # vertical and the two diagonals from that edge), 4 (horizontal + vertical) or 8 (every direction)
+    p1: int = _default("sgm_p1")  # penalty for a 1 px disparity change between path neighbours
+    p2: int = _default("sgm_p2")  # penalty for a larger change (both scaled to the margin census's
     # cost range: bad-2.0 lower on Motorcycle and every scene class than 15 / 128)
-    p2_adapt: int = 32  # > 0: P2 / (1 + |dI| / p2_adapt) along the path, not below p1 (nor
-    # above p2); 0: off
+    p2_adapt: int = _default("sgm_p2_adapt")  # > 0: P2 / (1 + |dI| / p2_adapt) along the path, not
+    # below p1 (nor above p2); 0: off
     p1_ground_percent: int = 50  # on the vertical and diagonal paths in the lower half of the
     # image (rows from ceil(h / 2)) a 1 px step the way a floor's disparity goes (growing
     # downwards) costs this percent of p1 (p1_ground_step): the paths no longer lag behind a
