@@ -60,7 +60,7 @@ def opencv_all_pairs(directory: Path, board_text: str, square: str | None, model
         if match_detections(dl, dr, board, ()) is not None:
             found.append((n, lp.name, dl, dr))
     size = cv2.imread(str(lp), cv2.IMREAD_GRAYSCALE).shape[::-1]
-    order = (choose_detector(found, size),)
+    order = choose_detector(found, size)
     pairs = [PairPoints(n, name, *match_detections(dl, dr, board, order)) for n, name, dl, dr in found]
     obj = [p.obj for p in pairs]
     if model == "equidistant":  # cv2.fisheye has no cold start that converges reliably: seed it as the tool does

@@ -27,7 +27,7 @@ from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.device_sim.rig.lens import LensClass
 from stereocam.device_sim.rig.scene import WALL_DISTANCE_M
 from stereocam.device_sim.rig.sensor import BOARD
-from stereocam.tools.calibration.boards import detect_all
+from stereocam.tools.calibration.boards import detect_all, most_accurate
 from stereocam.tools.calibration.device import calibrate_device
 from stereocam.tools.calibration.solve import SolveConfig
 from stereocam.tools.options import CONTEXT, SIZE, epilog
@@ -53,7 +53,7 @@ def rectified_dy(cam: Camera, frames: int, size: tuple[int, int]) -> float:
             f = cam.get_frame(timeout=60)
             found = [detect_all(img, BOARD) for img in (f.left, f.right)]
             if all(found):
-                cl, cr = (next(iter(d.values())).image_points for d in found)
+                cl, cr = (most_accurate(d).image_points for d in found)
                 if np.dot(cl[-1] - cl[0], cr[-1] - cr[0]) < 0:
                     cr = cr[::-1]
                 dy.append(cl[:, 1] - cr[:, 1])

@@ -39,6 +39,24 @@ from stereocam.tools.calibration.lens import (
 METRICS = ("reproj_left", "reproj_right", "stereo", "epipolar")
 
 
+class UnrectifiableFitError(LensSolveError):
+    """A head that was fitted (its stereo RMS known) but whose calibration has no usable
+    rectification (SPEC §12.4 step 4): a fit of mismatched pairs, or a lens model that does not
+    hold at the image's border."""
+
+    def __init__(self, model: str, reason: str, stereo_rms: float) -> None:
+        super().__init__(f"{model}: {reason}")
+        self.model, self.reason, self.stereo_rms = model, reason, stereo_rms
+
+
+class NoFitError(LensSolveError):
+    """No lens model gave a usable fit; `unrectifiable` holds those that fitted but do not rectify."""
+
+    def __init__(self, message: str, causes: Sequence[LensSolveError]) -> None:
+        super().__init__(message)
+        self.unrectifiable = [c for c in causes if isinstance(c, UnrectifiableFitError)]
+
+
 @dataclass
 class PairPoints:
     """One usable pair: object points (N, 3), left and right image points (N, 2), its index."""
@@ -89,7 +107,7 @@ def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], sta
         # rectification, and no folding — a fit can match every corner and still fold where none was seen
         check_rectifiable(calib, rectify_map)
     except ValueError as exc:  # CalibrationImplausible is one
-        raise LensSolveError(f"{model}: {exc}") from exc
+        raise UnrectifiableFitError(model, str(exc), st.rms) from exc
     return HeadFit(fl, fr, st, calib, stereo_rectify(calib))
 
 
@@ -190,11 +208,12 @@ def choose_model(models: Sequence[str], train: list[PairPoints], held: list[Pair
                  size: tuple[int, int], tie: float) -> ModelChoice:
     """Fit each model on `train` on its own terms (a plumb_bob fit, where there is one, is one more
     start for the others) and score it on `held`; a model that fails is listed, never fatal while
-    another one fits. Raises LensSolveError when none fits."""
+    another one fits. Raises NoFitError when none fits."""
     scores: dict[str, float] = {}
     errors: dict[str, dict[str, np.ndarray]] = {}
     fits: dict[str, HeadFit] = {}
     failures: dict[str, str] = {}
+    causes: list[LensSolveError] = []
     for model in models:
         try:
             fits[model] = fit_head(model, train, size, fits.get("plumb_bob"))
@@ -203,8 +222,9 @@ def choose_model(models: Sequence[str], train: list[PairPoints], held: list[Pair
         except LensSolveError as exc:
             fits.pop(model, None)
             failures[model] = str(exc)
+            causes.append(exc)
     if not scores:
-        raise LensSolveError("no lens model could be fitted: " + "; ".join(failures.values()))
+        raise NoFitError("no lens model could be fitted: " + "; ".join(failures.values()), causes)
     best = min(scores.values())
     chosen = next(m for m in models if m in scores and scores[m] <= best * (1 + tie))
     return ModelChoice(chosen, scores, failures, errors[chosen], fits[chosen])

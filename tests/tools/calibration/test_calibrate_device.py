@@ -13,7 +13,7 @@ from stereocam.device_sim.rig.sensor import BOARD
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.protocol import messages as m
-from stereocam.tools.calibration.boards import detect_all
+from stereocam.tools.calibration.boards import detect_all, most_accurate
 from stereocam.tools.calibration.solve import SolveConfig
 from stereocam.tools.calibration.calibrate import write_outputs
 from stereocam.tools.calibration.device import (EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_WRITE, calibrate_device)
@@ -235,7 +235,7 @@ def test_wide_angle_units_calibrate_to_their_truth_and_rectify_on_board(tmp_path
             assert f.rectified
             found = [detect_all(img, BOARD) for img in (f.left, f.right)]
             if all(found):
-                cl, cr = (next(iter(d.values())).image_points for d in found)
+                cl, cr = (most_accurate(d).image_points for d in found)
                 dy.append(cl[:, 1] - cr[:, 1] if np.dot(cl[-1] - cl[0], cr[-1] - cr[0]) > 0 else cl[:, 1] - cr[::-1, 1])
             if len(dy) == 3:
                 break
