@@ -284,6 +284,9 @@ def refine_sector(g: np.ndarray, corners: np.ndarray, board: BoardSpec) -> np.nd
 
 CHESSBOARD_DETECTORS = {"classic": _classic, "sector": _sector_based}
 REFINED = {"sector": "sector_subpix"}  # a detector's corners refined, a candidate of its own (solve.py)
+SUBPIXEL_FIRST = ("classic", *REFINED.values())
+"""Detections with sub-pixel refined corners: where a measurement takes its corners from first (the
+rectified views' vertical disparity), not a solve (solve.py chooses per set)."""
 
 
 def detect_all(img: np.ndarray, board: Board) -> dict[str, Detection]:
@@ -311,12 +314,6 @@ def detect_all(img: np.ndarray, board: Board) -> dict[str, Detection]:
                                          board.object_points())
     detection_cache.store(cache, {name: (d.ids, d.image_points, d.object_points) for name, d in out.items()})
     return out
-
-
-def most_accurate(found: dict[str, Detection]) -> Detection:
-    """Of one image's detections (detect_all), the one with sub-pixel refined corners where there is
-    one: a measurement's (the rectified views' vertical disparity), not a solve's (solve.py chooses)."""
-    return next((found[n] for n in ("classic", *REFINED.values()) if n in found), next(iter(found.values())))
 
 
 def detect_charuco(g: np.ndarray, board: CharucoSpec) -> Detection | None:

@@ -94,9 +94,12 @@ class OutlierRules:
     floor_px: float = 0.1
 
 
-def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], start: HeadFit | None = None
-             ) -> HeadFit:
-    """Per-camera solves, then stereo with fixed intrinsics. Raises LensSolveError."""
+def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], start: HeadFit | None = None,
+             storable: bool = True) -> HeadFit:
+    """Per-camera solves, then stereo with fixed intrinsics. Raises LensSolveError; with `storable`,
+    UnrectifiableFitError for a head a camera would not store. Without it (a fit whose residuals only
+    judge outliers) the head need only have the rectified rotations the epipolar error is measured in:
+    one gross outlier can spoil a fit's rectification, and the fit must still show which pair it is."""
     obj = [p.obj for p in pairs]
     fl = calibrate_mono(model, obj, [p.left for p in pairs], size, start.left if start else None)
     fr = calibrate_mono(model, obj, [p.right for p in pairs], size, start.right if start else None)
@@ -105,10 +108,13 @@ def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], sta
         calib = StereoCalibration(size, fl.K, fl.D, fr.K, fr.D, st.R, st.T, model)
         # the rule a camera applies before it stores a calibration (SPEC §12.4 step 4): a usable
         # rectification, and no folding — a fit can match every corner and still fold where none was seen
-        check_rectifiable(calib, rectify_map)
+        if storable:
+            check_rectifiable(calib, rectify_map)
+        with np.errstate(all="ignore"):
+            geometry = stereo_rectify(calib)
     except ValueError as exc:  # CalibrationImplausible is one
         raise UnrectifiableFitError(model, str(exc), st.rms) from exc
-    return HeadFit(fl, fr, st, calib, stereo_rectify(calib))
+    return HeadFit(fl, fr, st, calib, geometry)
 
 
 def epipolar_dy(fit: HeadFit, left: np.ndarray, right: np.ndarray) -> np.ndarray:
@@ -159,11 +165,12 @@ def _limits(values: np.ndarray, rules: OutlierRules) -> float:
 
 def robust_fit(model: str, pairs: list[PairPoints], size: tuple[int, int], rules: OutlierRules,
                start_model: str | None = None) -> tuple[HeadFit, list[PairPoints], dict[int, str]]:
-    """Fit, drop outlier pairs, refit; returns (fit, pairs kept, {index: reason} of those dropped)."""
+    """Fit, drop outlier pairs, refit; returns (fit, pairs kept, {index: reason} of those dropped).
+    The fits judge outliers only: they need not rectify (fit_head's `storable`)."""
     kept, dropped = list(pairs), {}
     budget = int(rules.max_drop_fraction * len(pairs))
     for round_ in range(rules.rounds + 1):
-        fit = fit_head(model, kept, size, try_fit(start_model, kept, size) if start_model else None)
+        fit = fit_head(model, kept, size, try_fit(start_model, kept, size) if start_model else None, storable=False)
         if round_ == rules.rounds or budget == 0:
             break
         errors = in_sample_errors(fit, kept)

@@ -13,8 +13,8 @@ from stereocam.device_sim.rig.sensor import BOARD
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.protocol import messages as m
-from stereocam.tools.calibration.boards import detect_all, most_accurate
-from stereocam.tools.calibration.solve import SolveConfig
+from stereocam.tools.calibration.boards import SUBPIXEL_FIRST, detect_all
+from stereocam.tools.calibration.solve import SolveConfig, match_detections
 from stereocam.tools.calibration.calibrate import write_outputs
 from stereocam.tools.calibration.device import (EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_WRITE, calibrate_device)
 
@@ -233,10 +233,9 @@ def test_wide_angle_units_calibrate_to_their_truth_and_rectify_on_board(tmp_path
         for _ in range(40):  # the fixture moves on every few frames; some poses leave the rectified view
             f = cam.get_frame(timeout=60)
             assert f.rectified
-            found = [detect_all(img, BOARD) for img in (f.left, f.right)]
-            if all(found):
-                cl, cr = (most_accurate(d).image_points for d in found)
-                dy.append(cl[:, 1] - cr[:, 1] if np.dot(cl[-1] - cl[0], cr[-1] - cr[0]) > 0 else cl[:, 1] - cr[::-1, 1])
+            matched = match_detections(detect_all(f.left, BOARD), detect_all(f.right, BOARD), BOARD, SUBPIXEL_FIRST)
+            if matched is not None:
+                dy.append(matched[1][:, 1] - matched[2][:, 1])
             if len(dy) == 3:
                 break
         cam.stop()
