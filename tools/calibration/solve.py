@@ -17,7 +17,9 @@ the device's raw stream in device mode — and returns a CalibrationResult.
   3. Outliers, lens model, final fit: tools/calibration/fit.py (residual-based outlier removal, model
      chosen on held-out pairs — every holdout_every-th pair kept — final fit on every pair kept).
      A fit whose lens model folds the image, or whose rectified views miss the sensors, counts as
-     no fit (the rule a camera applies before storing, SPEC §12.4): the next model is chosen.
+     no fit (the rule a camera applies before storing, SPEC §12.4): the next model is chosen. The
+     outlier screening's fits are exempt (they only judge residuals: one gross outlier can spoil a
+     fit's rectification, and that fit must still show which pair it is).
   4. Metrics (px of the raw image, N = number of corners):
        rms_left / rms_right = sqrt( Σ_views Σ_corners |x_obs − x_proj|² / N ) of that camera's own
          solve on every pair kept; rms_stereo = the stereo solve's RMS over both cameras;
