@@ -37,6 +37,7 @@ from stereocam.tools.calibration.lens import (
 )
 
 METRICS = ("reproj_left", "reproj_right", "stereo", "epipolar")
+CROSS_START_RATIO = 2.0  # fit_head: a camera's RMS this many times the other's is fitted again from the other's
 
 
 class UnrectifiableFitError(LensSolveError):
@@ -101,8 +102,16 @@ def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], sta
     judge outliers) the head need only have the rectified rotations the epipolar error is measured in:
     one gross outlier can spoil a fit's rectification, and the fit must still show which pair it is."""
     obj = [p.obj for p in pairs]
-    fl = calibrate_mono(model, obj, [p.left for p in pairs], size, start.left if start else None)
-    fr = calibrate_mono(model, obj, [p.right for p in pairs], size, start.right if start else None)
+    left, right = [p.left for p in pairs], [p.right for p in pairs]
+    fl = calibrate_mono(model, obj, left, size, start.left if start else None)
+    fr = calibrate_mono(model, obj, right, size, start.right if start else None)
+    # the cameras of a head have lenses of one class: a camera whose fit is far worse than the
+    # other's (a false minimum: a wide lens's rational fit where no start of its own held) is fitted
+    # again from the other's fit
+    if fl.rms > CROSS_START_RATIO * fr.rms:
+        fl = calibrate_mono(model, obj, left, size, fr)
+    elif fr.rms > CROSS_START_RATIO * fl.rms:
+        fr = calibrate_mono(model, obj, right, size, fl)
     st = calibrate_stereo(model, obj, [p.left for p in pairs], [p.right for p in pairs], size, fl, fr)
     try:
         calib = StereoCalibration(size, fl.K, fl.D, fr.K, fr.D, st.R, st.T, model)

@@ -264,34 +264,41 @@ def choose_detector(found: Sequence[tuple[int, str, dict[str, Detection], dict[s
     (boards.CHESSBOARD_DETECTORS), the one whose corners fit a plumb_bob camera best on the left
     images both found (fewer than 4 such images: the one that found the most); a detector's refined
     corners (boards.REFINED) replace its own where they fit a camera better (the lowest RMS of the
-    lens models, on the left images both have), judged on the set's own images: refinement helps
-    where the detector's corners are off (a wide lens), and hurts where the squares' print pulls it
-    (dot-coded squares)."""
-    lefts = [dl for _, _, dl, _ in found]
+    lens models, on each camera's images both have; the camera fitted best decides, since a fit
+    stuck in a false minimum says nothing of the corners), judged on the set's own images:
+    refinement helps where the detector's corners are off (a wide lens), and hurts where the
+    squares' print pulls it (dot-coded squares)."""
+    lefts, rights = [dl for _, _, dl, _ in found], [dr for _, _, _, dr in found]
     names = sorted({n for d in lefts for n in d} - set(REFINED.values()))
     first = names[0]
     for other in names[1:]:
-        first = _better(first, other, lefts, size, ("plumb_bob",))
-    variants = {n: _better(n, REFINED[n], lefts, size, MODELS) if n in REFINED else n for n in names}
+        first = _better(first, other, (lefts,), size, ("plumb_bob",))
+    variants = {n: _better(n, REFINED[n], (lefts, rights), size, MODELS) if n in REFINED else n for n in names}
     return (variants[first], *(variants[n] for n in names if n != first))
 
 
-def _better(a: str, b: str, lefts: Sequence[dict[str, Detection]], size: tuple[int, int],
+def _better(a: str, b: str, cameras: Sequence[Sequence[dict[str, Detection]]], size: tuple[int, int],
             models: Sequence[str]) -> str:
     """Of detections a and b, the one whose corners fit a camera of `models` with the lower RMS on the
-    images both have (ties and failures: a; fewer than 4 such images: the one found more often)."""
-    common = [d for d in lefts if a in d and b in d]
-    if len(common) < 4:
-        return max((a, b), key=lambda n: sum(n in d for d in lefts))
-    fits = {}
-    for n in (a, b):
-        for model in models:
-            try:
-                fit = calibrate_mono(model, [d[n].object_points for d in common], [d[n].image_points for d in common],
-                                     size).rms
-            except LensSolveError:
-                continue
-            fits[n] = min(fit, fits.get(n, fit))
+    images both have, on the camera (of `cameras`) where a fit is lowest (ties and failures: a;
+    fewer than 4 such images: the one found more often on the first camera)."""
+    fits: dict[str, float] = {}
+    compared = False
+    for images in cameras:
+        common = [d for d in images if a in d and b in d]
+        if len(common) < 4:
+            continue
+        compared = True
+        for n in (a, b):
+            for model in models:
+                try:
+                    fit = calibrate_mono(model, [d[n].object_points for d in common],
+                                         [d[n].image_points for d in common], size).rms
+                except LensSolveError:
+                    continue
+                fits[n] = min(fit, fits.get(n, fit))
+    if not compared:
+        return max((a, b), key=lambda n: sum(n in d for d in cameras[0]))
     return min(fits, key=lambda n: fits[n]) if fits else a
 
 
