@@ -202,9 +202,10 @@ def robust_fit(model: str, pairs: list[PairPoints], size: tuple[int, int], rules
 
 
 def try_fit(model: str, pairs: Sequence[PairPoints], size: tuple[int, int]) -> HeadFit | None:
-    """fit_head, or None where the model does not fit (a start for another model, never required)."""
+    """fit_head, or None where the model does not fit (a start for another model, never required,
+    so it need not rectify)."""
     try:
-        return fit_head(model, pairs, size)
+        return fit_head(model, pairs, size, storable=False)
     except LensSolveError:
         return None
 
@@ -223,16 +224,17 @@ class ModelChoice:
 def choose_model(models: Sequence[str], train: list[PairPoints], held: list[PairPoints],
                  size: tuple[int, int], tie: float) -> ModelChoice:
     """Fit each model on `train` on its own terms (a plumb_bob fit, where there is one, is one more
-    start for the others) and score it on `held`; a model that fails is listed, never fatal while
+    start for the others, also where plumb_bob is not among `models`) and score it on `held`; a model that fails is listed, never fatal while
     another one fits. Raises NoFitError when none fits."""
     scores: dict[str, float] = {}
     errors: dict[str, dict[str, np.ndarray]] = {}
     fits: dict[str, HeadFit] = {}
     failures: dict[str, str] = {}
     causes: list[LensSolveError] = []
+    starter = None if "plumb_bob" in models else try_fit("plumb_bob", train, size)
     for model in models:
         try:
-            fits[model] = fit_head(model, train, size, fits.get("plumb_bob"))
+            fits[model] = fit_head(model, train, size, fits.get("plumb_bob", starter))
             errors[model] = held_out_errors(fits[model], held)
             scores[model] = score(errors[model])
         except LensSolveError as exc:

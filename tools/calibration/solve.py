@@ -361,20 +361,20 @@ def _final_fit(choice: ModelChoice, train: list[PairPoints], held: list[PairPoin
                size: tuple[int, int]) -> HeadFit:
     """The chosen model fitted on every pair kept; should that fit fail, the next model by held-out
     score (`choice` is updated to it, the failure listed)."""
-    failures = []
+    failures: list[LensSolveError] = []
     for model in sorted(choice.scores, key=lambda m: (m != choice.model, choice.scores[m])):
         try:
             start = choice.fit if model == choice.model else None
             fit = fit_head(model, kept, size, start)
         except LensSolveError as exc:
             choice.failures[model] = f"fitted without the held-out pairs, but not with them: {exc}"
-            failures.append(str(exc))
+            failures.append(exc)
             continue
         if model != choice.model:
             choice.held_errors = held_out_errors(fit_head(model, train, size), held)
             choice.model = model
         return fit
-    raise LensSolveError("; ".join(failures))
+    raise NoFitError("; ".join(map(str, failures)), failures)
 
 
 def _screen(models: Sequence[str], pairs: list[PairPoints], size: tuple[int, int], config: SolveConfig
