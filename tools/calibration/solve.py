@@ -47,7 +47,7 @@ from stereocam.protocol.rectification import RectifiedGeometry
 from stereocam.tools.calibration.boards import REFINED, Board, Detection, describe, detect_all, gray, match_pair
 from stereocam.tools.calibration.coverage import CoverageSelector, view_params
 from stereocam.tools.calibration.fit import (
-    HeadFit, ModelChoice, NoFitError, OutlierRules, PairPoints, UnrectifiableFitError, choose_model, epipolar_dy,
+    CROSS_START_RATIO, HeadFit, ModelChoice, NoFitError, OutlierRules, PairPoints, UnrectifiableFitError, choose_model, epipolar_dy,
     fit_head, held_out_errors, rms, robust_fit,
 )
 from stereocam.tools.calibration.lens import MODELS, LensSolveError, calibrate_mono
@@ -263,9 +263,8 @@ def choose_detector(found: Sequence[tuple[int, str, dict[str, Detection], dict[s
     """The detectors the set's images are taken from, first choice first. Between the detectors
     (boards.CHESSBOARD_DETECTORS), the one whose corners fit a plumb_bob camera best on the left
     images both found (fewer than 4 such images: the one that found the most); a detector's refined
-    corners (boards.REFINED) replace its own where they fit a camera better (the lowest RMS of the
-    lens models, on each camera's images both have; the camera fitted best decides, since a fit
-    stuck in a false minimum says nothing of the corners), judged on the set's own images:
+    corners (boards.REFINED) replace its own where they fit the two cameras better (the lens model
+    that fits best, on each camera's images both have; see _better), judged on the set's own images:
     refinement helps where the detector's corners are off (a wide lens), and hurts where the
     squares' print pulls it (dot-coded squares)."""
     lefts, rights = [dl for _, _, dl, _ in found], [dr for _, _, _, dr in found]
@@ -279,27 +278,31 @@ def choose_detector(found: Sequence[tuple[int, str, dict[str, Detection], dict[s
 
 def _better(a: str, b: str, cameras: Sequence[Sequence[dict[str, Detection]]], size: tuple[int, int],
             models: Sequence[str]) -> str:
-    """Of detections a and b, the one whose corners fit a camera of `models` with the lower RMS on the
-    images both have, on the camera (of `cameras`) where a fit is lowest (ties and failures: a;
-    fewer than 4 such images: the one found more often on the first camera)."""
-    fits: dict[str, float] = {}
-    compared = False
-    for images in cameras:
-        common = [d for d in images if a in d and b in d]
-        if len(common) < 4:
-            continue
-        compared = True
-        for n in (a, b):
-            for model in models:
-                try:
-                    fit = calibrate_mono(model, [d[n].object_points for d in common],
-                                         [d[n].image_points for d in common], size).rms
-                except LensSolveError:
-                    continue
-                fits[n] = min(fit, fits.get(n, fit))
-    if not compared:
+    """Of detections a and b, the one whose corners fit the cameras (each of `cameras` a list of one
+    camera's detections) with the lower sum of RMS, on each camera's images both have, for the lens
+    model that fits best; as fit_head does, a camera fitted over CROSS_START_RATIO times worse than
+    the other is fitted again from the other's fit (ties and failures: a; fewer than 4 such images
+    on every camera: the one found more often on the first camera)."""
+    scored = [[d for d in images if a in d and b in d] for images in cameras]
+    scored = [common for common in scored if len(common) >= 4]
+    if not scored:
         return max((a, b), key=lambda n: sum(n in d for d in cameras[0]))
-    return min(fits, key=lambda n: fits[n]) if fits else a
+    totals: dict[str, float] = {}
+    for n in (a, b):
+        for model in models:
+            try:
+                fits = [calibrate_mono(model, [d[n].object_points for d in common],
+                                       [d[n].image_points for d in common], size) for common in scored]
+                if len(fits) == 2 and max(f.rms for f in fits) > CROSS_START_RATIO * min(f.rms for f in fits):
+                    worse = int(fits[1].rms > fits[0].rms)
+                    common = scored[worse]
+                    fits[worse] = calibrate_mono(model, [d[n].object_points for d in common],
+                                                 [d[n].image_points for d in common], size, fits[1 - worse])
+            except LensSolveError:
+                continue
+            total = sum(f.rms for f in fits)
+            totals[n] = min(total, totals.get(n, total))
+    return min(totals, key=lambda n: totals[n]) if totals else a
 
 
 def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, int], coverage: tuple[float, ...],
