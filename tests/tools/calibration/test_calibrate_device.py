@@ -211,11 +211,13 @@ def test_wide_angle_units_calibrate_to_their_truth_and_rectify_on_board(tmp_path
     board) within 0.2 % of the truth, held-out epipolar < 0.1 px, rectified board corners < 0.1 px
     apart vertically. Small: 640x480, the lens model named (cheaper than the automatic choice).
     Other seeds: ``stereocam bench device-calibration --size 640x480 --lens wide --lens fisheye``.
-    A measurement, out of `make test`: the bench's 6 units (seeds 1, 2, 73 of both lenses) and 22
-    sets of frames solved offline all met the targets (at worst 0.09 % / 0.09 px), and the fisheye
-    case here passes; but 2 of 4 runs of the wide case here (20 fps, other frames caught) ended in
-    rational fits whose border pixels have no usable ray ("rectification gives no usable view": the
-    solver fails, nothing written), and on a loaded 2-core host the fisheye case takes ~5 minutes."""
+    A measurement, out of `make test`: on a loaded 2-core host the fisheye case takes ~5 minutes.
+    The wide case's earlier failures ("rectification gives no usable view (focal -inf px)", 2 of 4
+    runs) came from frame sets where one camera's rational fit fell into a false minimum (1.5 px
+    against the other's 0.06 px) and the screening fits, which had to rectify, could not drop the
+    pair that spoilt them; both are fixed (tools/calibration/fit.py): the frame sets of seed 73 that
+    failed, solved offline, now meet the targets, but this test has not yet been run often enough
+    here to assert it in `make test`."""
     sim = SimulatedCamera(serial=f"LENS-{lens}", seed=seed, flash_path=tmp_path / "u.flash", factory_calibrated=False,
                           scene="board", lens=lens)
     with Camera(InProcessTransport(sim), timeout=2.0) as cam:
