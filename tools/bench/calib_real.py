@@ -62,12 +62,12 @@ def opencv_all_pairs(directory: Path, board_text: str, square: str | None, model
         dl, dr = detect_all(left, board), detect_all(right, board)
         if match_detections(dl, dr, board, ()) is not None:
             found.append((n, lp.name, dl, dr))
-    order = (choose_detector(found, size),)
+    order = choose_detector(found, size)
     pairs = []
     for n, name, dl, dr in found:
         matched = match_detections(dl, dr, board, order)
         if matched is None:
-            raise click.ClickException(f"{directory}: pair {name}: no corners of the chosen detector {order[0]}")
+            raise click.ClickException(f"{directory}: pair {name}: no corners of the chosen detectors {order}")
         pairs.append(PairPoints(n, name, *matched))
     obj = [p.obj for p in pairs]
     if model == "equidistant":  # cv2.fisheye has no cold start that converges reliably: seed it as the tool does

@@ -27,9 +27,9 @@ from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.device_sim.rig.lens import LensClass
 from stereocam.device_sim.rig.scene import WALL_DISTANCE_M
 from stereocam.device_sim.rig.sensor import BOARD
-from stereocam.tools.calibration.boards import detect_all
+from stereocam.tools.calibration.boards import SUBPIXEL_FIRST, detect_all
 from stereocam.tools.calibration.device import calibrate_device
-from stereocam.tools.calibration.solve import SolveConfig
+from stereocam.tools.calibration.solve import SolveConfig, match_detections
 from stereocam.tools.options import CONTEXT, SIZE, epilog
 
 TARGET_PCT, TARGET_EPI_PX, TARGET_DY_PX, TARGET_DEPTH_PCT = 0.2, 0.1, 0.1, 1.0
@@ -51,12 +51,9 @@ def rectified_dy(cam: Camera, frames: int, size: tuple[int, int]) -> float:
     try:
         for _ in range(frames * 4):  # the fixture dwells a few frames per pose; some poses leave the view
             f = cam.get_frame(timeout=60)
-            found = [detect_all(img, BOARD) for img in (f.left, f.right)]
-            if all(found):
-                cl, cr = (next(iter(d.values())).image_points for d in found)
-                if np.dot(cl[-1] - cl[0], cr[-1] - cr[0]) < 0:
-                    cr = cr[::-1]
-                dy.append(cl[:, 1] - cr[:, 1])
+            matched = match_detections(detect_all(f.left, BOARD), detect_all(f.right, BOARD), BOARD, SUBPIXEL_FIRST)
+            if matched is not None:  # the right corners numbered as the left ones, whichever detector found them
+                dy.append(matched[1][:, 1] - matched[2][:, 1])
             if len(dy) == frames:
                 break
     finally:

@@ -71,6 +71,7 @@ from stereocam.tools.calibration.outputs import (
 from stereocam.tools.calibration.solve import (
     CalibrationError,
     CalibrationResult,
+    GateFailedError,
     SolveConfig,
     UnusableImagesError,
     calibrate_pairs,
@@ -244,6 +245,10 @@ def _offline(args: SimpleNamespace, config: SolveConfig, db: FactoryDB, started:
     except UnusableImagesError as exc:  # unreadable images: exit 2, as the help says
         _record(db, args, serial, started, None, EXIT_USAGE, str(exc), None)
         return _fail(EXIT_USAGE, f"{exc} (nothing written)")
+    except GateFailedError as exc:  # fitted, but no fit can be stored: the gate's verdict, nothing to write
+        reason = GATE_FAILED + "; ".join(exc.failures)
+        _record(db, args, serial, started, None, EXIT_GATE, reason, None)
+        return _fail(EXIT_GATE, f"{reason} (nothing written)")
     except CalibrationError as exc:
         _record(db, args, serial, started, None, EXIT_NO_SOLUTION, str(exc), None)
         return _fail(EXIT_NO_SOLUTION, f"{exc} (nothing written)")

@@ -22,8 +22,8 @@ import numpy as np
 import stereocam
 from stereocam.calibration_io import id_text
 from stereocam.protocol import messages as m
-from stereocam.tools.calibration.solve import BoardNotFoundError, CalibrationError, CalibrationResult, Progress, \
-    SolveConfig, calibrate_pairs
+from stereocam.tools.calibration.solve import BoardNotFoundError, CalibrationError, CalibrationResult, \
+    GateFailedError, Progress, SolveConfig, calibrate_pairs
 from stereocam.tools.exit_codes import EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_UNSUPPORTED, EXIT_WRITE
 
 
@@ -88,6 +88,8 @@ def calibrate_device(cam: stereocam.Camera, board, config: SolveConfig, outdir: 
                                      progress=BoardWatch(progress, fps))
         finally:
             cam.stop()
+    except GateFailedError as exc:
+        return EXIT_GATE, None, "calibration FAILED the gate: " + "; ".join(exc.failures) + "; nothing was written to the camera"
     except CalibrationError as exc:
         return EXIT_NO_SOLUTION, None, f"{exc}; nothing was written to the camera"
     finally:

@@ -37,6 +37,25 @@ from stereocam.tools.calibration.lens import (
 )
 
 METRICS = ("reproj_left", "reproj_right", "stereo", "epipolar")
+CROSS_START_RATIO = 2.0  # fit_head: a camera's RMS this many times the other's is fitted again from the other's
+
+
+class UnrectifiableFitError(LensSolveError):
+    """A head that was fitted (its stereo RMS known) but whose calibration has no usable
+    rectification (SPEC §12.4 step 4): a fit of mismatched pairs, or a lens model that does not
+    hold at the image's border."""
+
+    def __init__(self, model: str, reason: str, stereo_rms: float) -> None:
+        super().__init__(f"{model}: {reason}")
+        self.model, self.reason, self.stereo_rms = model, reason, stereo_rms
+
+
+class NoFitError(LensSolveError):
+    """No lens model gave a usable fit; `unrectifiable` holds those that fitted but do not rectify."""
+
+    def __init__(self, message: str, causes: Sequence[LensSolveError]) -> None:
+        super().__init__(message)
+        self.unrectifiable = [c for c in causes if isinstance(c, UnrectifiableFitError)]
 
 
 @dataclass
@@ -76,21 +95,35 @@ class OutlierRules:
     floor_px: float = 0.1
 
 
-def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], start: HeadFit | None = None
-             ) -> HeadFit:
-    """Per-camera solves, then stereo with fixed intrinsics. Raises LensSolveError."""
+def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], start: HeadFit | None = None,
+             storable: bool = True) -> HeadFit:
+    """Per-camera solves, then stereo with fixed intrinsics. Raises LensSolveError; with `storable`,
+    UnrectifiableFitError for a head a camera would not store. Without it (a fit whose residuals only
+    judge outliers) the head need only have the rectified rotations the epipolar error is measured in:
+    one gross outlier can spoil a fit's rectification, and the fit must still show which pair it is."""
     obj = [p.obj for p in pairs]
-    fl = calibrate_mono(model, obj, [p.left for p in pairs], size, start.left if start else None)
-    fr = calibrate_mono(model, obj, [p.right for p in pairs], size, start.right if start else None)
+    left, right = [p.left for p in pairs], [p.right for p in pairs]
+    fl = calibrate_mono(model, obj, left, size, start.left if start else None)
+    fr = calibrate_mono(model, obj, right, size, start.right if start else None)
+    # the cameras of a head have lenses of one class: a camera whose fit is far worse than the
+    # other's (a false minimum: a wide lens's rational fit where no start of its own held) is fitted
+    # again from the other's fit
+    if fl.rms > CROSS_START_RATIO * fr.rms:
+        fl = calibrate_mono(model, obj, left, size, fr)
+    elif fr.rms > CROSS_START_RATIO * fl.rms:
+        fr = calibrate_mono(model, obj, right, size, fl)
     st = calibrate_stereo(model, obj, [p.left for p in pairs], [p.right for p in pairs], size, fl, fr)
     try:
         calib = StereoCalibration(size, fl.K, fl.D, fr.K, fr.D, st.R, st.T, model)
         # the rule a camera applies before it stores a calibration (SPEC §12.4 step 4): a usable
         # rectification, and no folding — a fit can match every corner and still fold where none was seen
-        check_rectifiable(calib, rectify_map)
+        if storable:
+            check_rectifiable(calib, rectify_map)
+        with np.errstate(all="ignore"):
+            geometry = stereo_rectify(calib)
     except ValueError as exc:  # CalibrationImplausible is one
-        raise LensSolveError(f"{model}: {exc}") from exc
-    return HeadFit(fl, fr, st, calib, stereo_rectify(calib))
+        raise UnrectifiableFitError(model, str(exc), st.rms) from exc
+    return HeadFit(fl, fr, st, calib, geometry)
 
 
 def epipolar_dy(fit: HeadFit, left: np.ndarray, right: np.ndarray) -> np.ndarray:
@@ -141,11 +174,12 @@ def _limits(values: np.ndarray, rules: OutlierRules) -> float:
 
 def robust_fit(model: str, pairs: list[PairPoints], size: tuple[int, int], rules: OutlierRules,
                start_model: str | None = None) -> tuple[HeadFit, list[PairPoints], dict[int, str]]:
-    """Fit, drop outlier pairs, refit; returns (fit, pairs kept, {index: reason} of those dropped)."""
+    """Fit, drop outlier pairs, refit; returns (fit, pairs kept, {index: reason} of those dropped).
+    The fits judge outliers only: they need not rectify (fit_head's `storable`)."""
     kept, dropped = list(pairs), {}
     budget = int(rules.max_drop_fraction * len(pairs))
     for round_ in range(rules.rounds + 1):
-        fit = fit_head(model, kept, size, try_fit(start_model, kept, size) if start_model else None)
+        fit = fit_head(model, kept, size, try_fit(start_model, kept, size) if start_model else None, storable=False)
         if round_ == rules.rounds or budget == 0:
             break
         errors = in_sample_errors(fit, kept)
@@ -168,9 +202,10 @@ def robust_fit(model: str, pairs: list[PairPoints], size: tuple[int, int], rules
 
 
 def try_fit(model: str, pairs: Sequence[PairPoints], size: tuple[int, int]) -> HeadFit | None:
-    """fit_head, or None where the model does not fit (a start for another model, never required)."""
+    """fit_head, or None where the model does not fit (a start for another model, never required,
+    so it need not rectify)."""
     try:
-        return fit_head(model, pairs, size)
+        return fit_head(model, pairs, size, storable=False)
     except LensSolveError:
         return None
 
@@ -189,22 +224,25 @@ class ModelChoice:
 def choose_model(models: Sequence[str], train: list[PairPoints], held: list[PairPoints],
                  size: tuple[int, int], tie: float) -> ModelChoice:
     """Fit each model on `train` on its own terms (a plumb_bob fit, where there is one, is one more
-    start for the others) and score it on `held`; a model that fails is listed, never fatal while
-    another one fits. Raises LensSolveError when none fits."""
+    start for the others, also where plumb_bob is not among `models`) and score it on `held`; a model that fails is listed, never fatal while
+    another one fits. Raises NoFitError when none fits."""
     scores: dict[str, float] = {}
     errors: dict[str, dict[str, np.ndarray]] = {}
     fits: dict[str, HeadFit] = {}
     failures: dict[str, str] = {}
+    causes: list[LensSolveError] = []
+    starter = None if "plumb_bob" in models else try_fit("plumb_bob", train, size)
     for model in models:
         try:
-            fits[model] = fit_head(model, train, size, fits.get("plumb_bob"))
+            fits[model] = fit_head(model, train, size, fits.get("plumb_bob", starter))
             errors[model] = held_out_errors(fits[model], held)
             scores[model] = score(errors[model])
         except LensSolveError as exc:
             fits.pop(model, None)
             failures[model] = str(exc)
+            causes.append(exc)
     if not scores:
-        raise LensSolveError("no lens model could be fitted: " + "; ".join(failures.values()))
+        raise NoFitError("no lens model could be fitted: " + "; ".join(failures.values()), causes)
     best = min(scores.values())
     chosen = next(m for m in models if m in scores and scores[m] <= best * (1 + tie))
     return ModelChoice(chosen, scores, failures, errors[chosen], fits[chosen])

@@ -17,7 +17,9 @@ the device's raw stream in device mode — and returns a CalibrationResult.
   3. Outliers, lens model, final fit: tools/calibration/fit.py (residual-based outlier removal, model
      chosen on held-out pairs — every holdout_every-th pair kept — final fit on every pair kept).
      A fit whose lens model folds the image, or whose rectified views miss the sensors, counts as
-     no fit (the rule a camera applies before storing, SPEC §12.4): the next model is chosen.
+     no fit (the rule a camera applies before storing, SPEC §12.4): the next model is chosen. The
+     outlier screening's fits are exempt (they only judge residuals: one gross outlier can spoil a
+     fit's rectification, and that fit must still show which pair it is).
   4. Metrics (px of the raw image, N = number of corners):
        rms_left / rms_right = sqrt( Σ_views Σ_corners |x_obs − x_proj|² / N ) of that camera's own
          solve on every pair kept; rms_stereo = the stereo solve's RMS over both cameras;
@@ -25,7 +27,8 @@ the device's raw stream in device mode — and returns a CalibrationResult.
          (y_left_rect − y_right_rect at the raw focal length near the centre), of the chosen
          model fitted without the held-out pairs; epipolar_all_rms_px the same over every pair kept,
          with the final fit.
-  5. Gate (CalibrationResult.failures lists every failed rule; passed = none failed): rms_stereo ≤
+  5. Gate (CalibrationResult.failures lists every failed rule; passed = none failed; where heads were
+     fitted but none rectifies, GateFailedError lists their failures instead): rms_stereo ≤
      max_stereo_rms_px; epipolar_rms_px ≤ max_epipolar_rms_px; plausibility: principal points
      inside the image, fy/fx within [1/max_pixel_aspect, max_pixel_aspect], baseline within
      [min_baseline_m, max_baseline_m].
@@ -41,11 +44,11 @@ from typing import Literal
 import numpy as np
 
 from stereocam.protocol.rectification import RectifiedGeometry
-from stereocam.tools.calibration.boards import Board, Detection, describe, detect_all, gray, match_pair
+from stereocam.tools.calibration.boards import REFINED, Board, Detection, describe, detect_all, gray, match_pair
 from stereocam.tools.calibration.coverage import CoverageSelector, view_params
 from stereocam.tools.calibration.fit import (
-    HeadFit, ModelChoice, OutlierRules, PairPoints, choose_model, epipolar_dy, fit_head, held_out_errors, rms,
-    robust_fit,
+    CROSS_START_RATIO, HeadFit, ModelChoice, NoFitError, OutlierRules, PairPoints, UnrectifiableFitError, choose_model, epipolar_dy,
+    fit_head, held_out_errors, rms, robust_fit,
 )
 from stereocam.tools.calibration.lens import MODELS, LensSolveError, calibrate_mono
 from stereocam.tools.calibration.sync import SyncReport, check_sync
@@ -69,6 +72,15 @@ class UnusableImagesError(CalibrationError, ValueError):
 
 class TooFewViewsError(CalibrationError):
     """Not enough distinct views (or held-out views) to solve and measure."""
+
+
+class GateFailedError(CalibrationError):
+    """Heads were fitted but none can be stored: `failures` lists the gate's rules they break (their
+    stereo RMS, their rectification), as CalibrationResult.failures does for a fit that rectifies."""
+
+    def __init__(self, failures: list[str], pairs: int) -> None:
+        super().__init__(f"no fit of the {pairs} pairs can be stored: " + "; ".join(failures))
+        self.failures = failures
 
 
 @dataclass(frozen=True)
@@ -220,7 +232,7 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board
         what = "distinct views" if select else "pairs with the board in both images"
         raise TooFewViewsError(f"{len(found)} {what} from {both} pairs with the board; need {need} — "
                                f"move the board to new positions, distances and tilts")
-    order = (choose_detector(found, size),)
+    order = choose_detector(found, size)
     kept = [PairPoints(i, label, *match_detections(dl, dr, board, order)) for i, label, dl, dr in found]
     return _solve(kept, views, size, selector.coverage(), sample, config)
 
@@ -247,23 +259,50 @@ def match_detections(dl: dict[str, Detection], dr: dict[str, Detection], board: 
 
 
 def choose_detector(found: Sequence[tuple[int, str, dict[str, Detection], dict[str, Detection]]],
-                    size: tuple[int, int]) -> str:
-    """The detector whose corners fit a plumb_bob camera best on the left images all detectors found
-    (fewer than 4 such images: the one that found the most)."""
-    names = sorted({n for _, _, dl, dr in found for n in (*dl, *dr)})
-    if len(names) == 1:
-        return names[0]
-    common = [dl for _, _, dl, _ in found if all(n in dl for n in names)]
-    if len(common) < 4:
-        return max(names, key=lambda n: sum(n in dl for _, _, dl, _ in found))
-    fits = {}
-    for n in names:
-        try:
-            fits[n] = calibrate_mono("plumb_bob", [d[n].object_points for d in common],
-                                     [d[n].image_points for d in common], size).rms
-        except LensSolveError:
-            continue
-    return min(fits, key=lambda n: fits[n]) if fits else names[0]
+                    size: tuple[int, int]) -> tuple[str, ...]:
+    """The detectors the set's images are taken from, first choice first. Between the detectors
+    (boards.CHESSBOARD_DETECTORS), the one whose corners fit a plumb_bob camera best on the left
+    images both found (fewer than 4 such images: the one that found the most); a detector's refined
+    corners (boards.REFINED) replace its own where they fit the two cameras better (the lens model
+    that fits best, on each camera's images both have; see _better), judged on the set's own images:
+    refinement helps where the detector's corners are off (a wide lens), and hurts where the
+    squares' print pulls it (dot-coded squares)."""
+    lefts, rights = [dl for _, _, dl, _ in found], [dr for _, _, _, dr in found]
+    names = sorted({n for d in lefts for n in d} - set(REFINED.values()))
+    first = names[0]
+    for other in names[1:]:
+        first = _better(first, other, (lefts,), size, ("plumb_bob",))
+    variants = {n: _better(n, REFINED[n], (lefts, rights), size, MODELS) if n in REFINED else n for n in names}
+    return (variants[first], *(variants[n] for n in names if n != first))
+
+
+def _better(a: str, b: str, cameras: Sequence[Sequence[dict[str, Detection]]], size: tuple[int, int],
+            models: Sequence[str]) -> str:
+    """Of detections a and b, the one whose corners fit the cameras (each of `cameras` a list of one
+    camera's detections) with the lower sum of RMS, on each camera's images both have, for the lens
+    model that fits best; as fit_head does, a camera fitted over CROSS_START_RATIO times worse than
+    the other is fitted again from the other's fit (ties and failures: a; fewer than 4 such images
+    on every camera: the one found more often on the first camera)."""
+    scored = [[d for d in images if a in d and b in d] for images in cameras]
+    scored = [common for common in scored if len(common) >= 4]
+    if not scored:
+        return max((a, b), key=lambda n: sum(n in d for d in cameras[0]))
+    totals: dict[str, float] = {}
+    for n in (a, b):
+        for model in models:
+            try:
+                fits = [calibrate_mono(model, [d[n].object_points for d in common],
+                                       [d[n].image_points for d in common], size) for common in scored]
+                if len(fits) == 2 and max(f.rms for f in fits) > CROSS_START_RATIO * min(f.rms for f in fits):
+                    worse = int(fits[1].rms > fits[0].rms)
+                    common = scored[worse]
+                    fits[worse] = calibrate_mono(model, [d[n].object_points for d in common],
+                                                 [d[n].image_points for d in common], size, fits[1 - worse])
+            except LensSolveError:
+                continue
+            total = sum(f.rms for f in fits)
+            totals[n] = min(total, totals.get(n, total))
+    return min(totals, key=lambda n: totals[n]) if totals else a
 
 
 def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, int], coverage: tuple[float, ...],
@@ -280,6 +319,10 @@ def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, in
         choice = choose_model(models, train, held, size, config.model_tie)
         fit = _final_fit(choice, train, held, kept, size)
         held_errors = choice.held_errors
+    except NoFitError as exc:
+        if exc.unrectifiable:
+            raise GateFailedError(_unrectifiable_failures(exc.unrectifiable, config), len(pairs)) from exc
+        raise CalibrationError(f"the solver failed on {len(pairs)} pairs: {exc}") from exc
     except LensSolveError as exc:
         raise CalibrationError(f"the solver failed on {len(pairs)} pairs: {exc}") from exc
     by_index = {v.index: v for v in views}
@@ -306,24 +349,35 @@ def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, in
                              choice.scores, choice.failures, check_sync(fit, pairs))
 
 
+def _unrectifiable_failures(fits: Sequence[UnrectifiableFitError], config: SolveConfig) -> list[str]:
+    """The gate's verdict on fits that do not rectify: the lowest stereo RMS among them against the
+    gate's limit (where it fails), and each model's rectification."""
+    best = min(fits, key=lambda f: f.stereo_rms)
+    out = []
+    if best.stereo_rms > config.max_stereo_rms_px:
+        out.append(f"stereo RMS {best.stereo_rms:.3f} px > {config.max_stereo_rms_px} px "
+                   f"(the lowest of the lens models, {best.model})")
+    return out + [f"no usable rectification: {f}" for f in fits]
+
+
 def _final_fit(choice: ModelChoice, train: list[PairPoints], held: list[PairPoints], kept: list[PairPoints],
                size: tuple[int, int]) -> HeadFit:
     """The chosen model fitted on every pair kept; should that fit fail, the next model by held-out
     score (`choice` is updated to it, the failure listed)."""
-    failures = []
+    failures: list[LensSolveError] = []
     for model in sorted(choice.scores, key=lambda m: (m != choice.model, choice.scores[m])):
         try:
             start = choice.fit if model == choice.model else None
             fit = fit_head(model, kept, size, start)
         except LensSolveError as exc:
             choice.failures[model] = f"fitted without the held-out pairs, but not with them: {exc}"
-            failures.append(str(exc))
+            failures.append(exc)
             continue
         if model != choice.model:
             choice.held_errors = held_out_errors(fit_head(model, train, size), held)
             choice.model = model
         return fit
-    raise LensSolveError("; ".join(failures))
+    raise NoFitError("; ".join(map(str, failures)), failures)
 
 
 def _screen(models: Sequence[str], pairs: list[PairPoints], size: tuple[int, int], config: SolveConfig
@@ -331,11 +385,11 @@ def _screen(models: Sequence[str], pairs: list[PairPoints], size: tuple[int, int
     """Outlier removal with the first model that fits (the most flexible pinhole model first:
     rational, then equidistant, then plumb_bob; or the one model asked for)."""
     order = [m for m in ("rational_polynomial", "equidistant", "plumb_bob") if m in models]
-    failures = []
+    failures: list[LensSolveError] = []
     for model in order:
         try:
             _, kept, dropped = robust_fit(model, pairs, size, config.outliers)
             return kept, dropped
         except LensSolveError as exc:
-            failures.append(str(exc))
-    raise LensSolveError("; ".join(failures))
+            failures.append(exc)
+    raise NoFitError("; ".join(map(str, failures)), failures)

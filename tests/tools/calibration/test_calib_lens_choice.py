@@ -12,7 +12,9 @@ import pytest
 from stereocam.device_sim.calibration.acceptance import firmware_map
 from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.calibration_limits import CalibrationImplausible, check_rectifiable
-from stereocam.tools.calibration.fit import OutlierRules, PairPoints, choose_model, fit_head, robust_fit
+from stereocam.tools.calibration.fit import (
+    OutlierRules, PairPoints, UnrectifiableFitError, choose_model, fit_head, robust_fit,
+)
 from stereocam.tools.calibration.lens import MODELS, LensSolveError, rectify_map
 
 SIZE = (1280, 640)
@@ -81,6 +83,19 @@ def test_non_simultaneous_pairs_are_dropped_by_their_residuals() -> None:
     assert sorted(dropped) == [5, 17]
     assert all("stereo" in why or "epipolar" in why for why in dropped.values())
     assert len(kept) == 22 and fit.stereo.rms < 0.2
+
+
+def test_a_gross_outlier_that_spoils_the_rectification_is_still_dropped() -> None:
+    """One pair's right view from another pair: the rational fit of all pairs has no usable
+    rectification (the camera would not store it), yet screening still finds the pair by its residuals."""
+    pairs = synthetic_pairs("rational_polynomial", n=16, seed=2)
+    p = pairs[3]
+    pairs[3] = PairPoints(p.index, p.label, p.obj, p.left, pairs[4].right)
+    with pytest.raises(UnrectifiableFitError):
+        fit_head("rational_polynomial", pairs, SIZE)
+    _, kept, dropped = robust_fit("rational_polynomial", pairs, SIZE, OutlierRules())
+    assert list(dropped) == [3] and len(kept) == 15
+    fit_head("rational_polynomial", kept, SIZE)  # the rest rectifies
 
 
 # -- the camera's own rule: a lens model that folds the image is no fit -----------------------------

@@ -13,8 +13,8 @@ from stereocam.device_sim.rig.sensor import BOARD
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.protocol import messages as m
-from stereocam.tools.calibration.boards import detect_all
-from stereocam.tools.calibration.solve import SolveConfig
+from stereocam.tools.calibration.boards import SUBPIXEL_FIRST, detect_all
+from stereocam.tools.calibration.solve import SolveConfig, match_detections
 from stereocam.tools.calibration.calibrate import write_outputs
 from stereocam.tools.calibration.device import (EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_WRITE, calibrate_device)
 
@@ -211,11 +211,14 @@ def test_wide_angle_units_calibrate_to_their_truth_and_rectify_on_board(tmp_path
     board) within 0.2 % of the truth, held-out epipolar < 0.1 px, rectified board corners < 0.1 px
     apart vertically. Small: 640x480, the lens model named (cheaper than the automatic choice).
     Other seeds: ``stereocam bench device-calibration --size 640x480 --lens wide --lens fisheye``.
-    A measurement, out of `make test`: the bench's 6 units (seeds 1, 2, 73 of both lenses) and 22
-    sets of frames solved offline all met the targets (at worst 0.09 % / 0.09 px), and the fisheye
-    case here passes; but 2 of 4 runs of the wide case here (20 fps, other frames caught) ended in
-    rational fits whose border pixels have no usable ray ("rectification gives no usable view": the
-    solver fails, nothing written), and on a loaded 2-core host the fisheye case takes ~5 minutes."""
+    A measurement, out of `make test`: on a loaded 2-core host the fisheye case takes ~5 minutes.
+    The wide case's earlier failures ("rectification gives no usable view (focal -inf px)", 2 of 4
+    runs) came from frame sets where one camera's rational fit fell into a false minimum (1.5 px
+    against the other's 0.06 px) and the screening fits, which had to rectify, could not drop the
+    pair that spoilt them; both are fixed (tools/calibration/fit.py): the frame sets of seed 73 that
+    failed, solved offline, now meet the targets (seed 73 caught at strides 1-4: six sets, at worst
+    0.097 % / 0.068 px), and the wide case here passed 3 of 3 runs; it stays out of `make test` as
+    those runs took 120-230 s on a 2-core host at load ~12 (the suite's budget: ~60 s)."""
     sim = SimulatedCamera(serial=f"LENS-{lens}", seed=seed, flash_path=tmp_path / "u.flash", factory_calibrated=False,
                           scene="board", lens=lens)
     with Camera(InProcessTransport(sim), timeout=2.0) as cam:
@@ -233,10 +236,9 @@ def test_wide_angle_units_calibrate_to_their_truth_and_rectify_on_board(tmp_path
         for _ in range(40):  # the fixture moves on every few frames; some poses leave the rectified view
             f = cam.get_frame(timeout=60)
             assert f.rectified
-            found = [detect_all(img, BOARD) for img in (f.left, f.right)]
-            if all(found):
-                cl, cr = (next(iter(d.values())).image_points for d in found)
-                dy.append(cl[:, 1] - cr[:, 1] if np.dot(cl[-1] - cl[0], cr[-1] - cr[0]) > 0 else cl[:, 1] - cr[::-1, 1])
+            matched = match_detections(detect_all(f.left, BOARD), detect_all(f.right, BOARD), BOARD, SUBPIXEL_FIRST)
+            if matched is not None:
+                dy.append(matched[1][:, 1] - matched[2][:, 1])
             if len(dy) == 3:
                 break
         cam.stop()

@@ -42,14 +42,14 @@ def test_a_second_detection_reads_the_cache(tmp_path: Path, monkeypatch, counted
     monkeypatch.setenv(ENV, str(tmp_path))
     img, board = cv2.imread(str(IMAGE), cv2.IMREAD_GRAYSCALE), parse_board("9x6", 0.025)
     first = detect_all(img, board)
-    assert set(first) == {"classic", "sector"} and counted == {"classic": 1, "sector": 1}
+    assert set(first) == {"classic", "sector", "sector_subpix"} and counted == {"classic": 1, "sector": 1}
     again = detect_all(img.copy(), parse_board("9x6", 0.025))
     assert _same(first, again) and counted == {"classic": 1, "sector": 1}
     other_board = detect_all(img, parse_board("9x6", 0.03))  # other object points: detected again
     assert counted == {"classic": 2, "sector": 2}
     assert np.allclose(other_board["classic"].object_points, first["classic"].object_points * 0.03 / 0.025)
     flipped = detect_all(img[::-1].copy(), board)  # another image
-    assert counted == {"classic": 3, "sector": 3} and set(flipped) == {"classic", "sector"}
+    assert counted == {"classic": 3, "sector": 3} and set(flipped) == {"classic", "sector", "sector_subpix"}
 
 
 def test_a_spoilt_entry_is_a_miss_and_is_rewritten(tmp_path: Path, monkeypatch, counted) -> None:
