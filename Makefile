@@ -35,7 +35,11 @@ TEST_WORKERS ?= auto
 # Bytecode caching on even where the environment turns it off (PYTHONDONTWRITEBYTECODE): each worker,
 # and every CLI or simulator the tests start in a child process, would otherwise compile the package
 # (and pytest re-rewrite every test module) from source again.
+# The matching kernels are compiled (or loaded from numba's disk cache) once before the workers start:
+# on a fresh clone or after a kernel change, two workers and the simulators they start would each
+# compile them at once, and a busy machine then misses the first frames' deadlines.
 test: lint
+	env -u PYTHONDONTWRITEBYTECODE $(PY) -c 'from stereocam.stereo.engines import warm_up; print(f"matching kernels ready in {warm_up():.1f} s")'
 	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup -m "not measurement"
 
 # Tests that measure a target whose result varies run to run (e.g. a simulated wide-angle unit's
