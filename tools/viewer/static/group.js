@@ -93,8 +93,7 @@ async function refreshState() {
 // An action's answer (a refusal's reason) stays until the next action.
 for (const action of ["start", "stop", "trigger"]) {
   $(action).addEventListener("click", async () => {
-    const r = await fetch(`/api/group/${action}`, {method: "POST", body: "{}", headers: {"Content-Type": "application/json"}});
-    const doc = await r.json();
+    const {r, doc} = await postInOrder(`/api/group/${action}`, {});
     $("action").className = r.ok ? "ok" : "error";
     $("action").textContent = r.ok ? (action === "trigger" ? `one set: trigger ${doc.trigger_id}` : `${action}: done`)
       : `${action} refused: ${doc.reason || doc.error}`;

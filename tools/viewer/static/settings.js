@@ -3,6 +3,20 @@
 // (a refused value snaps back, its reason stays beside it until that setting changes again).
 "use strict";
 
+// Every change a page asks of the camera goes out in the order the user made it, one at a time: the
+// server answers requests on threads of their own, so a value typed just before "Reset to defaults"
+// could otherwise be applied after the reset.
+let postsDone = Promise.resolve();
+function postInOrder(path, body) {
+  const send = async () => {
+    const r = await fetch(path, {method: "POST", body: JSON.stringify(body), headers: {"Content-Type": "application/json"}});
+    return {r, doc: await r.json()};
+  };
+  const answer = postsDone.then(send, send);
+  postsDone = answer.catch(() => {});
+  return answer;
+}
+
 const Settings = {
   path: "/api/config", // where a change is posted (a group page: every head)
   config: {}, // the configuration as last answered
@@ -88,9 +102,7 @@ const Settings = {
       return;
     }
     row.dataset.sent = "1";
-    const r = await fetch(this.path, {method: "POST", body: JSON.stringify({[p.name]: value}),
-                                      headers: {"Content-Type": "application/json"}});
-    const doc = await r.json();
+    const {r, doc} = await postInOrder(this.path, {[p.name]: value});
     if (doc.config) {
       Object.assign(this.config, doc.config);
       this.show(p, el, doc.config[p.name]); // the camera's value: a refused one snaps back

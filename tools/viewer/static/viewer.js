@@ -10,9 +10,11 @@ let state = null; // the newest /api/state
 const seenIn = {}; // plane -> the last frame that carried it
 
 async function api(path, body) {
-  const init = body === undefined ? {} : {method: "POST", body: JSON.stringify(body),
-                                           headers: {"Content-Type": "application/json"}};
-  const r = await fetch(path, init);
+  if (body !== undefined) { // a change: in order with every other (settings.js postInOrder)
+    const {r, doc} = await postInOrder(path, body);
+    return {ok: r.ok, status: r.status, doc};
+  }
+  const r = await fetch(path);
   return {ok: r.ok, status: r.status, doc: await r.json()};
 }
 
