@@ -41,6 +41,8 @@ MODULES: dict[str, tuple[str, str]] = {
     "matching": ("matching", "the numba matching core against cv2.StereoBM (--algorithm sgm: against SGBM)"),
     "calibration": ("calibration", "calibration accuracy of the solver against the simulator's truth"),
     "device-calibration": ("device_calibration", "device-mode calibration against truth, depth through it"),
+    "calib-synthetic": ("calib_synthetic", "the calibration tool on synthetic views through every lens model and "
+                                           "board class, against the truth"),
     "calib-real": ("calib_real", "the offline tool on real calibration sets against OpenCV's all-pairs solution"),
     "sync": ("sync", "three heads on one trigger line: skew within matched sets, clock-map error vs truth"),
     "firmware": ("firmware", "a 2 MiB signed image installed per transport, and one update's state trace"),
@@ -51,7 +53,7 @@ MODULES: dict[str, tuple[str, str]] = {
 """name -> (module in stereocam.tools.bench, one-line help); each module provides ``command``."""
 
 EPILOG = epilog("Figures, never pass/fail: 0 done; a bench with targets (calibration, device-calibration, "
-                "calib-real) exits 1 when it misses them.")
+                "calib-synthetic, calib-real) exits 1 when it misses them.")
 
 
 class BenchTable(click.Group):

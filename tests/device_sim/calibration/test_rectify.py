@@ -152,7 +152,7 @@ def test_maps_of_every_lens_model_match_opencv(model: str, D: list[float]) -> No
 def test_equidistant_view_has_the_stated_field_and_only_valid_pixels(fov: int) -> None:
     """SPEC §12.6 step 3 for fisheye lenses: the principal point at the image centre, f from the output
     field of view (120° by default) unless a narrower lens needs a longer focal; every pixel sees the sensor."""
-    from tests.support import calib_synth as synth
+    from stereocam.device_sim.calibration import lens_views as synth
     c = synth.rig("equidistant", fov, (320, 240)).truth()
     m = rectification_maps(c)
     g = m.geometry

@@ -1,4 +1,5 @@
-"""Synthetic stereo board views with known truth, for the calibration tool's tests.
+"""Synthetic stereo board views through any lens model, with known truth (the calibration tool's
+tests and `stereocam bench calib-synthetic`).
 
 A board is drawn flat (a texture, plus the affine map from board metres to texture pixels), then
 every pixel of each camera is traced back through the camera's lens model (rational / plumb_bob:
