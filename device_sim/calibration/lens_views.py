@@ -184,7 +184,7 @@ def board_poses(head: Rig, tex: Texture, n: int, seed: int, distance: tuple[floa
     """n poses (R, t) of the board in the left camera with the whole printed area inside both images,
     spread over the field of view (up to `reach` of the half-width angle), tilted up to 40 degrees."""
     rng = np.random.default_rng(seed)
-    out = []
+    out: list[tuple[np.ndarray, np.ndarray]] = []
     corners = np.column_stack([tex.outline, np.zeros(4)])
     # points along the outline's edges, so a bent edge through a strong lens is kept in view too
     edge = np.concatenate([corners[i] + np.linspace(0, 1, 12)[:, None] * (corners[(i + 1) % 4] - corners[i])

@@ -16,7 +16,7 @@ import os
 import re
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any
 
@@ -37,7 +37,7 @@ SQUARE_M = 0.03
 @dataclass(frozen=True)
 class Case:
     """A head (lens model, field of view across the width, degrees) and a board (its --board text
-    and the printed texture), with the poses' options (lens_views.board_poses)."""
+    and the printed texture), with the poses' options (lens_views.board_poses: distance range, reach, roll)."""
 
     model: str
     fov: float
@@ -45,7 +45,8 @@ class Case:
     texture: Callable[[], views.Texture]
     pairs: int = 14
     distance: tuple[float, float] = (0.2, 0.5)
-    poses: dict[str, float] = field(default_factory=dict)
+    reach: float = 0.8
+    roll: float = 0.5
     seed: int = 3
 
 
@@ -61,7 +62,7 @@ CHARUCO = "charuco:8x6:0.04:0.03:DICT_4X4_250"
 APRILGRID = "aprilgrid:4x3:0.05:0.3"
 
 CASES: dict[str, Case] = {
-    "plumb_bob 60deg chessboard 7x7 any roll": Case("plumb_bob", 60, "7x7", _chess(7, 7), poses={"roll": np.pi}),
+    "plumb_bob 60deg chessboard 7x7 any roll": Case("plumb_bob", 60, "7x7", _chess(7, 7), roll=np.pi),
     "plumb_bob 70deg chessboard 9x6": Case("plumb_bob", 70, "9x6", _chess(9, 6)),
     "plumb_bob 90deg chessboard 9x6": Case("plumb_bob", 90, "9x6", _chess(9, 6)),
     "plumb_bob 70deg charuco legacy": Case("plumb_bob", 70, CHARUCO, _charuco(True, False)),
@@ -70,19 +71,19 @@ CASES: dict[str, Case] = {
     "plumb_bob 70deg charuco current inverted": Case("plumb_bob", 70, CHARUCO, _charuco(False, True)),
     "plumb_bob 70deg aprilgrid 4x3": Case("plumb_bob", 70, APRILGRID, lambda: views.aprilgrid(4, 3, 0.05, 0.3),
                                           pairs=20, distance=(0.25, 0.55)),
-    "rational 110deg chessboard 9x6": Case("rational_polynomial", 110, "9x6", _chess(9, 6), poses={"reach": 0.9}),
-    "rational 130deg chessboard 9x6": Case("rational_polynomial", 130, "9x6", _chess(9, 6), poses={"reach": 0.9}),
+    "rational 110deg chessboard 9x6": Case("rational_polynomial", 110, "9x6", _chess(9, 6), reach=0.9),
+    "rational 130deg chessboard 9x6": Case("rational_polynomial", 130, "9x6", _chess(9, 6), reach=0.9),
     "rational 130deg chessboard 7x7 any roll": Case("rational_polynomial", 130, "7x7", _chess(7, 7),
-                                                    poses={"reach": 0.9, "roll": np.pi}),
+                                                    reach=0.9, roll=np.pi),
     "rational 130deg charuco current": Case("rational_polynomial", 130, CHARUCO, _charuco(False, False),
-                                            poses={"reach": 0.9}),
+                                            reach=0.9),
     "equidistant 150deg chessboard 9x6": Case("equidistant", 150, "9x6", _chess(9, 6)),
     "equidistant 150deg aprilgrid 4x3": Case("equidistant", 150, APRILGRID, lambda: views.aprilgrid(4, 3, 0.05, 0.3),
                                              pairs=20, distance=(0.15, 0.45)),
     "equidistant 170deg charuco legacy inverted": Case("equidistant", 170, CHARUCO, _charuco(True, True),
                                                        distance=(0.15, 0.4)),
     "equidistant 190deg chessboard 9x6": Case("equidistant", 190, "9x6", _chess(9, 6), distance=(0.15, 0.35),
-                                              poses={"reach": 0.9}),
+                                              reach=0.9),
 }
 """Every lens model at 60-190 degrees across the width, every board class (square and non-square
 chessboards, ChArUco in both layouts and polarities, AprilGrid)."""
@@ -93,7 +94,7 @@ ERRORS = ("fx", "fy", "cx", "cy", "baseline")
 def head_and_pairs(case: Case) -> tuple[views.Rig, list[tuple[np.ndarray, np.ndarray]]]:
     head = views.rig(case.model, case.fov, SIZE)
     return head, views.stereo_views(head, case.texture(), case.pairs, seed=case.seed, distance=case.distance,
-                                    **case.poses)
+                                    reach=case.reach, roll=case.roll)
 
 
 def calibrate(case: Case, pairs: list[tuple[np.ndarray, np.ndarray]]) -> CalibrationResult:

@@ -51,6 +51,8 @@ def rectified_dy(cam: Camera, frames: int, size: tuple[int, int]) -> float:
     try:
         for _ in range(frames * 4):  # the fixture dwells a few frames per pose; some poses leave the view
             f = cam.get_frame(timeout=60)
+            if f.left is None or f.right is None:
+                continue
             matched = match_detections(detect_all(f.left, BOARD), detect_all(f.right, BOARD), BOARD, SUBPIXEL_FIRST)
             if matched is not None:  # the right corners numbered as the left ones, whichever detector found them
                 dy.append(matched[1][:, 1] - matched[2][:, 1])
@@ -70,9 +72,12 @@ def one_unit(seed: int, workdir: Path, lens: str = "standard", rect_frames: int 
         code, result, verdict = calibrate_device(cam, BOARD, SolveConfig(), workdir / str(seed), target="factory",
                                                  size=size)
         elapsed = time.monotonic() - t0
-        if code:
+        if code or result is None:
             raise UnitFailed(verdict)
-        stored = cam.read_calibration().calibration
+        record = cam.read_calibration()
+        if record is None:
+            raise UnitFailed("the unit holds no calibration after the write")
+        stored = record.calibration
         truth = sim.true_calibration().scaled(*stored.image_size)
         dy = rectified_dy(cam, rect_frames, stored.image_size)
         sim.scene = "wall"
@@ -88,9 +93,13 @@ def one_unit(seed: int, workdir: Path, lens: str = "standard", rect_frames: int 
         fy=max(rel(stored.K_left[1, 1], truth.K_left[1, 1]), rel(stored.K_right[1, 1], truth.K_right[1, 1])),
         cx=max(rel(stored.K_left[0, 2], truth.K_left[0, 2]), rel(stored.K_right[0, 2], truth.K_right[0, 2])),
         cy=max(rel(stored.K_left[1, 2], truth.K_left[1, 2]), rel(stored.K_right[1, 2], truth.K_right[1, 2])),
-        baseline=rel(stored.baseline_m, truth.baseline_m), epi=result.quality.epipolar_rms_px, dy=dy,
-        rms=result.quality.rms_stereo, depth=100 * abs(float(np.nanmedian(z)) - WALL_DISTANCE_M) / WALL_DISTANCE_M,
-        valid=100 * float(np.isfinite(z).mean()), views=result.quality.views_used, secs=elapsed)
+        baseline=rel(stored.baseline_m, truth.baseline_m), epi=_measured(result.quality.epipolar_rms_px), dy=dy,
+        rms=_measured(result.quality.rms_stereo), depth=100 * abs(float(np.nanmedian(z)) - WALL_DISTANCE_M) / WALL_DISTANCE_M,
+        valid=100 * float(np.isfinite(z).mean()), views=float(result.quality.views_used or 0), secs=elapsed)
+
+
+def _measured(value: float | None) -> float:
+    return float("nan") if value is None else float(value)
 
 
 @click.command("device-calibration", context_settings=CONTEXT, epilog=epilog())
@@ -122,7 +131,7 @@ def command(**params: Any) -> int:
                     print(f"{lens:<8} {seed:>4} FAILED: {exc}", flush=True)
                     continue
                 rows.append(r)
-                print(f"{lens:<8} {seed:>4} " + " ".join(f"{r[c]:8.3f}" if isinstance(r[c], float) else f"{r[c]:8d}"
+                print(f"{lens:<8} {seed:>4} " + " ".join(f"{r[c]:8.0f}" if c == "views" else f"{r[c]:8.3f}"
                                                          for c in cols), flush=True)
     worst = {c: max((r[c] for r in rows), default=float("nan")) for c in cols}
     print("max           " + " ".join(f"{worst[c]:8.3f}" for c in cols))

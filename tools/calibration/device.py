@@ -28,8 +28,9 @@ from stereocam.tools.exit_codes import EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXI
 
 
 
-def raw_pairs(cam: stereocam.Camera, count: int, timeout: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """Up to ``count`` raw (left, right) pairs from the running stream."""
+def raw_pairs(cam: stereocam.Camera, count: int, timeout: float
+              ) -> Iterator[tuple[np.ndarray | None, np.ndarray | None]]:
+    """Up to ``count`` raw (left, right) pairs from the running stream (None: a plane the frame lacks)."""
     for _ in range(count):
         f = cam.get_frame(timeout=timeout)
         if f.rectified:

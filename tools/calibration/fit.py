@@ -186,7 +186,7 @@ def robust_fit(model: str, pairs: list[PairPoints], size: tuple[int, int], rules
         worst: dict[int, tuple[float, str]] = {}
         for name in METRICS:
             limit = _limits(errors[name], rules)
-            for i in np.flatnonzero(errors[name] > limit):
+            for i in np.flatnonzero(errors[name] > limit).tolist():
                 severity = errors[name][i] / limit
                 if severity > worst.get(i, (0.0, ""))[0]:
                     worst[i] = (severity, f"{name.replace('_', ' ')} {errors[name][i]:.3f} px > {limit:.3f} px "

@@ -369,10 +369,15 @@ def refine_stereo(model: str, obj: list[np.ndarray], left: list[np.ndarray], rig
         tr = cv2.Rodrigues(ext[:3])[0] @ pose[3:] + ext[3:]
         return (project(model, oo, cv2.Rodrigues(Rr)[0], tr, fr.K, fr.D) - rr).ravel()
 
+    def pair_error(pose: np.ndarray, ext: np.ndarray, oo: np.ndarray, ll: np.ndarray, rr: np.ndarray) -> np.ndarray:
+        return np.concatenate([(project(model, oo, pose[:3], pose[3:], fl.K, fl.D) - ll).ravel(),
+                               right_error(pose, ext, oo, rr)])
+
+    def head_error(ext: np.ndarray, poses: list[np.ndarray]) -> np.ndarray:
+        return np.concatenate([right_error(p, ext, oo, rr) for p, oo, rr in zip(poses, o, r)])
+
     for _ in range(rounds):
-        poses = [_levenberg_marquardt(pose, lambda p, oo=oo, ll=ll, rr=rr, rt=rt: np.concatenate([
-            (project(model, oo, p[:3], p[3:], fl.K, fl.D) - ll).ravel(), right_error(p, rt, oo, rr)]), steps=8)
-            for pose, oo, ll, rr in zip(poses, o, l, r)]
-        rt = _levenberg_marquardt(rt, lambda e, poses=poses: np.concatenate(
-            [right_error(p, e, oo, rr) for p, oo, rr in zip(poses, o, r)]), steps=8)
+        poses = [_levenberg_marquardt(pose, functools.partial(pair_error, ext=rt, oo=oo, ll=ll, rr=rr), steps=8)
+                 for pose, oo, ll, rr in zip(poses, o, l, r)]
+        rt = _levenberg_marquardt(rt, functools.partial(head_error, poses=poses), steps=8)
     return cv2.Rodrigues(rt[:3])[0], rt[3:]

@@ -111,7 +111,7 @@ class ViewRecord:
     label: str
     status: ViewStatus
     held_out: bool = False
-    params: tuple[float, float, float, float] | None = None
+    params: tuple[float, ...] | None = None  # coverage.view_params: X, Y, size, skew
     rms_left: float | None = None
     rms_right: float | None = None
     rms_stereo: tuple[float, float] | None = None
@@ -155,10 +155,12 @@ class Progress:
 
 def _gate(calib: StereoCalibration, q: CalibrationQuality, config: SolveConfig) -> list[str]:
     failures = []
-    if q.rms_stereo > config.max_stereo_rms_px:
-        failures.append(f"stereo RMS {q.rms_stereo:.3f} px > {config.max_stereo_rms_px} px")
-    if q.epipolar_rms_px > config.max_epipolar_rms_px:
-        failures.append(f"held-out epipolar RMS {q.epipolar_rms_px:.3f} px > {config.max_epipolar_rms_px} px")
+    stereo_rms = q.rms_stereo if q.rms_stereo is not None else float("inf")  # not measured: not passed
+    epipolar = q.epipolar_rms_px if q.epipolar_rms_px is not None else float("inf")
+    if stereo_rms > config.max_stereo_rms_px:
+        failures.append(f"stereo RMS {stereo_rms:.3f} px > {config.max_stereo_rms_px} px")
+    if epipolar > config.max_epipolar_rms_px:
+        failures.append(f"held-out epipolar RMS {epipolar:.3f} px > {config.max_epipolar_rms_px} px")
     w, h = calib.image_size
     for side, K in (("left", calib.K_left), ("right", calib.K_right)):
         if not (0 <= K[0, 2] < w and 0 <= K[1, 2] < h):
@@ -173,7 +175,7 @@ def _gate(calib: StereoCalibration, q: CalibrationQuality, config: SolveConfig) 
     return failures
 
 
-def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board,
+def calibrate_pairs(pairs: Iterable[tuple[np.ndarray | None, np.ndarray | None]], board: Board,
                     config: SolveConfig = SolveConfig(), labels: Sequence[str] | None = None,
                     progress: Callable[[Progress], None] | None = None, select: bool = True) -> CalibrationResult:
     """Calibrate a stereo head from raw image pairs of `board` (see the module docstring).
@@ -196,6 +198,7 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board
             if progress is not None:
                 progress(Progress(views[-1], len(found) - held, held, selector.coverage()))
             continue
+        assert left is not None and right is not None  # _unusable names a missing image
         left, right = gray(left), gray(right)
         size = (left.shape[1], left.shape[0])
         dl, dr = detect_all(left, board), detect_all(right, board)
@@ -204,11 +207,11 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board
         matched = match_detections(dl, dr, board, ())
         if matched is not None:
             both += 1
-            view.params = view_params(matched[1], board, size)
+            view.params = params = view_params(matched[1], board, size)
             held_here = both % config.holdout_every == 0
             if not select:
-                selector.kept.append(view.params)
-            if not select or held_here or selector.offer(view.params):
+                selector.kept.append(params)
+            if not select or held_here or selector.offer(params):
                 view.status = "used"
                 held += held_here
                 found.append((index, label, dl, dr))
@@ -232,8 +235,13 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], board: Board
         what = "distinct views" if select else "pairs with the board in both images"
         raise TooFewViewsError(f"{len(found)} {what} from {both} pairs with the board; need {need} — "
                                f"move the board to new positions, distances and tilts")
+    assert size is not None  # a pair with the board in both images set it
     order = choose_detector(found, size)
-    kept = [PairPoints(i, label, *match_detections(dl, dr, board, order)) for i, label, dl, dr in found]
+    kept = []
+    for i, label, dl, dr in found:  # each was matched above, so the chosen detectors' corners match too
+        matched = match_detections(dl, dr, board, order)
+        assert matched is not None
+        kept.append(PairPoints(i, label, *matched))
     return _solve(kept, views, size, selector.coverage(), sample, config)
 
 
@@ -332,7 +340,8 @@ def _solve(pairs: list[PairPoints], views: list[ViewRecord], size: tuple[int, in
     for i, p in enumerate(kept):
         v = by_index[p.index]
         v.rms_left, v.rms_right = float(fit.left.per_view[i]), float(fit.right.per_view[i])
-        v.rms_stereo = tuple(float(e) for e in fit.stereo.per_view[i])
+        left_rms, right_rms = fit.stereo.per_view[i]
+        v.rms_stereo = (float(left_rms), float(right_rms))
         epi_all.append(epipolar_dy(fit, p.left, p.right))
         v.epipolar_rms_px = rms(epi_all[-1])
     for p, e in zip(held, held_errors["epipolar"]):
