@@ -70,7 +70,8 @@ def rectified_dy(cam: Camera, frames: int, size: tuple[int, int]) -> float:
 
 def true_rectified_dy(truth: StereoCalibration, stored: StereoCalibration, n: int = 4000) -> float:
     """RMS rectified row difference (px) of exact projections of random points 0.5-5 m away, seen
-    through the true lenses, rectified as the unit does with its stored calibration (stereo_rectify)."""
+    through the true lenses, rectified as the unit does with its stored calibration (stereo_rectify),
+    over the points that land in both rectified images."""
     rng = np.random.default_rng(0)
     w, h = truth.image_size
     pix = np.column_stack([rng.uniform(0, w - 1, n), rng.uniform(0, h - 1, n)])
@@ -83,14 +84,16 @@ def true_rectified_dy(truth: StereoCalibration, stored: StereoCalibration, n: in
     uv_r = lens_project(truth.K_right, truth.D_right, truth.lens_model, right)
     inside = np.all((uv_r >= 0) & (uv_r <= [w - 1, h - 1]) & np.isfinite(uv_r), axis=1)
     geo = stereo_rectify(stored)
-    rows = []
+    rect = []
     for uv, K, D, R, P in ((uv_l[inside], stored.K_left, stored.D_left, geo.R1, geo.P1),
                            (uv_r[inside], stored.K_right, stored.D_right, geo.R2, geo.P2)):
         turned = viewing_rays(K, D, uv, 50, stored.lens_model) @ R.T
         with np.errstate(divide="ignore", invalid="ignore"):
-            rows.append(np.where(turned[:, 2] > 0, P[1, 1] * turned[:, 1] / turned[:, 2] + P[1, 2], np.nan))
-    dy = rows[0] - rows[1]
-    return float(np.sqrt(np.nanmean(dy ** 2)))
+            xy = (P[:2, :2] @ (turned[:, :2] / turned[:, 2:]).T).T + P[:2, 2]
+        rect.append(np.where(turned[:, 2:] > 0, xy, np.nan))
+    seen = np.all((rect[0] >= 0) & (rect[0] <= [w - 1, h - 1]) & (rect[1] >= 0) & (rect[1] <= [w - 1, h - 1]), axis=1)
+    dy = rect[0][seen, 1] - rect[1][seen, 1]  # points in both rectified images
+    return float(np.sqrt(np.mean(dy ** 2))) if dy.size else float("nan")
 
 
 def one_unit(seed: int, workdir: Path, lens: str = "standard", rect_frames: int = 6,

@@ -25,7 +25,8 @@ TRUTH_TOLERANCE = bench.MAX_REL_ERROR  # the issue's 0.2 %
 # the cases of `stereocam bench calib-synthetic` that the suite runs: one per lens model and board class
 CASES = ["plumb_bob 70deg chessboard 9x6", "plumb_bob 60deg chessboard 7x7 any roll", "rational 130deg chessboard 9x6",
          "equidistant 150deg chessboard 9x6", "plumb_bob 70deg charuco legacy",
-         "plumb_bob 70deg charuco current inverted", "equidistant 150deg aprilgrid 4x3"]
+         "plumb_bob 70deg charuco current inverted", "rational 130deg charuco current",
+         "equidistant 150deg aprilgrid 4x3"]
 
 
 @cache
