@@ -323,8 +323,8 @@ def detect_all(img: np.ndarray, board: Board) -> dict[str, Detection]:
         found = detect_charuco(g, board)
         if found is None:
             return {}
-        refined = refine_charuco(g, found, board)
-        return {"charuco": found} if refined is None else {"charuco": found, "charuco_subpix": refined}
+        subpix = refine_charuco(g, found, board)
+        return {"charuco": found} if subpix is None else {"charuco": found, "charuco_subpix": subpix}
     cache = detection_cache.entry(g, repr(board))  # ChArUco is not cached: it settles the layout
     hit = detection_cache.load(cache)
     if hit is not None:
