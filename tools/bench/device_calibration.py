@@ -48,13 +48,16 @@ def rel(a: float, b: float) -> float:
     return 100.0 * abs(a - b) / abs(b)
 
 
-def rectified_dy(cam: Camera, frames: int, size: tuple[int, int]) -> float:
-    """RMS vertical disparity (px) of the board's corners in on-board rectified frames of ``size``."""
+def rectified_dy(cam: Camera, frames: int, size: tuple[int, int]) -> tuple[float, int]:
+    """RMS vertical disparity (px) of the board's corners in the first ``frames`` on-board rectified
+    frames of ``size`` that show the board in both images, and how many did (fewer: NaN RMS or one over
+    fewer frames) among the next 20 x ``frames``: the fixture dwells a few frames per pose, and some
+    poses leave a fisheye unit's rectified view."""
     cam.configure(rectify=1, width=size[0], height=size[1], fps=10, trigger_mode=int(TriggerMode.FREE_RUN))
     dy = []
     cam.start()
     try:
-        for _ in range(frames * 4):  # the fixture dwells a few frames per pose; some poses leave the view
+        for _ in range(frames * 20):
             f = cam.get_frame(timeout=60)
             if f.left is None or f.right is None:
                 continue
@@ -65,7 +68,7 @@ def rectified_dy(cam: Camera, frames: int, size: tuple[int, int]) -> float:
                 break
     finally:
         cam.stop()
-    return float(np.sqrt(np.mean(np.concatenate(dy) ** 2))) if dy else float("nan")
+    return (float(np.sqrt(np.mean(np.concatenate(dy) ** 2))) if dy else float("nan")), len(dy)
 
 
 def true_rectified_dy(truth: StereoCalibration, stored: StereoCalibration, n: int = 4000) -> float:
@@ -112,7 +115,7 @@ def one_unit(seed: int, workdir: Path, lens: str = "standard", rect_frames: int 
             raise UnitFailed("the unit holds no calibration after the write")
         stored = record.calibration
         truth = sim.true_calibration().scaled(*stored.image_size)
-        dy = rectified_dy(cam, rect_frames, stored.image_size)
+        dy, _ = rectified_dy(cam, rect_frames, stored.image_size)
         dy_field = true_rectified_dy(truth, stored)
         sim.scene = "wall"
         cam.configure(rectify=1, width=640, height=480, num_disparities=64, block_size=15,
