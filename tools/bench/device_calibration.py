@@ -6,9 +6,11 @@ the board fixture at 1280x960 or ``--size``, solve, gate, write the factory reco
 stored result is compared with the unit's true calibration (scaled to that size); the unit then rectifies the board on board with it and
 the residual vertical disparity of the board's corners is measured (dy, RMS over ``--rect-frames``
 frames; corner detection's noise included), and that of exact projections of points anywhere in the
-field of view through the unit's true lenses, rectified with the stored calibration (dy_field: what the
-calibration leaves, without detection, also where the board never went, such as the image corners); then it looks at a flat wall at 1 m through its own rectification and matching, and the
-median depth error is measured. Prints a table; exits 1 if a target is missed.
+field of view through the unit's true lenses, rectified with the stored calibration (dy_field,
+calibration.true_rectified_dy: what the calibration leaves, without detection, also where the board
+never went, such as the image corners); then it looks at a flat wall at 1 m through its own
+rectification and matching, and the median depth error is measured. Prints a table; exits 1 if a
+target is missed.
 """
 from __future__ import annotations
 
@@ -26,16 +28,15 @@ from stereocam.camera import Camera
 from stereocam import TriggerMode
 from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.links.inprocess import InProcessTransport
-from stereocam.device_sim.calibration.rays import lens_project
 from stereocam.device_sim.rig.lens import LensClass
 from stereocam.device_sim.rig.scene import WALL_DISTANCE_M
 from stereocam.device_sim.rig.sensor import BOARD
-from stereocam.protocol.calibration import StereoCalibration
-from stereocam.protocol.rectification import stereo_rectify, viewing_rays
 from stereocam.tools.calibration.boards import SUBPIXEL_FIRST, detect_all
 from stereocam.tools.calibration.device import calibrate_device
 from stereocam.tools.calibration.solve import SolveConfig, match_detections
 from stereocam.tools.options import CONTEXT, SIZE, epilog
+
+from .calibration import true_rectified_dy
 
 TARGET_PCT, TARGET_EPI_PX, TARGET_DY_PX, TARGET_DEPTH_PCT = 0.2, 0.1, 0.1, 1.0
 
@@ -69,34 +70,6 @@ def rectified_dy(cam: Camera, frames: int, size: tuple[int, int]) -> tuple[float
     finally:
         cam.stop()
     return (float(np.sqrt(np.mean(np.concatenate(dy) ** 2))) if dy else float("nan")), len(dy)
-
-
-def true_rectified_dy(truth: StereoCalibration, stored: StereoCalibration, n: int = 4000) -> float:
-    """RMS rectified row difference (px) of exact projections of random points 0.5-5 m away, seen
-    through the true lenses, rectified as the unit does with its stored calibration (stereo_rectify),
-    over the points that land in both rectified images."""
-    rng = np.random.default_rng(0)
-    w, h = truth.image_size
-    pix = np.column_stack([rng.uniform(0, w - 1, n), rng.uniform(0, h - 1, n)])
-    rays = viewing_rays(truth.K_left, truth.D_left, pix, 50, truth.lens_model)
-    rays = rays[rays[:, 2] > 0.1]
-    pts = rays / np.linalg.norm(rays, axis=1, keepdims=True) * rng.uniform(0.5, 5.0, (len(rays), 1))
-    right = pts @ truth.R.T + truth.T.ravel()
-    pts, right = pts[right[:, 2] > 0.1], right[right[:, 2] > 0.1]
-    uv_l = lens_project(truth.K_left, truth.D_left, truth.lens_model, pts)
-    uv_r = lens_project(truth.K_right, truth.D_right, truth.lens_model, right)
-    inside = np.all((uv_r >= 0) & (uv_r <= [w - 1, h - 1]) & np.isfinite(uv_r), axis=1)
-    geo = stereo_rectify(stored)
-    rect = []
-    for uv, K, D, R, P in ((uv_l[inside], stored.K_left, stored.D_left, geo.R1, geo.P1),
-                           (uv_r[inside], stored.K_right, stored.D_right, geo.R2, geo.P2)):
-        turned = viewing_rays(K, D, uv, 50, stored.lens_model) @ R.T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xy = (P[:2, :2] @ (turned[:, :2] / turned[:, 2:]).T).T + P[:2, 2]
-        rect.append(np.where(turned[:, 2:] > 0, xy, np.nan))
-    seen = np.all((rect[0] >= 0) & (rect[0] <= [w - 1, h - 1]) & (rect[1] >= 0) & (rect[1] <= [w - 1, h - 1]), axis=1)
-    dy = rect[0][seen, 1] - rect[1][seen, 1]  # points in both rectified images
-    return float(np.sqrt(np.mean(dy ** 2))) if dy.size else float("nan")
 
 
 def one_unit(seed: int, workdir: Path, lens: str = "standard", rect_frames: int = 6,
