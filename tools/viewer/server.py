@@ -79,6 +79,8 @@ class ViewerServer(ThreadingHTTPServer):
         self.allowed_hosts = {h.lower() for h in (*LOOPBACK_NAMES, *allowed_hosts)}
         self.token = token
         self._slots = threading.BoundedSemaphore(max_connections)
+        self._holders: set[Any] = set()  # requests holding a slot: each gives it back exactly once
+        self._holders_lock = threading.Lock()
         super().__init__((host, port), _Handler)
 
     def process_request(self, request: Any, client_address: Any) -> None:
@@ -96,17 +98,29 @@ class ViewerServer(ThreadingHTTPServer):
                 pass
             self.shutdown_request(request)
             return
+        with self._holders_lock:
+            self._holders.add(request)
         try:
             super().process_request(request, client_address)
         except BaseException:
-            self._slots.release()
+            # a thread that could not start, or a Ctrl-C/SIGTERM while it started (it may already
+            # have served the request and given the slot back): the slot is given back once, and
+            # the interrupt goes on to serve_forever's caller instead of dying in handle_error
+            self._give_back(request)
             raise
 
     def process_request_thread(self, request: Any, client_address: Any) -> None:
         try:
             super().process_request_thread(request, client_address)
         finally:
-            self._slots.release()
+            self._give_back(request)
+
+    def _give_back(self, request: Any) -> None:
+        with self._holders_lock:
+            if request not in self._holders:
+                return
+            self._holders.discard(request)
+        self._slots.release()
 
     def host_allowed(self, asked: str) -> bool:
         """Whether a request's Host names this viewer: a loopback name, an allowed name or an IP

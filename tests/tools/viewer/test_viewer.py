@@ -5,6 +5,7 @@ import json
 import os
 import subprocess
 import sys
+import socket
 import threading
 import urllib.error
 import urllib.request
@@ -387,6 +388,45 @@ def test_idle_half_sent_connections_time_out_and_are_limited(tmp_path, monkeypat
         for s in idle:
             s.close()
         server.shutdown()
+        server.server_close()
+        server.session.close()
+        cam.close()
+
+
+def test_a_stop_signal_while_a_request_thread_starts_ends_serving(tmp_path, monkeypatch):
+    """SIGTERM/Ctrl-C lands in the serving thread while it starts a request's thread, and that
+    thread has already answered: the interrupt must reach serve_forever's caller (it was lost,
+    turned into "semaphore released too many times", and `stereocam view` never stopped)."""
+    cam = stereocam.open("sim://?seed=6", timeout=2.0)
+    server = ViewerServer(ViewerSession(cam, tmp_path), max_connections=2)
+    server.timeout = 10.0
+    url = server.url + "api/state"
+    real_start = threading.Thread.start
+    answered: list[int] = []
+    client = threading.Thread(target=lambda: answered.append(urllib.request.urlopen(url, timeout=30).status))
+    client.start()
+
+    def start_serve_then_interrupt(thread: threading.Thread) -> None:
+        real_start(thread)
+        thread.join()  # the request is served, and its slot given back, before the interrupt
+        raise KeyboardInterrupt
+
+    try:
+        monkeypatch.setattr(threading.Thread, "start", start_serve_then_interrupt)
+        with pytest.raises(KeyboardInterrupt):
+            server.handle_request()
+        monkeypatch.undo()
+        client.join(30)
+        assert answered == [200]
+        for _ in range(2):  # both slots are free: two silent peers are each given one ...
+            threading.Thread(target=server.handle_request, daemon=True).start()
+        peers = [socket.create_connection(server.server_address[:2], timeout=10) for _ in range(2)]
+        wait_until(lambda: not server._slots._value, 5, "both slots taken")
+        for p in peers:
+            p.close()
+        wait_until(lambda: server._slots._value == 2, 15, "both slots given back")  # ... and no more
+    finally:
+        monkeypatch.undo()
         server.server_close()
         server.session.close()
         cam.close()

@@ -256,7 +256,10 @@ def test_the_3d_view_draws_the_point_cloud_orbits_and_colours_by_the_left_image(
     assert _drawn(before).mean() > 0.2  # a non-empty cloud on screen
     assert np.abs(before[..., 0].astype(int) - before[..., 2]).max() > 60  # coloured by depth
     viewer.session.cam.stop()  # one frame from here on: only the orbit changes the picture
-    page.wait(f"cloud.points !== null && lastSeq === {viewer.session.newest(wait=0).sequence}")
+    # A frame already on its way when the stream stopped can still land after stop() returns: wait
+    # until the page shows whatever the session holds newest, read again on every poll.
+    wait_until(lambda: page.js("cloud.sequence") == viewer.session.newest(wait=0).sequence,
+               timeout=60.0, what="the 3-D view shows the session's newest frame")
     page.js("cloud.draw()")
     still = _canvas_pixels(browser, page)
     box = json.loads(page.js("JSON.stringify(document.getElementById('cloud').getBoundingClientRect())"))

@@ -10,6 +10,7 @@ class Cloud3D {
     this.ctx = canvas.getContext("2d");
     this.points = null; // Float32Array x y z ...
     this.rgb = null; // Uint8Array r g b ...
+    this.sequence = -1; // the frame the points came from
     this.drawn = 0; // points that landed on the canvas in the last drawing
     this.home();
     let drag = null;
@@ -39,6 +40,7 @@ class Cloud3D {
     const n = new DataView(buf).getUint32(0, true);
     this.points = new Float32Array(buf, 4, 3 * n);
     this.rgb = new Uint8Array(buf, 4 + 12 * n, 3 * n);
+    this.sequence = sequence;
     this.draw();
   }
 
