@@ -15,6 +15,7 @@ from stereocam.stereo import Matcher
 from stereocam.stereo.engines import params_from_config
 from stereocam.recording.reader import Recording
 from stereocam.tools.bench.record import synthetic_recording
+from tests.support.hangs import terminated
 
 N = 8
 
@@ -158,8 +159,7 @@ def test_served_replay_over_tcp(recording):
             frames = [cam.get_frame(timeout=10.0) for _ in range(N - 3)]
         _same(frames, caps[3:])
     finally:
-        proc.terminate()
-        proc.wait(timeout=10)
+        terminated(proc, 10)
 
 
 def _bytes_read() -> int:

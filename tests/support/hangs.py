@@ -1,6 +1,7 @@
 """A call that must return (or raise) in time: a hang fails the test instead of stalling the suite."""
 from __future__ import annotations
 
+import subprocess
 import threading
 from typing import Any, Callable
 
@@ -23,3 +24,17 @@ def returns_within(seconds: float, fn: Callable[..., Any], *args: Any, **kwargs:
     if "error" in box:
         raise box["error"]
     return box.get("value")
+
+
+def terminated(proc: subprocess.Popen, seconds: float = 30.0) -> int:
+    """SIGTERM ``proc`` and its exit status; a test failure (with what it wrote to stderr, if
+    piped) if it has not exited within ``seconds``, after which it is killed, never left
+    running behind the suite."""
+    proc.terminate()
+    try:
+        return proc.wait(timeout=seconds)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+        err = proc.stderr.read() if proc.stderr is not None else ""
+        raise AssertionError(f"{proc.args} did not exit within {seconds} s of SIGTERM: {err}") from None

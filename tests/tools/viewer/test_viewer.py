@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import sys
-import socket
 import threading
 import urllib.error
 import urllib.request
@@ -21,7 +21,7 @@ from stereocam.tools.viewer.server import ViewerServer
 from stereocam.tools.viewer.session import ViewerSession
 from tests.support.browser import Chromium, find_chromium
 from tests.support.device import SMALL
-from tests.support.hangs import returns_within
+from tests.support.hangs import returns_within, terminated
 from tests.support.waiting import wait_until
 
 CHROMIUM = find_chromium()
@@ -204,8 +204,7 @@ def test_view_command_prints_its_address_first_and_restores_the_camera(tmp_path)
             code, doc = _post(url + "api/config", {"gain": 40})
             assert code == 200 and doc["config"]["gain"] == 40
         finally:
-            proc.terminate()
-            assert proc.wait(timeout=30) == 0, proc.stderr.read()
+            assert (rc := terminated(proc)) == 0, (rc, proc.stderr.read())
         with stereocam.open(sim.url, timeout=2.0) as cam:
             assert cam.config()["gain"] == 0  # put back as found
 
@@ -292,8 +291,7 @@ def test_view_command_with_several_urls_shows_a_group_and_puts_each_head_back():
             s = wait_until(lambda: _complete_set(url), timeout=30, what="a complete matched set")
             assert set(s["frames"]) == {"SIM00040", "SIM00041"} and s["complete"]
         finally:
-            proc.terminate()
-            assert proc.wait(timeout=30) == 0, proc.stderr.read()
+            assert (rc := terminated(proc)) == 0, (rc, proc.stderr.read())
         for srv in servers:
             with stereocam.open(srv.url, timeout=2.0) as cam:
                 config = cam.config()

@@ -12,6 +12,7 @@ import pytest
 import stereocam
 from stereocam.tools.viewer.server import ViewerServer
 from tests.support.browser import Chromium, find_chromium
+from tests.support.hangs import terminated
 
 CHROMIUM = find_chromium()
 needs_browser = pytest.mark.skipif(CHROMIUM is None, reason="no Chromium on this machine (apt-get install chromium)")
@@ -122,8 +123,7 @@ def test_view_with_several_urls_sets_every_head():
             state = json.loads(urllib.request.urlopen(url + "api/group/state", timeout=30).read())
             assert state["config_names"]["fps"] == 4 and state["config_names"]["width"] == 320
         finally:
-            proc.terminate()
-            assert proc.wait(timeout=30) == 0, proc.stderr.read()
+            assert (rc := terminated(proc)) == 0, (rc, proc.stderr.read())
     finally:
         for srv in servers:
             srv.stop()

@@ -9,6 +9,7 @@ import urllib.request
 import numpy as np
 import pytest
 
+from tests.support.hangs import terminated
 from tests.support.waiting import wait_until
 
 rerun = pytest.importorskip("rerun", reason="rerun-sdk is not installed (pip install 'stereocam[viewer]')")
@@ -35,8 +36,7 @@ def test_view_streams_images_depth_pinhole_points_and_counters_to_a_rerun_record
         wait_until(lambda: (_frame(url) or {}).get("sequence", -1) >= first["sequence"] + 3, timeout=60,
                    what="3 more frames")
     finally:
-        proc.terminate()
-        assert proc.wait(timeout=30) == 0, proc.stderr.read()
+        assert (rc := terminated(proc)) == 0, (rc, proc.stderr.read())
     store = RrdReader(rrd).store()
     paths = set(store.schema().entity_paths())
     assert {"/world/camera", "/world/camera/left", "/world/camera/right", "/world/camera/depth", "/world/points",
