@@ -32,7 +32,7 @@ from stereocam.protocol.calibration import StereoCalibration
 from stereocam.protocol.calibration_limits import check_rectifiable
 from stereocam.protocol.rectification import RectifiedGeometry, stereo_rectify
 from stereocam.tools.calibration.lens import (
-    LensSolveError, MonoFit, StereoFit, calibrate_mono, calibrate_stereo, project, rectify_map, solve_pose,
+    RATIONAL_REDUCED, LensSolveError, MonoFit, StereoFit, calibrate_mono, calibrate_stereo, project, rectify_map, solve_pose,
     undistort,
 )
 
@@ -96,22 +96,41 @@ class OutlierRules:
 
 
 def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], start: HeadFit | None = None,
-             storable: bool = True) -> HeadFit:
+             storable: bool = True, reduce: bool = True) -> HeadFit:
     """Per-camera solves, then stereo with fixed intrinsics. Raises LensSolveError; with `storable`,
     UnrectifiableFitError for a head a camera would not store. Without it (a fit whose residuals only
     judge outliers) the head need only have the rectified rotations the epipolar error is measured in:
-    one gross outlier can spoil a fit's rectification, and the fit must still show which pair it is."""
+    one gross outlier can spoil a fit's rectification, and the fit must still show which pair it is.
+    A rational_polynomial head whose rectification folds is fitted again with its highest-order terms
+    held at 0 (lens.RATIONAL_REDUCED, in turn; not with `reduce` False); the first that a camera
+    would store is the fit."""
+    try:
+        return _fit_head(model, pairs, size, start, storable, 0)
+    except UnrectifiableFitError as exc:
+        if model != "rational_polynomial" or not reduce:
+            raise
+        first = exc
+    for fixed in RATIONAL_REDUCED:
+        try:
+            return _fit_head(model, pairs, size, start, storable, fixed)
+        except UnrectifiableFitError:
+            continue
+    raise first
+
+
+def _fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], start: HeadFit | None,
+              storable: bool, fixed: int) -> HeadFit:
     obj = [p.obj for p in pairs]
     left, right = [p.left for p in pairs], [p.right for p in pairs]
-    fl = calibrate_mono(model, obj, left, size, start.left if start else None)
-    fr = calibrate_mono(model, obj, right, size, start.right if start else None)
+    fl = calibrate_mono(model, obj, left, size, start.left if start else None, fixed)
+    fr = calibrate_mono(model, obj, right, size, start.right if start else None, fixed)
     # the cameras of a head have lenses of one class: a camera whose fit is far worse than the
     # other's (a false minimum: a wide lens's rational fit where no start of its own held) is fitted
     # again from the other's fit
     if fl.rms > CROSS_START_RATIO * fr.rms:
-        fl = calibrate_mono(model, obj, left, size, fr)
+        fl = calibrate_mono(model, obj, left, size, fr, fixed)
     elif fr.rms > CROSS_START_RATIO * fl.rms:
-        fr = calibrate_mono(model, obj, right, size, fl)
+        fr = calibrate_mono(model, obj, right, size, fl, fixed)
     st = calibrate_stereo(model, obj, [p.left for p in pairs], [p.right for p in pairs], size, fl, fr)
     try:
         calib = StereoCalibration(size, fl.K, fl.D, fr.K, fr.D, st.R, st.T, model)

@@ -9,6 +9,9 @@ Each model is fitted on its own terms, from several starts, and the start with t
   rational_polynomial  the caller's fit (any model) as guess, OpenCV's cold start, and the
                        K of an equidistant fit of the same views (the start that holds on
                        strongly distorted wide-angle lenses, where a 5-coefficient fit fails);
+                       with `fixed` (RATIONAL_REDUCED), the same starts with the
+                       highest-order terms held at 0 (fit.py's fallback for a head whose full
+                       fit folds the image beyond the views);
   equidistant          the caller's K, OpenCV's fisheye start (f = max(W, H) / pi, a ~180 degree
                        lens; given as a guess, fisheye_start) and the focal length of the board
                        homographies (narrow lenses).
@@ -35,6 +38,15 @@ UNDISTORT = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
 MODELS = ("plumb_bob", "equidistant", "rational_polynomial")  # simplest first (8 coefficients last): ties go to the earlier
 ALIASES = {"standard": "plumb_bob", "plumb_bob": "plumb_bob", "rational": "rational_polynomial",
            "rational_polynomial": "rational_polynomial", "fisheye": "equidistant", "equidistant": "equidistant"}
+
+
+# rational_polynomial with its highest-order terms held at 0, in the order fit.fit_head tries them
+# when the full fit's rectification folds: a fit free to bend anywhere can match every corner of
+# views that stop short of the image's corners and still turn back beyond them (a 110 degree lens
+# seen to 0.9 of its half-width); fewer terms extrapolate more tamely. The calibration stays a
+# rational_polynomial one (those coefficients 0), stored and exported as such.
+RATIONAL_REDUCED = (cv2.CALIB_FIX_K3 | cv2.CALIB_FIX_K6,
+                    cv2.CALIB_FIX_K3 | cv2.CALIB_FIX_K5 | cv2.CALIB_FIX_K6)
 
 
 def _fisheye_flag(name: str) -> int:
@@ -125,10 +137,10 @@ def fisheye_start(size: tuple[int, int]) -> np.ndarray:
 
 
 def _pinhole_once(model: str, obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int],
-                  K0: np.ndarray | None, D0: np.ndarray | None) -> MonoFit:
+                  K0: np.ndarray | None, D0: np.ndarray | None, fixed: int = 0) -> MonoFit:
     o = [np.asarray(p, np.float32).reshape(-1, 3) for p in obj]
     i = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in img]
-    flags = cv2.CALIB_RATIONAL_MODEL if model == "rational_polynomial" else 0
+    flags = (cv2.CALIB_RATIONAL_MODEL | fixed) if model == "rational_polynomial" else 0
     if K0 is not None:
         flags |= cv2.CALIB_USE_INTRINSIC_GUESS
         d = np.zeros(8)
@@ -181,18 +193,23 @@ def border_rays_finite(model: str, fit: MonoFit, size: tuple[int, int]) -> bool:
 
 @_one_thread
 def calibrate_mono(model: str, obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int],
-                   start: MonoFit | None = None) -> MonoFit:
-    """Fit one camera from the starts of the module docstring; `start` (a fit of any model) is one of them."""
+                   start: MonoFit | None = None, fixed: int = 0) -> MonoFit:
+    """Fit one camera from the starts of the module docstring; `start` (a fit of any model) is one of
+    them; `fixed`: rational_polynomial's terms held at 0 (one of RATIONAL_REDUCED, or 0: none)."""
     starts: list[Callable[[], MonoFit]] = []
+    if fixed and model != "rational_polynomial":
+        raise LensSolveError(f"{model}: no terms to hold at 0 (only rational_polynomial has them)")
     if model == "plumb_bob":
         starts.append(lambda: _pinhole_once(model, obj, img, size, None, None))
     elif model == "rational_polynomial":
         if start is not None:
-            d0 = start.D if len(start.D) >= 5 else None  # a fisheye start's D means nothing here
-            starts.append(lambda: _pinhole_once(model, obj, img, size, start.K, d0))
-        starts.append(lambda: _pinhole_once(model, obj, img, size, None, None))
+            # a fisheye start's D means nothing here; a reduced fit's D from a full one would be
+            # the held terms' too: its K only
+            d0 = start.D if len(start.D) >= 5 and not fixed else None
+            starts.append(lambda: _pinhole_once(model, obj, img, size, start.K, d0, fixed))
+        starts.append(lambda: _pinhole_once(model, obj, img, size, None, None, fixed))
         starts.append(lambda: _pinhole_once(model, obj, img, size, calibrate_mono("equidistant", obj, img, size).K,
-                                            None))
+                                            None, fixed))
     elif model == "equidistant":
         if start is not None:
             starts.append(lambda: _fisheye_once(obj, img, size, start.K))

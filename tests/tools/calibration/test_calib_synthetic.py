@@ -12,6 +12,7 @@ import pytest
 import yaml
 
 from stereocam.tools.calibration.boards import AprilGridSpec, CharucoSpec, Detection, match_pair, parse_board
+from stereocam.tools.calibration.fit import PairPoints, UnrectifiableFitError, fit_head
 from stereocam.tools.calibration.lens import calibrate_mono, calibrate_stereo
 from stereocam.tools.calibration.outputs import write_outputs
 from stereocam.tools.calibration.solve import CalibrationResult, SolveConfig, calibrate_pairs
@@ -84,6 +85,29 @@ def test_a_190_degree_fisheye_is_fitted_through_cv2_fisheye_from_a_sound_start()
     assert abs(fl.K[0, 0] / head.left.K[0, 0] - 1) < TRUTH_TOLERANCE
     assert abs(fr.K[1, 1] / head.right.K[1, 1] - 1) < TRUTH_TOLERANCE
     assert abs(np.linalg.norm(st.T) / np.linalg.norm(head.T) - 1) < TRUTH_TOLERANCE
+
+
+@pytest.mark.slow
+def test_a_rational_head_whose_full_fit_folds_beyond_the_views_gets_a_reduced_rational_fit() -> None:
+    """A 110 degree rational lens seen to 0.9 of its half-width: every full 8-coefficient fit matches
+    the training pairs' corners and turns back beyond them (the rectification folds), so the model
+    was lost to the choice; held at k3 = k6 = 0 (lens.RATIONAL_REDUCED) it rectifies and still meets the truth."""
+    case = bench.CASES["rational 110deg chessboard 9x6"]
+    head, pairs = _views("rational 110deg chessboard 9x6")
+    obj, left, right = _corners(parse_board(case.board, bench.SQUARE_M), pairs)
+    points = [PairPoints(i, str(i), o, pl, pr) for i, (o, pl, pr) in enumerate(zip(obj, left, right))]
+    every = SolveConfig().holdout_every
+    points = [p for p in points if p.index % every != every - 1]  # the tool's training pairs
+    with pytest.raises(UnrectifiableFitError, match="folds"):
+        fit_head("rational_polynomial", points, SIZE, reduce=False)
+    fit = fit_head("rational_polynomial", points, SIZE)
+    c = fit.calibration
+    assert c.lens_model == "rational_polynomial"
+    for D in (c.D_left, c.D_right):
+        assert D[4] == 0 and D[7] == 0 and np.all(D[[0, 5]] != 0)  # k3, k6 held; k1, k4 fitted
+    for K, true in ((c.K_left, head.left.K), (c.K_right, head.right.K)):
+        assert abs(K[0, 0] / true[0, 0] - 1) < TRUTH_TOLERANCE and abs(K[1, 1] / true[1, 1] - 1) < TRUTH_TOLERANCE
+    assert abs(c.baseline_m / float(np.linalg.norm(head.T)) - 1) < TRUTH_TOLERANCE
 
 
 def test_square_board_numbering_follows_the_left_view_whatever_the_detector_did() -> None:
