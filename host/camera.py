@@ -104,12 +104,26 @@ class Camera(CameraSettings, FrameDelivery):
                  ", resuming the stream" if self._streaming else "")
         self._resolve_geometry()
         # the unit may not have noticed the lost link yet and still stream for it (SPEC §4.6: STOP is
-        # always answered, streaming or not); a stream must be stopped before its format changes
-        self.request(m.Stop())
-        if self._applied:
-            self.request(m.SetConfig({BY_NAME[k].pid: v for k, v in self._applied.items()}))
-        if self._streaming:
-            self.start()
+        # always answered, streaming or not); a stream must be stopped before its format changes.
+        # Under the stream lock, as a user's stop and start: a heartbeat's STATUS of the unit not
+        # streaming would otherwise have its START sent between this STOP and the SET_CONFIG, which
+        # the unit then refuses (BAD_STATE: a format change while streaming)
+        with self._stream_lock:
+            self._stream_changed = time.monotonic()
+            self.request(m.Stop())
+            if self._applied:
+                self.request(m.SetConfig({BY_NAME[k].pid: v for k, v in self._applied.items()}))
+            if self._streaming:
+                self._start_stream()
+
+    def _start_stream(self) -> None:
+        """START, with the get_frame queue and frame assembly starting over (the stream lock held)."""
+        self._stream_changed = time.monotonic()
+        self.connection.assembler.reset()
+        self._frames.clear()
+        self.request(m.Start())
+        self._streaming = True
+        self._stream_error = None
 
     # -- plumbing ---------------------------------------------------------------------------
     def request(self, msg: m.Message, timeout: float | None = None) -> m.Message:
@@ -197,12 +211,7 @@ class Camera(CameraSettings, FrameDelivery):
     def start(self) -> None:
         """Start streaming; frames still queued from an earlier stream are discarded."""
         with self._stream_lock:
-            self._stream_changed = time.monotonic()
-            self.connection.assembler.reset()
-            self._frames.clear()
-            self.request(m.Start())
-            self._streaming = True
-            self._stream_error = None
+            self._start_stream()
 
     def stop(self) -> None:
         with self._stream_lock:
