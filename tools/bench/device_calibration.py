@@ -49,21 +49,34 @@ def rel(a: float, b: float) -> float:
     return 100.0 * abs(a - b) / abs(b)
 
 
+STILL_PX = 0.25  # a board whose corners moved less than this since the frame before stood still
+
+
 def rectified_dy(cam: Camera, frames: int, size: tuple[int, int]) -> tuple[float, int]:
     """RMS vertical disparity (px) of the board's corners in the first ``frames`` on-board rectified
-    frames of ``size`` that show the board in both images, and how many did (fewer: NaN RMS or one over
-    fewer frames) among the next 20 x ``frames``: the fixture dwells a few frames per pose, and some
-    poses leave a fisheye unit's rectified view."""
+    frames of ``size`` that show the board in both images standing still (its corners where the frame
+    before had them, within STILL_PX: a frame taken while the fixture moves to its next pose is no
+    measure of the rectification, and one such frame among six read 0.33 px against 0.06), and how
+    many did (fewer: NaN RMS or one over fewer frames) among the next 20 x ``frames``: the fixture
+    dwells a few frames per pose, and some poses leave a fisheye unit's rectified view."""
     cam.configure(rectify=1, width=size[0], height=size[1], fps=10, trigger_mode=int(TriggerMode.FREE_RUN))
     dy = []
+    before: np.ndarray | None = None  # the left corners of the frame before, if it showed the board
     cam.start()
     try:
         for _ in range(frames * 20):
             f = cam.get_frame(timeout=60)
             if f.left is None or f.right is None:
+                before = None
                 continue
             matched = match_detections(detect_all(f.left, BOARD), detect_all(f.right, BOARD), BOARD, SUBPIXEL_FIRST)
-            if matched is not None:  # the right corners numbered as the left ones, whichever detector found them
+            if matched is None:  # (else the right corners numbered as the left ones, whichever detector found them)
+                before = None
+                continue
+            still = before is not None and before.shape == matched[1].shape \
+                and float(np.abs(before - matched[1]).max()) < STILL_PX
+            before = matched[1]
+            if still:
                 dy.append(matched[1][:, 1] - matched[2][:, 1])
             if len(dy) == frames:
                 break

@@ -219,8 +219,8 @@ def test_wide_angle_units_calibrate_to_their_truth_and_rectify_on_board(tmp_path
     failed, solved offline, now meet the targets (seed 73 caught at strides 1-4: six sets, at worst
     0.097 % / 0.068 px), and the wide case here passed 3 of 3 runs; it stays out of `make test` as
     those runs took 120-230 s on a 2-core host at load ~12 (the suite's budget: ~60 s). The rectified
-    frames are the bench's (rectified_dy): the first 3 of up to 60 that show the board in both views
-    (a fisheye run once found it in 2 of the 40 frames this test scanned before)."""
+    frames are the bench's (rectified_dy): the first 3 of up to 60 that show the board in both views,
+    standing still (a fisheye run once found it in 2 of the 40 frames this test scanned before)."""
     sim = SimulatedCamera(serial=f"LENS-{lens}", seed=seed, flash_path=tmp_path / "u.flash", factory_calibrated=False,
                           scene="board", lens=lens)
     with Camera(InProcessTransport(sim), timeout=2.0) as cam:
