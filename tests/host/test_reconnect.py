@@ -14,13 +14,25 @@ from stereocam.tools.conformance.budget import budget
 pytestmark = pytest.mark.sim_only("pulls the simulated unit's USB plug")
 
 
-def test_usb_unplug_replug_reconnect_reapplies_config_and_resumes():
-    sim = SimulatedCamera(serial="RECON-1", seed=51)
+def _streaming(serial: str, seed: int, gain: int = 35, **options):
+    """(sim, its USB handle, a Camera on it) with the unit configured (320x240, 8 fps, ``gain``) and
+    streaming; ``options``: stereocam.open's."""
+    sim = SimulatedCamera(serial=serial, seed=seed)
     handle = simusb.plug(sim)
-    cam = stereocam.open("usb://?serial=RECON-1", timeout=1.0)
+    cam = stereocam.open(f"usb://?serial={serial}", timeout=1.0, **options)
     try:
-        cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=8, gain=35)
+        cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=8, gain=gain)
         cam.start()
+    except BaseException:
+        cam.close()
+        handle.unplug()
+        raise
+    return sim, handle, cam
+
+
+def test_usb_unplug_replug_reconnect_reapplies_config_and_resumes():
+    sim, handle, cam = _streaming("RECON-1", 51)
+    try:
         before = cam.get_frame(timeout=30)
         handle.unplug()
         with pytest.raises(stereocam.DisconnectedError):
@@ -48,12 +60,8 @@ def test_a_status_during_reconnect_waits_until_the_configuration_is_back(monkeyp
 
     from stereocam.protocol import messages as m
 
-    sim = SimulatedCamera(serial="RECON-4", seed=54)
-    handle = simusb.plug(sim)
-    cam = stereocam.open("usb://?serial=RECON-4", timeout=1.0)
+    sim, handle, cam = _streaming("RECON-4", 54)
     try:
-        cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=8, gain=35)
-        cam.start()
         cam.get_frame(timeout=30)
         handle.unplug()
         sim.close()
@@ -99,12 +107,9 @@ def test_reconnect_gives_up_with_a_disconnect_error():
 def test_auto_reconnect_rides_through_an_unplug():
     import threading
 
-    sim = SimulatedCamera(serial="RECON-3", seed=53)
-    handles = [simusb.plug(sim)]
-    cam = stereocam.open("usb://?serial=RECON-3", timeout=1.0, auto_reconnect=True)
+    sim, handle, cam = _streaming("RECON-3", 53, gain=20, auto_reconnect=True)
+    handles = [handle]
     try:
-        cam.configure(width=320, height=240, num_disparities=32, block_size=11, fps=8, gain=20)
-        cam.start()
         first = cam.get_frame(timeout=30)
 
         def power_cycle():
