@@ -20,7 +20,7 @@ from stereocam.tools.viewer.session import ViewerSession
 from stereocam.tools.viewer.settings import OTHER, group_of
 from tests.support.browser import Chromium, find_chromium
 from tests.support.device import SMALL
-from tests.support.waiting import wait_until
+from tests.support.waiting import stays, wait_until
 
 CHROMIUM = find_chromium()
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no Chromium on this machine (apt-get install chromium)")
@@ -278,3 +278,31 @@ def test_the_3d_view_draws_the_point_cloud_orbits_and_colours_by_the_left_image(
     grey = _canvas_pixels(browser, page)
     mask = _drawn(grey)
     assert mask.mean() > 0.05 and np.abs(grey[mask][:, 0].astype(int) - grey[mask][:, 2]).max() <= 2
+
+
+def test_a_state_asked_before_stop_recording_was_answered_does_not_undo_the_saved_line(viewer, page, monkeypatch):
+    """The page asks for the state every second while Stop is clicked, and the server answers in
+    parallel: a state taken while still recording, answered after the stop, put the button back to
+    'Stop recording' and then blanked the 'saved' line (a full-suite run waited 60 s for it)."""
+    session = viewer.session
+    page.js("document.getElementById('record').click()")
+    page.wait("document.getElementById('record').textContent === 'Stop recording'")
+    real, held, entered, release = session.recording, [], threading.Event(), threading.Event()
+
+    def recording():
+        state = real()
+        if not held and state is not None:  # the first state taken from now on: answered late
+            held.append(state)
+            entered.set()
+            release.wait(30)
+        return state
+
+    monkeypatch.setattr(session, "recording", recording)
+    try:
+        wait_until(entered.is_set, timeout=30, what="a state request taken while recording")
+        page.js("document.getElementById('record').click()")
+        page.wait("document.getElementById('recording').textContent.startsWith('saved')")
+    finally:
+        release.set()  # the old state's answer arrives now, after the stop's
+    assert stays(lambda: page.js("document.getElementById('recording').textContent").startswith("saved")
+                 and page.js("document.getElementById('record').textContent") == "Record", 2.5)

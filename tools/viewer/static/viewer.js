@@ -122,6 +122,7 @@ function showCounters(doc) {
 }
 
 async function refreshState() {
+  const acts = recordActs;
   try {
     const {doc} = await api("/api/state");
     state = doc;
@@ -131,7 +132,9 @@ async function refreshState() {
     $("waiting").textContent = doc.waiting || "";
     $("error").textContent = doc.error || "";
     showCounters(doc);
-    if (doc.recording || recording) showRecording(doc.recording); // a saved file's line stays
+    // a saved file's line stays; a state asked for before a Record/Stop click was answered may
+    // predate it (requests are served in parallel) and must not undo what the click showed
+    if (acts === recordActs && (doc.recording || recording)) showRecording(doc.recording);
     Settings.build(doc);
     showPresets(doc.presets);
     markPlanes();
@@ -141,6 +144,7 @@ async function refreshState() {
 }
 
 let recording = null;
+let recordActs = 0; // changes when a Record/Stop click is sent and when its answer comes
 function showRecording(rec) {
   recording = rec && !rec.done ? rec : null;
   $("record").textContent = recording ? "Stop recording" : "Record";
@@ -151,7 +155,9 @@ function showRecording(rec) {
 }
 
 $("record").addEventListener("click", async () => {
+  recordActs++;
   const {ok, doc} = await api(recording ? "/api/record/stop" : "/api/record/start", {});
+  recordActs++;
   if (ok) showRecording(doc.recording);
   else $("action").innerHTML = `<span class="error">recording refused: ${escape(doc.reason || doc.error)}</span>`;
 });
