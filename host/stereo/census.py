@@ -18,10 +18,11 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .jit import C_ARITHMETIC
 from .sgm_params import MARGIN_DIVISOR
 from .sgm_simd import census_codes, census_codes_masked
 
-_JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
+_JIT = C_ARITHMETIC
 LAPLACIAN_MAX = 16 * 255  # largest |3x3 Laplacian| of a uint8 image
 LAPLACIAN_ROW_STEP = 4  # the noise estimate reads every 4th row
 

@@ -99,6 +99,8 @@ class Matcher:
             self.labels = np.empty((h, w), np.int32)
             self.stack = np.empty((h * w, 2), np.int32)
             self.rtype = np.zeros(h * w + 1, np.uint8)
+            self.size = np.empty(h * w + 1, np.int32)  # region sizes and roots (postfilter)
+            self.parent = np.empty(h * w + 1, np.int32)
 
     def _ensure_threads(self, nthreads: int) -> None:
         """Per-thread scratch for every thread numba may run (sized once) and the stripe
@@ -140,7 +142,7 @@ class Matcher:
             self.run_sad(disp)
             if p.use_speckle:
                 filter_speckles(disp, inv, p.speckle_window_size, p.speckle_range,
-                                self.labels, self.stack, self.rtype)
+                                self.labels, self.stack, self.size, self.parent, self.rtype)
         return disp
 
     def run_sad(self, disp: np.ndarray) -> None:

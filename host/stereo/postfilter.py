@@ -1,140 +1,118 @@
-"""Speckle filter with cv::filterSpeckles semantics (4-connected regions, in place)."""
+"""Speckle filter with cv::filterSpeckles semantics (4-connected regions, in place).
+
+Regions are found run by run: each row splits into runs of neighbours that join (neither is
+``new_val``, they differ by at most ``max_diff``), and runs that touch on consecutive rows are
+united (union-find over run ids, the root holding the region's size). The same filter runs in
+parts for a matcher whose workers own row bands: each labels its band's regions and clears the
+small ones that do not reach its seam row (label_band); then one joins the regions across the
+seam (join_seam) and clears the small joined ones (clear_seam). Regions are connected
+components, so the result is filter_speckles' whatever the split.
+
+Scratch: labels int32 (h, w) (a pixel's run id, 0 on ``new_val``); stack int32 (h*w, 2) (per
+run id r: stack[r - 1] = flat index of its first pixel, length; clear_seam's flood stack);
+size and parent int32 (h*w + 1); rtype uint8 (h*w + 1). Band r0 .. r1-1 numbers its runs from
+r0 * w + 1.
+"""
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
 
-_JIT = dict(nogil=True, cache=True, boundscheck=False)
+from .jit import KERNEL
+from .lanes import uidx
+
+_JIT = KERNEL
 
 
 @nb.njit(**_JIT)
 def filter_speckles(img: np.ndarray, new_val: int, max_size: int, max_diff: int,
-                    labels: np.ndarray, stack: np.ndarray, rtype: np.ndarray) -> None:
-    """Set every 4-connected region of at most ``max_size`` pixels to ``new_val``.
-
-    Neighbours join a region when neither is ``new_val`` and they differ by at most
-    ``max_diff``. Scratch: labels int32 (h, w), stack int32 (h*w, 2), rtype uint8 (h*w + 1).
-    """
-    h, w = img.shape
-    labels[:, :] = 0
-    cur = 0
-    for i in range(h):
-        for j in range(w):
-            if img[i, j] == new_val:
-                continue
-            lab = labels[i, j]
-            if lab != 0:
-                if rtype[lab] != 0:
-                    img[i, j] = new_val
-                continue
-            cur += 1
-            labels[i, j] = cur
-            count = 0
-            top = 0
-            stack[0, 0] = i
-            stack[0, 1] = j
-            top = 1
-            while top > 0:
-                top -= 1
-                py = stack[top, 0]
-                px = stack[top, 1]
-                count += 1
-                dp = np.int32(img[py, px])
-                if py < h - 1 and labels[py + 1, px] == 0:
-                    q = np.int32(img[py + 1, px])
-                    if q != new_val and abs(dp - q) <= max_diff:
-                        labels[py + 1, px] = cur
-                        stack[top, 0] = py + 1
-                        stack[top, 1] = px
-                        top += 1
-                if py > 0 and labels[py - 1, px] == 0:
-                    q = np.int32(img[py - 1, px])
-                    if q != new_val and abs(dp - q) <= max_diff:
-                        labels[py - 1, px] = cur
-                        stack[top, 0] = py - 1
-                        stack[top, 1] = px
-                        top += 1
-                if px < w - 1 and labels[py, px + 1] == 0:
-                    q = np.int32(img[py, px + 1])
-                    if q != new_val and abs(dp - q) <= max_diff:
-                        labels[py, px + 1] = cur
-                        stack[top, 0] = py
-                        stack[top, 1] = px + 1
-                        top += 1
-                if px > 0 and labels[py, px - 1] == 0:
-                    q = np.int32(img[py, px - 1])
-                    if q != new_val and abs(dp - q) <= max_diff:
-                        labels[py, px - 1] = cur
-                        stack[top, 0] = py
-                        stack[top, 1] = px - 1
-                        top += 1
-            if count <= max_size:
-                rtype[cur] = 1
-                img[i, j] = new_val
-            else:
-                rtype[cur] = 0
+                    labels: np.ndarray, stack: np.ndarray, size: np.ndarray, parent: np.ndarray,
+                    rtype: np.ndarray) -> None:
+    """Set every 4-connected region of at most ``max_size`` pixels to ``new_val`` (the whole
+    image as one band)."""
+    label_band(img, 0, img.shape[0], -1, new_val, max_size, max_diff, labels, stack, size,
+               parent, rtype)
 
 
+@nb.njit(**_JIT)
+def _label_row(im: np.ndarray, lab: np.ndarray, st: np.ndarray, o: int, w: int, cur: int,
+               new_val: int, max_diff: int, parent: np.ndarray, size: np.ndarray) -> int:
+    """Runs of the row at flat index o (ids from cur + 1; each its own root, size its
+    length); returns the last id used. Branch-free per pixel: a pixel writes its flat index
+    as the first pixel of run cur + 1 (final once that run starts here; the slot of an id not
+    yet used otherwise) and as the last pixel of its own run (or of run cur + 1 if invalid);
+    at most one run per pixel keeps both slots inside the band's ids."""
+    first = cur + 1
+    pv = np.int32(new_val)
+    for x in range(w):
+        i = uidx(o + x)
+        v = np.int32(im[i])
+        valid = v != new_val
+        start = valid & ((pv == new_val) | (abs(v - pv) > max_diff))
+        st[uidx(2 * cur)] = o + x
+        cur += np.int64(start)
+        lab[i] = cur if valid else 0
+        st[uidx(2 * (cur + np.int64(not valid)) - 1)] = o + x
+        pv = v
+    for r in range(first, cur + 1):
+        n = st[2 * r - 1] - st[2 * r - 2] + 1
+        st[2 * r - 1] = n
+        size[r] = n
+        parent[r] = r
+    return cur
 
-# The same filter in parts, for a matcher whose workers own row bands: each labels its band's
-# regions and clears the small ones that do not reach its seam row (label_band); then one
-# joins the regions across the seam (join_seam) and clears the small joined ones (clear_seam).
-# Regions are connected components, so the result is filter_speckles' whatever the split.
-# Scratch: labels int32 (h, w), stack int32 (h*w, 2), size and parent int32 (h*w + 1), rtype
-# uint8 (h*w + 1); band r0 .. r1-1 numbers its regions from r0 * w + 1 and uses stack rows
-# r0 * w .. r1 * w - 1.
+
+@nb.njit(**_JIT)
+def _unite_rows(im: np.ndarray, lab: np.ndarray, o: int, w: int, max_diff: int,
+                parent: np.ndarray, size: np.ndarray) -> None:
+    """Unite the runs of the row at flat index o with those of the row above where they join
+    (once per pair of runs side by side)."""
+    la = lb = 0
+    for x in range(w):
+        i, j = uidx(o + x), uidx(o - w + x)
+        a, b = lab[j], lab[i]
+        join = (a != 0) & (b != 0) & (abs(np.int32(im[i]) - np.int32(im[j])) <= max_diff)
+        if join and (a != la or b != lb):
+            la, lb = a, b
+            _unite(parent, size, a, b)
+
+
+@nb.njit(**_JIT)
+def _unite(parent: np.ndarray, size: np.ndarray, a: int, b: int) -> None:
+    ra, rb = _root(parent, a), _root(parent, b)
+    if ra != rb:
+        if rb < ra:
+            ra, rb = rb, ra
+        parent[rb] = ra
+        size[ra] += size[rb]
+
 
 @nb.njit(**_JIT)
 def label_band(img: np.ndarray, r0: int, r1: int, edge: int, new_val: int, max_size: int,
                max_diff: int, labels: np.ndarray, stack: np.ndarray, size: np.ndarray,
                parent: np.ndarray, rtype: np.ndarray) -> None:
-    """Label the regions of rows r0 .. r1-1 (labels 0 on ``new_val`` pixels; size[label]:
-    pixels, parent[label] = label) and clear those of at most max_size pixels that have none
-    on row ``edge`` (the seam; -1: none). Flat pixel indices (stack entries: index, column),
-    a fifth faster than filter_speckles' row and column ones."""
+    """Label the regions of rows r0 .. r1-1 (labels: run ids; _root(parent, id): the region's
+    root, size[root]: its pixels) and clear those of at most max_size pixels that have none
+    on row ``edge`` (the seam; none if outside the band)."""
     w = img.shape[1]
     im, lab, st = img.ravel(), labels.ravel(), stack.ravel()
-    lo, hi = r0 * w, r1 * w  # the band's flat index range
-    e0, e1 = edge * w, edge * w + w  # the seam row's
-    lab[lo:hi] = 0
-    cur = lo
-    for o0 in range(lo, hi):
-        if im[o0] == new_val:
-            continue
-        if lab[o0] != 0:
-            if rtype[lab[o0]] != 0:
-                im[o0] = new_val
-            continue
-        cur += 1
-        lab[o0] = cur
-        st[2 * lo] = o0
-        st[2 * lo + 1] = o0 % w
-        top = lo + 1
-        count = 0
-        seam = False
-        while top > lo:
-            top -= 1
-            o = st[2 * top]
-            px = st[2 * top + 1]
-            count += 1
-            seam |= e0 <= o < e1
-            dp = np.int32(im[o])
-            for k in range(4):  # below, above, right, left
-                q = o + (w if k == 0 else -w if k == 1 else 1 if k == 2 else -1)
-                inside = (q < hi if k == 0 else q >= lo if k == 1 else
-                          px < w - 1 if k == 2 else px > 0)
-                if inside and lab[q] == 0:
-                    v = np.int32(im[q])
-                    if v != new_val and abs(dp - v) <= max_diff:
-                        lab[q] = cur
-                        st[2 * top] = q
-                        st[2 * top + 1] = px + (1 if k == 2 else -1 if k == 3 else 0)
-                        top += 1
-        size[cur] = count
-        parent[cur] = cur
-        rtype[cur] = count <= max_size and not seam
-        if rtype[cur]:
-            im[o0] = new_val
+    first = r0 * w + 1
+    cur = r0 * w
+    for y in range(r0, r1):
+        cur = _label_row(im, lab, st, y * w, w, cur, new_val, max_diff, parent, size)
+        if y > r0:
+            _unite_rows(im, lab, y * w, w, max_diff, parent, size)
+    rtype[first:cur + 1] = 0
+    if r0 <= edge < r1:  # regions on the seam row wait for clear_seam
+        for x in range(w):
+            r = lab[edge * w + x]
+            if r != 0:
+                rtype[_root(parent, r)] = 1
+    for r in range(first, cur + 1):
+        root = _root(parent, r)
+        if size[root] <= max_size and rtype[root] == 0:
+            s = st[2 * r - 2]
+            im[s:s + st[2 * r - 1]] = new_val
 
 
 @nb.njit(**_JIT)

@@ -20,9 +20,8 @@ parallel region: the halves are independent chains (one per worker); with more w
 within a chain wait band by band on the row before (a per-row progress count; a bounded spin,
 then yielding the core).
 
-numba caches this module's kernels on disk keyed on *this* file only: after editing
-sgm_simd.py, census.py or postfilter.py, touch this file (or delete __pycache__) so the cache
-is rebuilt.
+numba's disk cache of these kernels is keyed on every module of the package (jit.py), so
+editing sgm_simd.py, census.py or postfilter.py rebuilds them.
 """
 from __future__ import annotations
 
@@ -30,12 +29,13 @@ import numba as nb
 import numpy as np
 
 from .census import census_row_pair
+from .jit import C_ARITHMETIC
 from .lanes import uidx
 from .postfilter import clear_seam, join_seam, label_band
 from .sgm_simd import add_argmin, cost_run, count_le, diag_update, fetch_add, load_acquire, \
     path_step, pixel_paths, spin_wait, store_release, stream_copy, try_lock, unlock
 
-_JIT = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
+_JIT = C_ARITHMETIC
 
 # layout of the int64 configuration vector passed to sgm_rows
 (C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_MAXC, C_CW, C_CH,

@@ -98,9 +98,8 @@ class SGMMatcher:
         self.labels = np.empty((h, w) if m else (0, 0), np.int32)
         self.stack = np.empty((m, 2), np.int32)
         self.rtype = np.zeros(m + 1, np.uint8)
-        if p.paths == 5:  # speckle filter per half (sgm._speckle_half): region sizes and roots
-            self.size = np.empty(m + 1, np.int32)
-            self.parent = np.empty(m + 1, np.int32)
+        self.size = np.empty(m + 1, np.int32)  # region sizes and roots (postfilter)
+        self.parent = np.empty(m + 1, np.int32)
 
     def scratch_bytes(self) -> int:
         """Bytes of scratch this matcher keeps between frames."""
@@ -115,7 +114,7 @@ class SGMMatcher:
             self.run_sgm(left, right, disp)
             if p.use_speckle and p.paths != 5:
                 filter_speckles(disp, p.invalid_value, p.speckle_window_size, p.speckle_range,
-                                self.labels, self.stack, self.rtype)
+                                self.labels, self.stack, self.size, self.parent, self.rtype)
         return disp
 
     def margins(self, left: np.ndarray, right: np.ndarray) -> tuple[int, int]:

@@ -123,7 +123,7 @@ def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
     if p.use_speckle:
         out["speckle"] = _median_ms(lambda: filter_speckles(
             disp.copy(), p.invalid_value, p.speckle_window_size, p.speckle_range, m.labels,
-            m.stack, m.rtype), repeat)
+            m.stack, m.size, m.parent, m.rtype), repeat)
     out["total"] = _median_ms(lambda: m.match(left, right), repeat)
     return out
 

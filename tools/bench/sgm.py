@@ -163,7 +163,7 @@ def profile(left: np.ndarray, right: np.ndarray, nd: int, repeat: int, variants)
         if p.use_speckle:
             out["speckle (1 thread)"] = med(lambda: filter_speckles(
                 disp.copy(), p.invalid_value, p.speckle_window_size, p.speckle_range,
-                m.labels, m.stack, m.rtype))
+                m.labels, m.stack, m.size, m.parent, m.rtype))
         stages = stage_ms(m, left, right, repeat)
         both = "" if p.paths == 5 else ", both groups"
         out.update({f"{k} (CPU, 1 thread{both})": v for k, v in stages.items()})
