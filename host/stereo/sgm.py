@@ -45,6 +45,16 @@ _JIT = C_ARITHMETIC
 # margins of the left and right image (set per frame); C_P1G: params.p1_ground_step
 
 
+@nb.njit(inline="always", **_JIT)
+def run_stride(nd: int) -> int:
+    """Elements from one path-cost run (nd uint8 costs of a pixel) to the next in lbuf: nd
+    rounded up to 64, so every run starts on a cache line (with 64-byte lbuf) and a path step
+    that reads the run the previous pixel's step just wrote gets it forwarded from the store
+    (a store split across two cache lines is not forwarded: the step then waits for it to
+    reach the cache)."""
+    return (nd + 63) & ~63
+
+
 @nb.njit(**_JIT)
 def _inside(X: int, md: int, nd: int) -> int:
     """Disparities of left column X whose right pixel is in the image (k <= X - md), rounded
@@ -75,7 +85,7 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
     vertical and diagonal paths arriving from the row above (g = 0) or below (g = 1), none
     on the first; npaths 5: four paths plus the one _kept_row kept.
 
-    lbuf runs of nd + 2 (a padding element each side): from hb, two for the horizontal path
+    lbuf runs of run_stride(nd), 64-aligned: from hb, two for the horizontal path
     (this pixel's and its predecessor's), one zero run (predecessor of a path's first pixel)
     and, for npaths 5, the kept path's one per column; from vb, per row slot and vertical/diagonal
     path one run per column, row y in slot cur, its predecessor row in prv. mv[slot, v, x]:
@@ -86,9 +96,9 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
     # vertical/diagonal paths in the lower half: the ground's step (disparity growing downwards)
     # costs C_P1G
     p1v = (p1, p1) if 2 * y < img.shape[0] else (cfg[C_P1G], p1) if dy > 0 else (p1, cfg[C_P1G])
-    stride = nd + 2
-    zero = hb + 2 * stride + 1
-    kept = hb + 3 * stride + 1  # + x * stride: the kept horizontal path's run of column x
+    stride = run_stride(nd)
+    zero = hb + 2 * stride
+    kept = hb + 3 * stride  # + x * stride: the kept horizontal path's run of column x
     vpaths = min(npaths, 4)
     for i in range(i0, i1):
         x = i if g == 0 else cols - 1 - i
@@ -97,10 +107,10 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
         po, pv, mp = zero, np.int64(255), np.int64(0)
         if i > 0:
             mp = np.int64(pm[0])
-            po = hb + (1 - (i & 1)) * stride + 1
+            po = hb + (1 - (i & 1)) * stride
             pv = min(mp + p2tab[uidx(abs(np.int64(img[y, uidx(X)]) - img[y, uidx(X - dy)]))],
                      255)
-        hz = (po, hb + (i & 1) * stride + 1, pv, mp)
+        hz = (po, hb + (i & 1) * stride, pv, mp)
         # (dy, 0), (dy, 1), (dy, -1): predecessor (y - dy, x - dx)
         v1 = _vertical_meta(1, 0, first, x, X, y, dy, cur, prv, vb, zero, cols, stride, img,
                             p2tab, mv)
@@ -122,11 +132,11 @@ def _vertical_meta(v: int, dx: int, first: bool, x: int, X: int, y: int, dy: int
                    p2tab: np.ndarray, mv: np.ndarray) -> tuple[int, int, int, int]:
     """pixel_paths' (po, oo, p2m, mprev) of vertical/diagonal path v (_aggregate_row)."""
     xq = x - dx
-    oo = vb + ((cur * 3 + v - 1) * cols + x) * stride + 1
+    oo = vb + ((cur * 3 + v - 1) * cols + x) * stride
     if first or xq < 0 or xq >= cols:
         return zero, oo, np.int64(255), np.int64(0)
     mp = np.int64(mv[prv, v - 1, uidx(xq)])
-    return (vb + ((prv * 3 + v - 1) * cols + xq) * stride + 1, oo,
+    return (vb + ((prv * 3 + v - 1) * cols + xq) * stride, oo,
             min(mp + p2tab[uidx(abs(np.int64(img[y, uidx(X)])
                                     - img[uidx(y - dy), uidx(X - dx)]))], 255), mp)
 
@@ -136,12 +146,12 @@ def _kept_row(g: int, y: int, hb: int, img: np.ndarray, cl: np.ndarray, crr: np.
               cfg: np.ndarray, p2tab: np.ndarray, cost: np.ndarray, lbuf: np.ndarray) -> None:
     """Cost row y (as _cost_row) and, pixel by pixel as the costs are made, the horizontal
     path (left to right for g = 0, right to left for g = 1) kept per column in lbuf (the runs
-    from hb + 3 (nd + 2), _aggregate_row's layout)."""
+    from hb + 3 run_stride(nd), _aggregate_row's layout)."""
     nd, md, p1 = cfg[C_ND], cfg[C_MIND], cfg[C_P1]
     x0, cols, maxc = cfg[C_X0], cfg[C_COLS], cfg[C_MAXC]
     w = cl.shape[1]
-    stride = nd + 2
-    kept, zero = hb + 3 * stride + 1, hb + 2 * stride + 1
+    stride = run_stride(nd)
+    kept, zero = hb + 3 * stride, hb + 2 * stride
     dy = 1 if g == 0 else -1
     outside = nd - 1 - x0 + md  # columns x < outside have disparities left of the image
     hm = np.int64(0)
@@ -214,7 +224,7 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
     for step in range(h):
         y = step if g == 0 else h - 1 - step
         _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
-        _aggregate_row(g, y, step == 0, 2 if cfg[C_PATHS] == 4 else 4, 0, 3 * (nd + 2),
+        _aggregate_row(g, y, step == 0, 2 if cfg[C_PATHS] == 4 else 4, 0, 3 * run_stride(nd),
                        step & 1, 1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf, mv,
                        pm, acc)
         n = 0
@@ -299,7 +309,7 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
     is done: under load it would spin behind a descheduled one."""
     h = img.shape[0]
     nd, cols = cfg[C_ND], cfg[C_COLS]
-    stride = nd + 2
+    stride = run_stride(nd)
     vbase = lbuf.shape[0] - 18 * cols * stride  # per chain three row slots of three paths
     hb = t * (cols + 3) * stride
     top = (h + 1) // 2

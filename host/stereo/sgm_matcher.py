@@ -65,24 +65,23 @@ class SGMMatcher:
         if p.p2_adapt > 0:
             a = p.p2_adapt
             self.p2tab[:] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + np.arange(256))))
-        stride = nd + 2
+        stride = _sgm.run_stride(nd)  # path-cost runs, each 64-aligned in a 64-aligned lbuf
         if p.paths == 5:  # one top-down pass (sgm.sgm_single_pass); per worker n
             self.locks = np.zeros(5 * _sgm.NXT_STRIDE, np.int32)  # sgm.NXT_STRIDE's counters
             self.done = np.zeros(h, np.int32)  # columns each row has published
             # horizontal-path areas (cols + 3 runs each), then per chain three row slots of
             # three paths
             area = (cols + 3) * stride
-            self.lbuf = np.full((1, n * area + 18 * cols * stride), 255, np.uint8)
-            for t in range(n):
-                self.lbuf[0, t * area + 2 * stride + 1:t * area + 3 * stride - 1] = 0
+            self.lbuf = _aligned((1, n * area + 18 * cols * stride), np.uint8)
+            self.lbuf[:] = 0  # the zero runs (predecessor of a path's first pixel) included
             self.mv = np.empty((2, 3, 3, cols), np.int16)
         else:  # two groups of paths (sgm.sgm_rows)
             n = 2
             self.parked = _aligned((h, cols * nd), np.int16)
             self.locks = np.zeros(h, np.int32)
             self.done = np.zeros(h, np.int32)
-            self.lbuf = np.full((2, 3 * stride + 6 * cols * stride), 255, np.uint8)
-            self.lbuf[:, 2 * stride + 1:3 * stride - 1] = 0
+            self.lbuf = _aligned((2, 3 * stride + 6 * cols * stride), np.uint8)
+            self.lbuf[:] = 0  # the zero run included
             self.mv = np.empty((2, 2, 3, cols), np.int16)
         # per worker or group of paths: cost row, uint8 path buffers (sgm._aggregate_row; the
         # padding elements hold 255) and their minima

@@ -3,8 +3,7 @@ atomics and a bounded spin-wait.
 
 Arrays are 1-D (uint8 path costs, int16 sums) with the disparity axis contiguous; ``nd`` is a
 multiple of 16 and each loop walks it in 64/32/16-lane chunks (simd._chunked). Callers guarantee
-indices are in range, including the padding element before and after each predecessor run that
-pixel_paths reads.
+indices are in range.
 """
 from __future__ import annotations
 
@@ -287,10 +286,10 @@ def _umin(builder, a, b):
     return builder.select(builder.icmp_unsigned("<", a, b), a, b)
 
 
-def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, p1s, p1hi=None):
+def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, nd, p1s, p1hi=None):
     """L[k] for the n disparities from j0 of one path step (pixel_paths), stored at
-    lbuf[oo + j0 + k]; meta = (po, oo, p2m, mprev) as int64 values; p1hi: the step from
-    P[k+1]'s own P1 (None: p1s, the step from P[k-1]'s, for both)."""
+    lbuf[oo + j0 + k]; meta = (po, oo, p2m, mprev) as int64 values; nd: the run's length;
+    p1hi: the step from P[k+1]'s own P1 (None: p1s, the step from P[k-1]'s, for both)."""
     u8 = ir.IntType(8)
     vty = ir.VectorType(u8, n)
     po, oo, p2m, mp = meta
@@ -299,11 +298,16 @@ def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, p1s, p1hi=None):
     def at(off):
         return _ptr(context, builder, lbty, lbuf, [off])
     # P[k-1] and P[k+1] by shifting the chunk (loaded where it was stored, so a just-written
-    # predecessor forwards) with the neighbouring element (padding 255 at either end of the
-    # run)
+    # predecessor forwards) with the neighbouring element: 255 beyond either end of the run
+    # (read inside it, then replaced: no run has padding)
     pv = _vload(builder, at(pj), vty)
-    before = builder.load(at(builder.sub(pj, ir.Constant(pj.type, 1))))
-    after = builder.load(at(builder.add(pj, ir.Constant(pj.type, n))))
+    inner_lo = builder.icmp_signed(">", j0, ir.Constant(j0.type, 0))
+    inner_hi = builder.icmp_signed("<", builder.add(j0, ir.Constant(j0.type, n)), nd)
+    before = builder.load(at(builder.sub(pj, builder.zext(inner_lo, pj.type))))
+    after = builder.load(at(builder.add(pj, builder.select(
+        inner_hi, ir.Constant(pj.type, n), ir.Constant(pj.type, n - 1)))))
+    before = builder.select(inner_lo, before, ir.Constant(u8, 255))
+    after = builder.select(inner_hi, after, ir.Constant(u8, 255))
     lo = builder.shuffle_vector(pv, _splat(builder, before, vty), ir.Constant(
         ir.VectorType(_I32, n), [n] + list(range(n - 1))))
     hi = builder.shuffle_vector(pv, _splat(builder, after, vty), ir.Constant(
@@ -349,7 +353,7 @@ def path_step(typingctx, cost, ci, lbuf, po, oo, p2m, mprev, p1, nd):
             c = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(civ, j0)]),
                        vty)
             L = _step_chunk(context, builder, st[2], args[2], c, (pov, oov, p2v, mpv), j0, n,
-                            _splat(builder, p1v, vty))
+                            ndv, _splat(builder, p1v, vty))
             _keep_min(builder, best, L, n)
 
         _chunked(builder, ndv, body)
@@ -371,8 +375,8 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
         acc[ai+k] = sum_v L_v[k] (+ lbuf[meta[16]+k] when npaths is 5)   (int16; not
         written when npaths is 1)
 
-    Path costs are uint8 (the caller keeps every L <= 255 and passes p2m <= 255; the padding
-    elements hold 255, and +p1 saturates), so one 512-bit register holds 64 disparities. The
+    Path costs are uint8 (the caller keeps every L <= 255 and passes p2m <= 255; P beyond the
+    run's ends is 255, and +p1 saturates), so one 512-bit register holds 64 disparities. The
     cost and the sum stay in registers across the paths."""
     if not (_u8_arrays(cost, lbuf) and _i16_arrays(acc, mins)
             and isinstance(meta, types.UniTuple) and meta.count == 17
@@ -410,7 +414,7 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
 
             def step(v):
                 L = _step_chunk(context, builder, st[2], args[2], c, meta_v[4 * v:4 * v + 4],
-                                j0, n, *((p1s,) if v == 0 else p1ground))
+                                j0, n, ndv, *((p1s,) if v == 0 else p1ground))
                 _keep_min(builder, best[v], L, n)
                 return builder.zext(L, wty)
 

@@ -35,7 +35,7 @@ def _aggregate(img, cfg, p2tab, cost, lbuf, mv, pm, acc):
     for g in range(2):
         for step in range(h):
             y = step if g == 0 else h - 1 - step
-            _sgm._aggregate_row(g, y, step == 0, npaths, 0, 3 * (nd + 2), step & 1,
+            _sgm._aggregate_row(g, y, step == 0, npaths, 0, 3 * _sgm.run_stride(nd), step & 1,
                                 1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf, mv,
                                 pm, acc)
 
@@ -53,7 +53,7 @@ def _single_pass_upto(stages, img, right, cl, crr, cfg, p2tab, disp, win, offs, 
     stages (SINGLE_PASS_STAGES)."""
     h = img.shape[0]
     nd, cols = cfg[_sgm.C_ND], cfg[_sgm.C_COLS]
-    stride = nd + 2
+    stride = _sgm.run_stride(nd)
     vbase = lbuf.shape[0] - 18 * cols * stride
     top = (h + 1) // 2
     for c in range(2):
