@@ -97,33 +97,91 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
     # costs C_P1G
     p1v = (p1, p1) if 2 * y < img.shape[0] else (cfg[C_P1G], p1) if dy > 0 else (p1, cfg[C_P1G])
     stride = run_stride(nd)
-    zero = hb + 2 * stride
     kept = hb + 3 * stride  # + x * stride: the kept horizontal path's run of column x
     vpaths = min(npaths, 4)
-    for i in range(i0, i1):
+    if first:  # no predecessor row: every pixel takes the general way
+        for i in range(i0, i1):
+            _aggregate_pixel(i, g, y, True, npaths, hb, vb, cur, prv, img, cfg, p2tab, cost,
+                             lbuf, mv, pm, acc, p1v)
+        return
+    # the row's first and last pixels (a predecessor outside the row) the general way, the
+    # others with every predecessor inside: no tests, the per-row bases hoisted
+    lo, hi = max(i0, 1), min(i1, cols - 1)
+    if i0 == 0:
+        _aggregate_pixel(0, g, y, False, npaths, hb, vb, cur, prv, img, cfg, p2tab, cost,
+                         lbuf, mv, pm, acc, p1v)
+    irow, prow = img[y], img[y - dy]
+    bp = (vb + prv * 3 * cols * stride, vb + (prv * 3 + 1) * cols * stride,
+          vb + (prv * 3 + 2) * cols * stride)
+    bc = (vb + cur * 3 * cols * stride, vb + (cur * 3 + 1) * cols * stride,
+          vb + (cur * 3 + 2) * cols * stride)
+    mp0, mp1, mp2 = mv[prv, 0], mv[prv, 1], mv[prv, 2]
+    mc0, mc1, mc2 = mv[cur, 0], mv[cur, 1], mv[cur, 2]
+    for i in range(lo, hi):
         x = i if g == 0 else cols - 1 - i
         X = x0 + x
-        # horizontal path (0, dy): predecessor x - dy on this row
-        po, pv, mp = zero, np.int64(255), np.int64(0)
-        if i > 0:
-            mp = np.int64(pm[0])
-            po = hb + (1 - (i & 1)) * stride
-            pv = min(mp + p2tab[uidx(abs(np.int64(img[y, uidx(X)]) - img[y, uidx(X - dy)]))],
-                     255)
-        hz = (po, hb + (i & 1) * stride, pv, mp)
-        # (dy, 0), (dy, 1), (dy, -1): predecessor (y - dy, x - dx)
-        v1 = _vertical_meta(1, 0, first, x, X, y, dy, cur, prv, vb, zero, cols, stride, img,
-                            p2tab, mv)
+        ic = np.int64(irow[uidx(X)])
+        mh = np.int64(pm[0])  # horizontal path: predecessor x - dy on this row
+        hz = (hb + (1 - (i & 1)) * stride, hb + (i & 1) * stride,
+              min(mh + p2tab[uidx(abs(ic - irow[uidx(X - dy)]))], 255), mh)
+        m1 = np.int64(mp0[uidx(x)])  # (dy, 0), (dy, 1), (dy, -1): predecessor (y - dy, x - dx)
+        v1 = (bp[0] + x * stride, bc[0] + x * stride,
+              min(m1 + p2tab[uidx(abs(ic - prow[uidx(X)]))], 255), m1)
         v2 = v3 = v1
         if vpaths > 2:
-            v2 = _vertical_meta(2, 1, first, x, X, y, dy, cur, prv, vb, zero, cols, stride,
-                                img, p2tab, mv)
-            v3 = _vertical_meta(3, -1, first, x, X, y, dy, cur, prv, vb, zero, cols, stride,
-                                img, p2tab, mv)
-        pixel_paths(cost, x * nd, lbuf, hz + v1 + v2 + v3 + (kept + x * stride,), npaths, p1, acc, x * nd, nd, pm,
-                    p1v)
-        for v in range(1, vpaths):
-            mv[cur, v - 1, uidx(x)] = pm[v]
+            m2 = np.int64(mp1[uidx(x - 1)])
+            v2 = (bp[1] + (x - 1) * stride, bc[1] + x * stride,
+                  min(m2 + p2tab[uidx(abs(ic - prow[uidx(X - 1)]))], 255), m2)
+            m3 = np.int64(mp2[uidx(x + 1)])
+            v3 = (bp[2] + (x + 1) * stride, bc[2] + x * stride,
+                  min(m3 + p2tab[uidx(abs(ic - prow[uidx(X + 1)]))], 255), m3)
+        pixel_paths(cost, x * nd, lbuf, hz + v1 + v2 + v3 + (kept + x * stride,), npaths, p1,
+                    acc, x * nd, nd, pm, p1v)
+        mc0[uidx(x)] = pm[1]
+        if vpaths > 2:
+            mc1[uidx(x)] = pm[2]
+            mc2[uidx(x)] = pm[3]
+    if i1 == cols and cols > 1:
+        _aggregate_pixel(cols - 1, g, y, False, npaths, hb, vb, cur, prv, img, cfg, p2tab,
+                         cost, lbuf, mv, pm, acc, p1v)
+
+
+@nb.njit(**_JIT)
+def _aggregate_pixel(i: int, g: int, y: int, first: bool, npaths: int, hb: int, vb: int,
+                     cur: int, prv: int, img: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray,
+                     cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, pm: np.ndarray,
+                     acc: np.ndarray, p1v: tuple) -> None:
+    """Pixel i (in path order) of _aggregate_row, any predecessor outside the image taken
+    as none (the zero run, P2 255, minimum 0)."""
+    nd, p1 = cfg[C_ND], cfg[C_P1]
+    x0, cols = cfg[C_X0], cfg[C_COLS]
+    dy = 1 if g == 0 else -1
+    stride = run_stride(nd)
+    zero = hb + 2 * stride
+    kept = hb + 3 * stride
+    vpaths = min(npaths, 4)
+    x = i if g == 0 else cols - 1 - i
+    X = x0 + x
+    # horizontal path (0, dy): predecessor x - dy on this row
+    po, pv, mp = zero, np.int64(255), np.int64(0)
+    if i > 0:
+        mp = np.int64(pm[0])
+        po = hb + (1 - (i & 1)) * stride
+        pv = min(mp + p2tab[uidx(abs(np.int64(img[y, uidx(X)]) - img[y, uidx(X - dy)]))], 255)
+    hz = (po, hb + (i & 1) * stride, pv, mp)
+    # (dy, 0), (dy, 1), (dy, -1): predecessor (y - dy, x - dx)
+    v1 = _vertical_meta(1, 0, first, x, X, y, dy, cur, prv, vb, zero, cols, stride, img,
+                        p2tab, mv)
+    v2 = v3 = v1
+    if vpaths > 2:
+        v2 = _vertical_meta(2, 1, first, x, X, y, dy, cur, prv, vb, zero, cols, stride,
+                            img, p2tab, mv)
+        v3 = _vertical_meta(3, -1, first, x, X, y, dy, cur, prv, vb, zero, cols, stride,
+                            img, p2tab, mv)
+    pixel_paths(cost, x * nd, lbuf, hz + v1 + v2 + v3 + (kept + x * stride,), npaths, p1, acc,
+                x * nd, nd, pm, p1v)
+    for v in range(1, vpaths):
+        mv[cur, v - 1, uidx(x)] = pm[v]
 
 
 @nb.njit(inline="always", **_JIT)
