@@ -231,12 +231,15 @@ def _kept_row(g: int, y: int, hb: int, img: np.ndarray, cl: np.ndarray, crr: np.
 def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray | None,
                 rmin: np.ndarray, rarg: np.ndarray, karg: np.ndarray,
                 out: np.ndarray) -> None:
-    """acc += parked (the other group's sum; None: acc is the whole sum), then winner-take-all, uniqueness and subpixel
-    per pixel in one pass (the sum stays in L1), and the left-right check, which needs the
-    whole row's right-image winners, in a second pass over the kept winners karg."""
+    """acc += parked (the other group's sum; None: acc is the whole sum), then per pixel
+    winner-take-all and uniqueness in one pass (the sum stays in L1), keeping in karg (int32,
+    3 x cols) the winner, the equiangular subpixel fraction's numerator and denominator (0:
+    invalid); then the disparities in a second pass, whose divisions vectorise; and the
+    left-right check, which needs the whole row's right-image winners."""
     nd, md, uratio, lrdiff = cfg[C_ND], cfg[C_MIND], cfg[C_URATIO], cfg[C_LRDIFF]
     x0, cols = cfg[C_X0], cfg[C_COLS]
     inv = np.int16(cfg[C_INV])
+    kk, num, den = karg[0], karg[1], karg[2]
     for x in range(x0):
         out[x] = inv
     for x in range(x0 + cols, out.shape[0]):
@@ -249,23 +252,31 @@ def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray | N
         m, k = add_argmin(acc, o, parked, o, nd)
         if lrdiff >= 0:
             diag_update(acc, o, rmin, rarg, cols - 1 - x, nd)
-            karg[x] = k
+        kk[x] = k
         a = np.int64(acc[uidx(o + k - 1)]) if k > 0 else np.int64(0)
         b = np.int64(acc[uidx(o + k + 1)]) if k < nd - 1 else np.int64(0)
         if uratio > 0:
             thr = min(m + m * uratio // 100, 32767)
             near = np.int64((k > 0) & (a <= thr)) + np.int64((k < nd - 1) & (b <= thr))
             if count_le(acc, o, nd, thr) - 1 - near > 0:
-                out[x0 + x] = inv
+                den[x] = 0
                 continue
-        d16 = 16 * (md + k)
         if 0 < k < nd - 1:
-            den = max(max(a, b) - m, 1)  # equiangular (parabola: pixel-locking bias)
-            d16 += ((a - b) * 16 + den) // (2 * den)
-        out[x0 + x] = d16
+            d = max(max(a, b) - m, 1)  # equiangular (parabola: pixel-locking bias)
+            num[x] = (a - b) * 16 + d
+            den[x] = 2 * d
+        else:
+            num[x] = 0
+            den[x] = 1
+    for x in range(cols):
+        # floor(num / den) exactly: |num| < 2^20, den < 2^17, so a quotient that is not a
+        # whole number is 1 / den (> 2^-17) from one, far beyond float64's rounding
+        q = np.floor(np.float64(num[x]) / np.float64(max(den[x], 1)))
+        d16 = 16 * (md + np.int64(kk[x])) + np.int64(q)
+        out[uidx(x0 + x)] = d16 if den[x] != 0 else inv
     if lrdiff >= 0:
         for x in range(cols):
-            k = np.int64(karg[x])
+            k = np.int64(kk[x])
             if out[x0 + x] != inv and abs(np.int64(rarg[uidx(cols - 1 - x + k)]) - k) > lrdiff:
                 out[x0 + x] = inv
 

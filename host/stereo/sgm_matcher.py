@@ -92,7 +92,7 @@ class SGMMatcher:
         self.acc = _aligned((n, cols * nd), np.int16)
         self.rmin = np.empty((n, cols + nd - 1), np.int16)
         self.rarg = np.zeros((n, cols + nd - 1), np.int16)
-        self.karg = np.empty((n, cols), np.int16)  # winners of a row (left-right check)
+        self.karg = np.empty((n, 3, cols), np.int32)  # a row's winners, subpixel fractions
         m = h * w if p.use_speckle else 0
         self.labels = np.empty((h, w) if m else (0, 0), np.int32)
         self.stack = np.empty((m, 2), np.int32)
