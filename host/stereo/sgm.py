@@ -16,7 +16,8 @@ to bottom with the paths from above, the bottom half bottom to top with those fr
 row making its census codes and cost row once, the right-to-left path kept per column, then
 left to right the other four paths, the sum and the selection; whoever finishes a half runs
 its part of the speckle filter (the second also the seam's). Everything runs in that one
-parallel region: the halves are independent chains (one per worker); with more workers, rows
+parallel region: the halves are independent chains (one per worker); a worker whose chain is
+done joins the other (with two workers), and with more workers each chain has several; rows
 within a chain wait band by band on the row before (a per-row progress count; a bounded spin,
 then yielding the core).
 
@@ -373,16 +374,18 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
                  pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
                  karg: np.ndarray, spk: tuple, workers: int) -> None:
     """Worker t: rows of chain t % 2 taken one at a time until none is left (_chain_row),
-    then, when it is the only worker, those of chain 1; whoever finishes a half's last row
-    filters its speckles (_speckle_half). A worker never joins the other chain once its own
-    is done: under load it would spin behind a descheduled one."""
+    then, with one or two workers, those left of the other chain; whoever finishes a half's
+    last row filters its speckles (_speckle_half). Beside a busy process one of two workers
+    shares a core and runs at half speed: the other, done first, then takes every other row
+    of the late chain (each row waits band by band on the one before). With more workers
+    each stays on its chain (so at most two work on a chain: its three row slots)."""
     h = img.shape[0]
     nd, cols = cfg[C_ND], cfg[C_COLS]
     stride = run_stride(nd)
     vbase = lbuf.shape[0] - 18 * cols * stride  # per chain three row slots of three paths
     hb = t * (cols + 3) * stride
     top = (h + 1) // 2
-    for n in range(2 if workers == 1 else 1):
+    for n in range(2 if workers <= 2 else 1):
         c = (t + n) & 1
         rows = top if c == 0 else h - top
         while True:

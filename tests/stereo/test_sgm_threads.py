@@ -8,6 +8,8 @@ import sys
 
 import numpy as np
 
+from tests.support.hangs import terminated
+
 CHECK = "import os, stereocam.stereo; print(os.environ.get('OMP_WAIT_POLICY'))"
 
 
@@ -45,3 +47,33 @@ def test_five_paths_on_more_threads_than_cores(tmp_path) -> None:
         out[n] = np.load(path)
     assert np.array_equal(out[4], out[1])
     assert (out[1] != out[1][0, 0, 0]).any()
+
+
+MATCH_MANY = """
+import sys, numpy as np
+from stereocam.stereo import SGMMatcher, SGMParams
+rng = np.random.default_rng(7)
+base = rng.integers(0, 256, (120, 360), dtype=np.uint8)
+left, right = base[:, 20:340].copy(), base[:, 29:349].copy()
+m = SGMMatcher(left.shape, SGMParams(num_disparities=48, paths=5))
+np.save(sys.argv[1], np.stack([m.match(left, right) for _ in range(int(sys.argv[2]))]))
+"""
+
+
+def test_five_paths_on_two_threads_beside_a_busy_process(tmp_path) -> None:
+    """Two workers beside a spinning process: the one sharing a core falls behind, the other
+    finishes its half first and takes every other row of the late half; every frame is the
+    one-thread output."""
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        out = {}
+        for n, frames in ((1, 1), (2, 40)):
+            path = tmp_path / f"{n}.npy"
+            subprocess.run([sys.executable, "-c", MATCH_MANY, str(path), str(frames)],
+                           check=True, timeout=300, env={**os.environ, "NUMBA_NUM_THREADS": str(n)})
+            out[n] = np.load(path)
+    finally:
+        terminated(busy)
+    assert (out[1] != out[1][0, 0, 0]).any()
+    for frame in out[2]:
+        assert np.array_equal(frame, out[1][0])
