@@ -83,8 +83,8 @@ class SGMMatcher:
             self.lbuf = _aligned((2, 3 * stride + 6 * cols * stride), np.uint8)
             self.lbuf[:] = 0  # the zero run included
             self.mv = np.empty((2, 2, 3, cols), np.int16)
-        # per worker or group of paths: cost row, uint8 path buffers (sgm._aggregate_row; the
-        # padding elements hold 255) and their minima
+        # per worker or group of paths: cost row, uint8 path buffers (sgm._aggregate_row) and
+        # their minima
         self.cost = _aligned((n, cols * nd), np.uint8)
         # written at every pixel by every thread: each one's slice 128 bytes away from the
         # others' (path minima), never on one cache line (false sharing made two threads slower than one)
