@@ -375,10 +375,9 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
                  karg: np.ndarray, spk: tuple, workers: int) -> None:
     """Worker t: rows of chain t % 2 taken one at a time until none is left (_chain_row),
     then, with one or two workers, those left of the other chain; whoever finishes a half's
-    last row filters its speckles (_speckle_half). Beside a busy process one of two workers
-    shares a core and runs at half speed: the other, done first, then takes every other row
-    of the late chain (each row waits band by band on the one before). With more workers
-    each stays on its chain (so at most two work on a chain: its three row slots)."""
+    last row filters its speckles (_speckle_half). When one of two workers lags (descheduled,
+    or sharing its core), the other, done first, takes rows of the late chain (each row waits
+    band by band on the one before). With more workers each stays on its chain."""
     h = img.shape[0]
     nd, cols = cfg[C_ND], cfg[C_COLS]
     stride = run_stride(nd)
