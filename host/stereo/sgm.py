@@ -17,9 +17,10 @@ row making its census codes and cost row once, the right-to-left path kept per c
 left to right the other four paths, the sum and the selection; whoever finishes a half runs
 its part of the speckle filter (the second also the seam's). Everything runs in that one
 parallel region: the halves are independent chains (one per worker); a worker whose chain is
-done joins the other (with two workers), and with more workers each chain has several; rows
-within a chain wait band by band on the row before (a per-row progress count; a bounded spin,
-then yielding the core).
+done takes the other over after its row in progress (with two workers), and with more workers
+each chain has several; rows within a chain wait band by band on the row before (a per-row
+progress count; a bounded spin, then yielding the core). A pool worker that finds itself on
+another worker's CPU moves off it for the frame (cpus.spread_out).
 
 numba's disk cache of these kernels is keyed on every module of the package (jit.py), so
 editing sgm_simd.py, census.py or postfilter.py rebuilds them.
@@ -30,6 +31,7 @@ import numba as nb
 import numpy as np
 
 from .census import census_row_pair
+from .cpus import restore, spread_out
 from .jit import C_ARITHMETIC
 from .lanes import uidx
 from .postfilter import clear_seam, join_seam, label_band
@@ -326,7 +328,9 @@ def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
 
 BAND = 32  # columns a row publishes its progress after (single-pass mode)
 NXT_STRIDE = 16  # nxt[c * NXT_STRIDE]: chain c's next row, each on its own cache line;
-# nxt[(2 + c) * NXT_STRIDE]: its rows finished; nxt[4 * NXT_STRIDE]: halves speckle-labelled
+# nxt[(2 + c) * NXT_STRIDE]: its rows finished; nxt[4 * NXT_STRIDE]: halves speckle-labelled;
+# nxt[(5 + c) * NXT_STRIDE]: chain c handed to the worker that joined it
+NXT_SLOTS = 7
 
 
 @nb.njit(**_JIT)
@@ -372,30 +376,40 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
                  disp: np.ndarray, win: tuple, offs: np.ndarray,
                  cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                  pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
-                 karg: np.ndarray, spk: tuple, workers: int) -> None:
+                 karg: np.ndarray, spk: tuple, workers: int, spread: tuple) -> None:
     """Worker t: rows of chain t % 2 taken one at a time until none is left (_chain_row),
-    then, with one or two workers, those left of the other chain; whoever finishes a half's
-    last row filters its speckles (_speckle_half). When one of two workers lags (descheduled,
-    or sharing its core), the other, done first, takes rows of the late chain (each row waits
-    band by band on the one before). With more workers each stays on its chain."""
+    then, with one or two workers, the other chain over: its worker stops after the row in
+    progress (the flag at (5 + c) * NXT_STRIDE) and this one does the rest, each row waiting
+    band by band on the one before. So when one of two workers lags (descheduled, or sharing
+    its CPU), the one done first finishes the frame at its own speed. With more workers each
+    stays on its chain. Whoever finishes a half's last row filters its speckles
+    (_speckle_half). spread: (where, masks, caller) of cpus.spread_out, called per row until
+    it decides; the worker's CPU mask is restored at the end."""
     h = img.shape[0]
     nd, cols = cfg[C_ND], cfg[C_COLS]
     stride = run_stride(nd)
     vbase = lbuf.shape[0] - 18 * cols * stride  # per chain three row slots of three paths
     hb = t * (cols + 3) * stride
     top = (h + 1) // 2
+    where, masks, caller = spread
+    state = 0 if workers > 1 else 1
     for n in range(2 if workers <= 2 else 1):
         c = (t + n) & 1
         rows = top if c == 0 else h - top
-        while True:
+        if n == 1:
+            store_release(nxt, (5 + c) * NXT_STRIDE, 1)
+        while n == 1 or load_acquire(nxt, (5 + c) * NXT_STRIDE) == 0:
             j = fetch_add(nxt, c * NXT_STRIDE, 1)
             if j >= rows:
                 break
+            if state == 0:
+                state = spread_out(t, workers, caller, where, masks[t])
             _chain_row(c, j, hb, vbase + c * 9 * cols * stride, img, right, cl, crr, cfg, p2tab,
                        prog, disp, win, offs, cost, lbuf, mv[c], pm, acc, rmin,
                        rarg, karg)
             if fetch_add(nxt, (2 + c) * NXT_STRIDE, 1) == rows - 1 and cfg[C_SPW] > 0:
                 _speckle_half(c, top, cfg, nxt, disp, spk)
+    restore(state, masks[t])
 
 
 @nb.njit(**_JIT)
@@ -422,7 +436,7 @@ def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.
                     disp: np.ndarray, win: tuple, offs: np.ndarray,
                     cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                     pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
-                    karg: np.ndarray, spk: tuple, workers: int) -> None:
+                    karg: np.ndarray, spk: tuple, workers: int, spread: tuple) -> None:
     """Disparity map of the pair (img left, right) with five paths in one pass per half,
     each row's census codes (into cl, crr) made on the way and the speckle filter run per
     half (spk: its scratch labels, stack, size, parent, rtype, as postfilter.label_band): the
@@ -430,9 +444,10 @@ def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.
     rest) the vertical and both diagonals. The halves are independent chains, one per
     worker; more workers share them row by row (_single_pass). Scratch has
     one slice per worker (leading axis, at least ``workers``; win: census_row_pair's raw,
-    smooth and key, keys -1); nxt and prog must be zero."""
+    smooth and key, keys -1); nxt and prog must be zero; spread: cpus.spread_out's where
+    (all -1), per-worker masks and the calling thread's threading.get_ident()."""
     for t in nb.prange(workers):
         _single_pass(t, img, right, cl, crr, cfg, p2tab, nxt, prog, disp,
                      (win[0][t], win[1][t], win[2][t]), offs,
                      cost[t], lbuf[0], mv, pm[t], acc[t], rmin[t], rarg[t],
-                     karg[t], spk, workers)
+                     karg[t], spk, workers, spread)

@@ -2,11 +2,13 @@
 core from the one it waits for when the machine is busy."""
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from tests.support.hangs import terminated
 
@@ -50,20 +52,29 @@ def test_five_paths_on_more_threads_than_cores(tmp_path) -> None:
 
 
 MATCH_MANY = """
-import sys, numpy as np
+import json, os, sys, numpy as np
 from stereocam.stereo import SGMMatcher, SGMParams
 rng = np.random.default_rng(7)
 base = rng.integers(0, 256, (120, 360), dtype=np.uint8)
 left, right = base[:, 20:340].copy(), base[:, 29:349].copy()
 m = SGMMatcher(left.shape, SGMParams(num_disparities=48, paths=5))
-np.save(sys.argv[1], np.stack([m.match(left, right) for _ in range(int(sys.argv[2]))]))
+def masks():
+    return {t: sorted(os.sched_getaffinity(int(t))) for t in sorted(os.listdir("/proc/self/task"))}
+frames = [m.match(left, right)]
+before = masks()  # the pool's threads exist now
+frames += [m.match(left, right) for _ in range(int(sys.argv[2]) - 1)]
+np.save(sys.argv[1], np.stack(frames))
+json.dump({"before": before, "after": masks()}, open(sys.argv[1] + ".json", "w"))
 """
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc and CPU masks")
 def test_five_paths_on_two_threads_beside_a_busy_process(tmp_path) -> None:
-    """Two workers beside a spinning process: the one sharing a core falls behind, the other
-    finishes its half first and takes every other row of the late half; every frame is the
-    one-thread output."""
+    """Two workers beside a spinning process: the scheduler tends to put both on one CPU, so
+    the pool's worker moves to the other (cpus.spread_out); the one sharing a CPU falls
+    behind, and the other, done with its half first, takes the late half over after the
+    row in progress. Every frame is the one-thread output, and every thread ends with the
+    CPU mask it had."""
     busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:
         out = {}
@@ -77,3 +88,6 @@ def test_five_paths_on_two_threads_beside_a_busy_process(tmp_path) -> None:
     assert (out[1] != out[1][0, 0, 0]).any()
     for frame in out[2]:
         assert np.array_equal(frame, out[1][0])
+    masks = json.loads((tmp_path / "2.npy.json").read_text())
+    assert len(masks["before"]) >= 2  # the caller and the pool's worker
+    assert masks["after"] == masks["before"]

@@ -1,0 +1,121 @@
+"""Which CPU a kernel's worker runs on, and moving a worker off a CPU another worker of the
+same frame already runs on (numba intrinsics over the C library; Linux, elsewhere no-ops).
+
+Why: on a machine with as many CPUs as workers and one busy process, Linux's load balancer
+counts tasks, so it leaves the busy process alone on one CPU and both workers sharing the
+other (2 tasks against 1 looks balanced): the frame gets one core. A worker that sees this
+moves itself, for the rest of the frame, to an allowed CPU no worker of the frame is on, and
+restores its own CPU mask when its part is done. Only pool threads move: never the thread
+that called the kernel (the user's), and never outside the CPUs the thread was allowed.
+"""
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import numba as nb
+import numpy as np
+from llvmlite import ir
+from numba.core import cgutils, types
+
+from .jit import KERNEL
+from .lanes import intrinsic
+from .simd import _ptr
+
+LINUX = sys.platform.startswith("linux")
+MASK_WORDS = 16  # a cpu_set_t: 1024 CPUs
+WHERE_STRIDE = 16  # where[t * WHERE_STRIDE]: worker t's CPU, each on its own cache line
+_I64 = ir.IntType(64)
+
+
+def _libc(builder, name, ret, argtys, args):
+    fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ret, argtys), name)
+    return builder.call(fn, args)
+
+
+@intrinsic
+def current_cpu(typingctx):
+    """The CPU this thread runs on now (sched_getcpu), -1 where unknown."""
+    def codegen(context, builder, sig, args):
+        if not LINUX:
+            return ir.Constant(_I64, -1)
+        return builder.sext(_libc(builder, "sched_getcpu", ir.IntType(32), [], []), _I64)
+
+    return types.int64(), codegen
+
+
+@intrinsic
+def this_thread(typingctx):
+    """pthread_self() of the calling thread (threading.get_ident() on POSIX); 0 elsewhere."""
+    def codegen(context, builder, sig, args):
+        if not LINUX:
+            return ir.Constant(_I64, 0)
+        return _libc(builder, "pthread_self", _I64, [], [])
+
+    return types.uint64(), codegen
+
+
+def _affinity(name: str) -> Any:
+    @intrinsic
+    def call(typingctx, mask):
+        if not (isinstance(mask, types.Array) and mask.ndim == 1 and mask.dtype == types.uint64):
+            return None
+
+        def codegen(context, builder, sig, args):
+            if not LINUX:
+                return ir.Constant(_I64, -1)
+            p = builder.bitcast(_ptr(context, builder, sig.args[0], args[0],
+                                     [ir.Constant(_I64, 0)]), ir.IntType(8).as_pointer())
+            i32 = ir.IntType(32)
+            r = _libc(builder, name, i32, [i32, _I64, p.type],
+                      [ir.Constant(i32, 0), ir.Constant(_I64, 8 * MASK_WORDS), p])
+            return builder.sext(r, _I64)
+
+        return types.int64(mask), codegen
+    return call
+
+
+get_affinity = _affinity("sched_getaffinity")
+get_affinity.__doc__ = "The calling thread's allowed CPUs into mask (MASK_WORDS uint64); 0 on success."
+set_affinity = _affinity("sched_setaffinity")
+set_affinity.__doc__ = "Allow the calling thread only the CPUs in mask; 0 on success."
+
+STAY, MOVED = 1, 2  # spread_out's outcomes (0: not decided yet)
+
+
+@nb.njit(**KERNEL)
+def spread_out(t: int, workers: int, caller: np.uint64, where: np.ndarray,
+               masks: np.ndarray) -> int:
+    """Worker t records its CPU in where; a pool thread (not caller) sharing its CPU with
+    another worker moves to an allowed CPU no worker is on (saving its mask in masks[0],
+    the new one in masks[1]). Returns the new state: 0 (call again on the next row), STAY or
+    MOVED (call no more this frame)."""
+    cpu = current_cpu()
+    where[t * WHERE_STRIDE] = cpu
+    if cpu < 0:
+        return STAY
+    if this_thread() == caller:  # never moves; keeps its CPU on record
+        return 0
+    shared = False
+    for u in range(workers):
+        if u != t and where[u * WHERE_STRIDE] == cpu:
+            shared = True
+    if not shared:
+        return 0
+    if get_affinity(masks[0]) != 0:
+        return STAY
+    masks[1, :] = masks[0]
+    for u in range(workers):
+        c = where[u * WHERE_STRIDE]
+        if 0 <= c < 64 * MASK_WORDS:
+            masks[1, c // 64] &= ~(np.uint64(1) << np.uint64(c % 64))
+    if not masks[1].any() or set_affinity(masks[1]) != 0:
+        return STAY
+    return MOVED
+
+
+@nb.njit(**KERNEL)
+def restore(state: int, masks: np.ndarray) -> None:
+    """Give a worker that moved (state MOVED) its own CPU mask back."""
+    if state == MOVED:
+        set_affinity(masks[0])
