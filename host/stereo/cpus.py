@@ -86,18 +86,20 @@ STAY, MOVED = 1, 2  # spread_out's outcomes (0: not decided yet)
 @nb.njit(**KERNEL)
 def spread_out(t: int, workers: int, caller: np.uint64, where: np.ndarray,
                masks: np.ndarray) -> int:
-    """Worker t records its CPU in where; a pool thread (not caller) sharing its CPU with
-    another worker moves to an allowed CPU no worker is on (saving its mask in masks[0],
-    the new one in masks[1]). Returns the new state: 0 (call again on the next row), STAY or
-    MOVED (call no more this frame)."""
+    """Worker t records its CPU in where (a slot per worker, then the caller's: note_cpu);
+    a pool thread (not caller) sharing its CPU with another worker or the caller moves to an
+    allowed CPU none of them is on (saving its mask in masks[0], the new one in masks[1]).
+    Returns the new state: 0 (call again on the next row), STAY or MOVED (call no more this
+    frame)."""
     cpu = current_cpu()
     where[t * WHERE_STRIDE] = cpu
     if cpu < 0:
         return STAY
     if this_thread() == caller:  # never moves; keeps its CPU on record
+        where[workers * WHERE_STRIDE] = cpu
         return 0
     shared = False
-    for u in range(workers):
+    for u in range(workers + 1):  # slot ``workers``: the caller's CPU at the launch (note_cpu)
         if u != t and where[u * WHERE_STRIDE] == cpu:
             shared = True
     if not shared:
@@ -105,13 +107,20 @@ def spread_out(t: int, workers: int, caller: np.uint64, where: np.ndarray,
     if get_affinity(masks[0]) != 0:
         return STAY
     masks[1, :] = masks[0]
-    for u in range(workers):
+    for u in range(workers + 1):
         c = where[u * WHERE_STRIDE]
         if 0 <= c < 64 * MASK_WORDS:
             masks[1, c // 64] &= ~(np.uint64(1) << np.uint64(c % 64))
     if not masks[1].any() or set_affinity(masks[1]) != 0:
         return STAY
     return MOVED
+
+
+@nb.njit(**KERNEL)
+def note_cpu(where: np.ndarray, slot: int) -> None:
+    """Put the calling thread's CPU on record in where's slot (before launching the workers:
+    the worker woken on the caller's CPU often runs first, the caller waiting behind it)."""
+    where[slot * WHERE_STRIDE] = current_cpu()
 
 
 @nb.njit(**KERNEL)

@@ -88,7 +88,7 @@ class SGMMatcher:
             self.mv = np.empty((2, 2, 3, cols), np.int16)
         # per worker or group of paths: cost row, uint8 path buffers (sgm._aggregate_row) and
         # their minima
-        self.where = np.full(n * cpus.WHERE_STRIDE, -1, np.int64)
+        self.where = np.full((n + 1) * cpus.WHERE_STRIDE, -1, np.int64)  # + the caller's
         self.cost = _aligned((n, cols * nd), np.uint8)
         # written at every pixel by every thread: each one's slice 128 bytes away from the
         # others' (path minima), never on one cache line (false sharing made two threads slower than one)
@@ -146,6 +146,7 @@ class SGMMatcher:
         self.locks[:] = 0
         self.done[:] = 0
         self.where[:] = -1
+        cpus.note_cpu(self.where, nb.get_num_threads())
         chunk = nb.set_parallel_chunksize(1)
         try:
             if self.params.paths == 5:

@@ -16,9 +16,10 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Li
 
 
 @nb.njit
-def _worker_sees_worker_0_on_its_cpu(caller, where, masks, pinned):
-    """As worker 1 of 2, with worker 0 on record on this thread's CPU: spread_out, then the
-    CPU and mask it ended on, then restore. pinned[0] >= 0: first allow only that CPU."""
+def _worker_sees_worker_0_on_its_cpu(caller, where, masks, pinned, slot):
+    """As worker 1 of 2, with worker 0 (slot 0) or the caller at the launch (slot 2) on
+    record on this thread's CPU: spread_out, then the CPU and mask it ended on, then restore.
+    pinned[0] >= 0: first allow only that CPU."""
     before = np.zeros(cpus.MASK_WORDS, np.uint64)
     cpus.get_affinity(before)
     if pinned[0] >= 0:
@@ -27,7 +28,7 @@ def _worker_sees_worker_0_on_its_cpu(caller, where, masks, pinned):
         cpus.set_affinity(one)
         cpus.get_affinity(before)
     c0 = cpus.current_cpu()
-    where[0] = c0
+    where[slot * cpus.WHERE_STRIDE] = c0
     state = cpus.spread_out(1, 2, caller, where, masks)
     moved_to = cpus.current_cpu()
     during = np.zeros(cpus.MASK_WORDS, np.uint64)
@@ -42,12 +43,12 @@ def _allowed(words: np.ndarray) -> set[int]:
     return {64 * i + b for i, w in enumerate(words) for b in range(64) if int(w) >> b & 1}
 
 
-def _on_a_thread(caller: int, pinned: int = -1) -> tuple:
-    where = np.full(2 * cpus.WHERE_STRIDE, -1, np.int64)
+def _on_a_thread(caller: int, pinned: int = -1, slot: int = 0) -> tuple:
+    where = np.full(3 * cpus.WHERE_STRIDE, -1, np.int64)
     masks = np.zeros((2, cpus.MASK_WORDS), np.uint64)
     out: list = []
     t = threading.Thread(target=lambda: out.append(_worker_sees_worker_0_on_its_cpu(
-        np.uint64(caller), where, masks, np.array([pinned], np.int64))))
+        np.uint64(caller), where, masks, np.array([pinned], np.int64), slot)))
     t.start()
     t.join(timeout=120)
     assert out, "the worker thread did not finish"
@@ -55,8 +56,10 @@ def _on_a_thread(caller: int, pinned: int = -1) -> tuple:
 
 
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs two allowed CPUs")
-def test_a_pool_thread_on_another_workers_cpu_moves_off_it_and_gets_its_mask_back() -> None:
-    state, c0, moved_to, before, during, after, where = _on_a_thread(threading.get_ident())
+@pytest.mark.parametrize("slot", [0, 2], ids=["worker-0", "caller-at-launch"])
+def test_a_pool_thread_on_another_workers_cpu_moves_off_it_and_gets_its_mask_back(slot) -> None:
+    state, c0, moved_to, before, during, after, where = _on_a_thread(threading.get_ident(),
+                                                                     slot=slot)
     assert state == cpus.MOVED
     assert where[cpus.WHERE_STRIDE] == c0  # its own CPU on record
     assert moved_to != c0
@@ -74,11 +77,11 @@ def test_a_thread_allowed_one_cpu_stays() -> None:
 
 def test_the_thread_that_called_the_kernel_never_moves() -> None:
     """The caller's thread is the user's: it keeps its CPU on record and stays."""
-    where = np.full(2 * cpus.WHERE_STRIDE, -1, np.int64)
+    where = np.full(3 * cpus.WHERE_STRIDE, -1, np.int64)
     masks = np.zeros((2, cpus.MASK_WORDS), np.uint64)
     mine = os.sched_getaffinity(0)
     state, c0, moved_to, *_ = _worker_sees_worker_0_on_its_cpu(
-        np.uint64(threading.get_ident()), where, masks, np.array([-1], np.int64))
+        np.uint64(threading.get_ident()), where, masks, np.array([-1], np.int64), 0)
     assert state == 0
-    assert where[cpus.WHERE_STRIDE] == c0
+    assert where[cpus.WHERE_STRIDE] == where[2 * cpus.WHERE_STRIDE] == c0
     assert os.sched_getaffinity(0) == mine
