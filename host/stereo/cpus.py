@@ -84,6 +84,17 @@ STAY, MOVED = 1, 2  # spread_out's outcomes (0: not decided yet)
 
 
 @nb.njit(**KERNEL)
+def _count(mask: np.ndarray) -> int:
+    """CPUs in mask."""
+    n = 0
+    for w in mask:
+        while w:
+            w &= w - np.uint64(1)
+            n += 1
+    return n
+
+
+@nb.njit(**KERNEL)
 def spread_out(t: int, workers: int, caller: np.uint64, where: np.ndarray,
                masks: np.ndarray) -> int:
     """Worker t records its CPU in where (a slot per worker, then the caller's: note_cpu);
@@ -104,8 +115,8 @@ def spread_out(t: int, workers: int, caller: np.uint64, where: np.ndarray,
             shared = True
     if not shared:
         return 0
-    if get_affinity(masks[0]) != 0:
-        return STAY
+    if get_affinity(masks[0]) != 0 or _count(masks[0]) < workers:
+        return STAY  # more workers than CPUs: sharing is unavoidable, pinning would add to it
     masks[1, :] = masks[0]
     for u in range(workers + 1):
         c = where[u * WHERE_STRIDE]

@@ -16,20 +16,21 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Li
 
 
 @nb.njit
-def _worker_sees_worker_0_on_its_cpu(caller, where, masks, pinned, slot):
-    """As worker 1 of 2, with worker 0 (slot 0) or the caller at the launch (slot 2) on
-    record on this thread's CPU: spread_out, then the CPU and mask it ended on, then restore.
-    pinned[0] >= 0: first allow only that CPU."""
+def _worker_sees_worker_0_on_its_cpu(caller, where, masks, pinned, slot, workers=2):
+    """As worker 1 of ``workers``, with worker 0 (slot 0) or the caller at the launch (slot
+    ``workers``) on record on this thread's CPU: spread_out, then the CPU and mask it ended
+    on, then restore. pinned: first allow only those CPUs (none: as it is)."""
     before = np.zeros(cpus.MASK_WORDS, np.uint64)
     cpus.get_affinity(before)
-    if pinned[0] >= 0:
-        one = np.zeros(cpus.MASK_WORDS, np.uint64)
-        one[pinned[0] // 64] = np.uint64(1) << np.uint64(pinned[0] % 64)
-        cpus.set_affinity(one)
+    if pinned.size:
+        some = np.zeros(cpus.MASK_WORDS, np.uint64)
+        for c in pinned:
+            some[c // 64] |= np.uint64(1) << np.uint64(c % 64)
+        cpus.set_affinity(some)
         cpus.get_affinity(before)
     c0 = cpus.current_cpu()
     where[slot * cpus.WHERE_STRIDE] = c0
-    state = cpus.spread_out(1, 2, caller, where, masks)
+    state = cpus.spread_out(1, workers, caller, where, masks)
     moved_to = cpus.current_cpu()
     during = np.zeros(cpus.MASK_WORDS, np.uint64)
     cpus.get_affinity(during)
@@ -43,12 +44,13 @@ def _allowed(words: np.ndarray) -> set[int]:
     return {64 * i + b for i, w in enumerate(words) for b in range(64) if int(w) >> b & 1}
 
 
-def _on_a_thread(caller: int, pinned: int = -1, slot: int = 0) -> tuple:
-    where = np.full(3 * cpus.WHERE_STRIDE, -1, np.int64)
+def _on_a_thread(caller: int, pinned: tuple[int, ...] = (), slot: int = 0,
+                 workers: int = 2) -> tuple:
+    where = np.full((workers + 1) * cpus.WHERE_STRIDE, -1, np.int64)
     masks = np.zeros((2, cpus.MASK_WORDS), np.uint64)
     out: list = []
     t = threading.Thread(target=lambda: out.append(_worker_sees_worker_0_on_its_cpu(
-        np.uint64(caller), where, masks, np.array([pinned], np.int64), slot)))
+        np.uint64(caller), where, masks, np.array(pinned, np.int64), slot, workers)))
     t.start()
     t.join(timeout=120)
     assert out, "the worker thread did not finish"
@@ -56,7 +58,7 @@ def _on_a_thread(caller: int, pinned: int = -1, slot: int = 0) -> tuple:
 
 
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs two allowed CPUs")
-@pytest.mark.parametrize("slot", [0, 2], ids=["worker-0", "caller-at-launch"])
+@pytest.mark.parametrize("slot", [0, 2], ids=["worker-0", "caller-at-launch"])  # of 2 workers
 def test_a_pool_thread_on_another_workers_cpu_moves_off_it_and_gets_its_mask_back(slot) -> None:
     state, c0, moved_to, before, during, after, where = _on_a_thread(threading.get_ident(),
                                                                      slot=slot)
@@ -69,7 +71,7 @@ def test_a_pool_thread_on_another_workers_cpu_moves_off_it_and_gets_its_mask_bac
 
 def test_a_thread_allowed_one_cpu_stays() -> None:
     cpu = min(os.sched_getaffinity(0))
-    state, c0, moved_to, before, during, after, _ = _on_a_thread(threading.get_ident(), cpu)
+    state, c0, moved_to, before, during, after, _ = _on_a_thread(threading.get_ident(), (cpu,))
     assert state == cpus.STAY
     assert c0 == moved_to == cpu
     assert _allowed(before) == _allowed(during) == _allowed(after) == {cpu}
@@ -81,7 +83,17 @@ def test_the_thread_that_called_the_kernel_never_moves() -> None:
     masks = np.zeros((2, cpus.MASK_WORDS), np.uint64)
     mine = os.sched_getaffinity(0)
     state, c0, moved_to, *_ = _worker_sees_worker_0_on_its_cpu(
-        np.uint64(threading.get_ident()), where, masks, np.array([-1], np.int64), 0)
+        np.uint64(threading.get_ident()), where, masks, np.zeros(0, np.int64), 0)
     assert state == 0
     assert where[cpus.WHERE_STRIDE] == where[2 * cpus.WHERE_STRIDE] == c0
     assert os.sched_getaffinity(0) == mine
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs two allowed CPUs")
+def test_with_more_workers_than_allowed_cpus_a_worker_stays() -> None:
+    """Three workers on two CPUs share one anyway: pinning one would only add to it."""
+    two = tuple(sorted(os.sched_getaffinity(0))[:2])
+    state, c0, moved_to, before, during, after, _ = _on_a_thread(threading.get_ident(), two,
+                                                                 workers=3)
+    assert state == cpus.STAY
+    assert _allowed(before) == _allowed(during) == _allowed(after) == set(two)
