@@ -31,7 +31,7 @@ import numba as nb
 import numpy as np
 
 from .census import census_row_pair
-from .cpus import restore, spread_out
+from .cpus import STAY, restore, spread_out
 from .jit import C_ARITHMETIC
 from .lanes import uidx
 from .postfilter import clear_seam, join_seam, label_band
@@ -392,7 +392,7 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
     hb = t * (cols + 3) * stride
     top = (h + 1) // 2
     where, masks, caller = spread
-    state = 0 if workers > 1 else 1
+    state = 0 if workers > 1 else STAY
     for n in range(2 if workers <= 2 else 1):
         c = (t + n) & 1
         rows = top if c == 0 else h - top

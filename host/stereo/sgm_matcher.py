@@ -68,7 +68,7 @@ class SGMMatcher:
             self.p2tab[:] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + np.arange(256))))
         stride = _sgm.run_stride(nd)  # path-cost runs, each 64-aligned in a 64-aligned lbuf
         if p.paths == 5:  # one top-down pass (sgm.sgm_single_pass); per worker n
-            self.locks = np.zeros(_sgm.NXT_SLOTS * _sgm.NXT_STRIDE, np.int32)  # sgm.NXT_STRIDE's counters
+            self.locks = np.zeros(_sgm.NXT_SLOTS * _sgm.NXT_STRIDE, np.int32)  # sgm.NXT_STRIDE's slots
             self.done = np.zeros(h, np.int32)  # columns each row has published
             # horizontal-path areas (cols + 3 runs each), then per chain three row slots of
             # three paths
@@ -76,7 +76,8 @@ class SGMMatcher:
             self.lbuf = _aligned((1, n * area + 18 * cols * stride), np.uint8)
             self.lbuf[:] = 0  # the zero runs (predecessor of a path's first pixel) included
             self.mv = np.empty((2, 3, 3, cols), np.int16)
-            # each worker's CPU and CPU masks (cpus.spread_out)
+            # each worker's CPU, then the caller's, and each worker's CPU masks (cpus.spread_out)
+            self.where = np.full((n + 1) * cpus.WHERE_STRIDE, -1, np.int64)
             self.masks = np.zeros((n, 2, cpus.MASK_WORDS), np.uint64)
         else:  # two groups of paths (sgm.sgm_rows)
             n = 2
@@ -88,7 +89,6 @@ class SGMMatcher:
             self.mv = np.empty((2, 2, 3, cols), np.int16)
         # per worker or group of paths: cost row, uint8 path buffers (sgm._aggregate_row) and
         # their minima
-        self.where = np.full((n + 1) * cpus.WHERE_STRIDE, -1, np.int64)  # + the caller's
         self.cost = _aligned((n, cols * nd), np.uint8)
         # written at every pixel by every thread: each one's slice 128 bytes away from the
         # others' (path minima), never on one cache line (false sharing made two threads slower than one)
@@ -145,13 +145,13 @@ class SGMMatcher:
             self.run_census(left, right)
         self.locks[:] = 0
         self.done[:] = 0
-        self.where[:] = -1
-        cpus.note_cpu(self.where, nb.get_num_threads())
         chunk = nb.set_parallel_chunksize(1)
         try:
             if self.params.paths == 5:
                 self.cfg[_sgm.C_TL], self.cfg[_sgm.C_TR] = self.margins(left, right)
                 self.skey[:] = -1
+                self.where[:] = -1
+                cpus.note_cpu(self.where, nb.get_num_threads())
                 _sgm.sgm_single_pass(left, right, self.cl, self.crr, self.cfg, self.p2tab,
                                      self.locks, self.done, disp,
                                      (self.win, self.swin, self.skey), self.census_offs,

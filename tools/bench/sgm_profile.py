@@ -73,7 +73,7 @@ def _single_pass_upto(stages, img, right, cl, crr, cfg, p2tab, disp, win, offs, 
 
 @nb.njit(cache=True)
 def _speckle_halves(cfg, disp, spk):
-    nxt = np.zeros(5 * _sgm.NXT_STRIDE, np.int32)
+    nxt = np.zeros(_sgm.NXT_SLOTS * _sgm.NXT_STRIDE, np.int32)
     top = (disp.shape[0] + 1) // 2
     for c in range(2 if disp.shape[0] > top else 1):
         _sgm._speckle_half(c, top, cfg, nxt, disp, spk)
