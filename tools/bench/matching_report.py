@@ -240,14 +240,20 @@ def header(threads: int, busy: bool, repeat: int) -> str:
             f"cv2 {cv2.__version__}")
 
 
+SPIN = "import sys; print('spinning', flush=True)\nwhile True: pass"
+
+
 @contextlib.contextmanager
 def busy_process(on: bool) -> Iterator[None]:
-    """A competing process spinning on one core while the block runs (``on``), stopped after."""
+    """A competing process spinning on one core while the block runs (``on``), stopped after;
+    the block starts once it spins (a Python start-up takes tens of ms, a small frame a few)."""
     if not on:
         yield
         return
-    proc = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    proc = subprocess.Popen([sys.executable, "-c", SPIN], stdout=subprocess.PIPE)
     try:
+        assert proc.stdout is not None
+        proc.stdout.readline()  # "spinning", or nothing if it died
         yield
     finally:
         proc.terminate()
