@@ -20,8 +20,10 @@ class SGMMatcher:
     """Semi-global matcher for one (shape, params); scratch buffers live between frames.
 
     Runs on two threads (one per group of path directions, or with 5 paths one per half of
-    the image) when numba has them; the output does not depend on the thread count. Calls
-    are serialised by a lock."""
+    the image) when numba has them; the output does not depend on the thread count. With 5
+    paths on Linux, a numba pool thread that shares a CPU with the calling thread or the other
+    worker moves off it for the frame (cpus.py; the calling thread never moves). Calls are
+    serialised by a lock."""
 
     def __init__(self, shape: tuple[int, int], params: SGMParams = SGMParams()) -> None:
         if not isinstance(params, SGMParams):
