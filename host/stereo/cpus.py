@@ -16,21 +16,16 @@ from typing import Any
 import numba as nb
 import numpy as np
 from llvmlite import ir
-from numba.core import cgutils, types
+from numba.core import types
 
 from .jit import KERNEL
 from .lanes import intrinsic
-from .simd import _ptr
+from .simd import _call, _ptr
 
 LINUX = sys.platform.startswith("linux")
 MASK_WORDS = 16  # a cpu_set_t: 1024 CPUs
 WHERE_STRIDE = 16  # where[t * WHERE_STRIDE]: worker t's CPU, each on its own cache line
 _I64 = ir.IntType(64)
-
-
-def _libc(builder, name, ret, argtys, args):
-    fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ret, argtys), name)
-    return builder.call(fn, args)
 
 
 @intrinsic
@@ -39,7 +34,7 @@ def current_cpu(typingctx):
     def codegen(context, builder, sig, args):
         if not LINUX:
             return ir.Constant(_I64, -1)
-        return builder.sext(_libc(builder, "sched_getcpu", ir.IntType(32), [], []), _I64)
+        return builder.sext(_call(builder, "sched_getcpu", ir.IntType(32), []), _I64)
 
     return types.int64(), codegen
 
@@ -50,7 +45,7 @@ def this_thread(typingctx):
     def codegen(context, builder, sig, args):
         if not LINUX:
             return ir.Constant(_I64, 0)
-        return _libc(builder, "pthread_self", _I64, [], [])
+        return _call(builder, "pthread_self", _I64, [])
 
     return types.uint64(), codegen
 
@@ -67,7 +62,7 @@ def _affinity(name: str) -> Any:
             p = builder.bitcast(_ptr(context, builder, sig.args[0], args[0],
                                      [ir.Constant(_I64, 0)]), ir.IntType(8).as_pointer())
             i32 = ir.IntType(32)
-            r = _libc(builder, name, i32, [i32, _I64, p.type],
+            r = _call(builder, name, i32,
                       [ir.Constant(i32, 0), ir.Constant(_I64, 8 * MASK_WORDS), p])
             return builder.sext(r, _I64)
 
