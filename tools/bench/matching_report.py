@@ -240,7 +240,7 @@ def header(threads: int, busy: bool, repeat: int) -> str:
             f"cv2 {cv2.__version__}")
 
 
-SPIN = "import sys; print('spinning', flush=True)\nwhile True: pass"
+SPIN = "print('spinning', flush=True)\nwhile True: pass"
 
 
 @contextlib.contextmanager
