@@ -20,7 +20,8 @@ parallel region: the halves are independent chains (one per worker); a worker wh
 done takes the other over after its row in progress (with two workers), and with more workers
 each chain has several; rows within a chain wait band by band on the row before (a per-row
 progress count; a bounded spin, then yielding the core). A pool worker that finds itself on
-another worker's CPU moves off it for the frame (cpus.spread_out).
+another worker's CPU moves off it for the frame (cpus.spread_out; the caller gives it its
+mask back after the frame, cpus.restore).
 
 numba's disk cache of these kernels is keyed on every module of the package (jit.py), so
 editing sgm_simd.py, census.py or postfilter.py rebuilds them.
@@ -384,7 +385,7 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
     its CPU), the one done first finishes the frame at its own speed. With more workers each
     stays on its chain. Whoever finishes a half's last row filters its speckles
     (_speckle_half). spread: (where, masks, caller) of cpus.spread_out, called per row until
-    it decides; the worker's CPU mask is restored at the end."""
+    it decides (sgm_single_pass restores the masks)."""
     h = img.shape[0]
     nd, cols = cfg[C_ND], cfg[C_COLS]
     stride = run_stride(nd)
@@ -409,7 +410,6 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
                        rarg, karg)
             if fetch_add(nxt, (2 + c) * NXT_STRIDE, 1) == rows - 1 and cfg[C_SPW] > 0:
                 _speckle_half(c, top, cfg, nxt, disp, spk)
-    restore(state, masks[t])
 
 
 @nb.njit(**_JIT)
@@ -451,3 +451,4 @@ def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.
                      (win[0][t], win[1][t], win[2][t]), offs,
                      cost[t], lbuf[0], mv, pm[t], acc[t], rmin[t], rarg[t],
                      karg[t], spk, workers, spread)
+    restore(spread[0], spread[1], workers)

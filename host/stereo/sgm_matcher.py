@@ -78,7 +78,8 @@ class SGMMatcher:
             self.lbuf = _aligned((1, n * area + 18 * cols * stride), np.uint8)
             self.lbuf[:] = 0  # the zero runs (predecessor of a path's first pixel) included
             self.mv = np.empty((2, 3, 3, cols), np.int16)
-            # each worker's CPU, then the caller's, and each worker's CPU masks (cpus.spread_out)
+            # each worker's CPU (and thread id once moved), then the caller's CPU, and each
+            # worker's CPU masks (cpus.spread_out, cpus.restore)
             self.where = np.full((n + 1) * cpus.WHERE_STRIDE, -1, np.int64)
             self.masks = np.zeros((n, 2, cpus.MASK_WORDS), np.uint64)
         else:  # two groups of paths (sgm.sgm_rows)
