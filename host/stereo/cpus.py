@@ -108,8 +108,8 @@ def spread_out(t: int, workers: int, caller: np.uint64, where: np.ndarray,
     """Worker t records its CPU in where (a slot per worker, then the caller's: note_cpu);
     a pool thread (not caller) sharing its CPU with another worker or the caller moves to an
     allowed CPU none of them is on (saving its mask in masks[0], the new one in masks[1],
-    and its kernel thread id in the slot after its CPU, for restore). Returns the new state: 0 (call again on the next row), STAY or MOVED (call no more this
-    frame)."""
+    and its kernel thread id in the slot after its CPU, for restore). Returns the new
+    state: 0 (call again on the next row), STAY or MOVED (call no more this frame)."""
     cpu = current_cpu()
     where[t * WHERE_STRIDE] = cpu
     if cpu < 0:
