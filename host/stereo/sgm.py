@@ -12,13 +12,14 @@ who is first; nobody ever waits for the other group's progress, so one thread ru
 code (group 0, then group 1) with the same result.
 
 5 paths (sgm_single_pass) store no volume: one pass per half of the image, the top half top
-to bottom with the paths from above, the bottom half bottom to top with those from below, each
-row making its census codes and cost row once, the right-to-left path kept per column, then
-left to right the other four paths, the sum and the selection; whoever finishes a half runs
-its part of the speckle filter (the second also the seam's). Everything runs in that one
-parallel region: the halves are independent chains (one per worker); a worker whose chain is
-done takes the other over after its row in progress (with two workers), and with more workers
-each chain has several; rows within a chain wait band by band on the row before (a per-row
+to bottom with the paths from above, the bottom half bottom to top with those from below, two
+rows at a time: each row making its census codes and cost row once, the right-to-left path
+kept per column (both rows' in one loop, so that one path's steps fill the other's waits),
+then per row left to right the other four paths, the sum and the selection; whoever finishes
+a half runs its part of the speckle filter (the second also the seam's). Everything runs in
+that one parallel region: the halves are independent chains (one per worker); a worker whose
+chain is done takes the other over after its rows in progress (with two workers), and with
+more workers each chain has several; rows within a chain wait band by band on the row before (a per-row
 progress count; a bounded spin, then yielding the core). A pool worker that finds itself on
 another worker's CPU moves off it for the frame (cpus.spread_out; the caller gives it its
 mask back after the frame, cpus.restore).
@@ -80,18 +81,18 @@ def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int
 
 
 @nb.njit(**_JIT)
-def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, cur: int,
-                   prv: int, i0: int, i1: int, img: np.ndarray, cfg: np.ndarray,
+def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, kept: int, vb: int,
+                   cur: int, prv: int, i0: int, i1: int, img: np.ndarray, cfg: np.ndarray,
                    p2tab: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                    pm: np.ndarray, acc: np.ndarray) -> None:
     """acc = sum of the paths of L at row y, pixels i0 .. i1-1 in path order: the horizontal
     path (left to right for g = 0, right to left for g = 1), then (npaths 2 or 4) the
     vertical and diagonal paths arriving from the row above (g = 0) or below (g = 1), none
-    on the first; npaths 5: four paths plus the one _kept_row kept.
+    on the first; npaths 5: four paths plus the one _kept_rows kept.
 
     lbuf runs of run_stride(nd), 64-aligned: from hb, two for the horizontal path
-    (this pixel's and its predecessor's), one zero run (predecessor of a path's first pixel)
-    and, for npaths 5, the kept path's one per column; from vb, per row slot and vertical/diagonal
+    (this pixel's and its predecessor's) and one zero run (predecessor of a path's first
+    pixel); for npaths 5 from kept, the kept path's one per column (_kept_rows); from vb, per row slot and vertical/diagonal
     path one run per column, row y in slot cur, its predecessor row in prv. mv[slot, v, x]:
     minima. p2tab[|I(p) - I(q)|]: the effective P2 between neighbours of those intensities."""
     nd, p1 = cfg[C_ND], cfg[C_P1]
@@ -101,19 +102,18 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
     # costs C_P1G
     p1v = (p1, p1) if 2 * y < img.shape[0] else (cfg[C_P1G], p1) if dy > 0 else (p1, cfg[C_P1G])
     stride = run_stride(nd)
-    kept = hb + 3 * stride  # + x * stride: the kept horizontal path's run of column x
     vpaths = min(npaths, 4)
     if first:  # no predecessor row: every pixel takes the general way
         for i in range(i0, i1):
-            _aggregate_pixel(i, g, y, True, npaths, hb, vb, cur, prv, img, cfg, p2tab, cost,
-                             lbuf, mv, pm, acc, p1v)
+            _aggregate_pixel(i, g, y, True, npaths, hb, kept, vb, cur, prv, img, cfg, p2tab,
+                             cost, lbuf, mv, pm, acc, p1v)
         return
     # the row's first and last pixels (a predecessor outside the row) the general way, the
     # others with every predecessor inside: no tests, the per-row bases hoisted
     lo, hi = max(i0, 1), min(i1, cols - 1)
     if i0 == 0:
-        _aggregate_pixel(0, g, y, False, npaths, hb, vb, cur, prv, img, cfg, p2tab, cost,
-                         lbuf, mv, pm, acc, p1v)
+        _aggregate_pixel(0, g, y, False, npaths, hb, kept, vb, cur, prv, img, cfg, p2tab,
+                         cost, lbuf, mv, pm, acc, p1v)
     irow, prow = img[y], img[y - dy]
     bp = (vb + prv * 3 * cols * stride, vb + (prv * 3 + 1) * cols * stride,
           vb + (prv * 3 + 2) * cols * stride)
@@ -146,15 +146,15 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, vb: int, c
             mc1[uidx(x)] = pm[2]
             mc2[uidx(x)] = pm[3]
     if i1 == cols and cols > 1:
-        _aggregate_pixel(cols - 1, g, y, False, npaths, hb, vb, cur, prv, img, cfg, p2tab,
-                         cost, lbuf, mv, pm, acc, p1v)
+        _aggregate_pixel(cols - 1, g, y, False, npaths, hb, kept, vb, cur, prv, img, cfg,
+                         p2tab, cost, lbuf, mv, pm, acc, p1v)
 
 
 @nb.njit(**_JIT)
-def _aggregate_pixel(i: int, g: int, y: int, first: bool, npaths: int, hb: int, vb: int,
-                     cur: int, prv: int, img: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray,
-                     cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray, pm: np.ndarray,
-                     acc: np.ndarray, p1v: tuple) -> None:
+def _aggregate_pixel(i: int, g: int, y: int, first: bool, npaths: int, hb: int, kept: int,
+                     vb: int, cur: int, prv: int, img: np.ndarray, cfg: np.ndarray,
+                     p2tab: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+                     pm: np.ndarray, acc: np.ndarray, p1v: tuple) -> None:
     """Pixel i (in path order) of _aggregate_row, any predecessor outside the image taken
     as none (the zero run, P2 255, minimum 0)."""
     nd, p1 = cfg[C_ND], cfg[C_P1]
@@ -162,7 +162,6 @@ def _aggregate_pixel(i: int, g: int, y: int, first: bool, npaths: int, hb: int, 
     dy = 1 if g == 0 else -1
     stride = run_stride(nd)
     zero = hb + 2 * stride
-    kept = hb + 3 * stride
     vpaths = min(npaths, 4)
     x = i if g == 0 else cols - 1 - i
     X = x0 + x
@@ -204,31 +203,48 @@ def _vertical_meta(v: int, dx: int, first: bool, x: int, X: int, y: int, dy: int
 
 
 @nb.njit(**_JIT)
-def _kept_row(g: int, y: int, hb: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray,
-              cfg: np.ndarray, p2tab: np.ndarray, cost: np.ndarray, lbuf: np.ndarray) -> None:
-    """Cost row y (as _cost_row) and, pixel by pixel as the costs are made, the horizontal
-    path (left to right for g = 0, right to left for g = 1) kept per column in lbuf (the runs
-    from hb + 3 run_stride(nd), _aggregate_row's layout)."""
+def _kept_rows(g: int, y0: int, y1: int, hb: int, img: np.ndarray, cl: np.ndarray,
+               crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray, cost: np.ndarray,
+               lbuf: np.ndarray) -> None:
+    """Cost rows y0 and y1 (as _cost_row; y1 < 0: y0 only; y1's from cost[cols * nd]) and,
+    pixel by pixel as the costs are made, each row's horizontal path (left to right for
+    g = 0, right to left for g = 1) kept per column in lbuf: y0's runs from hb + 3
+    run_stride(nd), y1's cols runs further (_aggregate_row's kept). Two rows in one loop:
+    a path step waits on its predecessor's minimum, so one path alone leaves the core idle
+    between steps, and the other row's step fills it."""
     nd, md, p1 = cfg[C_ND], cfg[C_MIND], cfg[C_P1]
     x0, cols, maxc = cfg[C_X0], cfg[C_COLS], cfg[C_MAXC]
     w = cl.shape[1]
     stride = run_stride(nd)
-    kept, zero = hb + 3 * stride, hb + 2 * stride
+    k0, zero = hb + 3 * stride, hb + 2 * stride
+    k1, o1 = k0 + cols * stride, cols * nd
+    two = y1 >= 0
     dy = 1 if g == 0 else -1
     outside = nd - 1 - x0 + md  # columns x < outside have disparities left of the image
-    hm = np.int64(0)
+    hm0 = hm1 = np.int64(0)
     for i in range(cols):
         x = i if g == 0 else cols - 1 - i
         X = x0 + x
-        cost_run(cl[y, uidx(X)], crr[y], w - 1 - X + md, cost, x * nd, _inside(X, md, nd))
+        inside = _inside(X, md, nd)
+        cost_run(cl[y0, uidx(X)], crr[y0], w - 1 - X + md, cost, x * nd, inside)
+        if two:
+            cost_run(cl[y1, uidx(X)], crr[y1], w - 1 - X + md, cost, o1 + x * nd, inside)
         if x < outside:
             cost[x * nd + X - md + 1:(x + 1) * nd] = maxc
+            if two:
+                cost[o1 + x * nd + X - md + 1:o1 + (x + 1) * nd] = maxc
         if i == 0:
-            hm = path_step(cost, x * nd, lbuf, zero, kept + x * stride, 255, 0, p1, nd)
+            hm0 = path_step(cost, x * nd, lbuf, zero, k0 + x * stride, 255, 0, p1, nd)
+            if two:
+                hm1 = path_step(cost, o1 + x * nd, lbuf, zero, k1 + x * stride, 255, 0, p1, nd)
         else:
-            p2m = min(hm + p2tab[abs(np.int64(img[y, X]) - img[y, X - dy])], 255)
-            hm = path_step(cost, x * nd, lbuf, kept + (x - dy) * stride, kept + x * stride,
-                           p2m, hm, p1, nd)
+            p2m = min(hm0 + p2tab[abs(np.int64(img[y0, X]) - img[y0, X - dy])], 255)
+            hm0 = path_step(cost, x * nd, lbuf, k0 + (x - dy) * stride, k0 + x * stride,
+                            p2m, hm0, p1, nd)
+            if two:
+                p2m = min(hm1 + p2tab[abs(np.int64(img[y1, X]) - img[y1, X - dy])], 255)
+                hm1 = path_step(cost, o1 + x * nd, lbuf, k1 + (x - dy) * stride,
+                                k1 + x * stride, p2m, hm1, p1, nd)
 
 
 @nb.njit(**_JIT)
@@ -297,9 +313,9 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
     for step in range(h):
         y = step if g == 0 else h - 1 - step
         _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
-        _aggregate_row(g, y, step == 0, 2 if cfg[C_PATHS] == 4 else 4, 0, 3 * run_stride(nd),
-                       step & 1, 1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf, mv,
-                       pm, acc)
+        _aggregate_row(g, y, step == 0, 2 if cfg[C_PATHS] == 4 else 4, 0, 0,
+                       3 * run_stride(nd), step & 1, 1 - (step & 1), 0, cols, img, cfg, p2tab,
+                       cost, lbuf, mv, pm, acc)
         n = 0
         while not try_lock(locks, y):
             n += 1
@@ -335,40 +351,47 @@ NXT_SLOTS = 7
 
 
 @nb.njit(**_JIT)
-def _chain_row(c: int, j: int, hb: int, vb: int, img: np.ndarray, right: np.ndarray,
-               cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray,
-               prog: np.ndarray, disp: np.ndarray, win: tuple, offs: np.ndarray,
-               cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
-               pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
-               rarg: np.ndarray, karg: np.ndarray) -> None:
-    """Row j of chain c (c = 0: the top half top-down, paths from above; c = 1: the bottom
-    half bottom-up, paths from below): the row's census codes (census_row_pair; win its
-    scratch, offs its table), cost row, one horizontal path kept per column in lbuf, then
-    in the other horizontal direction the other four paths plus the kept one into acc,
-    band by band once the chain's previous row has published (prog) the columns the band
-    reads; then the selection. hb: this worker's horizontal-path area (cols + 3 runs); vb:
-    the chain's three row slots of three paths."""
+def _chain_rows(c: int, j: int, n: int, hb: int, vb: int, img: np.ndarray, right: np.ndarray,
+                cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray,
+                prog: np.ndarray, disp: np.ndarray, win: tuple, offs: np.ndarray,
+                cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
+                pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
+                rarg: np.ndarray, karg: np.ndarray) -> None:
+    """Rows j .. j + n - 1 (n 1 or 2) of chain c (c = 0: the top half top-down, paths from
+    above; c = 1: the bottom half bottom-up, paths from below): the rows' census codes
+    (census_row_pair; win its scratch, offs its table), their cost rows and one horizontal
+    path each kept per column in lbuf (_kept_rows, both rows in one loop), then per row in
+    the other horizontal direction the other four paths plus the kept one into acc, band
+    by band once the chain's previous row has published (prog) the columns the band reads,
+    and the selection. hb: this worker's horizontal-path area (2 cols + 3 runs); vb: the
+    chain's three row slots of three paths; cost: this worker's two cost rows."""
     h = img.shape[0]
-    cols = cfg[C_COLS]
+    nd, cols = cfg[C_ND], cfg[C_COLS]
+    stride = run_stride(nd)
     dy = 1 - 2 * c
-    y = j if c == 0 else h - 1 - j
-    census_row_pair(img, right, y, cfg[C_CW], cfg[C_CH], cfg[C_TL], cfg[C_TR], win, offs, cl,
-                    crr)
-    _kept_row(1 - c, y, hb, img, cl, crr, cfg, p2tab, cost, lbuf)
-    i = 0
-    while i < cols:
-        i1 = min(i + BAND, cols)
-        if j > 0:
-            need = min(i1 + 1, cols)
-            n = 0
-            while load_acquire(prog, y - dy) < need:  # more than two workers share a chain
-                n += 1
-                spin_wait(n)
-        _aggregate_row(c, y, j == 0, 5, hb, vb, j % 3, (j + 2) % 3, i, i1, img, cfg, p2tab,
-                       cost, lbuf, mv, pm, acc)
-        store_release(prog, y, i1)
-        i = i1
-    _finish_row(y, cfg, acc, None, rmin, rarg, karg, disp[y])
+    y0 = j if c == 0 else h - 1 - j
+    for r in range(n):
+        census_row_pair(img, right, y0 + r * dy, cfg[C_CW], cfg[C_CH], cfg[C_TL], cfg[C_TR],
+                        win, offs, cl, crr)
+    _kept_rows(1 - c, y0, y0 + dy if n == 2 else -1, hb, img, cl, crr, cfg, p2tab, cost, lbuf)
+    for r in range(n):
+        jr, y = j + r, y0 + r * dy
+        costr = cost[r * cols * nd:(r + 1) * cols * nd]
+        kept = hb + (3 + r * cols) * stride
+        i = 0
+        while i < cols:
+            i1 = min(i + BAND, cols)
+            if jr > 0:
+                need = min(i1 + 1, cols)
+                k = 0
+                while load_acquire(prog, y - dy) < need:  # more than two workers share a chain
+                    k += 1
+                    spin_wait(k)
+            _aggregate_row(c, y, jr == 0, 5, hb, kept, vb, jr % 3, (jr + 2) % 3, i, i1, img,
+                           cfg, p2tab, costr, lbuf, mv, pm, acc)
+            store_release(prog, y, i1)
+            i = i1
+        _finish_row(y, cfg, acc, None, rmin, rarg, karg, disp[y])
 
 
 @nb.njit(**_JIT)
@@ -378,19 +401,19 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
                  cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                  pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
                  karg: np.ndarray, spk: tuple, workers: int, spread: tuple) -> None:
-    """Worker t: rows of chain t % 2 taken one at a time until none is left (_chain_row),
-    then, with one or two workers, the other chain over: its worker stops after the row in
+    """Worker t: rows of chain t % 2 taken two at a time until none is left (_chain_rows),
+    then, with one or two workers, the other chain over: its worker stops after the rows in
     progress (the flag at (5 + c) * NXT_STRIDE) and this one does the rest, each row waiting
     band by band on the one before. So when one of two workers lags (descheduled, or sharing
     its CPU), the one done first finishes the frame at its own speed. With more workers each
     stays on its chain. Whoever finishes a half's last row filters its speckles
-    (_speckle_half). spread: (where, masks, caller) of cpus.spread_out, called per row until
-    it decides (sgm_single_pass restores the masks)."""
+    (_speckle_half). spread: (where, masks, caller) of cpus.spread_out, called per two rows
+    until it decides (sgm_single_pass restores the masks)."""
     h = img.shape[0]
     nd, cols = cfg[C_ND], cfg[C_COLS]
     stride = run_stride(nd)
     vbase = lbuf.shape[0] - 18 * cols * stride  # per chain three row slots of three paths
-    hb = t * (cols + 3) * stride
+    hb = t * (2 * cols + 3) * stride
     top = (h + 1) // 2
     where, masks, caller = spread
     state = 0 if workers > 1 else STAY
@@ -400,15 +423,16 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
         if n == 1:
             store_release(nxt, (5 + c) * NXT_STRIDE, 1)
         while n == 1 or load_acquire(nxt, (5 + c) * NXT_STRIDE) == 0:
-            j = fetch_add(nxt, c * NXT_STRIDE, 1)
+            j = fetch_add(nxt, c * NXT_STRIDE, 2)
             if j >= rows:
                 break
+            n2 = min(2, rows - j)
             if state == 0:
                 state = spread_out(t, workers, caller, where, masks[t])
-            _chain_row(c, j, hb, vbase + c * 9 * cols * stride, img, right, cl, crr, cfg, p2tab,
-                       prog, disp, win, offs, cost, lbuf, mv[c], pm, acc, rmin,
-                       rarg, karg)
-            if fetch_add(nxt, (2 + c) * NXT_STRIDE, 1) == rows - 1 and cfg[C_SPW] > 0:
+            _chain_rows(c, j, n2, hb, vbase + c * 9 * cols * stride, img, right, cl, crr, cfg,
+                        p2tab, prog, disp, win, offs, cost, lbuf, mv[c], pm, acc, rmin,
+                        rarg, karg)
+            if fetch_add(nxt, (2 + c) * NXT_STRIDE, n2) + n2 == rows and cfg[C_SPW] > 0:
                 _speckle_half(c, top, cfg, nxt, disp, spk)
 
 

@@ -72,9 +72,9 @@ class SGMMatcher:
         if p.paths == 5:  # one top-down pass (sgm.sgm_single_pass); per worker n
             self.locks = np.zeros(_sgm.NXT_SLOTS * _sgm.NXT_STRIDE, np.int32)  # sgm.NXT_STRIDE's slots
             self.done = np.zeros(h, np.int32)  # columns each row has published
-            # horizontal-path areas (cols + 3 runs each), then per chain three row slots of
-            # three paths
-            area = (cols + 3) * stride
+            # horizontal-path areas (2 cols + 3 runs each: sgm._kept_rows keeps two rows),
+            # then per chain three row slots of three paths
+            area = (2 * cols + 3) * stride
             self.lbuf = _aligned((1, n * area + 18 * cols * stride), np.uint8)
             self.lbuf[:] = 0  # the zero runs (predecessor of a path's first pixel) included
             self.mv = np.empty((2, 3, 3, cols), np.int16)
@@ -90,9 +90,9 @@ class SGMMatcher:
             self.lbuf = _aligned((2, 3 * stride + 6 * cols * stride), np.uint8)
             self.lbuf[:] = 0  # the zero run included
             self.mv = np.empty((2, 2, 3, cols), np.int16)
-        # per worker or group of paths: cost row, uint8 path buffers (sgm._aggregate_row) and
-        # their minima
-        self.cost = _aligned((n, cols * nd), np.uint8)
+        # per worker or group of paths: cost row (5 paths: two, sgm._kept_rows), uint8 path
+        # buffers (sgm._aggregate_row) and their minima
+        self.cost = _aligned((n, (2 if p.paths == 5 else 1) * cols * nd), np.uint8)
         # written at every pixel by every thread: each one's slice 128 bytes away from the
         # others' (path minima), never on one cache line (false sharing made two threads slower than one)
         self.pm = np.zeros((n, 64), np.int16)  # 4 used
