@@ -94,7 +94,8 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, kept: int,
     (this pixel's and its predecessor's) and one zero run (predecessor of a path's first
     pixel); for npaths 5 from kept, the kept path's one per column (_kept_rows); from vb,
     per row slot and vertical/diagonal path one run per column, row y in slot cur, its
-    predecessor row in prv. mv[slot, v, x]: minima. p2tab[|I(p) - I(q)|]: the effective P2 between neighbours of those intensities."""
+    predecessor row in prv. mv[slot, v, x]: minima. p2tab[|I(p) - I(q)|]: the effective P2
+    between neighbours of those intensities."""
     nd, p1 = cfg[C_ND], cfg[C_P1]
     x0, cols = cfg[C_X0], cfg[C_COLS]
     dy = 1 if g == 0 else -1

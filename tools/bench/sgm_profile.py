@@ -35,9 +35,9 @@ def _aggregate(img, cfg, p2tab, cost, lbuf, mv, pm, acc):
     for g in range(2):
         for step in range(h):
             y = step if g == 0 else h - 1 - step
-            _sgm._aggregate_row(g, y, step == 0, npaths, 0, 3 * _sgm.run_stride(nd), step & 1,
-                                1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf, mv,
-                                pm, acc)
+            _sgm._aggregate_row(g, y, step == 0, npaths, 0, 0, 3 * _sgm.run_stride(nd),
+                                step & 1, 1 - (step & 1), 0, cols, img, cfg, p2tab, cost, lbuf,
+                                mv, pm, acc)
 
 
 @nb.njit(cache=True)
@@ -49,26 +49,35 @@ def _select(cfg, acc, parked, rmin, rarg, karg, disp):
 @nb.njit(cache=True)
 def _single_pass_upto(stages, img, right, cl, crr, cfg, p2tab, disp, win, offs, cost, lbuf,
                       mv, pm, acc, rmin, rarg, karg):
-    """sgm_single_pass's rows on one worker (chain 0, then 1), only their first ``stages``
-    stages (SINGLE_PASS_STAGES)."""
+    """sgm_single_pass's rows on one worker (chain 0, then 1, two rows at a time as
+    sgm._chain_rows), only their first ``stages`` stages (SINGLE_PASS_STAGES)."""
     h = img.shape[0]
     nd, cols = cfg[_sgm.C_ND], cfg[_sgm.C_COLS]
     stride = _sgm.run_stride(nd)
     vbase = lbuf.shape[0] - 18 * cols * stride
     top = (h + 1) // 2
     for c in range(2):
-        for j in range(top if c == 0 else h - top):
-            y = j if c == 0 else h - 1 - j
-            census_row_pair(img, right, y, cfg[_sgm.C_CW], cfg[_sgm.C_CH], cfg[_sgm.C_TL],
-                            cfg[_sgm.C_TR], win, offs, cl, crr)
+        rows = top if c == 0 else h - top
+        dy = 1 - 2 * c
+        for j in range(0, rows, 2):
+            n = min(2, rows - j)
+            y0 = j if c == 0 else h - 1 - j
+            for r in range(n):
+                census_row_pair(img, right, y0 + r * dy, cfg[_sgm.C_CW], cfg[_sgm.C_CH],
+                                cfg[_sgm.C_TL], cfg[_sgm.C_TR], win, offs, cl, crr)
             if stages > 1:
-                _sgm._kept_row(1 - c, y, 0, img, cl, crr, cfg, p2tab, cost, lbuf)
-            if stages > 2:
-                _sgm._aggregate_row(c, y, j == 0, 5, 0, vbase + c * 9 * cols * stride, j % 3,
-                                    (j + 2) % 3, 0, cols, img, cfg, p2tab, cost, lbuf, mv[c],
-                                    pm, acc)
-            if stages > 3:
-                _sgm._finish_row(y, cfg, acc, None, rmin, rarg, karg, disp[y])
+                _sgm._kept_rows(1 - c, y0, y0 + dy if n == 2 else -1, 0, img, cl, crr, cfg,
+                                p2tab, cost, lbuf)
+            for r in range(n):
+                jr, y = j + r, y0 + r * dy
+                if stages > 2:
+                    _sgm._aggregate_row(c, y, jr == 0, 5, 0, (3 + r * cols) * stride,
+                                        vbase + c * 9 * cols * stride, jr % 3, (jr + 2) % 3, 0,
+                                        cols, img, cfg, p2tab,
+                                        cost[r * cols * nd:(r + 1) * cols * nd], lbuf, mv[c],
+                                        pm, acc)
+                if stages > 3:
+                    _sgm._finish_row(y, cfg, acc, None, rmin, rarg, karg, disp[y])
 
 
 @nb.njit(cache=True)
