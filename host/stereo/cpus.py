@@ -29,15 +29,23 @@ WHERE_STRIDE = 16  # where[t * WHERE_STRIDE]: worker t's CPU, each on its own ca
 _I64 = ir.IntType(64)
 
 
-@intrinsic
-def current_cpu(typingctx):
-    """The CPU this thread runs on now (sched_getcpu), -1 where unknown."""
-    def codegen(context, builder, sig, args):
-        if not LINUX:
-            return ir.Constant(_I64, -1)
-        return builder.sext(_call(builder, "sched_getcpu", ir.IntType(32), []), _I64)
+def _int_of(name: str) -> Any:
+    """An intrinsic returning the C library's int ``name()`` as int64 (-1 outside Linux)."""
+    @intrinsic
+    def call(typingctx):
+        def codegen(context, builder, sig, args):
+            if not LINUX:
+                return ir.Constant(_I64, -1)
+            return builder.sext(_call(builder, name, ir.IntType(32), []), _I64)
 
-    return types.int64(), codegen
+        return types.int64(), codegen
+    return call
+
+
+current_cpu = _int_of("sched_getcpu")
+current_cpu.__doc__ = "The CPU this thread runs on now (sched_getcpu), -1 where unknown."
+thread_id = _int_of("gettid")
+thread_id.__doc__ = "The calling thread's kernel id (gettid), -1 where unknown."
 
 
 @intrinsic
@@ -69,16 +77,6 @@ def _affinity(name: str) -> Any:
 
         return types.int64(types.int64, mask), codegen
     return call
-
-
-@intrinsic
-def thread_id(typingctx):
-    """The calling thread's kernel id (gettid), -1 where unknown."""
-    def codegen(context, builder, sig, args):
-        if not LINUX:
-            return ir.Constant(_I64, -1)
-        return builder.sext(_call(builder, "gettid", ir.IntType(32), []), _I64)
-    return types.int64(), codegen
 
 
 get_affinity = _affinity("sched_getaffinity")
