@@ -19,10 +19,10 @@ then per row left to right the other four paths, the sum and the selection; whoe
 a half runs its part of the speckle filter (the second also the seam's). Everything runs in
 that one parallel region: the halves are independent chains (one per worker); a worker whose
 chain is done takes the other over after its rows in progress (with two workers), and with
-more workers each chain has several; rows within a chain wait band by band on the row before (a per-row
-progress count; a bounded spin, then yielding the core). A pool worker that finds itself on
-another worker's CPU moves off it for the frame (cpus.spread_out; the caller gives it its
-mask back after the frame, cpus.restore).
+more workers each chain has several; rows within a chain wait band by band on the row before
+(a per-row progress count; a bounded spin, then yielding the core). A pool worker that finds
+itself on another worker's CPU moves off it for the frame (cpus.spread_out; the caller gives
+it its mask back after the frame, cpus.restore).
 
 numba's disk cache of these kernels is keyed on every module of the package (jit.py), so
 editing sgm_simd.py, census.py or postfilter.py rebuilds them.
