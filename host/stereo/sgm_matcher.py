@@ -1,6 +1,6 @@
 """Reusable semi-global matcher: validates inputs, owns scratch buffers, runs the pipeline
 census (census.py) -> aggregation and selection (sgm.py) -> speckle filter (postfilter.py); with 5
-paths all three in one parallel region per frame (sgm.sgm_single_pass)."""
+paths all three in one parallel region per frame (sgm_one_pass.sgm_single_pass)."""
 from __future__ import annotations
 
 import threading
@@ -10,6 +10,7 @@ import numpy as np
 
 from . import cpus
 from . import sgm as _sgm
+from . import sgm_one_pass as _one
 from .census import census_offsets, census_pair, noise_margin
 from .matcher import STRIPES_PER_THREAD, _aligned, _stripes, prepared_pair
 from .postfilter import filter_speckles
@@ -69,8 +70,8 @@ class SGMMatcher:
             a = p.p2_adapt
             self.p2tab[:] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + np.arange(256))))
         stride = _sgm.run_stride(nd)  # path-cost runs, each 64-aligned in a 64-aligned lbuf
-        if p.paths == 5:  # one top-down pass (sgm.sgm_single_pass); per worker n
-            self.locks = np.zeros(_sgm.NXT_SLOTS * _sgm.NXT_STRIDE, np.int32)  # sgm.NXT_STRIDE's slots
+        if p.paths == 5:  # one pass per half (sgm_one_pass.sgm_single_pass); per worker n
+            self.locks = np.zeros(_one.NXT_SLOTS * _one.NXT_STRIDE, np.int32)  # sgm_one_pass.NXT_STRIDE's slots
             self.done = np.zeros(h, np.int32)  # columns each row has published
             # horizontal-path areas (2 cols + 3 runs each: sgm._kept_rows keeps two rows),
             # then per chain three row slots of three paths
@@ -155,7 +156,7 @@ class SGMMatcher:
                 self.skey[:] = -1
                 self.where[:] = -1
                 cpus.note_cpu(self.where, nb.get_num_threads())
-                _sgm.sgm_single_pass(left, right, self.cl, self.crr, self.cfg, self.p2tab,
+                _one.sgm_single_pass(left, right, self.cl, self.crr, self.cfg, self.p2tab,
                                      self.locks, self.done, disp,
                                      (self.win, self.swin, self.skey), self.census_offs,
                                      self.cost, self.lbuf, self.mv,

@@ -13,7 +13,7 @@ import pytest
 
 from stereocam.stereo import jit
 
-KERNEL_MODULES = ("census", "postfilter", "prefilter", "sad", "sgm", "post.confidence",
+KERNEL_MODULES = ("census", "postfilter", "prefilter", "sad", "sgm", "sgm_one_pass", "post.confidence",
                   "post.decimation", "post.holes", "post.lr_check", "post.median",
                   "post.spatial", "post.temporal")
 

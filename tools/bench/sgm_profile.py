@@ -13,6 +13,7 @@ import numba as nb
 import numpy as np
 
 from stereocam.stereo import sgm as _sgm
+from stereocam.stereo import sgm_one_pass as _one
 from stereocam.stereo.census import census_row_pair
 
 SINGLE_PASS_STAGES = ("census rows", "cost row + kept path", "four paths + sum",
@@ -50,7 +51,7 @@ def _select(cfg, acc, parked, rmin, rarg, karg, disp):
 def _single_pass_upto(stages, img, right, cl, crr, cfg, p2tab, disp, win, offs, cost, lbuf,
                       mv, pm, acc, rmin, rarg, karg):
     """sgm_single_pass's rows on one worker (chain 0, then 1, two rows at a time as
-    sgm._chain_rows), only their first ``stages`` stages (SINGLE_PASS_STAGES)."""
+    sgm_one_pass._chain_rows), only their first ``stages`` stages (SINGLE_PASS_STAGES)."""
     h = img.shape[0]
     nd, cols = cfg[_sgm.C_ND], cfg[_sgm.C_COLS]
     stride = _sgm.run_stride(nd)
@@ -82,10 +83,10 @@ def _single_pass_upto(stages, img, right, cl, crr, cfg, p2tab, disp, win, offs, 
 
 @nb.njit(cache=True)
 def _speckle_halves(cfg, disp, spk):
-    nxt = np.zeros(_sgm.NXT_SLOTS * _sgm.NXT_STRIDE, np.int32)
+    nxt = np.zeros(_one.NXT_SLOTS * _one.NXT_STRIDE, np.int32)
     top = (disp.shape[0] + 1) // 2
     for c in range(2 if disp.shape[0] > top else 1):
-        _sgm._speckle_half(c, top, cfg, nxt, disp, spk)
+        _one._speckle_half(c, top, cfg, nxt, disp, spk)
 
 
 def cpu_ms(fn, repeat: int) -> float:
