@@ -73,9 +73,9 @@ class SGMMatcher:
         if p.paths == 5:  # one pass per half (sgm_one_pass.sgm_single_pass); per worker n
             self.locks = np.zeros(_one.NXT_SLOTS * _one.NXT_STRIDE, np.int32)  # sgm_one_pass.NXT_STRIDE's slots
             self.done = np.zeros(h, np.int32)  # columns each row has published
-            # horizontal-path areas (2 cols + 3 runs each: sgm._kept_rows keeps two rows),
-            # then per chain three row slots of three paths
-            area = (2 * cols + 3) * stride
+            # horizontal-path areas (sgm_one_pass.area_runs), then per chain three row slots
+            # of three paths
+            area = _one.area_runs(cols) * stride
             self.lbuf = _aligned((1, n * area + 18 * cols * stride), np.uint8)
             self.lbuf[:] = 0  # the zero runs (predecessor of a path's first pixel) included
             self.mv = np.empty((2, 3, 3, cols), np.int16)

@@ -38,6 +38,13 @@ NXT_SLOTS = 7
 
 
 @nb.njit(**_JIT)
+def area_runs(cols: int) -> int:
+    """Runs (run_stride each) of a worker's horizontal-path area in lbuf: two for the
+    horizontal path, a zero run, then two rows' kept paths of cols runs each (_kept_rows)."""
+    return 2 * cols + 3
+
+
+@nb.njit(**_JIT)
 def _chain_rows(c: int, j: int, n: int, hb: int, vb: int, img: np.ndarray, right: np.ndarray,
                 cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray, p2tab: np.ndarray,
                 prog: np.ndarray, disp: np.ndarray, win: tuple, offs: np.ndarray,
@@ -50,7 +57,7 @@ def _chain_rows(c: int, j: int, n: int, hb: int, vb: int, img: np.ndarray, right
     path each kept per column in lbuf (_kept_rows, both rows in one loop), then per row in
     the other horizontal direction the other four paths plus the kept one into acc, band
     by band once the chain's previous row has published (prog) the columns the band reads,
-    and the selection. hb: this worker's horizontal-path area (2 cols + 3 runs); vb: the
+    and the selection. hb: this worker's horizontal-path area (area_runs); vb: the
     chain's three row slots of three paths; cost: this worker's two cost rows."""
     h = img.shape[0]
     nd, cols = cfg[C_ND], cfg[C_COLS]
@@ -100,7 +107,7 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
     nd, cols = cfg[C_ND], cfg[C_COLS]
     stride = run_stride(nd)
     vbase = lbuf.shape[0] - 18 * cols * stride  # per chain three row slots of three paths
-    hb = t * (2 * cols + 3) * stride
+    hb = t * area_runs(cols) * stride
     top = (h + 1) // 2
     where, masks, caller = spread
     state = 0 if workers > 1 else STAY
@@ -153,7 +160,7 @@ def sgm_single_pass(img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr: np.
     half (spk: its scratch labels, stack, size, parent, rtype, as postfilter.label_band): the
     two horizontal ones, and from above (top half, rows < ceil(h / 2)) or from below (the
     rest) the vertical and both diagonals. The halves are independent chains, one per
-    worker; more workers share them row by row (_single_pass). Scratch has
+    worker; more workers share them two rows at a time (_single_pass). Scratch has
     one slice per worker (leading axis, at least ``workers``; win: census_row_pair's raw,
     smooth and key, keys -1); nxt and prog must be zero; spread: cpus.spread_out's where
     (all -1), per-worker masks and the calling thread's threading.get_ident()."""
