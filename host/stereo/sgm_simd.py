@@ -2,8 +2,9 @@
 atomics and a bounded spin-wait.
 
 Arrays are 1-D (uint8 path costs, int16 sums) with the disparity axis contiguous; ``nd`` is a
-multiple of 16 and each loop walks it in 64/32/16-lane chunks (simd._chunked). Callers guarantee
-indices are in range.
+multiple of 16 and each loop walks it in chunks of simd.LANES lanes (one register of the CPU's
+widest vectors: 64 with AVX-512, 32 with AVX2), then 32/16-lane tails (simd._chunked). Callers
+guarantee indices are in range.
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-from .simd import _call, _chunked, _ptr, _reduce_min, _splat, _vload, \
+from .simd import LANES, _call, _chunked, _ptr, _reduce_min, _splat, _vload, \
     _vstore
 
 _I16 = ir.IntType(16)
@@ -48,8 +49,8 @@ def add_argmin(typingctx, dst, di, src, si, nd):
         st = sig.args
         div, siv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 3, 4))
         i64 = ir.IntType(64)
-        wide = ir.VectorType(_I16, 64)
-        best = cgutils.alloca_once_value(builder, ir.Constant(wide, [32767] * 64))
+        wide = ir.VectorType(_I16, LANES)
+        best = cgutils.alloca_once_value(builder, ir.Constant(wide, [32767] * LANES))
 
         def body(j0, n):
             vty = ir.VectorType(_I16, n)
@@ -60,13 +61,13 @@ def add_argmin(typingctx, dst, di, src, si, nd):
                                          [builder.add(siv, j0)]), vty)
                 t = builder.add(t, s)
                 _vstore(builder, t, pd)
-            if n < 64:  # pad to 64 lanes with values that never win
-                pad = ir.Constant(ir.VectorType(_I32, 64), list(range(n)) + [n] * (64 - n))
+            if n < LANES:  # pad to LANES lanes with values that never win
+                pad = ir.Constant(ir.VectorType(_I32, LANES), list(range(n)) + [n] * (LANES - n))
                 t = builder.shuffle_vector(t, ir.Constant(vty, [32767] * n), pad)
             b = builder.load(best)
             builder.store(builder.select(builder.icmp_signed("<", t, b), t, b), best)
 
-        _chunked(builder, ndv, body)
+        _chunked(builder, ndv, body, LANES)
         m = _reduce_min(builder, builder.load(best))
         k = cgutils.alloca_once_value(builder, ir.Constant(i64, 1 << 20))
 
@@ -83,7 +84,7 @@ def add_argmin(typingctx, dst, di, src, si, nd):
             old = builder.load(k)
             builder.store(builder.select(builder.icmp_unsigned("<", kk, old), kk, old), k)
 
-        _chunked(builder, ndv, first)
+        _chunked(builder, ndv, first, LANES)
         return context.make_tuple(builder, ret, [builder.sext(m, i64), builder.load(k)])
 
     return ret(dst, di, src, si, nd), codegen
@@ -109,7 +110,7 @@ def count_le(typingctx, s, si, nd, thr):
             c = builder.zext(_call(builder, f"llvm.ctpop.i{n}", mty, [le]), i64)
             builder.store(builder.add(builder.load(count), c), count)
 
-        _chunked(builder, ndv, body)
+        _chunked(builder, ndv, body, LANES)
         return builder.load(count)
 
     return types.int64(s, si, nd, thr), codegen
@@ -139,7 +140,7 @@ def diag_update(typingctx, s, si, rmin, rarg, ri, nd):
                              ir.Constant(vty, list(range(n))))
             _vstore(builder, builder.select(lt, ks, _vload(builder, pa, vty)), pa)
 
-        _chunked(builder, ndv, body)
+        _chunked(builder, ndv, body, LANES)
         return context.get_dummy_value()
 
     return types.none(s, si, rmin, rarg, ri, nd), codegen
@@ -277,6 +278,16 @@ def spin_wait(typingctx, n):
     return types.none(n), codegen
 
 
+_UMIN = f"llvm.vector.reduce.umin.v{LANES}i8"
+# Below 512-bit vectors a run's neighbours P[k-1], P[k+1] come cheaper from two unaligned loads
+# than from shuffles across the register's 128-bit halves: so for the vertical and diagonal
+# paths, whose predecessor was written a row ago. A horizontal step reads the run the previous
+# pixel just wrote, which an unaligned load would not get forwarded from the store. The loads
+# reach one byte before and after a run (after lbuf's last one: matcher._aligned allocates
+# more than it returns); 255 is OR-ed over those lanes.
+LOAD_NEIGHBOURS = LANES < 64
+
+
 def _u8_arrays(*tys) -> bool:
     return all(isinstance(t, types.Array) and t.ndim == 1 and t.dtype == types.uint8
                for t in tys)
@@ -286,10 +297,12 @@ def _umin(builder, a, b):
     return builder.select(builder.icmp_unsigned("<", a, b), a, b)
 
 
-def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, nd, p1s, p1hi=None):
+def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, nd, p1s, p1hi=None,
+                loads=False):
     """L[k] for the n disparities from j0 of one path step (pixel_paths), stored at
     lbuf[oo + j0 + k]; meta = (po, oo, p2m, mprev) as int64 values; nd: the run's length;
-    p1hi: the step from P[k+1]'s own P1 (None: p1s, the step from P[k-1]'s, for both)."""
+    p1hi: the step from P[k+1]'s own P1 (None: p1s, the step from P[k-1]'s, for both);
+    loads: P[k-1] and P[k+1] loaded unaligned (LOAD_NEIGHBOURS)."""
     u8 = ir.IntType(8)
     vty = ir.VectorType(u8, n)
     po, oo, p2m, mp = meta
@@ -297,21 +310,31 @@ def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, nd, p1s, p1hi=None
 
     def at(off):
         return _ptr(context, builder, lbty, lbuf, [off])
-    # P[k-1] and P[k+1] by shifting the chunk (loaded where it was stored, so a just-written
-    # predecessor forwards) with the neighbouring element: 255 beyond either end of the run
-    # (read inside it, then replaced: no run has padding)
     pv = _vload(builder, at(pj), vty)
-    inner_lo = builder.icmp_signed(">", j0, ir.Constant(j0.type, 0))
-    inner_hi = builder.icmp_signed("<", builder.add(j0, ir.Constant(j0.type, n)), nd)
-    before = builder.load(at(builder.sub(pj, builder.zext(inner_lo, pj.type))))
-    after = builder.load(at(builder.add(pj, builder.select(
-        inner_hi, ir.Constant(pj.type, n), ir.Constant(pj.type, n - 1)))))
-    before = builder.select(inner_lo, before, ir.Constant(u8, 255))
-    after = builder.select(inner_hi, after, ir.Constant(u8, 255))
-    lo = builder.shuffle_vector(pv, _splat(builder, before, vty), ir.Constant(
-        ir.VectorType(_I32, n), [n] + list(range(n - 1))))
-    hi = builder.shuffle_vector(pv, _splat(builder, after, vty), ir.Constant(
-        ir.VectorType(_I32, n), list(range(1, n)) + [n]))
+    if loads:  # P[k-1] and P[k+1] from memory, 255 OR-ed in beyond the run's ends
+        first = builder.icmp_signed("==", j0, ir.Constant(j0.type, 0))
+        last = builder.icmp_signed("==", builder.add(j0, ir.Constant(j0.type, n)), nd)
+        lo = builder.or_(_vload(builder, at(builder.sub(pj, ir.Constant(pj.type, 1))), vty),
+                         builder.select(first, ir.Constant(vty, [255] + [0] * (n - 1)),
+                                        ir.Constant(vty, None)))
+        hi = builder.or_(_vload(builder, at(builder.add(pj, ir.Constant(pj.type, 1))), vty),
+                         builder.select(last, ir.Constant(vty, [0] * (n - 1) + [255]),
+                                        ir.Constant(vty, None)))
+    else:
+        # P[k-1] and P[k+1] by shifting the chunk (loaded where it was stored, so a
+        # just-written predecessor forwards) with the neighbouring element: 255 beyond
+        # either end of the run (read inside it, then replaced)
+        inner_lo = builder.icmp_signed(">", j0, ir.Constant(j0.type, 0))
+        inner_hi = builder.icmp_signed("<", builder.add(j0, ir.Constant(j0.type, n)), nd)
+        before = builder.load(at(builder.sub(pj, builder.zext(inner_lo, pj.type))))
+        after = builder.load(at(builder.add(pj, builder.select(
+            inner_hi, ir.Constant(pj.type, n), ir.Constant(pj.type, n - 1)))))
+        before = builder.select(inner_lo, before, ir.Constant(u8, 255))
+        after = builder.select(inner_hi, after, ir.Constant(u8, 255))
+        lo = builder.shuffle_vector(pv, _splat(builder, before, vty), ir.Constant(
+            ir.VectorType(_I32, n), [n] + list(range(n - 1))))
+        hi = builder.shuffle_vector(pv, _splat(builder, after, vty), ir.Constant(
+            ir.VectorType(_I32, n), list(range(1, n)) + [n]))
     sat = f"llvm.uadd.sat.v{n}i8"
     if p1hi is None:
         t = _call(builder, sat, vty, [_umin(builder, lo, hi), p1s])
@@ -325,10 +348,10 @@ def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, nd, p1s, p1hi=None
 
 
 def _keep_min(builder, best, L, n):
-    """best (a <64 x i8> slot) = lane-wise min(best, L padded with 255 to 64 lanes)."""
-    lw = L if n == 64 else builder.shuffle_vector(
+    """best (a <LANES x i8> slot) = lane-wise min(best, L padded with 255 to LANES lanes)."""
+    lw = L if n == LANES else builder.shuffle_vector(
         L, ir.Constant(L.type, [255] * n),
-        ir.Constant(ir.VectorType(_I32, 64), list(range(n)) + [n] * (64 - n)))
+        ir.Constant(ir.VectorType(_I32, LANES), list(range(n)) + [n] * (LANES - n)))
     builder.store(_umin(builder, builder.load(best), lw), best)
 
 
@@ -346,7 +369,8 @@ def path_step(typingctx, cost, ci, lbuf, po, oo, p2m, mprev, p1, nd):
         civ, pov, oov, p2v, mpv, ndv = (_intp(context, builder, sig, args, i)
                                         for i in (1, 3, 4, 5, 6, 8))
         p1v = context.cast(builder, args[7], st[7], types.uint8)
-        best = cgutils.alloca_once_value(builder, ir.Constant(ir.VectorType(u8, 64), [255] * 64))
+        best = cgutils.alloca_once_value(builder, ir.Constant(ir.VectorType(u8, LANES),
+                                                              [255] * LANES))
 
         def body(j0, n):
             vty = ir.VectorType(u8, n)
@@ -356,8 +380,8 @@ def path_step(typingctx, cost, ci, lbuf, po, oo, p2m, mprev, p1, nd):
                             ndv, _splat(builder, p1v, vty))
             _keep_min(builder, best, L, n)
 
-        _chunked(builder, ndv, body)
-        low = _call(builder, "llvm.vector.reduce.umin.v64i8", u8, [builder.load(best)])
+        _chunked(builder, ndv, body, LANES)
+        low = _call(builder, _UMIN, u8, [builder.load(best)])
         return builder.zext(low, ir.IntType(64))
 
     return types.int64(cost, ci, lbuf, po, oo, p2m, mprev, p1, nd), codegen
@@ -376,7 +400,7 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
         written when npaths is 1)
 
     Path costs are uint8 (the caller keeps every L <= 255 and passes p2m <= 255; P beyond the
-    run's ends is 255, and +p1 saturates), so one 512-bit register holds 64 disparities. The
+    run's ends is 255, and +p1 saturates), so one register holds LANES disparities. The
     cost and the sum stay in registers across the paths."""
     if not (_u8_arrays(cost, lbuf) and _i16_arrays(acc, mins)
             and isinstance(meta, types.UniTuple) and meta.count == 17
@@ -397,8 +421,8 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
                                    types.uint8) for i in range(2))
         meta_v = [context.cast(builder, builder.extract_value(args[3], i), st[3].dtype,
                                types.intp) for i in range(17)]
-        wide = ir.VectorType(u8, 64)
-        best = [cgutils.alloca_once_value(builder, ir.Constant(wide, [255] * 64))
+        wide = ir.VectorType(u8, LANES)
+        best = [cgutils.alloca_once_value(builder, ir.Constant(wide, [255] * LANES))
                 for _ in range(4)]
 
         def lb(off, vty):
@@ -414,7 +438,8 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
 
             def step(v):
                 L = _step_chunk(context, builder, st[2], args[2], c, meta_v[4 * v:4 * v + 4],
-                                j0, n, ndv, *((p1s,) if v == 0 else p1ground))
+                                j0, n, ndv, *((p1s,) if v == 0 else p1ground),
+                                loads=LOAD_NEIGHBOURS and v > 0)
                 _keep_min(builder, best[v], L, n)
                 return builder.zext(L, wty)
 
@@ -430,10 +455,10 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
                 _vstore(builder, builder.load(total),
                         _ptr(context, builder, st[6], args[6], [builder.add(aiv, j0)]))
 
-        _chunked(builder, ndv, body)
+        _chunked(builder, ndv, body, LANES)
         for v in range(4):
             def put(v=v):
-                low = _call(builder, "llvm.vector.reduce.umin.v64i8", u8,
+                low = _call(builder, _UMIN, u8,
                             [builder.load(best[v])])
                 builder.store(builder.zext(low, _I16), _ptr(context, builder, st[9], args[9],
                                                             [ir.Constant(civ.type, v)]))
@@ -467,7 +492,7 @@ def cost_run(typingctx, a, crow, base, out, oi, nd):
             _vstore(builder, builder.trunc(pc, ir.VectorType(ir.IntType(8), n)),
                     _ptr(context, builder, st[3], args[3], [builder.add(oiv, j0)]))
 
-        _chunked(builder, ndv, body)
+        _chunked(builder, ndv, body, LANES)
         return context.get_dummy_value()
 
     return types.none(a, crow, base, out, oi, nd), codegen
@@ -585,3 +610,4 @@ def census_codes_masked(typingctx, src, base, offs, ncmp, w, out, rev, ssrc, sba
         return None
     return (types.none(src, base, offs, ncmp, w, out, rev, ssrc, sbase, t),
             _census_codegen(True))
+

@@ -1,7 +1,7 @@
 """Explicit-width vector operations over the cost axis, as numba intrinsics.
 
-Each intrinsic walks the ``nd`` cost indices of one pixel in chunks of 32 lanes (plus one
-16-lane tail when nd % 32 == 16) of the arrays' element type (int16 or int32). Writing the
+Each intrinsic walks the ``nd`` cost indices of one pixel in chunks of 64 lanes, then tails of
+32 and 16, of the arrays' element type (int16 or int32). Writing the
 vector IR directly keeps LLVM's per-call runtime alias checks, horizontal reductions per chunk
 and unpredictable branches out of the per-pixel path. Callers guarantee indices are in range.
 """
@@ -12,6 +12,21 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 _TAIL = 16
+
+
+def _vector_bytes() -> int:
+    """Bytes in one SIMD register of the CPU numba compiles for: 64 with AVX-512BW, 32 with
+    AVX2, else 16 (SSE, NEON)."""
+    from llvmlite import binding
+    from numba import config
+    if config.CPU_FEATURES:  # NUMBA_CPU_FEATURES, e.g. '+avx2,-avx512bw'
+        on = {f[1:] for f in str(config.CPU_FEATURES).split(",") if f.startswith("+")}
+    else:
+        on = {k for k, v in binding.get_host_cpu_features().items() if v}
+    return 64 if "avx512bw" in on else 32 if "avx2" in on else 16
+
+
+LANES = _vector_bytes()  # lanes per chunk of the SGM kernels' disparity loops (sgm_simd)
 _I32 = ir.IntType(32)
 _I64 = ir.IntType(64)
 
@@ -56,18 +71,19 @@ def _absdiff_u8(builder, scalar, vec):
     return builder.sub(builder.select(gt, splat, vec), builder.select(gt, vec, splat))
 
 
-def _chunked(builder, nd, body):
-    """Emit body(j0, lanes) over j0 < nd: 64-lane steps, then 32- and 16-lane tails."""
-    nd64 = builder.and_(nd, ir.Constant(nd.type, ~63))
-    with cgutils.for_range_slice(builder, ir.Constant(nd.type, 0), nd64,
-                                 ir.Constant(nd.type, 64)) as (j0, _):
-        body(j0, 64)
-    rest = builder.sub(nd, nd64)
-    j32 = builder.add(nd64, builder.and_(rest, ir.Constant(nd.type, 32)))
-    with builder.if_then(builder.icmp_signed("<", nd64, j32)):
-        body(nd64, 32)
-    with builder.if_then(builder.icmp_signed("<", j32, nd)):
-        body(j32, 16)
+def _chunked(builder, nd, body, widest=64):
+    """Emit body(j0, lanes) over j0 < nd (a multiple of 16): steps of ``widest`` lanes, then
+    tails of half as many, down to 16."""
+    top = builder.and_(nd, ir.Constant(nd.type, -widest))
+    with cgutils.for_range_slice(builder, ir.Constant(nd.type, 0), top,
+                                 ir.Constant(nd.type, widest)) as (j0, _):
+        body(j0, widest)
+    n = widest // 2
+    while n >= _TAIL:
+        nxt = builder.add(top, builder.and_(builder.sub(nd, top), ir.Constant(nd.type, n)))
+        with builder.if_then(builder.icmp_signed("<", top, nxt)):
+            body(top, n)
+        top, n = nxt, n // 2
 
 
 def _fold16(builder, vec):
