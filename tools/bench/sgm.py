@@ -199,7 +199,8 @@ def cpu_table(scenes, nd: int, repeat: int, variants: dict[str, dict]) -> None:
 def size_table(left: np.ndarray, right: np.ndarray, repeat: int, variants: dict[str, dict],
                threads: int, busy: bool) -> None:
     """Ours per variant over cv2 SGBM_3WAY on one pair resized to 320x240 .. 1280x960 with 64,
-    128 and 256 disparities: CPU time on one thread, then (threads > 1) the median and range
+    128 and 256 disparities: the median and range of CPU-time ratios of interleaved rounds on
+    one thread, then (threads > 1) the median and range
     of wall-time ratios of interleaved runs on ``threads`` threads, beside a busy process when
     ``busy``; under each size the 5-path variant's CPU ms per stage (sgm_profile.stage_ms)."""
     import cv2
@@ -207,9 +208,10 @@ def size_table(left: np.ndarray, right: np.ndarray, repeat: int, variants: dict[
 
     from stereocam.stereo import SGMMatcher, SGMParams
 
-    from .sgm_profile import cpu_ms, stage_ms
+    from .sgm_profile import cpu_ratios, stage_ms
 
-    print(f"per size and disparities, ours / cv2 SGBM_3WAY: CPU on 1 thread; wall on {threads} "
+    print(f"per size and disparities, ours / cv2 SGBM_3WAY: CPU on 1 thread (median, range of "
+          f"interleaved rounds); wall on {threads} "
           f"threads{' beside a busy process' if busy else ''} (median, range):")
     for w, h in ((320, 240), (640, 480), (1280, 960)):
         pair = [cv2.resize(im, (w, h), interpolation=cv2.INTER_AREA) for im in (left, right)]
@@ -220,9 +222,10 @@ def size_table(left: np.ndarray, right: np.ndarray, repeat: int, variants: dict[
                                               SGBM_MODES["SGBM_3WAY"]).compute
             ours = {label: SGMMatcher((h, w), SGMParams(num_disparities=nd, **kw)).match
                     for label, kw in variants.items()}
-            t3 = cpu_ms(lambda: three_way(*pair), repeat)
-            cells = [f"{label} {cpu_ms(lambda fn=fn: fn(*pair), repeat) / t3:.2f}x"
-                     for label, fn in ours.items()]
+            t3, ratios = cpu_ratios(lambda: three_way(*pair),
+                                    [lambda fn=fn: fn(*pair) for fn in ours.values()], repeat)
+            cells = [f"{label} {statistics.median(r):.2f}x ({min(r):.2f}-{max(r):.2f})"
+                     for label, r in zip(ours, ratios)]
             if threads > 1:
                 numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
                 cv2.setNumThreads(threads)

@@ -108,6 +108,29 @@ def cpu_ms(fn, repeat: int) -> float:
         cv2.setNumThreads(threads[1])
 
 
+def cpu_ratios(base, fns, repeat: int) -> tuple[float, list[list[float]]]:
+    """One thread, interleaved rounds (base, then each of fns, per round; one warm-up round):
+    base's median CPU ms and each fn's per-round ratios of CPU time to base's. Interleaving
+    keeps a machine whose speed drifts between minutes (a shared host) from skewing ratios."""
+    import cv2
+    threads = nb.get_num_threads(), cv2.getNumThreads()
+    nb.set_num_threads(1)
+    cv2.setNumThreads(1)
+    try:
+        times: list[list[float]] = [[] for _ in range(len(fns) + 1)]
+        for r in range(repeat + 1):
+            for ts, fn in zip(times, (base, *fns)):
+                t0 = time.process_time()
+                fn()
+                if r:
+                    ts.append(time.process_time() - t0)
+        return (statistics.median(times[0]) * 1e3,
+                [[t / t0 for t, t0 in zip(ts, times[0])] for ts in times[1:]])
+    finally:
+        nb.set_num_threads(threads[0])
+        cv2.setNumThreads(threads[1])
+
+
 def stage_ms(m, left: np.ndarray, right: np.ndarray, repeat: int) -> dict[str, float]:
     """Median CPU ms (process time, robust to a busy machine) per stage of SGMMatcher m, after
     one m.match so that its buffers hold a frame."""

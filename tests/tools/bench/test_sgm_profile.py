@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from stereocam.stereo import SGMMatcher, SGMParams
-from stereocam.tools.bench.sgm_profile import SINGLE_PASS_STAGES, single_pass_rows, \
+from stereocam.tools.bench.sgm_profile import SINGLE_PASS_STAGES, cpu_ratios, single_pass_rows, \
     speckle_halves, stage_ms
 
 
@@ -30,3 +30,17 @@ def test_stage_names() -> None:
     m = SGMMatcher(img.shape, SGMParams(num_disparities=16))
     assert list(stage_ms(m, img, np.roll(img, -3, axis=1), 1)) == [
         *SINGLE_PASS_STAGES, "speckle (halves)", "rest of match"]
+
+
+def test_cpu_ratios_interleave_the_rounds() -> None:
+    calls: list[str] = []
+
+    def spin(name: str, n: int):
+        def fn() -> None:
+            calls.append(name)
+            sum(range(n))
+        return fn
+    base_ms, ratios = cpu_ratios(spin("base", 20_000), [spin("a", 20_000), spin("b", 40_000)], 3)
+    assert calls == ["base", "a", "b"] * 4  # a warm-up round, then 3 timed
+    assert base_ms >= 0 and [len(r) for r in ratios] == [3, 3]
+    assert all(t >= 0 for r in ratios for t in r)
