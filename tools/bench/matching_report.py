@@ -229,13 +229,23 @@ def cpu_name() -> str:
     return platform.processor() or platform.machine()
 
 
+def vector_target() -> str:
+    """The CPU numba compiles the kernels for and the SGM kernels' vector width: their speed
+    against cv2 depends on it (stereo/simd.py)."""
+    from llvmlite import binding
+    from numba import config
+
+    from stereocam.stereo.simd import LANES
+    return f"numba target {config.CPU_NAME or binding.get_host_cpu_name()}, SGM vectors of {LANES} lanes"
+
+
 def header(threads: int, busy: bool, repeat: int) -> str:
     import cv2
     import numba
 
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     return (f"threads {threads} (cv2 and numba); {'beside a busy process' if busy else 'no busy process'}; "
-            f"repeat {repeat}; load average {load} on {os.cpu_count()} cpus ({cpu_name()})\n"
+            f"repeat {repeat}; load average {load} on {os.cpu_count()} cpus ({cpu_name()}; {vector_target()})\n"
             f"python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
             f"cv2 {cv2.__version__}")
 

@@ -22,7 +22,7 @@ from typing import Callable
 import numpy as np
 
 from .matching import bad_rate, motorcycle
-from .matching_report import busy_process
+from .matching_report import busy_process, vector_target
 
 SGBM_MODES = {"SGBM": 0, "HH": 1, "SGBM_3WAY": 2, "HH4": 3}  # cv2.STEREO_SGBM_MODE_*
 
@@ -289,7 +289,8 @@ def main(args) -> int:
     t0 = time.perf_counter()
     engine_named("sgm").warm_up()
     print(f"threads={args.threads} (cv2 {cv2.__version__}, numba {numba.__version__}); "
-          f"repeat={args.repeat}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus;"
+          f"repeat={args.repeat}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus"
+          f" ({vector_target()});"
           f" SGM JIT warm-up {time.perf_counter() - t0:.2f} s")
     variants = {"ours SGM 8 paths": {"paths": 8}, "ours SGM 4 paths": {"paths": 4},
                 "ours SGM 5 paths": {"paths": 5}}
