@@ -12,7 +12,8 @@ The engine table (engines.py) keys the engines by the protocol's ``algorithm`` v
 pipeline, replay, rematch and the benches select engines there. Names below import on first use.
 
 SGM pipeline (modules): sgm_params.py -> census.py -> sgm.py + sgm_simd.py (costs, paths,
-selection; 5 paths: sgm_one_pass.py over sgm.py's row stages) -> postfilter.py (speckle filter).
+selection; 5 paths: sgm_one_pass.py over sgm.py's row stages; their threads' locks and atomics:
+atomics.py; the vector width: simd.LANES) -> postfilter.py (speckle filter).
 
 Pipeline (modules): prefilter.py (XSOBEL / NORMALIZED_RESPONSE) -> sad.py + simd.py (running
 SAD sums, texture, winner-take-all, uniqueness, subpixel, left-right check, valid region) ->

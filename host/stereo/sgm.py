@@ -22,8 +22,9 @@ import numpy as np
 
 from .jit import C_ARITHMETIC
 from .lanes import uidx
+from .atomics import spin_wait, try_lock, unlock
 from .sgm_simd import add_argmin, cost_run, count_le, diag_update, path_step, pixel_paths, \
-    spin_wait, stream_copy, try_lock, unlock
+    stream_copy
 
 _JIT = C_ARITHMETIC
 

@@ -26,7 +26,7 @@ from .jit import C_ARITHMETIC
 from .postfilter import clear_seam, join_seam, label_band
 from .sgm import C_CH, C_COLS, C_CW, C_INV, C_ND, C_SPR, C_SPW, C_TL, C_TR, _aggregate_row, \
     _finish_row, _kept_rows, run_stride
-from .sgm_simd import fetch_add, load_acquire, spin_wait, store_release
+from .atomics import fetch_add, load_acquire, spin_wait, store_release
 
 _JIT = C_ARITHMETIC
 

@@ -1,5 +1,5 @@
-"""Vector operations over the disparity axis for the SGM kernels, plus a per-row spin lock,
-atomics and a bounded spin-wait.
+"""Vector operations over the disparity axis for the SGM kernels (their locks and atomics:
+atomics.py).
 
 Arrays are 1-D (uint8 path costs, int16 sums) with the disparity axis contiguous; ``nd`` is a
 multiple of 16 and each loop walks it in chunks of simd.LANES lanes (one register of the CPU's
@@ -8,13 +8,11 @@ guarantee indices are in range.
 """
 from __future__ import annotations
 
-import platform
-
 from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-from .simd import LANES, _call, _chunked, _ptr, _reduce_min, _splat, _vload, \
+from .simd import LANES, X86, _call, _chunked, _ix, _ptr, _reduce_min, _splat, _vload, \
     _vstore
 
 _I16 = ir.IntType(16)
@@ -24,10 +22,6 @@ _I32 = ir.IntType(32)
 def _i16_arrays(*tys) -> bool:
     return all(isinstance(t, types.Array) and t.ndim == 1 and t.dtype == types.int16
                for t in tys)
-
-
-def _intp(context, builder, sig, args, i):
-    return context.cast(builder, args[i], sig.args[i], types.intp)
 
 
 def _i16(context, builder, sig, args, i):
@@ -47,7 +41,7 @@ def add_argmin(typingctx, dst, di, src, si, nd):
 
     def codegen(context, builder, sig, args):
         st = sig.args
-        div, siv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 3, 4))
+        div, siv, ndv = (_ix(context, builder, sig, args, i) for i in (1, 3, 4))
         i64 = ir.IntType(64)
         wide = ir.VectorType(_I16, LANES)
         best = cgutils.alloca_once_value(builder, ir.Constant(wide, [32767] * LANES))
@@ -97,7 +91,7 @@ def count_le(typingctx, s, si, nd, thr):
         return None
 
     def codegen(context, builder, sig, args):
-        siv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 2))
+        siv, ndv = (_ix(context, builder, sig, args, i) for i in (1, 2))
         thv = _i16(context, builder, sig, args, 3)
         i64 = ir.IntType(64)
         count = cgutils.alloca_once_value(builder, ir.Constant(i64, 0))
@@ -125,7 +119,7 @@ def diag_update(typingctx, s, si, rmin, rarg, ri, nd):
 
     def codegen(context, builder, sig, args):
         st = sig.args
-        siv, riv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 4, 5))
+        siv, riv, ndv = (_ix(context, builder, sig, args, i) for i in (1, 4, 5))
 
         def body(j0, n):
             vty = ir.VectorType(_I16, n)
@@ -146,9 +140,6 @@ def diag_update(typingctx, s, si, rmin, rarg, ri, nd):
     return types.none(s, si, rmin, rarg, ri, nd), codegen
 
 
-_X86 = platform.machine().lower() in ("x86_64", "amd64")
-
-
 @intrinsic
 def stream_copy(typingctx, dst, src, n):
     """dst[k] = src[k] for k < n (int16; n a multiple of 16, dst 32-byte aligned). On x86 the
@@ -159,7 +150,7 @@ def stream_copy(typingctx, dst, src, n):
 
     def codegen(context, builder, sig, args):
         st = sig.args
-        nv = _intp(context, builder, sig, args, 2)
+        nv = _ix(context, builder, sig, args, 2)
         vty = ir.VectorType(_I16, 16)
         nt = builder.module.add_metadata([ir.Constant(_I32, 1)])
         with cgutils.for_range_slice(builder, ir.Constant(nv.type, 0), nv,
@@ -167,115 +158,13 @@ def stream_copy(typingctx, dst, src, n):
             v = _vload(builder, _ptr(context, builder, st[1], args[1], [i]), vty)
             pd = builder.bitcast(_ptr(context, builder, st[0], args[0], [i]), vty.as_pointer())
             store = builder.store(v, pd, align=32)
-            if _X86:
+            if X86:
                 store.set_metadata("nontemporal", nt)
-        if _X86:
+        if X86:
             _call(builder, "llvm.x86.sse.sfence", ir.VoidType(), [])
         return context.get_dummy_value()
 
     return types.none(dst, src, n), codegen
-
-
-def _lock_ptr(context, builder, sig, args):
-    return _ptr(context, builder, sig.args[0], args[0], [_intp(context, builder, sig, args, 1)])
-
-
-@intrinsic
-def try_lock(typingctx, locks, i):
-    """Atomically set locks[i] from 0 to 1 (acquire); True when this call took the lock."""
-    if not (isinstance(locks, types.Array) and locks.dtype == types.int32):
-        return None
-
-    def codegen(context, builder, sig, args):
-        res = builder.cmpxchg(_lock_ptr(context, builder, sig, args), ir.Constant(_I32, 0),
-                              ir.Constant(_I32, 1), "acq_rel", "monotonic")
-        return builder.extract_value(res, 1)
-
-    return types.boolean(locks, i), codegen
-
-
-@intrinsic
-def unlock(typingctx, locks, i):
-    """Release locks[i] (store 0 with release ordering)."""
-    if not (isinstance(locks, types.Array) and locks.dtype == types.int32):
-        return None
-
-    def codegen(context, builder, sig, args):
-        builder.store_atomic(ir.Constant(_I32, 0), _lock_ptr(context, builder, sig, args),
-                             "release", 4)
-        return context.get_dummy_value()
-
-    return types.none(locks, i), codegen
-
-
-@intrinsic
-def fetch_add(typingctx, arr, i, v):
-    """arr[i] += v atomically (int32, acquire and release: what this thread wrote before is
-    seen by a thread whose later fetch_add returns this one's result); returns the value
-    before."""
-    if not (isinstance(arr, types.Array) and arr.dtype == types.int32):
-        return None
-
-    def codegen(context, builder, sig, args):
-        val = context.cast(builder, args[2], sig.args[2], types.int32)
-        old = builder.atomic_rmw("add", _lock_ptr(context, builder, sig, args), val, "acq_rel")
-        return builder.sext(old, ir.IntType(64))
-
-    return types.int64(arr, i, v), codegen
-
-
-@intrinsic
-def load_acquire(typingctx, arr, i):
-    """arr[i] (int32), read with acquire ordering."""
-    if not (isinstance(arr, types.Array) and arr.dtype == types.int32):
-        return None
-
-    def codegen(context, builder, sig, args):
-        v = builder.load_atomic(_lock_ptr(context, builder, sig, args), "acquire", 4)
-        return builder.sext(v, ir.IntType(64))
-
-    return types.int64(arr, i), codegen
-
-
-@intrinsic
-def store_release(typingctx, arr, i, v):
-    """arr[i] = v (int32), written with release ordering."""
-    if not (isinstance(arr, types.Array) and arr.dtype == types.int32):
-        return None
-
-    def codegen(context, builder, sig, args):
-        val = context.cast(builder, args[2], sig.args[2], types.int32)
-        builder.store_atomic(val, _lock_ptr(context, builder, sig, args), "release", 4)
-        return context.get_dummy_value()
-
-    return types.none(arr, i, v), codegen
-
-
-SPINS = 2000  # spin_wait's PAUSEs (some microseconds) before it gives the core away
-
-
-@intrinsic
-def spin_wait(typingctx, n):
-    """One step of a wait loop, the n-th (from 1): a PAUSE for the first SPINS, then
-    sched_yield, which lets a descheduled thread that the loop waits for have the core
-    (spinning beside a busy process would keep it from it). Linux and other POSIX systems."""
-    if not isinstance(n, types.Integer):
-        return None
-
-    def codegen(context, builder, sig, args):
-        n64 = context.cast(builder, args[0], sig.args[0], types.int64)
-        spin = builder.icmp_signed("<=", n64, ir.Constant(n64.type, SPINS))
-        with builder.if_else(spin) as (then, otherwise):
-            with then:
-                if _X86:
-                    _call(builder, "llvm.x86.sse2.pause", ir.VoidType(), [])
-            with otherwise:
-                fn = cgutils.get_or_insert_function(builder.module,
-                                                    ir.FunctionType(_I32, []), "sched_yield")
-                builder.call(fn, [])
-        return context.get_dummy_value()
-
-    return types.none(n), codegen
 
 
 _UMIN = f"llvm.vector.reduce.umin.v{LANES}i8"
@@ -366,7 +255,7 @@ def path_step(typingctx, cost, ci, lbuf, po, oo, p2m, mprev, p1, nd):
     def codegen(context, builder, sig, args):
         st = sig.args
         u8 = ir.IntType(8)
-        civ, pov, oov, p2v, mpv, ndv = (_intp(context, builder, sig, args, i)
+        civ, pov, oov, p2v, mpv, ndv = (_ix(context, builder, sig, args, i)
                                         for i in (1, 3, 4, 5, 6, 8))
         p1v = context.cast(builder, args[7], st[7], types.uint8)
         best = cgutils.alloca_once_value(builder, ir.Constant(ir.VectorType(u8, LANES),
@@ -411,8 +300,8 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
     def codegen(context, builder, sig, args):
         st = sig.args
         u8 = ir.IntType(8)
-        civ, aiv, ndv = (_intp(context, builder, sig, args, i) for i in (1, 7, 8))
-        npv = _intp(context, builder, sig, args, 4)
+        civ, aiv, ndv = (_ix(context, builder, sig, args, i) for i in (1, 7, 8))
+        npv = _ix(context, builder, sig, args, 4)
         ntwo = builder.icmp_signed(">", npv, ir.Constant(npv.type, 1))
         nmore = builder.icmp_signed(">", npv, ir.Constant(npv.type, 2))
         extra = builder.icmp_signed("==", npv, ir.Constant(npv.type, 5))
@@ -481,7 +370,7 @@ def cost_run(typingctx, a, crow, base, out, oi, nd):
 
     def codegen(context, builder, sig, args):
         st = sig.args
-        bv, oiv, ndv = (_intp(context, builder, sig, args, i) for i in (2, 4, 5))
+        bv, oiv, ndv = (_ix(context, builder, sig, args, i) for i in (2, 4, 5))
 
         def body(j0, n):
             qty = ir.VectorType(ir.IntType(64), n)
@@ -515,14 +404,14 @@ def _census_codegen(masked: bool):
     def codegen(context, builder, sig, args):
         st = sig.args
         u8, i64 = ir.IntType(8), ir.IntType(64)
-        bv, ncv, wv = (_intp(context, builder, sig, args, i) for i in (1, 3, 4))
+        bv, ncv, wv = (_ix(context, builder, sig, args, i) for i in (1, 3, 4))
         vty = ir.VectorType(u8, 64)
         zero = ir.Constant(vty, None)
         groups = builder.udiv(builder.add(ncv, ir.Constant(ncv.type, 7)),
                               ir.Constant(ncv.type, 8))
         last = builder.sub(ncv, ir.Constant(ncv.type, 1))
         if masked:
-            sbv = _intp(context, builder, sig, args, 8)
+            sbv = _ix(context, builder, sig, args, 8)
             tv = _splat(builder, context.cast(builder, args[9], st[9], types.uint8), vty)
 
         def offs(n):  # offs[n]

@@ -7,11 +7,14 @@ and unpredictable branches out of the per-pixel path. Callers guarantee indices 
 """
 from __future__ import annotations
 
+import platform
+
 from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 _TAIL = 16
+X86 = platform.machine().lower() in ("x86_64", "amd64")
 
 
 def _vector_bytes() -> int:

@@ -236,7 +236,8 @@ def vector_target() -> str:
     from numba import config
 
     from stereocam.stereo.simd import LANES
-    return f"numba target {config.CPU_NAME or binding.get_host_cpu_name()}, SGM vectors of {LANES} lanes"
+    target = getattr(config, "CPU_NAME", None) or binding.get_host_cpu_name()
+    return f"numba target {target}, SGM vectors of {LANES} lanes"
 
 
 def header(threads: int, busy: bool, repeat: int) -> str:
