@@ -11,7 +11,7 @@ bit-exact with tests/sgm_reference.py. Depends on stereocam.protocol, numpy and 
 The engine table (engines.py) keys the engines by the protocol's ``algorithm`` value; the device
 pipeline, replay, rematch and the benches select engines there. Names below import on first use.
 
-SGM pipeline (modules): sgm_params.py -> census.py -> sgm.py + sgm_simd.py (costs, paths,
+SGM pipeline (modules): sgm_params.py -> census.py (+ census_simd.py) -> sgm.py + sgm_simd.py (costs, paths,
 selection; 5 paths: sgm_one_pass.py over sgm.py's row stages; their threads' locks and atomics:
 atomics.py; the vector width: simd.LANES) -> postfilter.py (speckle filter).
 

@@ -9,7 +9,7 @@ there and the paths carry the disparity in from the edges instead of summing noi
 MARGIN_DIVISOR): 0 on a clean image (plain census), 2-3 DN on the simulator's sensor.
 
 Comparisons are made 64 pixels at a time into bytes (8 neighbours per byte) kept in registers,
-then shuffled into the uint64 codes (sgm_simd.census_codes, census_codes_masked with a margin;
+then shuffled into the uint64 codes (census_simd.census_codes, census_codes_masked with a margin;
 which one is chosen once per row). The right image's codes are stored mirrored along each row,
 so that the right pixels X - d of a left pixel X are contiguous and ascending in d.
 """
@@ -20,7 +20,7 @@ import numpy as np
 
 from .jit import C_ARITHMETIC
 from .sgm_params import MARGIN_DIVISOR
-from .sgm_simd import census_codes, census_codes_masked
+from .census_simd import census_codes, census_codes_masked
 
 _JIT = C_ARITHMETIC
 LAPLACIAN_MAX = 16 * 255  # largest |3x3 Laplacian| of a uint8 image

@@ -106,6 +106,11 @@ def _acc_ok(vs, sad) -> bool:
             and sad.ndim == 1 and vs.dtype == sad.dtype and vs.dtype in (types.int16, types.int32))
 
 
+def _u8_arrays(*tys) -> bool:
+    return all(isinstance(t, types.Array) and t.ndim == 1 and t.dtype == types.uint8
+               for t in tys)
+
+
 def _ix(context, builder, sig, args, i):
     return context.cast(builder, args[i], sig.args[i], types.intp)
 

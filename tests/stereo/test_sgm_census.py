@@ -1,4 +1,4 @@
-"""Census codes (census.py, sgm_simd.census_codes and census_codes_masked) against the numpy
+"""Census codes (census.py, census_simd.census_codes and census_codes_masked) against the numpy
 reference, in the layout the SGM kernels read: left codes per row, right codes mirrored, rows
 padded to 64 codes; with and without the census margin."""
 from __future__ import annotations
