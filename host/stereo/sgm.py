@@ -20,9 +20,9 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .atomics import spin_wait, try_lock, unlock
 from .jit import C_ARITHMETIC
 from .lanes import uidx
-from .atomics import spin_wait, try_lock, unlock
 from .sgm_simd import add_argmin, cost_run, count_le, diag_update, path_step, pixel_paths, \
     stream_copy
 

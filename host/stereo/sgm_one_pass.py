@@ -20,13 +20,13 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .atomics import fetch_add, load_acquire, spin_wait, store_release
 from .census import census_row_pair
 from .cpus import STAY, restore, spread_out
 from .jit import C_ARITHMETIC
 from .postfilter import clear_seam, join_seam, label_band
 from .sgm import C_CH, C_COLS, C_CW, C_INV, C_ND, C_SPR, C_SPW, C_TL, C_TR, _aggregate_row, \
     _finish_row, _kept_rows, run_stride
-from .atomics import fetch_add, load_acquire, spin_wait, store_release
 
 _JIT = C_ARITHMETIC
 

@@ -14,6 +14,8 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 _TAIL = 16
+_I32 = ir.IntType(32)
+_I64 = ir.IntType(64)
 X86 = platform.machine().lower() in ("x86_64", "amd64")
 
 
@@ -30,8 +32,6 @@ def _vector_bytes() -> int:
 
 
 LANES = _vector_bytes()  # lanes per chunk of the SGM kernels' disparity loops (sgm_simd)
-_I32 = ir.IntType(32)
-_I64 = ir.IntType(64)
 
 
 def _ptr(context, builder, aryty, ary, inds):
