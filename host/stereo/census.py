@@ -9,8 +9,9 @@ there and the paths carry the disparity in from the edges instead of summing noi
 MARGIN_DIVISOR): 0 on a clean image (plain census), 2-3 DN on the simulator's sensor.
 
 Comparisons are made 64 pixels at a time into bytes (8 neighbours per byte) kept in registers,
-then shuffled into the uint64 codes (census_simd.census_codes, census_codes_masked with a margin;
-which one is chosen once per row). The right image's codes are stored mirrored along each row,
+then shuffled into the left image's uint64 codes (census_simd.census_codes, census_codes_masked
+with a margin; which one is chosen once per row). The right image's codes are stored as those
+bytes, byte planes (crr[y, b]: byte b of each code; sgm_simd.cost_run), mirrored along each row,
 so that the right pixels X - d of a left pixel X are contiguous and ascending in d.
 """
 from __future__ import annotations
@@ -104,26 +105,25 @@ def _smooth_pad_row(img: np.ndarray, yy: int, rx: int, ry: int, row: np.ndarray)
 
 
 @nb.njit(**_JIT)
-def _census_row(pad: np.ndarray, y: int, offs: np.ndarray, out: np.ndarray, rev: bool,
-                spad: np.ndarray, sy: int, t: int) -> None:
-    """Census codes of row y of the padded image into out (its length, a multiple of 64, of
-    them; rev: mirrored, pixel x at out[len - 1 - x]); margin t > 0: row sy of spad, the
-    padded smoothed image, is the window's top row."""
+def _census_row(pad: np.ndarray, y: int, offs: np.ndarray, w: int, out: np.ndarray,
+                rev: bool, spad: np.ndarray, sy: int, t: int) -> None:
+    """The w (a multiple of 64) census codes of row y of the padded image into out (codes,
+    or byte planes: census_codes; rev: mirrored, pixel x at w - 1 - x); margin t > 0: row
+    sy of spad, the padded smoothed image, is the window's top row."""
     if t > 0:
-        census_codes_masked(pad.ravel(), y * pad.shape[1], offs, offs.shape[0] - 1,
-                            out.shape[0], out, rev, spad.ravel(), sy * spad.shape[1], t)
+        census_codes_masked(pad.ravel(), y * pad.shape[1], offs, offs.shape[0] - 1, w, out,
+                            rev, spad.ravel(), sy * spad.shape[1], t)
     else:
-        census_codes(pad.ravel(), y * pad.shape[1], offs, offs.shape[0] - 1, out.shape[0], out,
-                     rev)
+        census_codes(pad.ravel(), y * pad.shape[1], offs, offs.shape[0] - 1, w, out, rev)
 
 
 @nb.njit(parallel=True, **_JIT)
 def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, tl: int, tr: int,
                 bounds: np.ndarray, padl: np.ndarray, padr: np.ndarray, spadl: np.ndarray,
                 spadr: np.ndarray, offs: np.ndarray, cl: np.ndarray, crr: np.ndarray) -> None:
-    """cl[y, x] = census of left with margin tl; crr[y, W-1-x] = census of right with margin
-    tr (mirrored rows), W = cl.shape[1]: the width rounded up to 64 (codes past the image are
-    made too).
+    """cl[y, x] = census of left with margin tl; crr[y, b, W-1-x] = byte b of the census of
+    right with margin tr (byte planes, mirrored rows), W = cl.shape[1]: the width rounded up to
+    64 (codes past the image are made too).
 
     padl, padr, spadl, spadr (the smoothed images, read with a margin only): (h + ch - 1, w +
     cw - 1 + 64) uint8; offs: census_offsets over their rows; bounds: row stripes of the
@@ -142,8 +142,8 @@ def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, tl: int, 
     for s in nb.prange(nstripes):
         y0, y1 = h * s // nstripes, h * (s + 1) // nstripes
         for y in range(y0, y1):
-            _census_row(padl, y, offs, cl[y], False, spadl, y, tl)
-            _census_row(padr, y, offs, crr[y, :cl.shape[1]], True, spadr, y, tr)
+            _census_row(padl, y, offs, cl.shape[1], cl[y], False, spadl, y, tl)
+            _census_row(padr, y, offs, cl.shape[1], crr[y], True, spadr, y, tr)
 
 
 def census_offsets(cw: int, ch: int, stride: int) -> np.ndarray:
@@ -179,6 +179,6 @@ def census_row_pair(left: np.ndarray, right: np.ndarray, y: int, cw: int, ch: in
                     smooth[1, slot + ch] = smooth[1, slot]
                 key[slot] = yy
     _pad_rows(left, y, y + ch, rx, ry, raw, y)
-    _census_row(raw, 0, offs, cl[y], False, smooth[0], y % ch, tl)
+    _census_row(raw, 0, offs, cl.shape[1], cl[y], False, smooth[0], y % ch, tl)
     _pad_rows(right, y, y + ch, rx, ry, raw, y)
-    _census_row(raw, 0, offs, crr[y, :cl.shape[1]], True, smooth[1], y % ch, tr)
+    _census_row(raw, 0, offs, cl.shape[1], crr[y], True, smooth[1], y % ch, tr)

@@ -1,6 +1,6 @@
 """The census transform's bit packing as numba intrinsics (census.py's rows): per 64 pixels
 the comparisons go into eight byte vectors, which three rounds of two-source shuffles turn into
-64-bit codes."""
+64-bit codes, or which are stored as they are: byte planes (sgm_simd.cost_run's right codes)."""
 from __future__ import annotations
 
 from llvmlite import ir
@@ -24,12 +24,12 @@ def _zip(builder, a, b, lanes, half):
 _SAT = ("llvm.uadd.sat.v64i8", "llvm.usub.sat.v64i8")  # saturating a + b, a - b
 
 
-def _census_codegen(masked: bool):
+def _census_codegen(masked: bool, planes: bool):
     """census_codes' code generator; masked: census_codes_masked's (args 7, 8, 9: the
-    smoothed source, its base and the margin t)."""
+    smoothed source, its base and the margin t); planes: out is byte planes."""
     def codegen(context, builder, sig, args):
         st = sig.args
-        u8, i64 = ir.IntType(8), ir.IntType(64)
+        u8 = ir.IntType(8)
         bv, ncv, wv = (_ix(context, builder, sig, args, i) for i in (1, 3, 4))
         vty = ir.VectorType(u8, 64)
         zero = ir.Constant(vty, None)
@@ -73,46 +73,73 @@ def _census_codegen(masked: bool):
                         a = builder.or_(a, builder.select(hit, _splat(builder, bit, vty), zero))
                     builder.store(a, slot)
                 acc.append(builder.load(slot))
-            # bytes -> 16-bit pairs -> 32-bit quads -> 64-bit codes: code x = (acc[g][x])_g
-            pairs = [_zip(builder, acc[g], acc[g + 1], 64, h) for g in (0, 2, 4, 6)
-                     for h in (0, 1)]  # [pair][half]: 32 pixels each, 2 bytes per pixel
-            w16 = ir.VectorType(_I16, 32)
-            pairs = [builder.bitcast(v, w16) for v in pairs]
-            quads = [_zip(builder, pairs[2 * p + q // 2], pairs[2 * p + 2 + q // 2], 32, q % 2)
-                     for p in (0, 2) for q in range(4)]  # 16 pixels each, 4 bytes per pixel
-            w32 = ir.VectorType(_I32, 16)
-            quads = [builder.bitcast(v, w32) for v in quads]
-            q8 = ir.VectorType(i64, 8)
-            for c in range(8):  # 8 pixels each
-                code = builder.bitcast(_zip(builder, quads[c // 2], quads[4 + c // 2], 16, c % 2),
-                                       q8)
-                x = builder.add(x0, ir.Constant(x0.type, 8 * c))
-                flip = builder.shuffle_vector(code, code, ir.Constant(ir.VectorType(_I32, 8),
-                                                                      list(range(7, -1, -1))))
-                at = builder.select(args[6], builder.sub(builder.sub(wv, x), ir.Constant(
-                    x.type, 8)), x)
-                _vstore(builder, builder.select(args[6], flip, code),
-                        _ptr(context, builder, st[5], args[5], [at]))
+            if planes:
+                _store_planes(context, builder, acc, x0, wv, args[5], st[5], args[6])
+            else:
+                _store_codes(context, builder, acc, x0, wv, args[5], st[5], args[6])
         return context.get_dummy_value()
 
     return codegen
 
 
+def _store_planes(context, builder, acc, x0, wv, out, outty, rev):
+    """Byte g of code x0 + i (acc[g][i]) at out[g, x0 + i] (rev: out[g, w - 1 - x0 - i])."""
+    at = builder.select(rev, builder.sub(builder.sub(wv, x0), ir.Constant(x0.type, 64)), x0)
+    flip = ir.Constant(ir.VectorType(_I32, 64), list(range(63, -1, -1)))
+    for g in range(8):
+        v = builder.select(rev, builder.shuffle_vector(acc[g], acc[g], flip), acc[g])
+        _vstore(builder, v, _ptr(context, builder, outty, out, [ir.Constant(x0.type, g), at]))
+
+
+def _store_codes(context, builder, acc, x0, wv, out, outty, rev):
+    """Code x0 + i = (acc[g][i])_g at out[x0 + i] (rev: out[w - 1 - x0 - i])."""
+    i64 = ir.IntType(64)
+    # bytes -> 16-bit pairs -> 32-bit quads -> 64-bit codes: code x = (acc[g][x])_g
+    pairs = [_zip(builder, acc[g], acc[g + 1], 64, h) for g in (0, 2, 4, 6)
+             for h in (0, 1)]  # [pair][half]: 32 pixels each, 2 bytes per pixel
+    w16 = ir.VectorType(_I16, 32)
+    pairs = [builder.bitcast(v, w16) for v in pairs]
+    quads = [_zip(builder, pairs[2 * p + q // 2], pairs[2 * p + 2 + q // 2], 32, q % 2)
+             for p in (0, 2) for q in range(4)]  # 16 pixels each, 4 bytes per pixel
+    w32 = ir.VectorType(_I32, 16)
+    quads = [builder.bitcast(v, w32) for v in quads]
+    q8 = ir.VectorType(i64, 8)
+    for c in range(8):  # 8 pixels each
+        code = builder.bitcast(_zip(builder, quads[c // 2], quads[4 + c // 2], 16, c % 2),
+                               q8)
+        x = builder.add(x0, ir.Constant(x0.type, 8 * c))
+        flip = builder.shuffle_vector(code, code, ir.Constant(ir.VectorType(_I32, 8),
+                                                              list(range(7, -1, -1))))
+        at = builder.select(rev, builder.sub(builder.sub(wv, x), ir.Constant(
+            x.type, 8)), x)
+        _vstore(builder, builder.select(rev, flip, code),
+                _ptr(context, builder, outty, out, [at]))
+
+
+def _planes(out) -> bool:
+    """out is byte planes (2-D C-contiguous uint8, 8 rows) rather than codes (1-D uint64)."""
+    return out.ndim == 2 and out.dtype == types.uint8 and out.layout == "C"
+
+
 def _census_types(src, offs, out, rev) -> bool:
     return (_u8_arrays(src) and isinstance(offs, types.Array) and offs.dtype == types.int64
-            and isinstance(out, types.Array) and out.dtype == types.uint64
+            and isinstance(out, types.Array)
+            and (out.ndim == 1 and out.dtype == types.uint64 or _planes(out))
             and isinstance(rev, types.Boolean))
 
 
 @intrinsic
 def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
-    """out[x] (uint64; rev: out[w - 1 - x]) for x < w, a multiple of 64: bit n set where
-    src[base + offs[1 + n] + x] < src[base + offs[0] + x], n < ncmp <= 64 (uint8 src). Per
-    64 pixels the comparisons go into eight byte vectors (one per 8 bits, in registers),
-    which three rounds of two-source shuffles turn into the 64 codes."""
+    """Code x for x < w, a multiple of 64: bit n set where src[base + offs[1 + n] + x] <
+    src[base + offs[0] + x], n < ncmp <= 64 (uint8 src), into out[x] (uint64; rev: out[w - 1
+    - x]), or with out uint8 (8, >= w) its byte b into out[b, x] (rev: out[b, w - 1 - x]).
+    Per 64 pixels the comparisons go into eight byte vectors (one per 8 bits, in
+    registers): stored as they are as planes, or turned into the 64 codes by three rounds
+    of two-source shuffles."""
     if not _census_types(src, offs, out, rev):
         return None
-    return types.none(src, base, offs, ncmp, w, out, rev), _census_codegen(False)
+    return (types.none(src, base, offs, ncmp, w, out, rev),
+            _census_codegen(False, _planes(out)))
 
 
 @intrinsic
@@ -124,5 +151,5 @@ def census_codes_masked(typingctx, src, base, offs, ncmp, w, out, rev, ssrc, sba
             and isinstance(t, types.Integer)):
         return None
     return (types.none(src, base, offs, ncmp, w, out, rev, ssrc, sbase, t),
-            _census_codegen(True))
+            _census_codegen(True, _planes(out)))
 

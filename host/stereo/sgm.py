@@ -57,7 +57,8 @@ def _inside(X: int, md: int, nd: int) -> int:
 def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int, cols: int,
               maxc: int, out: np.ndarray) -> None:
     """out[x * nd + k] = popcount(cl[y, x0 + x] ^ census_R[y, x0 + x - md - k]), or maxc where
-    that right pixel is left of the image (crr's rows run nd codes past it)."""
+    that right pixel is left of the image (crr[y]: census_R's byte planes, mirrored, running nd
+    codes past it)."""
     w = cl.shape[1]
     for x in range(cols):
         cost_run(cl[y, uidx(x0 + x)], crr[y], w - 1 - x0 - x + md, out, x * nd,
@@ -322,7 +323,8 @@ def sgm_rows(img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.ndarray,
              disp: np.ndarray, cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
              pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray, rarg: np.ndarray,
              karg: np.ndarray) -> None:
-    """Disparity rows (before the speckle filter) of the census pair (cl, crr mirrored).
+    """Disparity rows (before the speckle filter) of the census pair (cl; crr, byte planes,
+    mirrored: census.census_pair).
 
     Scratch has one slice per group (leading axis 2); locks and done must be zero."""
     for g in nb.prange(2):

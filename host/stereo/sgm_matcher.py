@@ -56,7 +56,8 @@ class SGMMatcher:
         self.census_offs = census_offsets(p.census_width, p.census_height, padded[1])
         wc = (w + 63) & ~63  # census codes per row (census.census_pair)
         self.cl = np.empty((h, wc), np.uint64)
-        self.crr = np.zeros((h, wc + nd), np.uint64)  # + codes left of the image (unused)
+        # the right codes as byte planes (census.census_pair), + codes left of the image (unused)
+        self.crr = np.zeros((h, 8, wc + nd), np.uint8)
         cfg = np.zeros(_sgm.C_LEN, np.int64)
         cfg[[_sgm.C_ND, _sgm.C_MIND, _sgm.C_P1, _sgm.C_URATIO, _sgm.C_LRDIFF, _sgm.C_X0,
              _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV, _sgm.C_MAXC, _sgm.C_CW, _sgm.C_CH,

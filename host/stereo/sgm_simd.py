@@ -169,11 +169,12 @@ def stream_copy(typingctx, dst, src, n):
 
 _UMIN = f"llvm.vector.reduce.umin.v{LANES}i8"
 # Below 512-bit vectors a run's neighbours P[k-1], P[k+1] come cheaper from two unaligned loads
-# than from shuffles across the register's 128-bit halves: so for the vertical and diagonal
-# paths, whose predecessor was written a row ago. A horizontal step reads the run the previous
-# pixel just wrote, which an unaligned load would not get forwarded from the store. The loads
-# reach one byte before and after a run (after lbuf's last one: matcher._aligned allocates
-# more than it returns); 255 is OR-ed over those lanes.
+# than from shuffles across the register's 128-bit halves: so for every path of pixel_paths,
+# the horizontal one too (its step reads the run the previous pixel just wrote, which an
+# unaligned load does not get forwarded from the store, but the pass is bound by its
+# operations, not by that wait). path_step's lone kept path is bound by that chain: it
+# shuffles. The loads reach one byte before and after a run (after lbuf's last one:
+# matcher._aligned allocates more than it returns); 255 is OR-ed over those lanes.
 LOAD_NEIGHBOURS = LANES < 64
 
 
@@ -323,7 +324,7 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
             def step(v):
                 L = _step_chunk(context, builder, st[2], args[2], c, meta_v[4 * v:4 * v + 4],
                                 j0, n, ndv, *((p1s,) if v == 0 else p1ground),
-                                loads=LOAD_NEIGHBOURS and v > 0)
+                                loads=LOAD_NEIGHBOURS)
                 _keep_min(builder, best[v], L, n)
                 return builder.zext(L, wty)
 
@@ -357,26 +358,37 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
 
 
 @intrinsic
-def cost_run(typingctx, a, crow, base, out, oi, nd):
-    """out[oi+k] = popcount(a ^ crow[base+k]) for k < nd (census codes uint64, out uint8)."""
-    if not (a == types.uint64 and isinstance(crow, types.Array) and crow.ndim == 1
-            and crow.dtype == types.uint64 and _u8_arrays(out)):
+def cost_run(typingctx, a, planes, base, out, oi, nd):
+    """out[oi+k] = popcount(a ^ code[base+k]) for k < nd (census codes uint64, out uint8), the
+    codes as byte planes: planes[b, i] = byte b of code i (census_simd.census_codes' planes).
+    Per chunk eight XORs against a byte of a and byte popcounts, summed: no 64-bit popcount
+    to pack into bytes (LLVM's costs 30 shuffles per 32 codes below AVX-512)."""
+    if not (a == types.uint64 and isinstance(planes, types.Array) and planes.ndim == 2
+            and planes.dtype == types.uint8 and planes.layout == "C" and _u8_arrays(out)):
         return None
 
     def codegen(context, builder, sig, args):
         st = sig.args
+        u8 = ir.IntType(8)
         bv, oiv, ndv = (_ix(context, builder, sig, args, i) for i in (2, 4, 5))
+        a16 = builder.bitcast(builder.insert_element(
+            ir.Constant(ir.VectorType(args[0].type, 2), ir.Undefined), args[0],
+            ir.Constant(_I32, 0)), ir.VectorType(u8, 16))  # a's bytes, splat per byte below
 
         def body(j0, n):
-            qty = ir.VectorType(ir.IntType(64), n)
-            x = _vload(builder, _ptr(context, builder, st[1], args[1], [builder.add(bv, j0)]),
-                       qty)
-            pc = _call(builder, f"llvm.ctpop.v{n}i64", qty,
-                       [builder.xor(x, _splat(builder, args[0], qty))])
-            _vstore(builder, builder.trunc(pc, ir.VectorType(ir.IntType(8), n)),
+            vty = ir.VectorType(u8, n)
+            total = None
+            for b in range(8):
+                x = _vload(builder, _ptr(context, builder, st[1], args[1],
+                                         [ir.Constant(bv.type, b), builder.add(bv, j0)]), vty)
+                ab = builder.shuffle_vector(a16, ir.Constant(a16.type, ir.Undefined),
+                                            ir.Constant(ir.VectorType(_I32, n), [b] * n))
+                pc = _call(builder, f"llvm.ctpop.v{n}i8", vty, [builder.xor(x, ab)])
+                total = pc if total is None else builder.add(total, pc)
+            _vstore(builder, total,
                     _ptr(context, builder, st[3], args[3], [builder.add(oiv, j0)]))
 
         _chunked(builder, ndv, body, LANES)
         return context.get_dummy_value()
 
-    return types.none(a, crow, base, out, oi, nd), codegen
+    return types.none(a, planes, base, out, oi, nd), codegen

@@ -1,6 +1,6 @@
 """Census codes (census.py, census_simd.census_codes and census_codes_masked) against the numpy
-reference, in the layout the SGM kernels read: left codes per row, right codes mirrored, rows
-padded to 64 codes; with and without the census margin."""
+reference, in the layout the SGM kernels read: left codes per row, right codes as byte planes
+and mirrored, rows padded to 64 codes; with and without the census margin."""
 from __future__ import annotations
 
 import numpy as np
@@ -29,4 +29,7 @@ def test_census_codes_match_the_reference(w: int, cw: int, ch: int, paths: int,
     tl, tr = ref.margin(left, p), ref.margin(right, p)
     assert margin >= 0 or 0 < tl != tr
     np.testing.assert_array_equal(m.cl[:, :w], ref.census(left, cw, ch, tl))
-    np.testing.assert_array_equal(m.crr[:, wc - w:wc][:, ::-1], ref.census(right, cw, ch, tr))
+    assert m.crr.dtype == np.uint8 and m.crr.shape[1] == 8
+    planes = m.crr[:, :, wc - w:wc][:, :, ::-1].astype(np.uint64)
+    codes = sum(planes[:, b] << np.uint64(8 * b) for b in range(8))
+    np.testing.assert_array_equal(codes, ref.census(right, cw, ch, tr))
