@@ -28,12 +28,26 @@ def _i16(context, builder, sig, args, i):
     return context.cast(builder, args[i], sig.args[i], types.int16)
 
 
+def _key_halves(builder, t, k0):
+    """The int32 keys (t[i] << 16) | (k0 + i) of the n int16 lanes t (0 <= t[i] < 2^15), as
+    two n/2-lane vectors in no particular lane order: word i of t and of k0 + iota
+    interleaved within each 128-bit block, which x86 does in one unpack per vector."""
+    n = t.type.count
+    k = builder.add(_splat(builder, k0, t.type), ir.Constant(t.type, list(range(n))))
+    halves = []
+    for part in (0, 4):
+        idx = [i for blk in range(0, n, 8) for j in range(part, part + 4)
+               for i in (blk + j, n + blk + j)]
+        halves.append(builder.bitcast(builder.shuffle_vector(
+            k, t, ir.Constant(ir.VectorType(_I32, n), idx)), ir.VectorType(_I32, n // 2)))
+    return halves
+
+
 @intrinsic
 def add_argmin(typingctx, dst, di, src, si, nd):
     """dst[di+k] += src[si+k] for k < nd (src None: dst as it is); returns (m, first k with
-    dst[di+k] == m), m the minimum of the new values: the minimum in one pass, then the
-    first chunk holding it and its first lane (a compare mask's trailing zeros), reading
-    the new values again (from L1)."""
+    dst[di+k] == m), m the minimum of the new values (0 <= each < 2^15). One pass: the
+    minimum of the keys (value << 16) | k, whose low half is then the first k holding m."""
     add = not isinstance(src, (types.NoneType, types.Omitted))
     if not (_i16_arrays(dst) and (not add or _i16_arrays(src))):
         return None
@@ -43,8 +57,9 @@ def add_argmin(typingctx, dst, di, src, si, nd):
         st = sig.args
         div, siv, ndv = (_ix(context, builder, sig, args, i) for i in (1, 3, 4))
         i64 = ir.IntType(64)
-        wide = ir.VectorType(_I16, LANES)
-        best = cgutils.alloca_once_value(builder, ir.Constant(wide, [32767] * LANES))
+        half = LANES // 2
+        wide = ir.VectorType(_I32, half)
+        best = cgutils.alloca_once_value(builder, ir.Constant(wide, [0x7FFFFFFF] * half))
 
         def body(j0, n):
             vty = ir.VectorType(_I16, n)
@@ -55,31 +70,20 @@ def add_argmin(typingctx, dst, di, src, si, nd):
                                          [builder.add(siv, j0)]), vty)
                 t = builder.add(t, s)
                 _vstore(builder, t, pd)
-            if n < LANES:  # pad to LANES lanes with values that never win
-                pad = ir.Constant(ir.VectorType(_I32, LANES), list(range(n)) + [n] * (LANES - n))
-                t = builder.shuffle_vector(t, ir.Constant(vty, [32767] * n), pad)
-            b = builder.load(best)
-            builder.store(builder.select(builder.icmp_signed("<", t, b), t, b), best)
+            for key in _key_halves(builder, t, builder.trunc(j0, _I16)):
+                if n < LANES:  # pad to the slot's lanes with keys that never win
+                    pad = ir.Constant(ir.VectorType(_I32, half),
+                                      list(range(n // 2)) + [n // 2] * (half - n // 2))
+                    key = builder.shuffle_vector(key, ir.Constant(key.type, [0x7FFFFFFF] * (n // 2)),
+                                                 pad)
+                b = builder.load(best)
+                builder.store(builder.select(builder.icmp_signed("<", key, b), key, b), best)
 
         _chunked(builder, ndv, body, LANES)
-        m = _reduce_min(builder, builder.load(best))
-        k = cgutils.alloca_once_value(builder, ir.Constant(i64, 1 << 20))
-
-        def first(j0, n):
-            vty = ir.VectorType(_I16, n)
-            t = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(div, j0)]),
-                       vty)
-            hit = builder.zext(builder.bitcast(builder.icmp_signed("==", t, _splat(builder, m, vty)),
-                                               ir.IntType(n)), i64)
-            at = builder.add(builder.zext(j0, i64), _call(builder, "llvm.cttz.i64", i64,
-                                                          [hit, ir.Constant(ir.IntType(1), 0)]))
-            kk = builder.select(builder.icmp_unsigned("!=", hit, ir.Constant(i64, 0)), at,
-                                ir.Constant(i64, 1 << 20))
-            old = builder.load(k)
-            builder.store(builder.select(builder.icmp_unsigned("<", kk, old), kk, old), k)
-
-        _chunked(builder, ndv, first, LANES)
-        return context.make_tuple(builder, ret, [builder.sext(m, i64), builder.load(k)])
+        low = builder.sext(_reduce_min(builder, builder.load(best)), i64)
+        m = builder.ashr(low, ir.Constant(i64, 16))
+        k = builder.and_(low, ir.Constant(i64, 0xFFFF))
+        return context.make_tuple(builder, ret, [m, k])
 
     return ret(dst, di, src, si, nd), codegen
 
