@@ -24,7 +24,7 @@ from .atomics import spin_wait, try_lock, unlock
 from .jit import C_ARITHMETIC
 from .lanes import uidx
 from .sgm_simd import add_argmin, cost_run, count_le, diag_update, path_step, pixel_paths, \
-    stream_copy
+    stream_copy, sum_pos
 
 _JIT = C_ARITHMETIC
 
@@ -261,8 +261,8 @@ def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray | N
         if lrdiff >= 0:
             diag_update(acc, o, rmin, rarg, cols - 1 - x, nd)
         kk[x] = k
-        a = np.int64(acc[uidx(o + k - 1)]) if k > 0 else np.int64(0)
-        b = np.int64(acc[uidx(o + k + 1)]) if k < nd - 1 else np.int64(0)
+        a = np.int64(acc[uidx(o + sum_pos(k - 1, nd))]) if k > 0 else np.int64(0)
+        b = np.int64(acc[uidx(o + sum_pos(k + 1, nd))]) if k < nd - 1 else np.int64(0)
         if uratio > 0:
             thr = min(m + m * uratio // 100, 32767)
             near = np.int64((k > 0) & (a <= thr)) + np.int64((k < nd - 1) & (b <= thr))

@@ -5,13 +5,20 @@ Arrays are 1-D (uint8 path costs, int16 sums) with the disparity axis contiguous
 multiple of 16 and each loop walks it in chunks of simd.LANES lanes (one register of the CPU's
 widest vectors: 64 with AVX-512, 32 with AVX2), then 32/16-lane tails (simd._chunked). Callers
 guarantee indices are in range.
+
+The sums pixel_paths writes are in split order: each chunk of n disparities from j0 holds
+those of even k - j0 first, then the odd ones (sum_pos), which is how a register of byte path
+costs widens into 16-bit lanes without shuffles. The sums' readers here (add_argmin,
+count_le, diag_update) know it; others index them with sum_pos.
 """
 from __future__ import annotations
 
+import numba as nb
 from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
+from .jit import C_ARITHMETIC
 from .simd import LANES, X86, _call, _chunked, _ix, _u8_arrays, _ptr, _reduce_min, _splat, _vload, \
     _vstore
 
@@ -28,12 +35,39 @@ def _i16(context, builder, sig, args, i):
     return context.cast(builder, args[i], sig.args[i], types.int16)
 
 
+@nb.njit(inline="always", **C_ARITHMETIC)
+def sum_pos(k: int, nd: int) -> int:
+    """Where disparity k of a pixel's nd sums is (split order, see the module docstring)."""
+    top = nd & -LANES
+    j0, n = k & -LANES, LANES
+    if k >= top:  # in a tail: its chunks are the bits of nd - top, widest first
+        j0, n = top, LANES // 2
+        while (nd - top) & n == 0 or k >= j0 + n:
+            j0 += (nd - top) & n
+            n //= 2
+    r = k - j0
+    return j0 + (r >> 1) + (r & 1) * (n >> 1)
+
+
+def _split_labels(n):
+    """Disparity offsets (from the chunk's j0) of an n-lane chunk of sums in split order."""
+    return [2 * i for i in range(n // 2)] + [2 * i + 1 for i in range(n // 2)]
+
+
+def _natural(builder, v):
+    """A chunk of sums in split order put in disparity order."""
+    n = v.type.count
+    return builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(_I32, n), [
+        (k >> 1) + (k & 1) * (n >> 1) for k in range(n)]))
+
+
 def _key_halves(builder, t, k0):
-    """The int32 keys (t[i] << 16) | (k0 + i) of the n int16 lanes t (0 <= t[i] < 2^15), as
-    two n/2-lane vectors in no particular lane order: word i of t and of k0 + iota
-    interleaved within each 128-bit block, which x86 does in one unpack per vector."""
+    """The int32 keys (t[i] << 16) | k of the n int16 lanes t of a chunk of sums from k0 in
+    split order (0 <= t[i] < 2^15, k its disparity), as two n/2-lane vectors in no particular
+    lane order: words of t and of their k interleaved within each 128-bit block, which x86
+    does in one unpack per vector."""
     n = t.type.count
-    k = builder.add(_splat(builder, k0, t.type), ir.Constant(t.type, list(range(n))))
+    k = builder.add(_splat(builder, k0, t.type), ir.Constant(t.type, _split_labels(n)))
     halves = []
     for part in (0, 4):
         idx = [i for blk in range(0, n, 8) for j in range(part, part + 4)
@@ -45,9 +79,9 @@ def _key_halves(builder, t, k0):
 
 @intrinsic
 def add_argmin(typingctx, dst, di, src, si, nd):
-    """dst[di+k] += src[si+k] for k < nd (src None: dst as it is); returns (m, first k with
-    dst[di+k] == m), m the minimum of the new values (0 <= each < 2^15). One pass: the
-    minimum of the keys (value << 16) | k, whose low half is then the first k holding m."""
+    """dst[di+i] += src[si+i] for i < nd (src None: dst as it is); returns (m, first k
+    holding m), m the minimum of the new values (sums in split order, 0 <= each < 2^15). One
+    pass: the minimum of the keys (value << 16) | k, whose low half is then that k."""
     add = not isinstance(src, (types.NoneType, types.Omitted))
     if not (_i16_arrays(dst) and (not add or _i16_arrays(src))):
         return None
@@ -90,7 +124,7 @@ def add_argmin(typingctx, dst, di, src, si, nd):
 
 @intrinsic
 def count_le(typingctx, s, si, nd, thr):
-    """Number of k < nd with s[si+k] <= thr."""
+    """Number of k < nd with s[si+k] <= thr (any order)."""
     if not (_i16_arrays(s) and isinstance(thr, types.Integer)):
         return None
 
@@ -116,8 +150,9 @@ def count_le(typingctx, s, si, nd, thr):
 
 @intrinsic
 def diag_update(typingctx, s, si, rmin, rarg, ri, nd):
-    """Right-image winner bookkeeping: where s[si+k] < rmin[ri+k], rmin[ri+k] = s[si+k] and
-    rarg[ri+k] = k (strictly smaller only: the first minimum in scan order is kept)."""
+    """Right-image winner bookkeeping: where S[k] < rmin[ri+k], rmin[ri+k] = S[k] and
+    rarg[ri+k] = k (strictly smaller only: the first minimum in scan order is kept); S the
+    sums from s[si] (split order)."""
     if not _i16_arrays(s, rmin, rarg):
         return None
 
@@ -127,8 +162,8 @@ def diag_update(typingctx, s, si, rmin, rarg, ri, nd):
 
         def body(j0, n):
             vty = ir.VectorType(_I16, n)
-            x = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(siv, j0)]),
-                       vty)
+            x = _natural(builder, _vload(builder, _ptr(context, builder, st[0], args[0],
+                                                       [builder.add(siv, j0)]), vty))
             pr = _ptr(context, builder, st[2], args[2], [builder.add(riv, j0)])
             pa = _ptr(context, builder, st[3], args[3], [builder.add(riv, j0)])
             r = _vload(builder, pr, vty)
@@ -285,12 +320,15 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
           L_v[k] = cost[ci+k] + min(P, min(P[-1] +sat a, P[+1] +sat b), p2m) - mprev,
           P = lbuf[po+k], (a, b) = (p1, p1) for v = 0 (horizontal), else p1pair
           lbuf[oo+k] = L_v[k];  mins[v] = min_k L_v[k]
-        acc[ai+k] = sum_v L_v[k] (+ lbuf[meta[16]+k] when npaths is 5)   (int16; not
-        written when npaths is 1)
+        acc[ai + sum_pos(k, nd)] = sum_v L_v[k] (+ lbuf[meta[16]+k] when npaths is 5)
+        (int16, split order; not written when npaths is 1)
 
     Path costs are uint8 (the caller keeps every L <= 255 and passes p2m <= 255; P beyond the
     run's ends is 255, and +p1 saturates), so one register holds LANES disparities. The
-    cost and the sum stay in registers across the paths."""
+    cost and the sum stay in registers across the paths. The sum widens without shuffles:
+    each register of L, read as 16-bit words, adds to T (the even disparities' sum plus 256
+    times the odd ones', mod 2^16) and, shifted right by 8, to O (the odd ones' sum); the
+    even ones' are T - (O << 8), exact as every sum is below 2^15."""
     if not (_u8_arrays(cost, lbuf) and _i16_arrays(acc, mins)
             and isinstance(meta, types.UniTuple) and meta.count == 17
             and isinstance(meta.dtype, types.Integer)
@@ -318,10 +356,11 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
             return _vload(builder, _ptr(context, builder, st[2], args[2], [off]), vty)
 
         def body(j0, n):
-            vty, wty = ir.VectorType(u8, n), ir.VectorType(_I16, n)
+            vty, hty = ir.VectorType(u8, n), ir.VectorType(_I16, n // 2)
+            eight = ir.Constant(hty, [8] * (n // 2))
             c = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(civ, j0)]),
                        vty)
-            total = cgutils.alloca_once(builder, wty)
+            sums = [cgutils.alloca_once(builder, hty) for _ in range(2)]  # T, O
             p1s = _splat(builder, p1v, vty)
             p1ground = (_splat(builder, p1lo, vty), _splat(builder, p1hi, vty))
 
@@ -330,19 +369,30 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
                                 j0, n, ndv, *((p1s,) if v == 0 else p1ground),
                                 loads=LOAD_NEIGHBOURS)
                 _keep_min(builder, best[v], L, n)
-                return builder.zext(L, wty)
+                return L
+
+            def add(*regs):  # T += the registers as words, O += their odd bytes
+                for slot, f in zip(sums, (lambda w: w, lambda w: builder.lshr(w, eight))):
+                    t = builder.load(slot)
+                    for r in regs:
+                        t = builder.add(t, f(builder.bitcast(r, hty)))
+                    builder.store(t, slot)
 
             first = step(0)
             with builder.if_then(ntwo, likely=True):
-                builder.store(builder.add(first, step(1)), total)
+                for slot in sums:
+                    builder.store(ir.Constant(hty, None), slot)
+                add(first, step(1))
                 with builder.if_then(nmore, likely=True):
-                    builder.store(builder.add(builder.load(total),
-                                              builder.add(step(2), step(3))), total)
+                    add(step(2), step(3))
                 with builder.if_then(extra, likely=True):
-                    builder.store(builder.add(builder.load(total), builder.zext(
-                        lb(builder.add(meta_v[16], j0), vty), wty)), total)
-                _vstore(builder, builder.load(total),
-                        _ptr(context, builder, st[6], args[6], [builder.add(aiv, j0)]))
+                    add(lb(builder.add(meta_v[16], j0), vty))
+                odd = builder.load(sums[1])
+                even = builder.sub(builder.load(sums[0]), builder.shl(odd, eight))
+                at = builder.add(aiv, j0)
+                _vstore(builder, even, _ptr(context, builder, st[6], args[6], [at]))
+                _vstore(builder, odd, _ptr(context, builder, st[6], args[6], [
+                    builder.add(at, ir.Constant(at.type, n // 2))]))
 
         _chunked(builder, ndv, body, LANES)
         for v in range(4):
