@@ -9,10 +9,10 @@ there and the paths carry the disparity in from the edges instead of summing noi
 MARGIN_DIVISOR): 0 on a clean image (plain census), 2-3 DN on the simulator's sensor.
 
 Comparisons are made 64 pixels at a time into bytes (8 neighbours per byte) kept in registers,
-then shuffled into the left image's uint64 codes (census_simd.census_codes, census_codes_masked
-with a margin; which one is chosen once per row). The right image's codes are stored as those
-bytes, byte planes (crr[y, b]: byte b of each code; sgm_simd.cost_run), mirrored along each row,
-so that the right pixels X - d of a left pixel X are contiguous and ascending in d.
+then stored as they are, byte planes (cl[y, b], crr[y, b]: byte b of each code of row y;
+census_simd.census_codes, census_codes_masked with a margin, which one chosen once per row;
+sgm_simd.cost_run reads them). The right image's codes are stored mirrored along each row, so
+that the right pixels X - d of a left pixel X are contiguous and ascending in d.
 """
 from __future__ import annotations
 
@@ -121,8 +121,8 @@ def _census_row(pad: np.ndarray, y: int, offs: np.ndarray, w: int, out: np.ndarr
 def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, tl: int, tr: int,
                 bounds: np.ndarray, padl: np.ndarray, padr: np.ndarray, spadl: np.ndarray,
                 spadr: np.ndarray, offs: np.ndarray, cl: np.ndarray, crr: np.ndarray) -> None:
-    """cl[y, x] = census of left with margin tl; crr[y, b, W-1-x] = byte b of the census of
-    right with margin tr (byte planes, mirrored rows), W = cl.shape[1]: the width rounded up to
+    """cl[y, b, x] = byte b of the census of left with margin tl; crr[y, b, W-1-x] = that of
+    right with margin tr (byte planes; mirrored rows), W = cl.shape[2]: the width rounded up to
     64 (codes past the image are made too).
 
     padl, padr, spadl, spadr (the smoothed images, read with a margin only): (h + ch - 1, w +
@@ -142,8 +142,8 @@ def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, tl: int, 
     for s in nb.prange(nstripes):
         y0, y1 = h * s // nstripes, h * (s + 1) // nstripes
         for y in range(y0, y1):
-            _census_row(padl, y, offs, cl.shape[1], cl[y], False, spadl, y, tl)
-            _census_row(padr, y, offs, cl.shape[1], crr[y], True, spadr, y, tr)
+            _census_row(padl, y, offs, cl.shape[2], cl[y], False, spadl, y, tl)
+            _census_row(padr, y, offs, cl.shape[2], crr[y], True, spadr, y, tr)
 
 
 def census_offsets(cw: int, ch: int, stride: int) -> np.ndarray:
@@ -179,6 +179,6 @@ def census_row_pair(left: np.ndarray, right: np.ndarray, y: int, cw: int, ch: in
                     smooth[1, slot + ch] = smooth[1, slot]
                 key[slot] = yy
     _pad_rows(left, y, y + ch, rx, ry, raw, y)
-    _census_row(raw, 0, offs, cl.shape[1], cl[y], False, smooth[0], y % ch, tl)
+    _census_row(raw, 0, offs, cl.shape[2], cl[y], False, smooth[0], y % ch, tl)
     _pad_rows(right, y, y + ch, rx, ry, raw, y)
-    _census_row(raw, 0, offs, cl.shape[1], crr[y], True, smooth[1], y % ch, tr)
+    _census_row(raw, 0, offs, cl.shape[2], crr[y], True, smooth[1], y % ch, tr)

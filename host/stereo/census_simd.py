@@ -1,6 +1,6 @@
 """The census transform's bit packing as numba intrinsics (census.py's rows): per 64 pixels
 the comparisons go into eight byte vectors, which three rounds of two-source shuffles turn into
-64-bit codes, or which are stored as they are: byte planes (sgm_simd.cost_run's right codes)."""
+64-bit codes, or which are stored as they are: byte planes (what sgm_simd.cost_run reads)."""
 from __future__ import annotations
 
 from llvmlite import ir

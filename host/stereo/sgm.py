@@ -56,12 +56,12 @@ def _inside(X: int, md: int, nd: int) -> int:
 @nb.njit(**_JIT)
 def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int, cols: int,
               maxc: int, out: np.ndarray) -> None:
-    """out[x * nd + k] = popcount(cl[y, x0 + x] ^ census_R[y, x0 + x - md - k]), or maxc where
-    that right pixel is left of the image (crr[y]: census_R's byte planes, mirrored, running nd
-    codes past it)."""
-    w = cl.shape[1]
+    """out[x * nd + k] = popcount(census_L[y, x0 + x] ^ census_R[y, x0 + x - md - k]), or maxc
+    where that right pixel is left of the image (cl[y], crr[y]: their byte planes, census_R's
+    mirrored and running nd codes past it)."""
+    w = cl.shape[2]
     for x in range(cols):
-        cost_run(cl[y, uidx(x0 + x)], crr[y], w - 1 - x0 - x + md, out, x * nd,
+        cost_run(cl[y], x0 + x, crr[y], w - 1 - x0 - x + md, out, x * nd,
                  _inside(x0 + x, md, nd))
     for x in range(min(cols, nd - 1 - x0 + md)):  # k > x0 + x - md is outside
         out[x * nd + x0 + x - md + 1:(x + 1) * nd] = maxc
@@ -202,7 +202,7 @@ def _kept_rows(g: int, y0: int, y1: int, hb: int, img: np.ndarray, cl: np.ndarra
     between steps, and the other row's step fills it."""
     nd, md, p1 = cfg[C_ND], cfg[C_MIND], cfg[C_P1]
     x0, cols, maxc = cfg[C_X0], cfg[C_COLS], cfg[C_MAXC]
-    w = cl.shape[1]
+    w = cl.shape[2]
     stride = run_stride(nd)
     k0, zero = hb + 3 * stride, hb + 2 * stride
     k1, o1 = k0 + cols * stride, cols * nd
@@ -214,9 +214,9 @@ def _kept_rows(g: int, y0: int, y1: int, hb: int, img: np.ndarray, cl: np.ndarra
         x = i if g == 0 else cols - 1 - i
         X = x0 + x
         inside = _inside(X, md, nd)
-        cost_run(cl[y0, uidx(X)], crr[y0], w - 1 - X + md, cost, x * nd, inside)
+        cost_run(cl[y0], X, crr[y0], w - 1 - X + md, cost, x * nd, inside)
         if two:
-            cost_run(cl[y1, uidx(X)], crr[y1], w - 1 - X + md, cost, o1 + x * nd, inside)
+            cost_run(cl[y1], X, crr[y1], w - 1 - X + md, cost, o1 + x * nd, inside)
         if x < outside:
             cost[x * nd + X - md + 1:(x + 1) * nd] = maxc
             if two:

@@ -55,7 +55,7 @@ class SGMMatcher:
             self.spadr = np.zeros(padded, np.uint8)
         self.census_offs = census_offsets(p.census_width, p.census_height, padded[1])
         wc = (w + 63) & ~63  # census codes per row (census.census_pair)
-        self.cl = np.empty((h, wc), np.uint64)
+        self.cl = np.empty((h, 8, wc), np.uint8)  # the left codes as byte planes (census_pair)
         # the right codes as byte planes (census.census_pair), + codes left of the image (unused)
         self.crr = np.zeros((h, 8, wc + nd), np.uint8)
         cfg = np.zeros(_sgm.C_LEN, np.int64)

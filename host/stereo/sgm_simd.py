@@ -412,37 +412,36 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
 
 
 @intrinsic
-def cost_run(typingctx, a, planes, base, out, oi, nd):
-    """out[oi+k] = popcount(a ^ code[base+k]) for k < nd (census codes uint64, out uint8), the
-    codes as byte planes: planes[b, i] = byte b of code i (census_simd.census_codes' planes).
-    Per chunk eight XORs against a byte of a and byte popcounts, summed: no 64-bit popcount
-    to pack into bytes (LLVM's costs 30 shuffles per 32 codes below AVX-512)."""
-    if not (a == types.uint64 and isinstance(planes, types.Array) and planes.ndim == 2
-            and planes.dtype == types.uint8 and planes.layout == "C" and _u8_arrays(out)):
+def cost_run(typingctx, left, li, right, base, out, oi, nd):
+    """out[oi+k] = popcount(L ^ R[base+k]) for k < nd (census codes; out uint8), L the code
+    li of ``left`` and R those of ``right``, both byte planes (census_simd.census_codes'
+    planes: [b, i] = byte b of code i). Per chunk eight XORs against a broadcast byte of L
+    and byte popcounts, summed: no 64-bit popcount to pack into bytes (LLVM's takes 30
+    shuffles per 32 codes below AVX-512)."""
+    if not (all(isinstance(t, types.Array) and t.ndim == 2 and t.dtype == types.uint8
+                and t.layout == "C" for t in (left, right)) and _u8_arrays(out)):
         return None
 
     def codegen(context, builder, sig, args):
         st = sig.args
         u8 = ir.IntType(8)
-        bv, oiv, ndv = (_ix(context, builder, sig, args, i) for i in (2, 4, 5))
-        a16 = builder.bitcast(builder.insert_element(
-            ir.Constant(ir.VectorType(args[0].type, 2), ir.Undefined), args[0],
-            ir.Constant(_I32, 0)), ir.VectorType(u8, 16))  # a's bytes, splat per byte below
+        liv, bv, oiv, ndv = (_ix(context, builder, sig, args, i) for i in (1, 3, 5, 6))
+        lbytes = [builder.load(_ptr(context, builder, st[0], args[0],
+                                    [ir.Constant(liv.type, b), liv])) for b in range(8)]
 
         def body(j0, n):
             vty = ir.VectorType(u8, n)
             total = None
             for b in range(8):
-                x = _vload(builder, _ptr(context, builder, st[1], args[1],
+                x = _vload(builder, _ptr(context, builder, st[2], args[2],
                                          [ir.Constant(bv.type, b), builder.add(bv, j0)]), vty)
-                ab = builder.shuffle_vector(a16, ir.Constant(a16.type, ir.Undefined),
-                                            ir.Constant(ir.VectorType(_I32, n), [b] * n))
-                pc = _call(builder, f"llvm.ctpop.v{n}i8", vty, [builder.xor(x, ab)])
+                pc = _call(builder, f"llvm.ctpop.v{n}i8", vty,
+                           [builder.xor(x, _splat(builder, lbytes[b], vty))])
                 total = pc if total is None else builder.add(total, pc)
             _vstore(builder, total,
-                    _ptr(context, builder, st[3], args[3], [builder.add(oiv, j0)]))
+                    _ptr(context, builder, st[4], args[4], [builder.add(oiv, j0)]))
 
         _chunked(builder, ndv, body, LANES)
         return context.get_dummy_value()
 
-    return types.none(a, planes, base, out, oi, nd), codegen
+    return types.none(left, li, right, base, out, oi, nd), codegen

@@ -1,6 +1,6 @@
 """Census codes (census.py, census_simd.census_codes and census_codes_masked) against the numpy
-reference, in the layout the SGM kernels read: left codes per row, right codes as byte planes
-and mirrored, rows padded to 64 codes; with and without the census margin."""
+reference, in the layout the SGM kernels read: byte planes per row, the right codes mirrored,
+rows padded to 64 codes; with and without the census margin."""
 from __future__ import annotations
 
 import numpy as np
@@ -24,12 +24,16 @@ def test_census_codes_match_the_reference(w: int, cw: int, ch: int, paths: int,
                   census_margin=margin)
     m = SGMMatcher(left.shape, p)
     m.match(left, right)
-    wc = m.cl.shape[1]
+    wc = m.cl.shape[2]
     assert wc % 64 == 0 and wc >= w
     tl, tr = ref.margin(left, p), ref.margin(right, p)
     assert margin >= 0 or 0 < tl != tr
-    np.testing.assert_array_equal(m.cl[:, :w], ref.census(left, cw, ch, tl))
-    assert m.crr.dtype == np.uint8 and m.crr.shape[1] == 8
-    planes = m.crr[:, :, wc - w:wc][:, :, ::-1].astype(np.uint64)
-    codes = sum(planes[:, b] << np.uint64(8 * b) for b in range(8))
-    np.testing.assert_array_equal(codes, ref.census(right, cw, ch, tr))
+    np.testing.assert_array_equal(_codes(m.cl[:, :, :w]), ref.census(left, cw, ch, tl))
+    np.testing.assert_array_equal(_codes(m.crr[:, :, wc - w:wc][:, :, ::-1]),
+                                  ref.census(right, cw, ch, tr))
+
+
+def _codes(planes: np.ndarray) -> np.ndarray:
+    """uint64 codes from byte planes (rows, 8, codes)."""
+    assert planes.dtype == np.uint8 and planes.shape[1] == 8
+    return sum(planes[:, b].astype(np.uint64) << np.uint64(8 * b) for b in range(8))
