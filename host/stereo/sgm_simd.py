@@ -355,7 +355,7 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
         def lb(off, vty):
             return _vload(builder, _ptr(context, builder, st[2], args[2], [off]), vty)
 
-        def body(j0, n):
+        def body(j0, n, ground):
             vty, hty = ir.VectorType(u8, n), ir.VectorType(_I16, n // 2)
             eight = ir.Constant(hty, [8] * (n // 2))
             c = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(civ, j0)]),
@@ -366,7 +366,7 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
 
             def step(v):
                 L = _step_chunk(context, builder, st[2], args[2], c, meta_v[4 * v:4 * v + 4],
-                                j0, n, ndv, *((p1s,) if v == 0 else p1ground),
+                                j0, n, ndv, *((p1s,) if v == 0 or not ground else p1ground),
                                 loads=LOAD_NEIGHBOURS)
                 _keep_min(builder, best[v], L, n)
                 return L
@@ -394,7 +394,12 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
                 _vstore(builder, odd, _ptr(context, builder, st[6], args[6], [
                     builder.add(at, ir.Constant(at.type, n // 2))]))
 
-        _chunked(builder, ndv, body, LANES)
+        # p1pair's two steps equal (no ground step on this row): one saturating add per path
+        with builder.if_else(builder.icmp_unsigned("==", p1lo, p1hi)) as (same, ground):
+            with same:
+                _chunked(builder, ndv, lambda j0, n: body(j0, n, False), LANES)
+            with ground:
+                _chunked(builder, ndv, lambda j0, n: body(j0, n, True), LANES)
         for v in range(4):
             def put(v=v):
                 low = _call(builder, _UMIN, u8,
