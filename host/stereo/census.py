@@ -11,7 +11,7 @@ MARGIN_DIVISOR): 0 on a clean image (plain census), 2-3 DN on the simulator's se
 Comparisons are made 64 pixels at a time into bytes (8 neighbours per byte) kept in registers,
 then stored as they are, byte planes (cl[y, b], crr[y, b]: byte b of each code of row y;
 census_simd.census_codes, census_codes_masked with a margin, which one chosen once per row;
-sgm_simd.cost_run reads them). The right image's codes are stored mirrored along each row, so
+census_simd.cost_run reads them). The right image's codes are stored mirrored along each row, so
 that the right pixels X - d of a left pixel X are contiguous and ascending in d.
 """
 from __future__ import annotations

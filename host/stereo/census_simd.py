@@ -1,32 +1,21 @@
-"""The census transform's bit packing as numba intrinsics (census.py's rows): per 64 pixels
-the comparisons go into eight byte vectors, which three rounds of two-source shuffles turn into
-64-bit codes, or which are stored as they are: byte planes (what sgm_simd.cost_run reads)."""
+"""The census transform's codes as byte planes, and their Hamming costs, as numba intrinsics:
+per 64 pixels census.py's rows put the comparisons into eight byte vectors, stored as they are
+(census_codes); cost_run XORs and counts them a plane at a time for the SGM kernels."""
 from __future__ import annotations
 
 from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-from .simd import _call, _ix, _ptr, _splat, _u8_arrays, _vload, _vstore
+from .simd import LANES, _call, _chunked, _ix, _ptr, _splat, _u8_arrays, _vload, _vstore
 
-_I16 = ir.IntType(16)
 _I32 = ir.IntType(32)
-
-
-def _zip(builder, a, b, lanes, half):
-    """Lanes half*lanes/2 .. of a and b interleaved: (a[i], b[i]) for lanes/2 indices i from
-    half * lanes / 2, as one lanes-lane vector (a two-source shuffle)."""
-    n = lanes // 2
-    idx = [k for i in range(half * n, half * n + n) for k in (i, lanes + i)]
-    return builder.shuffle_vector(a, b, ir.Constant(ir.VectorType(_I32, lanes), idx))
-
-
 _SAT = ("llvm.uadd.sat.v64i8", "llvm.usub.sat.v64i8")  # saturating a + b, a - b
 
 
-def _census_codegen(masked: bool, planes: bool):
+def _census_codegen(masked: bool):
     """census_codes' code generator; masked: census_codes_masked's (args 7, 8, 9: the
-    smoothed source, its base and the margin t); planes: out is byte planes."""
+    smoothed source, its base and the margin t)."""
     def codegen(context, builder, sig, args):
         st = sig.args
         u8 = ir.IntType(8)
@@ -73,10 +62,7 @@ def _census_codegen(masked: bool, planes: bool):
                         a = builder.or_(a, builder.select(hit, _splat(builder, bit, vty), zero))
                     builder.store(a, slot)
                 acc.append(builder.load(slot))
-            if planes:
-                _store_planes(context, builder, acc, x0, wv, args[5], st[5], args[6])
-            else:
-                _store_codes(context, builder, acc, x0, wv, args[5], st[5], args[6])
+            _store_planes(context, builder, acc, x0, wv, args[5], st[5], args[6])
         return context.get_dummy_value()
 
     return codegen
@@ -91,55 +77,26 @@ def _store_planes(context, builder, acc, x0, wv, out, outty, rev):
         _vstore(builder, v, _ptr(context, builder, outty, out, [ir.Constant(x0.type, g), at]))
 
 
-def _store_codes(context, builder, acc, x0, wv, out, outty, rev):
-    """Code x0 + i = (acc[g][i])_g at out[x0 + i] (rev: out[w - 1 - x0 - i])."""
-    i64 = ir.IntType(64)
-    # bytes -> 16-bit pairs -> 32-bit quads -> 64-bit codes: code x = (acc[g][x])_g
-    pairs = [_zip(builder, acc[g], acc[g + 1], 64, h) for g in (0, 2, 4, 6)
-             for h in (0, 1)]  # [pair][half]: 32 pixels each, 2 bytes per pixel
-    w16 = ir.VectorType(_I16, 32)
-    pairs = [builder.bitcast(v, w16) for v in pairs]
-    quads = [_zip(builder, pairs[2 * p + q // 2], pairs[2 * p + 2 + q // 2], 32, q % 2)
-             for p in (0, 2) for q in range(4)]  # 16 pixels each, 4 bytes per pixel
-    w32 = ir.VectorType(_I32, 16)
-    quads = [builder.bitcast(v, w32) for v in quads]
-    q8 = ir.VectorType(i64, 8)
-    for c in range(8):  # 8 pixels each
-        code = builder.bitcast(_zip(builder, quads[c // 2], quads[4 + c // 2], 16, c % 2),
-                               q8)
-        x = builder.add(x0, ir.Constant(x0.type, 8 * c))
-        flip = builder.shuffle_vector(code, code, ir.Constant(ir.VectorType(_I32, 8),
-                                                              list(range(7, -1, -1))))
-        at = builder.select(rev, builder.sub(builder.sub(wv, x), ir.Constant(
-            x.type, 8)), x)
-        _vstore(builder, builder.select(rev, flip, code),
-                _ptr(context, builder, outty, out, [at]))
-
-
-def _planes(out) -> bool:
-    """out is byte planes (2-D C-contiguous uint8, 8 rows) rather than codes (1-D uint64)."""
-    return out.ndim == 2 and out.dtype == types.uint8 and out.layout == "C"
+def _planes(*tys) -> bool:
+    """Each is byte planes: a 2-D C-contiguous uint8 array, [b, i] byte b of code i."""
+    return all(isinstance(t, types.Array) and t.ndim == 2 and t.dtype == types.uint8
+               and t.layout == "C" for t in tys)
 
 
 def _census_types(src, offs, out, rev) -> bool:
     return (_u8_arrays(src) and isinstance(offs, types.Array) and offs.dtype == types.int64
-            and isinstance(out, types.Array)
-            and (out.ndim == 1 and out.dtype == types.uint64 or _planes(out))
-            and isinstance(rev, types.Boolean))
+            and _planes(out) and isinstance(rev, types.Boolean))
 
 
 @intrinsic
 def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
     """Code x for x < w, a multiple of 64: bit n set where src[base + offs[1 + n] + x] <
-    src[base + offs[0] + x], n < ncmp <= 64 (uint8 src), into out[x] (uint64; rev: out[w - 1
-    - x]), or with out uint8 (8, >= w) its byte b into out[b, x] (rev: out[b, w - 1 - x]).
-    Per 64 pixels the comparisons go into eight byte vectors (one per 8 bits, in
-    registers): stored as they are as planes, or turned into the 64 codes by three rounds
-    of two-source shuffles."""
+    src[base + offs[0] + x], n < ncmp <= 64 (uint8 src), as byte planes: its byte b into
+    out[b, x] (uint8 (8, >= w); rev: out[b, w - 1 - x]). Per 64 pixels the comparisons go
+    into eight byte vectors (one per 8 bits, in registers), stored as they are."""
     if not _census_types(src, offs, out, rev):
         return None
-    return (types.none(src, base, offs, ncmp, w, out, rev),
-            _census_codegen(False, _planes(out)))
+    return types.none(src, base, offs, ncmp, w, out, rev), _census_codegen(False)
 
 
 @intrinsic
@@ -151,5 +108,38 @@ def census_codes_masked(typingctx, src, base, offs, ncmp, w, out, rev, ssrc, sba
             and isinstance(t, types.Integer)):
         return None
     return (types.none(src, base, offs, ncmp, w, out, rev, ssrc, sbase, t),
-            _census_codegen(True, _planes(out)))
+            _census_codegen(True))
 
+
+@intrinsic
+def cost_run(typingctx, left, li, right, base, out, oi, nd):
+    """out[oi+k] = popcount(L ^ R[base+k]) for k < nd (census codes; out uint8), L the code
+    li of ``left`` and R those of ``right``, both byte planes (census_codes'). Per chunk
+    eight XORs against a broadcast byte of L and byte popcounts, summed: no 64-bit popcount
+    to pack into bytes (LLVM's takes 30 shuffles per 32 codes below AVX-512)."""
+    if not (_planes(left, right) and _u8_arrays(out)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        st = sig.args
+        u8 = ir.IntType(8)
+        liv, bv, oiv, ndv = (_ix(context, builder, sig, args, i) for i in (1, 3, 5, 6))
+        lbytes = [builder.load(_ptr(context, builder, st[0], args[0],
+                                    [ir.Constant(liv.type, b), liv])) for b in range(8)]
+
+        def body(j0, n):
+            vty = ir.VectorType(u8, n)
+            total = None
+            for b in range(8):
+                x = _vload(builder, _ptr(context, builder, st[2], args[2],
+                                         [ir.Constant(bv.type, b), builder.add(bv, j0)]), vty)
+                pc = _call(builder, f"llvm.ctpop.v{n}i8", vty,
+                           [builder.xor(x, _splat(builder, lbytes[b], vty))])
+                total = pc if total is None else builder.add(total, pc)
+            _vstore(builder, total,
+                    _ptr(context, builder, st[4], args[4], [builder.add(oiv, j0)]))
+
+        _chunked(builder, ndv, body, LANES)
+        return context.get_dummy_value()
+
+    return types.none(left, li, right, base, out, oi, nd), codegen

@@ -23,8 +23,9 @@ import numpy as np
 from .atomics import spin_wait, try_lock, unlock
 from .jit import C_ARITHMETIC
 from .lanes import uidx
-from .sgm_simd import add_argmin, cost_run, count_le, diag_update, path_step, pixel_paths, \
-    stream_copy, sum_pos
+from .census_simd import cost_run
+from .sgm_simd import add_argmin, count_le, diag_update, path_step, pixel_paths, stream_copy, \
+    sum_pos
 
 _JIT = C_ARITHMETIC
 

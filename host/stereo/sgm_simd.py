@@ -414,39 +414,3 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
         return context.get_dummy_value()
 
     return types.none(cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, p1pair), codegen
-
-
-@intrinsic
-def cost_run(typingctx, left, li, right, base, out, oi, nd):
-    """out[oi+k] = popcount(L ^ R[base+k]) for k < nd (census codes; out uint8), L the code
-    li of ``left`` and R those of ``right``, both byte planes (census_simd.census_codes'
-    planes: [b, i] = byte b of code i). Per chunk eight XORs against a broadcast byte of L
-    and byte popcounts, summed: no 64-bit popcount to pack into bytes (LLVM's takes 30
-    shuffles per 32 codes below AVX-512)."""
-    if not (all(isinstance(t, types.Array) and t.ndim == 2 and t.dtype == types.uint8
-                and t.layout == "C" for t in (left, right)) and _u8_arrays(out)):
-        return None
-
-    def codegen(context, builder, sig, args):
-        st = sig.args
-        u8 = ir.IntType(8)
-        liv, bv, oiv, ndv = (_ix(context, builder, sig, args, i) for i in (1, 3, 5, 6))
-        lbytes = [builder.load(_ptr(context, builder, st[0], args[0],
-                                    [ir.Constant(liv.type, b), liv])) for b in range(8)]
-
-        def body(j0, n):
-            vty = ir.VectorType(u8, n)
-            total = None
-            for b in range(8):
-                x = _vload(builder, _ptr(context, builder, st[2], args[2],
-                                         [ir.Constant(bv.type, b), builder.add(bv, j0)]), vty)
-                pc = _call(builder, f"llvm.ctpop.v{n}i8", vty,
-                           [builder.xor(x, _splat(builder, lbytes[b], vty))])
-                total = pc if total is None else builder.add(total, pc)
-            _vstore(builder, total,
-                    _ptr(context, builder, st[4], args[4], [builder.add(oiv, j0)]))
-
-        _chunked(builder, ndv, body, LANES)
-        return context.get_dummy_value()
-
-    return types.none(left, li, right, base, out, oi, nd), codegen
