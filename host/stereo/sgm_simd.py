@@ -355,19 +355,19 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
         def lb(off, vty):
             return _vload(builder, _ptr(context, builder, st[2], args[2], [off]), vty)
 
-        def body(j0, n, ground):
+        def body(j0, n, ground):  # ground: the pair's steps differ
             vty, hty = ir.VectorType(u8, n), ir.VectorType(_I16, n // 2)
             eight = ir.Constant(hty, [8] * (n // 2))
             c = _vload(builder, _ptr(context, builder, st[0], args[0], [builder.add(civ, j0)]),
                        vty)
             sums = [cgutils.alloca_once(builder, hty) for _ in range(2)]  # T, O
             p1s = _splat(builder, p1v, vty)
-            p1ground = (_splat(builder, p1lo, vty), _splat(builder, p1hi, vty))
+            p1pair = (_splat(builder, p1lo, vty), _splat(builder, p1hi, vty))
 
             def step(v):
                 L = _step_chunk(context, builder, st[2], args[2], c, meta_v[4 * v:4 * v + 4],
-                                j0, n, ndv, *((p1s,) if v == 0 or not ground else p1ground),
-                                loads=LOAD_NEIGHBOURS)
+                                j0, n, ndv, *((p1s,) if v == 0 else p1pair if ground
+                                              else p1pair[:1]), loads=LOAD_NEIGHBOURS)
                 _keep_min(builder, best[v], L, n)
                 return L
 
@@ -395,10 +395,10 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
                     builder.add(at, ir.Constant(at.type, n // 2))]))
 
         # p1pair's two steps equal (no ground step on this row): one saturating add per path
-        with builder.if_else(builder.icmp_unsigned("==", p1lo, p1hi)) as (same, ground):
-            with same:
+        with builder.if_else(builder.icmp_unsigned("==", p1lo, p1hi)) as (equal, unequal):
+            with equal:
                 _chunked(builder, ndv, lambda j0, n: body(j0, n, False), LANES)
-            with ground:
+            with unequal:
                 _chunked(builder, ndv, lambda j0, n: body(j0, n, True), LANES)
         for v in range(4):
             def put(v=v):
