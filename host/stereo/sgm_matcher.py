@@ -66,10 +66,13 @@ class SGMMatcher:
             p.invalid_value, p.max_cost, p.census_width, p.census_height,
             p.speckle_window_size if p.use_speckle else 0, p.speckle_range, p.p1_ground_step]
         self.cfg = cfg
-        self.p2tab = np.full(256, p.p2, np.int64)  # effective P2 per intensity step |dI|
+        # effective P2 per intensity step |dI|, and (row 1) the same times 0x01010101 as
+        # sgm_simd.pixel_paths takes it
+        self.p2tab = np.full((2, 256), p.p2, np.int64)
         if p.p2_adapt > 0:
             a = p.p2_adapt
-            self.p2tab[:] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + np.arange(256))))
+            self.p2tab[0] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + np.arange(256))))
+        self.p2tab[1] = self.p2tab[0] * 0x01010101
         stride = _sgm.run_stride(nd)  # path-cost runs, each 64-aligned in a 64-aligned lbuf
         if p.paths == 5:  # one pass per half (sgm_one_pass.sgm_single_pass); per worker n
             self.locks = np.zeros(_one.NXT_SLOTS * _one.NXT_STRIDE, np.int32)  # sgm_one_pass.NXT_STRIDE's slots
@@ -79,7 +82,7 @@ class SGMMatcher:
             area = _one.area_runs(cols) * stride
             self.lbuf = _aligned((1, n * area + 18 * cols * stride), np.uint8)
             self.lbuf[:] = 0  # the zero runs (predecessor of a path's first pixel) included
-            self.mv = np.empty((2, 3, 3, cols), np.int16)
+            self.mv = np.empty((2, 3, 3, cols), np.uint32)
             # each worker's CPU (and thread id once moved), then the caller's CPU, and each
             # worker's CPU masks (cpus.spread_out, cpus.restore)
             self.where = np.full((n + 1) * cpus.WHERE_STRIDE, -1, np.int64)
@@ -91,13 +94,13 @@ class SGMMatcher:
             self.done = np.zeros(h, np.int32)
             self.lbuf = _aligned((2, 3 * stride + 6 * cols * stride), np.uint8)
             self.lbuf[:] = 0  # the zero run included
-            self.mv = np.empty((2, 2, 3, cols), np.int16)
+            self.mv = np.empty((2, 2, 3, cols), np.uint32)
         # per worker or group of paths: cost row (5 paths: two, sgm._kept_rows), uint8 path
         # buffers (sgm._aggregate_row) and their minima
         self.cost = _aligned((n, (2 if p.paths == 5 else 1) * cols * nd), np.uint8)
         # written at every pixel by every thread: each one's slice 128 bytes away from the
         # others' (path minima), never on one cache line (false sharing made two threads slower than one)
-        self.pm = np.zeros((n, 64), np.int16)  # 4 used
+        self.pm = np.zeros((n, 64), np.uint32)  # 4 used
         self.acc = _aligned((n, cols * nd), np.int16)
         self.rmin = np.empty((n, cols + nd - 1), np.int16)
         self.rarg = np.zeros((n, cols + nd - 1), np.int16)

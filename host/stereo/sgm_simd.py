@@ -224,12 +224,14 @@ def _umin(builder, a, b):
 def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, nd, p1s, p1hi=None,
                 loads=False):
     """L[k] for the n disparities from j0 of one path step (pixel_paths), stored at
-    lbuf[oo + j0 + k]; meta = (po, oo, p2m, mprev) as int64 values; nd: the run's length;
+    lbuf[oo + j0 + k]; meta = (po, oo, p2m, mprev): po, oo int64, p2m and mprev int64 (their
+    low byte) or byte vectors (_bytes_of); nd: the run's length;
     p1hi: the step from P[k+1]'s own P1 (None: p1s, the step from P[k-1]'s, for both);
     loads: P[k-1] and P[k+1] loaded unaligned (LOAD_NEIGHBOURS)."""
     u8 = ir.IntType(8)
     vty = ir.VectorType(u8, n)
     po, oo, p2m, mp = meta
+    p2m, mp = (_bytes_of(builder, v, n) for v in (p2m, mp))
     pj = builder.add(po, j0)
 
     def at(off):
@@ -265,10 +267,27 @@ def _step_chunk(context, builder, lbty, lbuf, c, meta, j0, n, nd, p1s, p1hi=None
     else:  # a ground step: one neighbour's P1 is cheaper
         t = _umin(builder, _call(builder, sat, vty, [lo, p1s]),
                   _call(builder, sat, vty, [hi, p1hi]))
-    m = _umin(builder, _umin(builder, pv, t), _splat(builder, builder.trunc(p2m, u8), vty))
-    L = builder.sub(builder.add(c, m), _splat(builder, builder.trunc(mp, u8), vty))
+    m = _umin(builder, _umin(builder, pv, t), p2m)
+    L = builder.sub(builder.add(c, m), mp)
     _vstore(builder, L, at(builder.add(oo, j0)))
     return L
+
+
+def _bytes_of(builder, v, n):
+    """The n-byte vector of v: v's first n lanes if it is a byte vector, else the splat of
+    int v's low byte."""
+    if isinstance(v.type, ir.VectorType):
+        if v.type.count == n:
+            return v
+        return builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(_I32, n), list(range(n))))
+    return _splat(builder, builder.trunc(v, ir.IntType(8)), ir.VectorType(ir.IntType(8), n))
+
+
+def _rep_bytes(builder, v):
+    """The LANES-byte vector of byte b from v = b * 0x01010101 (int64): a dword splat, which
+    x86 loads straight from memory (vpbroadcastd) where v was just loaded, with no shuffle."""
+    w = _splat(builder, builder.trunc(v, _I32), ir.VectorType(_I32, LANES // 4))
+    return builder.bitcast(w, ir.VectorType(ir.IntType(8), LANES))
 
 
 def _keep_min(builder, best, L, n):
@@ -316,20 +335,24 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
     """All path steps of one pixel (npaths 1, 2, 4, or 5: four and a fifth path's stored
     L) in one pass over the disparities:
 
-        for path v < min(npaths, 4), (po, oo, p2m, mprev) = meta[4v : 4v+4] (meta: 17 ints):
-          L_v[k] = cost[ci+k] + min(P, min(P[-1] +sat a, P[+1] +sat b), p2m) - mprev,
+        for path v < min(npaths, 4), (po, oo, q, m) = meta[4v : 4v+4] (meta: 17 ints; q
+        and m bytes times 0x01010101: the step's P2 and the predecessor's minimum):
+          L_v[k] = cost[ci+k] + min(P, min(P[-1] +sat a, P[+1] +sat b), m +sat q) - m,
           P = lbuf[po+k], (a, b) = (p1, p1) for v = 0 (horizontal), else p1pair
-          lbuf[oo+k] = L_v[k];  mins[v] = min_k L_v[k]
+          lbuf[oo+k] = L_v[k];  mins[v] = (min_k L_v[k]) * 0x01010101  (uint32)
         acc[ai + sum_pos(k, nd)] = sum_v L_v[k] (+ lbuf[meta[16]+k] when npaths is 5)
         (int16, split order; not written when npaths is 1)
 
-    Path costs are uint8 (the caller keeps every L <= 255 and passes p2m <= 255; P beyond the
-    run's ends is 255, and +p1 saturates), so one register holds LANES disparities. The
+    Path costs are uint8 (the caller keeps every L <= 255; P beyond the run's ends is 255,
+    and +p1 saturates), so one register holds LANES disparities. q and m come and go as
+    replicated dwords so that each is one broadcast from memory (no shuffle), and the step's
+    P2 term min(m + q, 255) one saturating add. The
     cost and the sum stay in registers across the paths. The sum widens without shuffles:
     each register of L, read as 16-bit words, adds to T (the even disparities' sum plus 256
     times the odd ones', mod 2^16) and, shifted right by 8, to O (the odd ones' sum); the
     even ones' are T - (O << 8), exact as every sum is below 2^15."""
-    if not (_u8_arrays(cost, lbuf) and _i16_arrays(acc, mins)
+    if not (_u8_arrays(cost, lbuf) and _i16_arrays(acc) and isinstance(mins, types.Array)
+            and mins.ndim == 1 and mins.dtype == types.uint32
             and isinstance(meta, types.UniTuple) and meta.count == 17
             and isinstance(meta.dtype, types.Integer)
             and isinstance(p1pair, types.UniTuple) and p1pair.count == 2):
@@ -348,6 +371,10 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
                                    types.uint8) for i in range(2))
         meta_v = [context.cast(builder, builder.extract_value(args[3], i), st[3].dtype,
                                types.intp) for i in range(17)]
+        for v in range(4):  # (q, m) as byte vectors: p2m = m +sat q, mprev = m
+            qv, mvv = (_rep_bytes(builder, meta_v[4 * v + i]) for i in (2, 3))
+            meta_v[4 * v + 2] = _call(builder, f"llvm.uadd.sat.v{LANES}i8", qv.type, [mvv, qv])
+            meta_v[4 * v + 3] = mvv
         wide = ir.VectorType(u8, LANES)
         best = [cgutils.alloca_once_value(builder, ir.Constant(wide, [255] * LANES))
                 for _ in range(4)]
@@ -404,8 +431,8 @@ def pixel_paths(typingctx, cost, ci, lbuf, meta, npaths, p1, acc, ai, nd, mins, 
             def put(v=v):
                 low = _call(builder, _UMIN, u8,
                             [builder.load(best[v])])
-                builder.store(builder.zext(low, _I16), _ptr(context, builder, st[9], args[9],
-                                                            [ir.Constant(civ.type, v)]))
+                builder.store(builder.mul(builder.zext(low, _I32), ir.Constant(_I32, 0x01010101)),
+                              _ptr(context, builder, st[9], args[9], [ir.Constant(civ.type, v)]))
             if v == 0:
                 put()
             else:

@@ -1,5 +1,7 @@
 """sgm_simd's split order of the path sums: pixel_paths writes each disparity's sum where
-sum_pos says, and add_argmin reads them back as disparities, at every chunk and tail width."""
+sum_pos says, and add_argmin reads them back as disparities, at every chunk and tail width;
+pixel_paths takes each path's previous minimum and P2 as replicated dwords and writes its
+minima so."""
 from __future__ import annotations
 
 import numba as nb
@@ -26,12 +28,17 @@ def _positions(nd):
     return out
 
 
-def _step(cost: np.ndarray, prev: np.ndarray) -> np.ndarray:
-    """One path step with P2 255 and a zero minimum: cost + min(P, min(P[k-1], P[k+1]) + P1)."""
+def _rep(b: int) -> int:
+    """Byte b replicated over a dword, as pixel_paths takes and writes minima and P2."""
+    return b * 0x01010101
+
+
+def _step(cost: np.ndarray, prev: np.ndarray, m: int = 0, p2: int = 255) -> np.ndarray:
+    """One path step: cost + min(P, min(P[k-1], P[k+1]) + P1, min(m + p2, 255)) - m."""
     p = prev.astype(np.int64)
     lo = np.concatenate(([255], p[:-1]))
     hi = np.concatenate((p[1:], [255]))
-    return cost + np.minimum(p, np.minimum(np.minimum(lo, hi) + P1, 255))
+    return cost + np.minimum(np.minimum(p, np.minimum(lo, hi) + P1), min(m + p2, 255)) - m
 
 
 @pytest.mark.parametrize("nd", [16, 32, 48, 64, 80, 112, 128, 208, 256])
@@ -42,13 +49,19 @@ def test_sums_land_where_sum_pos_says_and_argmin_reads_disparities(nd: int) -> N
     prev = [rng.integers(0, 100, nd).astype(np.uint8) for _ in range(2)]
     lbuf[STRIDE:STRIDE + nd] = prev[0]
     lbuf[2 * STRIDE:2 * STRIDE + nd] = prev[1]
-    meta = (STRIDE, 3 * STRIDE, 255, 0, 2 * STRIDE, 4 * STRIDE, 255, 0) + (0,) * 9
+    # path 0 with its predecessor's minimum and a P2 of 40 (min(m + 40, 255) cuts in), path 1
+    # with none (P2 255, minimum 0: a path's first pixel)
+    m0 = int(prev[0].min())
+    meta = (STRIDE, 3 * STRIDE, _rep(40), _rep(m0), 2 * STRIDE, 4 * STRIDE, _rep(255), 0) + (0,) * 9
     acc = np.zeros(nd, np.int16)
-    mins = np.zeros(4, np.int16)
+    mins = np.zeros(4, np.uint32)
     m, k = _two_paths(cost, lbuf, meta, acc, nd, mins)
-    want = _step(cost, prev[0]) + _step(cost, prev[1])
+    paths = [_step(cost, prev[0], m0, 40), _step(cost, prev[1])]
+    want = paths[0] + paths[1]
     pos = _positions(nd)
     assert sorted(pos) == list(range(nd))
     np.testing.assert_array_equal(acc[pos], want)
     assert (m, k) == (want.min(), int(np.argmin(want)))  # the first disparity holding it
-    np.testing.assert_array_equal(lbuf[3 * STRIDE:3 * STRIDE + nd], _step(cost, prev[0]))
+    np.testing.assert_array_equal(lbuf[3 * STRIDE:3 * STRIDE + nd], paths[0])
+    np.testing.assert_array_equal(lbuf[4 * STRIDE:4 * STRIDE + nd], paths[1])
+    assert list(mins[:2]) == [_rep(int(p.min())) for p in paths]
