@@ -67,18 +67,18 @@ def noise_margin(img: np.ndarray) -> int:
 @nb.njit(**_JIT)
 def _pad_rows(img: np.ndarray, y0: int, y1: int, rx: int, ry: int, out: np.ndarray,
               o: int) -> None:
-    """Rows y0 .. y1-1 of the edge-replicated image into out from row y0 - o: out[ry + y - o,
-    rx + x] = img[y, x], with ry rows above and below and rx columns left and right (plus
-    slack, left as is)."""
+    """Rows y0 .. y1-1 of the edge-replicated image XOR 0x80 (census_codes' input: uint8
+    order as int8) into out from row y0 - o: out[ry + y - o, rx + x] = img[y, x] ^ 0x80, with
+    ry rows above and below and rx columns left and right (plus slack, left as is)."""
     h, w = img.shape
     for yy in range(y0, y1):
         src = img[min(max(yy - ry, 0), h - 1)]
         row = out[yy - o]
         for x in range(rx):
-            row[x] = src[0]
-            row[rx + w + x] = src[w - 1]
+            row[x] = src[0] ^ 0x80
+            row[rx + w + x] = src[w - 1] ^ 0x80
         for x in range(w):
-            row[rx + x] = src[x]
+            row[rx + x] = src[x] ^ 0x80
 
 
 @nb.njit(**_JIT)
@@ -93,18 +93,18 @@ def _smooth_px(a: np.ndarray, b: np.ndarray, c: np.ndarray, xl: int, x: int, xr:
 
 @nb.njit(**_JIT)
 def _smooth_pad_row(img: np.ndarray, yy: int, rx: int, ry: int, row: np.ndarray) -> None:
-    """Padded row yy (as _pad_rows) of the image's 3x3 binomial smoothing, edges replicated,
-    into row."""
+    """Padded row yy (as _pad_rows, XOR 0x80) of the image's 3x3 binomial smoothing, edges
+    replicated, into row."""
     h, w = img.shape
     y = min(max(yy - ry, 0), h - 1)
     a, b, c = img[max(y - 1, 0)], img[y], img[min(y + 1, h - 1)]
     for x in range(1, w - 1):
-        row[rx + x] = np.uint8((np.int32(a[x - 1]) + 2 * np.int32(a[x]) + np.int32(a[x + 1])
-                                + 2 * (np.int32(b[x - 1]) + 2 * np.int32(b[x]) + np.int32(b[x + 1]))
-                                + np.int32(c[x - 1]) + 2 * np.int32(c[x]) + np.int32(c[x + 1])
-                                + 8) >> 4)
-    row[rx] = _smooth_px(a, b, c, 0, 0, min(1, w - 1))
-    row[rx + w - 1] = _smooth_px(a, b, c, max(w - 2, 0), w - 1, w - 1)
+        row[rx + x] = np.uint8(((np.int32(a[x - 1]) + 2 * np.int32(a[x]) + np.int32(a[x + 1])
+                                 + 2 * (np.int32(b[x - 1]) + 2 * np.int32(b[x]) + np.int32(b[x + 1]))
+                                 + np.int32(c[x - 1]) + 2 * np.int32(c[x]) + np.int32(c[x + 1])
+                                 + 8) >> 4) ^ 0x80)
+    row[rx] = _smooth_px(a, b, c, 0, 0, min(1, w - 1)) ^ 0x80
+    row[rx + w - 1] = _smooth_px(a, b, c, max(w - 2, 0), w - 1, w - 1) ^ 0x80
     for x in range(rx):
         row[x] = row[rx]
         row[rx + w + x] = row[rx + w - 1]

@@ -40,9 +40,11 @@ def _census_codegen(masked: bool):
                                      ir.Constant(wv.type, 64)) as (x0, _):
             c0 = ir.Constant(ncv.type, 0)
             centre = load(0, bv, c0, x0)
-            if masked:  # |s - sc| > t <=> s > sat(sc + t) or s < sat(sc - t)
-                scentre = load(7, sbv, c0, x0)
-                hi, lo = (_call(builder, f, vty, [scentre, tv]) for f in _SAT)
+            if masked:  # |s - sc| > t <=> s > sat(sc + t) or s < sat(sc - t), bounds made
+                # on the bytes as uint8 (XOR 0x80), then compared signed as the bytes are
+                flip = ir.Constant(vty, [0x80] * 64)
+                scentre = builder.xor(load(7, sbv, c0, x0), flip)
+                hi, lo = (builder.xor(_call(builder, f, vty, [scentre, tv]), flip) for f in _SAT)
             acc = []
             for g in range(8):
                 slot = cgutils.alloca_once_value(builder, zero)
@@ -53,11 +55,11 @@ def _census_codegen(masked: bool):
                         ok = builder.icmp_signed("<", n, ncv)
                         k = builder.add(builder.select(ok, n, last),  # a valid comparison,
                                         ir.Constant(ncv.type, 1))     # masked off
-                        hit = builder.icmp_unsigned("<", load(0, bv, k, x0), centre)
+                        hit = builder.icmp_signed("<", load(0, bv, k, x0), centre)
                         if masked:  # and |smoothed neighbour - smoothed centre| > t
                             s = load(7, sbv, k, x0)
                             hit = builder.and_(hit, builder.or_(
-                                builder.icmp_unsigned(">", s, hi), builder.icmp_unsigned("<", s, lo)))
+                                builder.icmp_signed(">", s, hi), builder.icmp_signed("<", s, lo)))
                         bit = builder.select(ok, ir.Constant(u8, 1 << b), ir.Constant(u8, 0))
                         a = builder.or_(a, builder.select(hit, _splat(builder, bit, vty), zero))
                     builder.store(a, slot)
@@ -91,9 +93,11 @@ def _census_types(src, offs, out, rev) -> bool:
 @intrinsic
 def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
     """Code x for x < w, a multiple of 64: bit n set where src[base + offs[1 + n] + x] <
-    src[base + offs[0] + x], n < ncmp <= 64 (uint8 src), as byte planes: its byte b into
-    out[b, x] (uint8 (8, >= w); rev: out[b, w - 1 - x]). Per 64 pixels the comparisons go
-    into eight byte vectors (one per 8 bits, in registers), stored as they are."""
+    src[base + offs[0] + x] as int8, n < ncmp <= 64 (uint8 src holding an image XOR 0x80,
+    census.py's padded rows: its order as uint8, compared in one signed instruction on x86,
+    where an unsigned compare takes two), as byte planes: its byte b into out[b, x] (uint8
+    (8, >= w); rev: out[b, w - 1 - x]). Per 64 pixels the comparisons go into eight byte
+    vectors (one per 8 bits, in registers), stored as they are."""
     if not _census_types(src, offs, out, rev):
         return None
     return types.none(src, base, offs, ncmp, w, out, rev), _census_codegen(False)
@@ -102,8 +106,8 @@ def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
 @intrinsic
 def census_codes_masked(typingctx, src, base, offs, ncmp, w, out, rev, ssrc, sbase, t):
     """census_codes with a margin: bit n also needs |ssrc[sbase + offs[1 + n] + x] -
-    ssrc[sbase + offs[0] + x]| > t (ssrc uint8, the smoothed image laid out as src; 0 <= t
-    <= 255), one more pair of loads and a fused compare per comparison."""
+    ssrc[sbase + offs[0] + x]| > t (ssrc uint8, the smoothed image XOR 0x80 laid out as src;
+    0 <= t <= 255), one more load and two signed compares per comparison."""
     if not (_census_types(src, offs, out, rev) and _u8_arrays(ssrc)
             and isinstance(t, types.Integer)):
         return None

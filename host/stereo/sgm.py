@@ -83,8 +83,9 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, kept: int,
     pixel); for npaths 5 from kept, the kept path's one per column (_kept_rows); from vb,
     per row slot and vertical/diagonal path one run per column, row y in slot cur, its
     predecessor row in prv. mv[slot, v, x]: minima, times 0x01010101 (pixel_paths' form).
-    p2tab[0, |I(p) - I(q)|]: the effective P2 between neighbours of those intensities;
-    p2tab[1] the same times 0x01010101."""
+    p2tab[0, 255 + I(p) - I(q)]: the effective P2 between neighbours of those intensities
+    (indexed by the signed step: no absolute value per lookup); p2tab[1] the same times
+    0x01010101."""
     nd, p1 = cfg[C_ND], cfg[C_P1]
     x0, cols = cfg[C_X0], cfg[C_COLS]
     dy = 1 if g == 0 else -1
@@ -117,18 +118,18 @@ def _aggregate_row(g: int, y: int, first: bool, npaths: int, hb: int, kept: int,
         ic = np.int64(irow[uidx(X)])
         mh = np.int64(pm[0])  # horizontal path: predecessor x - dy on this row
         hz = (hb + (1 - (i & 1)) * stride, hb + (i & 1) * stride,
-              p2tab[1, uidx(abs(ic - irow[uidx(X - dy)]))], mh)
+              p2tab[1, uidx(255 + ic - irow[uidx(X - dy)])], mh)
         m1 = np.int64(mp0[uidx(x)])  # (dy, 0), (dy, 1), (dy, -1): predecessor (y - dy, x - dx)
         v1 = (bp[0] + x * stride, bc[0] + x * stride,
-              p2tab[1, uidx(abs(ic - prow[uidx(X)]))], m1)
+              p2tab[1, uidx(255 + ic - prow[uidx(X)])], m1)
         v2 = v3 = v1
         if vpaths > 2:
             m2 = np.int64(mp1[uidx(x - 1)])
             v2 = (bp[1] + (x - 1) * stride, bc[1] + x * stride,
-                  p2tab[1, uidx(abs(ic - prow[uidx(X - 1)]))], m2)
+                  p2tab[1, uidx(255 + ic - prow[uidx(X - 1)])], m2)
             m3 = np.int64(mp2[uidx(x + 1)])
             v3 = (bp[2] + (x + 1) * stride, bc[2] + x * stride,
-                  p2tab[1, uidx(abs(ic - prow[uidx(X + 1)]))], m3)
+                  p2tab[1, uidx(255 + ic - prow[uidx(X + 1)])], m3)
         pixel_paths(cost, x * nd, lbuf, hz + v1 + v2 + v3 + (kept + x * stride,), npaths, p1,
                     acc, x * nd, nd, pm, p1v)
         mc0[uidx(x)] = pm[1]
@@ -160,7 +161,7 @@ def _aggregate_pixel(i: int, g: int, y: int, first: bool, npaths: int, hb: int, 
     if i > 0:
         mp = np.int64(pm[0])
         po = hb + (1 - (i & 1)) * stride
-        pv = p2tab[1, uidx(abs(np.int64(img[y, uidx(X)]) - img[y, uidx(X - dy)]))]
+        pv = p2tab[1, uidx(255 + np.int64(img[y, uidx(X)]) - img[y, uidx(X - dy)])]
     hz = (po, hb + (i & 1) * stride, pv, mp)
     # (dy, 0), (dy, 1), (dy, -1): predecessor (y - dy, x - dx)
     v1 = _vertical_meta(1, 0, first, x, X, y, dy, cur, prv, vb, zero, cols, stride, img,
@@ -189,7 +190,7 @@ def _vertical_meta(v: int, dx: int, first: bool, x: int, X: int, y: int, dy: int
         return zero, oo, np.int64(0xFFFFFFFF), np.int64(0)
     mp = np.int64(mv[prv, v - 1, uidx(xq)])
     return (vb + ((prv * 3 + v - 1) * cols + xq) * stride, oo,
-            p2tab[1, uidx(abs(np.int64(img[y, uidx(X)]) - img[uidx(y - dy), uidx(X - dx)]))], mp)
+            p2tab[1, uidx(255 + np.int64(img[y, uidx(X)]) - img[uidx(y - dy), uidx(X - dx)])], mp)
 
 
 @nb.njit(**_JIT)
@@ -228,11 +229,11 @@ def _kept_rows(g: int, y0: int, y1: int, hb: int, img: np.ndarray, cl: np.ndarra
             if two:
                 hm1 = path_step(cost, o1 + x * nd, lbuf, zero, k1 + x * stride, 255, 0, p1, nd)
         else:
-            p2m = min(hm0 + p2tab[0, abs(np.int64(img[y0, X]) - img[y0, X - dy])], 255)
+            p2m = min(hm0 + p2tab[0, uidx(255 + np.int64(img[y0, X]) - img[y0, X - dy])], 255)
             hm0 = path_step(cost, x * nd, lbuf, k0 + (x - dy) * stride, k0 + x * stride,
                             p2m, hm0, p1, nd)
             if two:
-                p2m = min(hm1 + p2tab[0, abs(np.int64(img[y1, X]) - img[y1, X - dy])], 255)
+                p2m = min(hm1 + p2tab[0, uidx(255 + np.int64(img[y1, X]) - img[y1, X - dy])], 255)
                 hm1 = path_step(cost, o1 + x * nd, lbuf, k1 + (x - dy) * stride,
                                 k1 + x * stride, p2m, hm1, p1, nd)
 

@@ -66,12 +66,12 @@ class SGMMatcher:
             p.invalid_value, p.max_cost, p.census_width, p.census_height,
             p.speckle_window_size if p.use_speckle else 0, p.speckle_range, p.p1_ground_step]
         self.cfg = cfg
-        # effective P2 per intensity step |dI|, and (row 1) the same times 0x01010101 as
-        # sgm_simd.pixel_paths takes it
-        self.p2tab = np.full((2, 256), p.p2, np.int64)
+        # effective P2 per intensity step dI (at 255 + dI, -255 <= dI <= 255), and (row 1) the
+        # same times 0x01010101 as sgm_simd.pixel_paths takes it
+        self.p2tab = np.full((2, 511), p.p2, np.int64)
         if p.p2_adapt > 0:
-            a = p.p2_adapt
-            self.p2tab[0] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + np.arange(256))))
+            a, step = p.p2_adapt, np.abs(np.arange(-255, 256))
+            self.p2tab[0] = np.minimum(p.p2, np.maximum(p.p1, p.p2 * a // (a + step)))
         self.p2tab[1] = self.p2tab[0] * 0x01010101
         stride = _sgm.run_stride(nd)  # path-cost runs, each 64-aligned in a 64-aligned lbuf
         if p.paths == 5:  # one pass per half (sgm_one_pass.sgm_single_pass); per worker n
