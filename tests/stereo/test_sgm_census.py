@@ -37,3 +37,23 @@ def _codes(planes: np.ndarray) -> np.ndarray:
     """uint64 codes from byte planes (rows, 8, codes)."""
     assert planes.dtype == np.uint8 and planes.shape[1] == 8
     return sum(planes[:, b].astype(np.uint64) << np.uint64(8 * b) for b in range(8))
+
+
+@pytest.mark.parametrize("margin", [126, 127, 128, 129, 200, 254])
+def test_margins_past_the_signed_byte_range_match_the_reference(margin: int) -> None:
+    """The rows are compared as int8 (XOR 0x80) and a margin's bounds made on the uint8 bytes:
+    margins from 128 up, on blocks of 0 and 255 whose smoothed steps reach them, still give the
+    reference's codes."""
+    rng = np.random.default_rng(margin)
+    left = (np.kron(rng.integers(0, 2, (4, 20)), np.ones((4, 4), np.int64)) * 255).astype(np.uint8)
+    right = np.roll(left, 3, axis=1)
+    right[::5] = rng.integers(0, 256, right[::5].shape)  # rows of every level between them
+    p = SGMParams(num_disparities=16, census_margin=margin)
+    m = SGMMatcher(left.shape, p)
+    m.match(left, right)
+    w, wc = left.shape[1], m.cl.shape[2]
+    want = ref.census(left, 9, 7, margin)
+    assert 0 < np.count_nonzero(want) < want.size  # the margin keeps some bits, not all
+    np.testing.assert_array_equal(_codes(m.cl[:, :, :w]), want)
+    np.testing.assert_array_equal(_codes(m.crr[:, :, wc - w:wc][:, :, ::-1]),
+                                  ref.census(right, 9, 7, margin))
