@@ -35,6 +35,7 @@ _JIT = C_ARITHMETIC
 # C_INV: params.invalid_value; C_MAXC: params.max_cost; C_CW, C_CH: census window; C_SPW,
 # C_SPR: speckle window size (0: no speckle filter) and range; C_TL, C_TR: the frame's census
 # margins of the left and right image (set per frame); C_P1G: params.p1_ground_step
+NO_P2 = 0xFFFFFFFF  # pixel_paths' q of a path's first pixel (no predecessor): P2 255 in each byte
 
 
 @nb.njit(inline="always", **_JIT)
@@ -157,7 +158,7 @@ def _aggregate_pixel(i: int, g: int, y: int, first: bool, npaths: int, hb: int, 
     x = i if g == 0 else cols - 1 - i
     X = x0 + x
     # horizontal path (0, dy): predecessor x - dy on this row
-    po, pv, mp = zero, np.int64(0xFFFFFFFF), np.int64(0)
+    po, pv, mp = zero, NO_P2, np.int64(0)
     if i > 0:
         mp = np.int64(pm[0])
         po = hb + (1 - (i & 1)) * stride
@@ -187,7 +188,7 @@ def _vertical_meta(v: int, dx: int, first: bool, x: int, X: int, y: int, dy: int
     xq = x - dx
     oo = vb + ((cur * 3 + v - 1) * cols + x) * stride
     if first or xq < 0 or xq >= cols:
-        return zero, oo, np.int64(0xFFFFFFFF), np.int64(0)
+        return zero, oo, NO_P2, np.int64(0)
     mp = np.int64(mv[prv, v - 1, uidx(xq)])
     return (vb + ((prv * 3 + v - 1) * cols + xq) * stride, oo,
             p2tab[1, uidx(255 + np.int64(img[y, uidx(X)]) - img[uidx(y - dy), uidx(X - dx)])], mp)
