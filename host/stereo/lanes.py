@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from typing import Any, Callable, Concatenate, ParamSpec, cast
 
-from numba.core import types
+from llvmlite import ir
+from numba.core import cgutils, types
 from numba.extending import intrinsic as numba_intrinsic
 
 _P = ParamSpec("_P")
@@ -88,4 +89,30 @@ def cdiv(typingctx, a, b):
                 return builder.sdiv(args[0], args[1])
             return builder.udiv(args[0], args[1])
         return a(a, b), codegen
+    return None
+
+
+@intrinsic
+def ctz(typingctx, value):
+    """Trailing zero bits of a non-zero uint64 (one tzcnt / bsf)."""
+    if isinstance(value, types.Integer):
+        def codegen(context, builder, sig, args):
+            v = context.cast(builder, args[0], sig.args[0], types.uint64)
+            fnty = ir.FunctionType(v.type, [v.type, ir.IntType(1)])
+            fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.cttz.i64")
+            return builder.call(fn, [v, ir.Constant(ir.IntType(1), 1)])
+        return types.uint64(value), codegen
+    return None
+
+
+@intrinsic
+def popcount(typingctx, value):
+    """Set bits of a uint64 (one popcnt)."""
+    if isinstance(value, types.Integer):
+        def codegen(context, builder, sig, args):
+            v = context.cast(builder, args[0], sig.args[0], types.uint64)
+            fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(v.type, [v.type]),
+                                                "llvm.ctpop.i64")
+            return builder.call(fn, [v])
+        return types.uint64(value), codegen
     return None

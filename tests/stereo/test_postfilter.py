@@ -52,14 +52,22 @@ def speckle_cases(seed: int):
     """Disparity maps as the engines make them: smooth ramps with noise, holes, blocks and a
     checkerboard in which every pixel is its own run (the most runs a band can have)."""
     rng = np.random.default_rng(seed)
-    for _ in range(12):
-        h, w = int(rng.integers(1, 40)), int(rng.integers(1, 70))
+    for i in range(16):  # the last four wide: runs across many of the filter's 8-pixel words
+        h, w = int(rng.integers(1, 40)), int(rng.integers(1, 70) if i < 12 else rng.integers(100, 300))
         ramp = np.cumsum(rng.integers(-1, 2, (h, w)), axis=1) * int(rng.integers(4, 24))
         img = (ramp + rng.integers(0, 3, (h, w)) * 16).astype(np.int16)
         img[rng.random((h, w)) < rng.random() * 0.4] = INV
         yield img
     yy, xx = np.mgrid[:9, :13]
     yield (((yy + xx) % 2) * 160).astype(np.int16)
+    for i in range(12):  # blocks of a few levels: rows of few runs, regions joined at single
+        # pixels; levels 24 apart join a neighbour level at max_diff 32, not the next one
+        h, w = int(rng.integers(2, 50)), int(rng.integers(8, 300))
+        bh, bw = int(rng.integers(1, 6)), int(rng.integers(1, 12))
+        coarse = rng.integers(0, 4, (h // bh + 1, w // bw + 1)) * (48 if i % 2 else 24)
+        img = np.repeat(np.repeat(coarse, bh, 0), bw, 1)[:h, :w].astype(np.int16)
+        img[rng.random((h, w)) < 0.02] = INV
+        yield img
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -76,3 +84,46 @@ def test_whole_image_and_bands_equal_cv2_filter_speckles_on_engine_like_maps(see
                 got = img.copy()
                 split_filter(got, top, max_size, max_diff)
                 assert np.array_equal(got, want), (img.shape, max_size, max_diff, top)
+
+
+def flags_reference(row: np.ndarray, above: np.ndarray | None, new_val: int, max_diff: int) -> np.ndarray:
+    """postfilter._row_flags' definition in numpy (int64, so no difference overflows)."""
+    v = row.astype(np.int64)
+    ok = v != new_val
+    far = lambda a, b: np.abs(a - b) > max_diff  # noqa: E731
+    s, e = ok.copy(), ok.copy()
+    s[1:] &= (v[:-1] == new_val) | far(v[1:], v[:-1])
+    e[:-1] &= (v[1:] == new_val) | far(v[1:], v[:-1])
+    k = np.zeros_like(ok)
+    if above is not None:
+        u = above.astype(np.int64)
+        uk = u != new_val
+        j = ok & uk & ~far(v, u)
+        su = uk.copy()
+        su[1:] &= (u[:-1] == new_val) | far(u[1:], u[:-1])
+        jp = np.concatenate([[False], j[:-1]])
+        k = j & (~jp | s | su)
+    return (s * 1 | e * 2 | k * 4).astype(np.uint8)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_row_flags_vector_and_scalar_paths_match_their_definition(seed: int) -> None:
+    """The per-pixel flags the labelling reads, made a register at a time with a scalar
+    first pixel and tail, on rows of every length around the register width, extreme int16
+    values (the vector absolute difference must not overflow) and max_diff at and past the
+    vector path's range."""
+    from stereocam.stereo.postfilter import _row_flags
+
+    rng = np.random.default_rng(seed)
+    for w in [1, 2, 3, *rng.integers(4, 200, 12)]:
+        w = int(w)
+        pair = rng.choice(np.array([INV, -32768, 32767, 0, 16, 40, 70, 100], np.int16), (2, w))
+        pair[:, rng.random(w) < 0.5] = rng.integers(0, 120, (2, w))[:, :1]  # some runs
+        flat = pair.ravel()
+        flags = np.zeros((w + 7) & ~7, np.uint8)
+        for max_diff in (0, 16, 32, 65535, 70000, -1):
+            for above in (False, True):
+                flags[:] = 0xFF
+                _row_flags(flat, w, 0 if above else -1, w, INV, max_diff, flags)
+                want = flags_reference(pair[1], pair[0] if above else None, INV, max_diff)
+                assert np.array_equal(flags[:w], want), (w, max_diff, above)
