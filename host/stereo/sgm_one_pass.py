@@ -30,7 +30,8 @@ from .sgm import C_CH, C_COLS, C_CW, C_INV, C_ND, C_SPR, C_SPW, C_TL, C_TR, _agg
 
 _JIT = C_ARITHMETIC
 
-BAND = 32  # columns a row publishes its progress after (single-pass mode)
+BAND = 32  # columns a row publishes its progress after (single-pass mode), with more than one
+# worker: alone, a worker steps each row in one call (a call per band costs ~3 ns a pixel)
 NXT_STRIDE = 16  # nxt[c * NXT_STRIDE]: chain c's next row, each on its own cache line;
 # nxt[(2 + c) * NXT_STRIDE]: its rows finished; nxt[4 * NXT_STRIDE]: halves speckle-labelled;
 # nxt[(5 + c) * NXT_STRIDE]: chain c handed to the worker that joined it
@@ -50,15 +51,16 @@ def _chain_rows(c: int, j: int, n: int, hb: int, vb: int, img: np.ndarray, right
                 prog: np.ndarray, disp: np.ndarray, win: tuple, offs: np.ndarray,
                 cost: np.ndarray, lbuf: np.ndarray, mv: np.ndarray,
                 pm: np.ndarray, acc: np.ndarray, rmin: np.ndarray,
-                rarg: np.ndarray, karg: np.ndarray) -> None:
+                rarg: np.ndarray, karg: np.ndarray, band: int) -> None:
     """Rows j .. j + n - 1 (n 1 or 2) of chain c (c = 0: the top half top-down, paths from
     above; c = 1: the bottom half bottom-up, paths from below): the rows' census codes
     (census_row_pair; win its scratch, offs its table), their cost rows and one horizontal
     path each kept per column in lbuf (_kept_rows, both rows in one loop), then per row in
     the other horizontal direction the other four paths plus the kept one into acc, band
-    by band once the chain's previous row has published (prog) the columns the band reads,
-    and the selection. hb: this worker's horizontal-path area (area_runs); vb: the
-    chain's three row slots of three paths; cost: this worker's two cost rows."""
+    by band (``band`` columns) once the chain's previous row has published (prog) the
+    columns the band reads, and the selection. hb: this worker's horizontal-path area
+    (area_runs); vb: the chain's three row slots of three paths; cost: this worker's two
+    cost rows."""
     h = img.shape[0]
     nd, cols = cfg[C_ND], cfg[C_COLS]
     stride = run_stride(nd)
@@ -74,7 +76,7 @@ def _chain_rows(c: int, j: int, n: int, hb: int, vb: int, img: np.ndarray, right
         kept = hb + (3 + r * cols) * stride
         i = 0
         while i < cols:
-            i1 = min(i + BAND, cols)
+            i1 = min(i + band, cols)
             if jr > 0:
                 need = min(i1 + 1, cols)
                 k = 0
@@ -125,7 +127,7 @@ def _single_pass(t: int, img: np.ndarray, right: np.ndarray, cl: np.ndarray, crr
                 state = spread_out(t, workers, caller, where, masks[t])
             _chain_rows(c, j, n2, hb, vbase + c * 9 * cols * stride, img, right, cl, crr, cfg,
                         p2tab, prog, disp, win, offs, cost, lbuf, mv[c], pm, acc, rmin,
-                        rarg, karg)
+                        rarg, karg, BAND if workers > 1 else cols)
             if fetch_add(nxt, (2 + c) * NXT_STRIDE, n2) + n2 == rows and cfg[C_SPW] > 0:
                 _speckle_half(c, top, cfg, nxt, disp, spk)
 
