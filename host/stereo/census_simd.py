@@ -45,38 +45,40 @@ def _census_codegen(masked: bool):
                 flip = ir.Constant(vty, [0x80] * 64)
                 scentre = builder.xor(load(7, sbv, c0, x0), flip)
                 hi, lo = (builder.xor(_call(builder, f, vty, [scentre, tv]), flip) for f in _SAT)
-            acc = []
-            for g in range(8):
-                slot = cgutils.alloca_once_value(builder, zero)
-                with builder.if_then(builder.icmp_signed(">", groups, ir.Constant(ncv.type, g))):
-                    a = zero
-                    for b in range(8):
-                        n = ir.Constant(ncv.type, 8 * g + b)
-                        ok = builder.icmp_signed("<", n, ncv)
-                        k = builder.add(builder.select(ok, n, last),  # a valid comparison,
-                                        ir.Constant(ncv.type, 1))     # masked off
-                        hit = builder.icmp_signed("<", load(0, bv, k, x0), centre)
-                        if masked:  # and |smoothed neighbour - smoothed centre| > t
-                            s = load(7, sbv, k, x0)
-                            hit = builder.and_(hit, builder.or_(
-                                builder.icmp_signed(">", s, hi), builder.icmp_signed("<", s, lo)))
-                        bit = builder.select(ok, ir.Constant(u8, 1 << b), ir.Constant(u8, 0))
-                        a = builder.or_(a, builder.select(hit, _splat(builder, bit, vty), zero))
-                    builder.store(a, slot)
-                acc.append(builder.load(slot))
-            _store_planes(context, builder, acc, x0, wv, args[5], st[5], args[6])
+            # one byte plane per trip, its eight comparisons unrolled: the loop body stays
+            # small enough for the CPU's decoded-instruction cache (the 62 comparisons of a
+            # 9x7 window unrolled did not, and decoding bound the loop)
+            with cgutils.for_range(builder, groups) as loop:
+                g = loop.index
+                a = zero
+                for b in range(8):
+                    n = builder.add(builder.mul(g, ir.Constant(ncv.type, 8)),
+                                    ir.Constant(ncv.type, b))
+                    ok = builder.icmp_signed("<", n, ncv)
+                    k = builder.add(builder.select(ok, n, last),  # a valid comparison,
+                                    ir.Constant(ncv.type, 1))     # masked off
+                    hit = builder.icmp_signed("<", load(0, bv, k, x0), centre)
+                    if masked:  # and |smoothed neighbour - smoothed centre| > t
+                        s = load(7, sbv, k, x0)
+                        hit = builder.and_(hit, builder.or_(
+                            builder.icmp_signed(">", s, hi), builder.icmp_signed("<", s, lo)))
+                    bit = builder.select(ok, ir.Constant(u8, 1 << b), ir.Constant(u8, 0))
+                    a = builder.or_(a, builder.select(hit, _splat(builder, bit, vty), zero))
+                _store_plane(context, builder, a, g, x0, wv, args[5], st[5], args[6])
+            with cgutils.for_range_slice(builder, groups, ir.Constant(ncv.type, 8),
+                                         ir.Constant(ncv.type, 1)) as (g, _):
+                _store_plane(context, builder, zero, g, x0, wv, args[5], st[5], args[6])
         return context.get_dummy_value()
 
     return codegen
 
 
-def _store_planes(context, builder, acc, x0, wv, out, outty, rev):
-    """Byte g of code x0 + i (acc[g][i]) at out[g, x0 + i] (rev: out[g, w - 1 - x0 - i])."""
+def _store_plane(context, builder, v, g, x0, wv, out, outty, rev):
+    """Byte g of code x0 + i (v[i]) at out[g, x0 + i] (rev: out[g, w - 1 - x0 - i])."""
     at = builder.select(rev, builder.sub(builder.sub(wv, x0), ir.Constant(x0.type, 64)), x0)
     flip = ir.Constant(ir.VectorType(_I32, 64), list(range(63, -1, -1)))
-    for g in range(8):
-        v = builder.select(rev, builder.shuffle_vector(acc[g], acc[g], flip), acc[g])
-        _vstore(builder, v, _ptr(context, builder, outty, out, [ir.Constant(x0.type, g), at]))
+    v = builder.select(rev, builder.shuffle_vector(v, v, flip), v)
+    _vstore(builder, v, _ptr(context, builder, outty, out, [g, at]))
 
 
 def _planes(*tys) -> bool:
