@@ -1,5 +1,5 @@
 """The census transform's codes as byte planes, and their Hamming costs, as numba intrinsics:
-per 64 pixels census.py's rows put the comparisons into eight byte vectors, stored as they are
+per 64 pixels census.py's rows put each eight comparisons into a byte vector, stored as it is
 (census_codes); cost_run XORs and counts them a plane at a time for the SGM kernels."""
 from __future__ import annotations
 
@@ -98,8 +98,8 @@ def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
     src[base + offs[0] + x] as int8, n < ncmp <= 64 (uint8 src holding an image XOR 0x80,
     census.py's padded rows: its order as uint8, compared in one signed instruction on x86,
     where an unsigned compare takes two), as byte planes: its byte b into out[b, x] (uint8
-    (8, >= w); rev: out[b, w - 1 - x]). Per 64 pixels the comparisons go into eight byte
-    vectors (one per 8 bits, in registers), stored as they are."""
+    (8, >= w); rev: out[b, w - 1 - x]). Per 64 pixels a loop over the planes, each plane's
+    eight comparisons in a byte vector (in registers), stored as it is."""
     if not _census_types(src, offs, out, rev):
         return None
     return types.none(src, base, offs, ncmp, w, out, rev), _census_codegen(False)
