@@ -92,27 +92,27 @@ def cdiv(typingctx, a, b):
     return None
 
 
+def _bit_count(value, name: str, *flags: int):
+    """(signature, codegen) of the LLVM bit-counting intrinsic ``name`` on a uint64 (flags: its
+    i1 arguments after the value)."""
+    if not isinstance(value, types.Integer):
+        return None
+
+    def codegen(context, builder, sig, args):
+        v = context.cast(builder, args[0], sig.args[0], types.uint64)
+        more = [ir.Constant(ir.IntType(1), f) for f in flags]
+        fnty = ir.FunctionType(v.type, [v.type] + [f.type for f in more])
+        return builder.call(cgutils.get_or_insert_function(builder.module, fnty, name), [v, *more])
+    return types.uint64(value), codegen
+
+
 @intrinsic
 def ctz(typingctx, value):
     """Trailing zero bits of a non-zero uint64 (one tzcnt / bsf)."""
-    if isinstance(value, types.Integer):
-        def codegen(context, builder, sig, args):
-            v = context.cast(builder, args[0], sig.args[0], types.uint64)
-            fnty = ir.FunctionType(v.type, [v.type, ir.IntType(1)])
-            fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.cttz.i64")
-            return builder.call(fn, [v, ir.Constant(ir.IntType(1), 1)])
-        return types.uint64(value), codegen
-    return None
+    return _bit_count(value, "llvm.cttz.i64", 1)  # 1: zero is undefined
 
 
 @intrinsic
 def popcount(typingctx, value):
     """Set bits of a uint64 (one popcnt)."""
-    if isinstance(value, types.Integer):
-        def codegen(context, builder, sig, args):
-            v = context.cast(builder, args[0], sig.args[0], types.uint64)
-            fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(v.type, [v.type]),
-                                                "llvm.ctpop.i64")
-            return builder.call(fn, [v])
-        return types.uint64(value), codegen
-    return None
+    return _bit_count(value, "llvm.ctpop.i64")

@@ -5,10 +5,9 @@ Regions are found run by run: each row splits into runs of neighbours that join 
 united (union-find over run ids, the root holding the region's size). A row's run starts, run
 ends and joins with the row above are first flagged a register of pixels at a time; a row of
 few runs then visits only the flagged pixels, one of many runs takes a branch-free pass per
-pixel. The same filter runs in
-parts for a matcher whose workers own row bands: each labels its band's regions and clears the
-small ones that do not reach its seam row (label_band); then one joins the regions across the
-seam (join_seam) and clears the small joined ones (clear_seam). Regions are connected
+pixel. The same filter runs in parts for a matcher whose workers own row bands: each labels its
+band's regions and clears the small ones that do not reach its seam row (label_band); then one
+joins the regions across the seam (join_seam) and clears the small joined ones (clear_seam). Regions are connected
 components, so the result is filter_speckles' whatever the split.
 
 Scratch: labels int32 (h, w) (a pixel's run id, 0 on ``new_val``); stack int32 (h*w, 2) (per
@@ -105,7 +104,7 @@ def _label_row_events(im: np.ndarray, lab: np.ndarray, st: np.ndarray, o: int, a
                       cur: int, parent: np.ndarray, size: np.ndarray, flags: np.ndarray) -> int:
     """_label_row for a row of few runs: the flags (_row_flags) read eight at a time, each
     run start, join and run end handled where it is (labels written per run)."""
-    words = flags.view(np.uint64)
+    words = flags.view(np.uint64)  # little-endian: flags[8 i + b] is byte b of words[i]
     start = done = 0  # the current run's first pixel; pixels labelled so far
     for i in range((w + 7) >> 3):
         word = words[i]
@@ -138,12 +137,13 @@ def _label_row_events(im: np.ndarray, lab: np.ndarray, st: np.ndarray, o: int, a
 
 @nb.njit(**_JIT)
 def _label_row_pixels(im: np.ndarray, lab: np.ndarray, st: np.ndarray, o: int, w: int, cur: int,
-               new_val: int, max_diff: int, parent: np.ndarray, size: np.ndarray) -> int:
+                      new_val: int, max_diff: int, parent: np.ndarray, size: np.ndarray) -> int:
     """Runs of the row at flat index o (ids from cur + 1; each its own root, size its
-    length); returns the last id used. Branch-free per pixel, for rows of many short runs: a pixel writes its flat index
-    as the first pixel of run cur + 1 (final once that run starts here; the slot of an id not
-    yet used otherwise) and as the last pixel of its own run (or of run cur + 1 if invalid);
-    at most one run per pixel keeps both slots inside the band's ids."""
+    length); returns the last id used. Branch-free per pixel, for rows of many short runs: a
+    pixel writes its flat index as the first pixel of run cur + 1 (final once that run starts
+    here; the slot of an id not yet used otherwise) and as the last pixel of its own run (or
+    of run cur + 1 if invalid); at most one run per pixel keeps both slots inside the band's
+    ids."""
     first = cur + 1
     pv = np.int32(new_val)
     for x in range(w):

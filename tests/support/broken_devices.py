@@ -170,6 +170,21 @@ def rescan_timed_decoder() -> Decoder:
     return RescanTimedDecoder(max_payload=REQUEST_MAX, message_timeout=1.0)
 
 
+class LinkDroppingDecoder(RescanTimedDecoder):
+    """The rescan-timed receive path of a unit whose watchdog, once a header has waited past the
+    message timeout, drops the link instead of abandoning the frame (the proxy hangs up on both
+    sides)."""
+
+    def _timed_out(self, offset: int, now: float | None) -> bool:
+        if super()._timed_out(offset, now):
+            raise ConnectionAbortedError("receive watchdog: the link is dropped")
+        return False
+
+
+def link_dropping_decoder() -> Decoder:
+    return LinkDroppingDecoder(max_payload=REQUEST_MAX, message_timeout=1.0)
+
+
 GROUPS = {m.Capability.CALIBRATION: range(m.MsgType.CALIB_READ, m.MsgType.CALIB_RESTORE + 1)}
 """SPEC §4.0 capability groups this module can hide (request types)."""
 HIDDEN_BASE = 0x3F00  # a hidden request travels as this | its low byte: a type the device does not know
@@ -276,12 +291,15 @@ class RewritingProxy:
             if self.speak_for_silent_host and not spoken and time.monotonic() - last > 1.0:
                 dst.sendall(encode_frame(m.MsgType.HEARTBEAT, KEEPALIVE_ID))
                 last = time.monotonic()
-        with src, dst:
-            while data := _recv(src, self._stop, idle):
-                spoken = True
-                for p in decoder.feed(data):
-                    q = self.rewrite(p)
-                    dst.sendall(encode_frame(q.msg_type, q.request_id, q.payload, q.flags))
+        with src, dst:  # closed on the way out: both sides see the hang-up
+            try:
+                while data := _recv(src, self._stop, idle):
+                    spoken = True
+                    for p in decoder.feed(data):
+                        q = self.rewrite(p)
+                        dst.sendall(encode_frame(q.msg_type, q.request_id, q.payload, q.flags))
+            except OSError:  # a peer gone, or a receive path that drops the link
+                pass
 
     def _to_host(self, src: socket.socket, dst: socket.socket) -> None:
         decoder = Decoder()

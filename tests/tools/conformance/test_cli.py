@@ -24,7 +24,8 @@ from stereocam.tools.conformance.checks.config import UNUSED_PARAM_ID
 from tests.tools.conformance.test_device import KNOWN_SIMULATOR_GAPS
 from tests.support.broken_devices import (RewritingProxy, blinding_decoder, clamp_into_range, commit_what_is_staged,
                                           counting_stop_discards, dead_trigger_output, first_duplicate_wins,
-                                          forget_resend, generations_restart, rescan_timed_decoder, small_sgm_limit,
+                                          forget_resend, generations_restart, link_dropping_decoder,
+                                          rescan_timed_decoder, small_sgm_limit,
                                           stale_slot_report, typed_busy_nack, unchanged, without_features)
 
 # Through the rewriting proxy: the checks the breakage is about, and enough around them to show
@@ -236,6 +237,19 @@ def test_each_new_check_fails_against_a_device_broken_that_way(tcp_sim, name):
     assert rc == 1 and _failures(report) == {name}, out
     detail = next(c["detail"] for c in report["checks"] if c["name"] == name)
     assert GAP_DETAILS[name] in detail, detail
+
+
+@BUILT_HERE
+def test_a_link_dropped_behind_stray_headers_fails_the_message_timeout_rule(tcp_sim):
+    """A unit whose stuck receive path ends in a dropped link (or whose watchdog trips while the
+    check waits, on a loaded machine) fails link.message_timeout with the rule, not a bare
+    disconnect."""
+    with RewritingProxy(tcp_sim.url, unchanged, decoder=link_dropping_decoder) as proxy:
+        rc, out = _run_cli([proxy.url, "--json", "-k", r"^link\.message_timeout$"])
+    report = json.loads(out)
+    assert rc == 1 and _failures(report) == {"link.message_timeout"}, out
+    detail = next(c["detail"] for c in report["checks"] if c["name"] == "link.message_timeout")
+    assert "the link dropped" in detail and GAP_DETAILS["link.message_timeout"] in detail, detail
 
 
 @BUILT_HERE

@@ -2,20 +2,21 @@
 extensions and headers announcing large payloads must not stop the device answering in time."""
 from __future__ import annotations
 
+import contextlib
 import random
 import struct
 import time
 import zlib
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.errors import StereoCamError
+from stereocam.protocol.errors import DisconnectedError, StereoCamError
 from stereocam.protocol.framing import DEVICE_MESSAGE_TIMEOUT, FLAG_RESEND, MAGIC, header_crc
 from stereocam.protocol.params import BY_NAME, TriggerMode
 
 from ..budget import budget
 from ..context import Context
 from ..registry import check
-from ..results import expect
+from ..results import CheckFailed, expect
 
 GARBAGE_BYTES = 4096
 QUIET_S = 0.3  # how long the suite waits to be sure a dropped frame got no answer
@@ -166,19 +167,25 @@ def message_timeout(ctx: Context) -> str:
     s.send_bytes(stray + frame(m.MsgType.GET_INFO, rid))
     allowed = budget(MESSAGE_TIMEOUT_BUDGET_S)
     answered = None
+    rule = ("each header's wait must run from its own arrival (T in all), not from when a rescan "
+            "reached it")
     try:
         while answered is None and time.monotonic() - t0 < allowed:
             try:  # a device need not poll its decoder while idle: later bytes let it expire the wait
                 answered = s.wait_reply(rid, min(0.2, allowed - (time.monotonic() - t0)))
             except TimeoutError:
                 s.send(m.GetInfo(), rid, FLAG_RESEND)
+    except DisconnectedError as e:  # a receive path stuck that long can trip the link's watchdog
+        raise CheckFailed(f"the link dropped ({e}) {time.monotonic() - t0:.3g} s into {STRAY_HEADERS} "
+                          f"stray headers announcing {n} bytes each, unanswered: {rule}") from e
     finally:
         if answered is None:
-            s.send_bytes(bytes(n + 4))  # completes the frame being waited on: the decoder resynchronises
+            with contextlib.suppress(StereoCamError):  # completes the frame being waited on: the
+                s.send_bytes(bytes(n + 4))  # decoder resynchronises (if the link is still up)
     took = time.monotonic() - t0
     expect(answered is not None,
            f"no answer within {allowed:.3g} s behind {STRAY_HEADERS} stray headers announcing {n} bytes each: "
-           "each header's wait must run from its own arrival (T in all), not from when a rescan reached it")
+           + rule)
     counters = ctx.status().counters
     if "rx_message_timeouts" in counters:
         d = counters["rx_message_timeouts"] - before.counters["rx_message_timeouts"]
