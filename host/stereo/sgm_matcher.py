@@ -178,7 +178,11 @@ class SGMMatcher:
 
 
 def sgm_warm_up() -> None:
-    """Compile (or load from numba's disk cache) the SGM kernels."""
+    """Compile (or load from numba's disk cache) the SGM kernels: the 5-path one-pass kernel
+    (the default) and the 4- and 8-path one (sgm_rows, census_pair and filter_speckles), so that
+    a device configured for either does not compile on its first frame."""
     rng = np.random.default_rng(0)
     img = rng.integers(0, 256, (24, 64), dtype=np.uint8)
-    SGMMatcher(img.shape, SGMParams(num_disparities=16)).match(img, np.roll(img, -3, axis=1))
+    for paths in (5, 4):
+        SGMMatcher(img.shape, SGMParams(num_disparities=16, paths=paths)).match(
+            img, np.roll(img, -3, axis=1))
