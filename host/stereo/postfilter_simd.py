@@ -16,15 +16,15 @@ N = LANES // 2  # int16 lanes per register
 
 def _far(builder, a, b, md):
     """|a - b| > md lane-wise, exactly for any int16 a, b: max - min fits uint16."""
-    hi = builder.select(builder.icmp_signed(">", a, b), a, b)
-    lo = builder.select(builder.icmp_signed(">", a, b), b, a)
-    return builder.icmp_unsigned(">", builder.sub(hi, lo), md)
+    gt = builder.icmp_signed(">", a, b)
+    return builder.icmp_unsigned(">", builder.sub(builder.select(gt, a, b), builder.select(gt, b, a)),
+                                 md)
 
 
 @intrinsic
 def run_flags(typingctx, im, o, a, x0, x1, new_val, max_diff, flags):
-    """flags[x] for x from x0 (>= 1) in whole registers while they end at or before x1 (<= w -
-    1): bit 0 a run starts at x, bit 1 one ends at x, bit 2 (a >= 0, the row above's flat
+    """flags[x] for x from x0 (>= 1) in whole registers while they end at or before x1 (x0 <=
+    x1 <= w - 1): bit 0 a run starts at x, bit 1 one ends at x, bit 2 (a >= 0, the row above's flat
     index) x joins the pixel above and is the first of its stretch of joins or a run start in
     either row; im int16 (flat), the row at o; 0 <= max_diff <= 65535. Returns the first x not
     done."""
@@ -38,9 +38,8 @@ def run_flags(typingctx, im, o, a, x0, x1, new_val, max_diff, flags):
         vty, bty = ir.VectorType(_I16, N), ir.VectorType(_I8, N)
         nv = _splat(builder, builder.trunc(_ix(context, builder, sig, args, 5), _I16), vty)
         md = _splat(builder, builder.trunc(_ix(context, builder, sig, args, 6), _I16), vty)
-        end = builder.add(x0v, builder.mul(
-            builder.sdiv(builder.sub(builder.select(builder.icmp_signed(">", x1v, x0v), x1v, x0v),
-                                     x0v), ir.Constant(x0v.type, N)), ir.Constant(x0v.type, N)))
+        span = builder.sub(x1v, x0v)
+        end = builder.sub(x1v, builder.srem(span, ir.Constant(span.type, N)))  # whole registers
 
         def load(base, x, off=0):
             return _vload(builder, _ptr(context, builder, st[0], args[0], [
@@ -74,6 +73,6 @@ def run_flags(typingctx, im, o, a, x0, x1, new_val, max_diff, flags):
                 loop(True)
             with no:
                 loop(False)
-        return builder.select(builder.icmp_signed(">", end, x0v), end, x0v)
+        return end
 
     return types.intp(im, o, a, x0, x1, new_val, max_diff, flags), codegen
