@@ -181,12 +181,14 @@ def _unite_rows(im: np.ndarray, lab: np.ndarray, o: int, w: int, max_diff: int,
 
 @nb.njit(**_JIT)
 def _unite(parent: np.ndarray, size: np.ndarray, a: int, b: int) -> None:
+    """Join the regions of runs a and b: the larger root points to the smaller, which adds
+    its size. No branch on whether they are one region already (unpredictable on maps of
+    small regions): then the root points to itself and adds nothing."""
     ra, rb = _root(parent, a), _root(parent, b)
-    if ra != rb:
-        if rb < ra:
-            ra, rb = rb, ra
-        parent[rb] = ra
-        size[ra] += size[rb]
+    lo, hi = min(ra, rb), max(ra, rb)
+    grow = size[uidx(hi)] * np.int32(lo != hi)
+    parent[uidx(hi)] = lo
+    size[uidx(lo)] += grow
 
 
 @nb.njit(**_JIT)
