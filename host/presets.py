@@ -35,6 +35,8 @@ def read_preset(path: str | os.PathLike) -> dict[str, int]:
 
 def preset_values(preset: str | os.PathLike) -> dict[str, int]:
     """The values a preset sets: a name of ``POST_PRESETS``, else a preset file's configuration."""
-    if isinstance(preset, str) and (preset in POST_PRESETS or preset.isidentifier() and not Path(preset).exists()):
+    if isinstance(preset, str) and (preset in POST_PRESETS or not preset or (
+            not Path(preset).exists() and "/" not in preset and os.sep not in preset
+            and not preset.lower().endswith(".json"))):
         return preset_config(preset)  # a name (ConfigError naming the known ones when unknown)
     return read_preset(preset)

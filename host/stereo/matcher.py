@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import threading
+from numbers import Integral
 
 import numba as nb
 import numpy as np
@@ -45,6 +46,14 @@ def _contiguous(img: np.ndarray) -> np.ndarray:
     return img if img.flags.writeable else img.copy()  # one compiled signature only
 
 
+def frame_shape(shape: object) -> tuple[int, int]:
+    """(height, width) of a matcher's frames, or ValueError unless ``shape`` is a pair of ints."""
+    if not isinstance(shape, (tuple, list)) or len(shape) != 2 or any(
+            isinstance(v, bool) or not isinstance(v, Integral) for v in shape):
+        raise ValueError(f"shape must be (height, width), two ints, got {shape!r}")
+    return int(shape[0]), int(shape[1])
+
+
 def prepared_pair(left: np.ndarray, right: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """The pair as the kernels take it (checked, of the matcher's ``shape``, C-contiguous, writable)."""
     check_pair(left, right)
@@ -65,7 +74,9 @@ class Matcher:
         if not isinstance(params, MatchParams):
             raise ValueError(f"params must be MatchParams, got {type(params).__name__}")
         params.validate()
-        h, w = int(shape[0]), int(shape[1])
+        h, w = frame_shape(shape)
+        if nstripes is not None and (isinstance(nstripes, bool) or not isinstance(nstripes, Integral)):
+            raise ValueError(f"nstripes must be an int or None, got {nstripes!r}")
         self.params = params
         self.shape = (h, w)
         self.geom: Geometry = geometry(h, w, params)

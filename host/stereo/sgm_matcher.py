@@ -12,7 +12,7 @@ from . import cpus
 from . import sgm as _sgm
 from . import sgm_one_pass as _one
 from .census import census_offsets, census_pair, noise_margin
-from .matcher import STRIPES_PER_THREAD, _aligned, _stripes, prepared_pair
+from .matcher import STRIPES_PER_THREAD, _aligned, _stripes, frame_shape, prepared_pair
 from .postfilter import filter_speckles
 from .sgm_params import SGMGeometry, SGMParams, sgm_geometry
 
@@ -30,7 +30,7 @@ class SGMMatcher:
         if not isinstance(params, SGMParams):
             raise ValueError(f"params must be SGMParams, got {type(params).__name__}")
         params.validate()
-        h, w = int(shape[0]), int(shape[1])
+        h, w = frame_shape(shape)
         self.params = params
         self.shape = (h, w)
         self.geom: SGMGeometry = sgm_geometry(h, w, params)

@@ -7,6 +7,7 @@ bit-exact with it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from numbers import Integral
 
 from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.frame_messages import invalid_disparity
@@ -36,6 +37,9 @@ and the path count (4, 5 or 8); the protocol's ranges lie within them."""
 def _default(name: str) -> int:
     """The protocol's default for an SGM row: the engine's own default is the device's."""
     return int(BY_NAME[name].default)
+
+
+P2_ADAPT_MAX = 1 << 20  # beyond it P2 / (1 + |dI| / p2_adapt) is P2 anyway; p2 * p2_adapt fits int64
 
 
 @dataclass(frozen=True)
@@ -87,8 +91,9 @@ class SGMParams:
                 or not -1 <= self.census_margin <= MARGIN_MAX:
             raise ConfigError(f"census_margin must be -1 (from the image's noise) or 0..{MARGIN_MAX}, "
                               f"got {self.census_margin}")
-        if self.p2_adapt < 0:
-            raise ConfigError(f"p2_adapt must be non-negative, got {self.p2_adapt}")
+        if isinstance(self.p2_adapt, bool) or not isinstance(self.p2_adapt, Integral) \
+                or not 0 <= self.p2_adapt <= P2_ADAPT_MAX:
+            raise ConfigError(f"p2_adapt must be 0..{P2_ADAPT_MAX}, got {self.p2_adapt}")
         if isinstance(self.p1_ground_percent, bool) or not isinstance(self.p1_ground_percent, int) \
                 or not 0 <= self.p1_ground_percent <= 100:
             raise ConfigError(f"p1_ground_percent must be 0..100, got {self.p1_ground_percent}")

@@ -35,3 +35,13 @@ def test_presets_are_valid_configuration_values() -> None:
     for name, values in POST_PRESETS.items():
         assert all(BY_NAME[k].check(v) is None for k, v in values.items()), name
         assert np.all([k in BY_NAME for k in values])
+
+
+@pytest.mark.parametrize("name", ["high-density", "", "HIGH_DENSITY"])
+def test_a_mistyped_name_lists_the_known_ones(name: str) -> None:
+    from stereocam.presets import preset_values
+    from stereocam.stereo.post.presets import preset_config
+    with pytest.raises(stereocam.ConfigError, match="known: high_density"):
+        preset_values(name)
+    with pytest.raises(stereocam.ConfigError, match="a preset name is a string"):
+        preset_config(["high_density"])  # type: ignore[arg-type]

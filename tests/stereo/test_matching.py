@@ -248,3 +248,14 @@ def test_opencv_rejects_what_we_reject() -> None:
         match(img, img, p)
     with pytest.raises(cv2.error):
         cv_stereo_bm(p).compute(img[:9], img[:9])
+
+
+@pytest.mark.parametrize("shape", [(30,), None, "ab", (30, 60, 3), (30.7, 60.9), (True, 60)])
+def test_a_shape_that_is_not_two_ints_is_refused(shape) -> None:
+    from stereocam.stereo import SGMMatcher, SGMParams
+    with pytest.raises(ValueError, match=r"shape must be \(height, width\)"):
+        Matcher(shape, MatchParams(num_disparities=16))
+    with pytest.raises(ValueError, match=r"shape must be \(height, width\)"):
+        SGMMatcher(shape, SGMParams(num_disparities=16))
+    with pytest.raises(ValueError, match="nstripes"):
+        Matcher((30, 60), MatchParams(num_disparities=16), nstripes=2.5)

@@ -205,6 +205,9 @@ def test_thread_count_and_reuse_do_not_change_output(paths: int) -> None:
     (dict(census_margin=2.0), "census_margin"),
     (dict(p1_ground_percent=101), "p1_ground_percent must be 0..100, got 101"),
     (dict(p1_ground_percent=-1), "p1_ground_percent"),
+    (dict(p2_adapt=2 ** 62), r"p2_adapt must be 0..1048576"),  # p2 * p2_adapt past int64
+    (dict(p2_adapt=-1), "p2_adapt"),
+    (dict(p2_adapt=2.5), "p2_adapt"),
 ])
 def test_bad_params(kw, msg) -> None:
     with pytest.raises(ValueError, match=msg):

@@ -36,6 +36,8 @@ POST_PRESETS: Mapping[str, Mapping[str, int]] = MappingProxyType({
 
 def preset_config(name: str) -> dict[str, int]:
     """The configuration values preset ``name`` sets (ConfigError naming the known ones)."""
+    if not isinstance(name, str):
+        raise ConfigError(f"a preset name is a string, got {type(name).__name__}; known: {', '.join(POST_PRESETS)}")
     try:
         return {k: int(v) for k, v in POST_PRESETS[name].items()}
     except KeyError:

@@ -184,3 +184,36 @@ def test_confidence_without_stages_marks_invalid_and_isolated_pixels() -> None:
     assert np.array_equal(out, disp) and chain.confidence is not None
     assert chain.confidence[0, 0] == 0 and chain.confidence[4, 5] == 31 and chain.confidence[2, 2] == 255
     assert np.array_equal(chain.confidence, ref.confidence(disp, disp, -16))
+
+
+def test_the_chain_refuses_maps_it_cannot_read_with_the_reason() -> None:
+    from stereocam.protocol.errors import ConfigError
+    from stereocam.stereo.post import PostChain, PostParams
+    from stereocam.stereo.post.chain import postprocess
+    from stereocam.stereo.sgm_params import SGMParams
+    d = np.full((40, 64), 48, np.int16)
+    lr = PostChain(PostParams(lr_check=0))
+    # a right view of another shape would be read out of bounds
+    with pytest.raises(ValueError, match="right view's disparity is 64x1"):
+        lr.run(d, lambda: np.full((1, 64), 48, np.int16))
+    with pytest.raises(ValueError, match="right view's disparity must be a numpy array"):
+        lr.run(d, lambda: None)
+    med = PostChain(PostParams(median_size=3))
+    for bad, word in ((np.full((4, 4), np.nan, np.float32), "int16.*float32"),
+                      (d.astype(np.int32) * 1000, "outside int16"),
+                      (np.zeros((3, 4, 2), np.int16), "2-D"),
+                      (np.zeros((0, 5), np.int16), "empty"),
+                      (d.tolist(), "numpy array")):
+        with pytest.raises(ValueError, match=word):
+            med.run(bad)
+    np.testing.assert_array_equal(med.run(d.astype(np.int32)), med.run(d))  # integers that fit
+    with pytest.raises(ConfigError, match="min_disparity=3000"):
+        PostChain(PostParams(), min_disparity=3000)
+    with pytest.raises(ConfigError, match="min_disparity must be an int"):
+        PostChain(PostParams(), min_disparity="0")
+    with pytest.raises(ValueError, match="params must be PostParams, got dict"):
+        PostChain({"hole_fill": 2})
+    img = np.zeros((10, 64), np.uint8)
+    with pytest.raises(ValueError, match="differ in shape"):
+        postprocess(np.full((300, 64), 48, np.int16), img, PostParams(lr_check=64), img,
+                    SGMParams(num_disparities=16))
