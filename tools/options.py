@@ -1,11 +1,14 @@
 """Click parameter types and settings every ``stereocam`` command shares."""
 from __future__ import annotations
 
+import functools
+import operator
 import re
 from typing import Any
 
 import click
 
+from stereocam.protocol.params import BY_NAME, Output
 from stereocam.tools.exit_codes import EXIT_CODES
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -13,7 +16,9 @@ CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
 
 class Setting(click.ParamType):
-    """``NAME=INTEGER``, a camera or matching parameter, as the pair (name, value)."""
+    """``NAME=VALUE``, a camera or matching parameter, as the pair (name, value): an integer, or
+    one of the names the parameter table gives its values (``trigger_mode=software``, any case),
+    or for ``outputs`` planes joined by ``+`` (``outputs=left+disparity``), as ``info`` prints them."""
 
     name = "NAME=VALUE"
 
@@ -24,7 +29,27 @@ class Setting(click.ParamType):
         try:
             return name, int(text)
         except ValueError:
-            self.fail(f"takes name=integer, got {value!r}", param, ctx)
+            pass
+        known = _value_names(name)
+        word = text.strip().lower()
+        if name == "outputs" and word:
+            try:
+                return name, int(functools.reduce(operator.or_, (Output[p.upper()] for p in word.split("+"))))
+            except KeyError:
+                pass
+        elif word in known:
+            return name, known[word]
+        if known:
+            self.fail(f"{name} takes {', '.join(known)} or an integer, got {text!r}", param, ctx)
+        self.fail(f"takes name=integer, got {value!r}", param, ctx)
+
+
+def _value_names(name: str) -> dict[str, int]:
+    """Parameter ``name``'s value names (lower case) -> values; ``outputs``: its planes."""
+    if name == "outputs":
+        return {m.name.lower(): int(m) for m in Output if m.name}
+    param = BY_NAME.get(name)
+    return {n.lower(): int(v) for v, n in param.values.items()} if param is not None else {}
 
 
 SETTING = Setting()

@@ -10,7 +10,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
-from stereocam.protocol.errors import ConfigError
+from stereocam.protocol.errors import ConfigError, StreamStalledError
+from stereocam.protocol.params import TriggerMode
 
 from ..arguments import count_arg, timeout_arg
 from ..frame_types import Frame
@@ -93,7 +94,8 @@ class RecordingListener:
 def record(camera: "Camera", path: str | Path, *, frames: int | None = None, seconds: float | None = None,
            progress: Callable[[Progress], None] | None = None, **recorder_options) -> RecorderStats:
     """Record ``camera`` to ``path`` until ``frames`` captures or ``seconds`` have gone by (or the
-    stream stops); starts streaming if it was not, and stops it again then."""
+    stream stops); starts streaming if it was not, and stops it again then. No frame at all is a
+    StreamStalledError saying why if it can (a trigger mode nothing triggers); the empty file is removed."""
     if frames is None and seconds is None:
         raise ConfigError("record needs a limit: frames or seconds")
     frames = None if frames is None else count_arg(frames, "frames", 1)
@@ -111,7 +113,8 @@ def record(camera: "Camera", path: str | Path, *, frames: int | None = None, sec
         raise RecordingError(f"{path} already exists: a recording never replaces a file; remove it or give "
                              f"another path")
     started_here = not camera.streaming
-    recorder = Recorder(path, describe(camera), **recorder_options)
+    unit = describe(camera)
+    recorder = Recorder(path, unit, **recorder_options)
     listener = RecordingListener(camera, recorder, frames)
     stall = max(camera.timeout, 2.0)  # streaming but no frame for this long: the recording ends
     camera.add_listener(listener)
@@ -136,9 +139,24 @@ def record(camera: "Camera", path: str | Path, *, frames: int | None = None, sec
         stats = recorder.close()
     if listener.error is not None:
         raise listener.error
+    if listener.frames == 0:  # nothing to keep: the path is free for another try
+        Path(path).unlink(missing_ok=True)
+        raise StreamStalledError(f"no frame arrived in {time.monotonic() - t0:.1f} s of recording"
+                                 f"{_why_no_frame(unit.config)}; {path} not kept")
     if progress is not None:
         progress(_progress(recorder, listener.frames, time.monotonic() - t0))
     return stats
+
+
+def _why_no_frame(config: dict[str, int]) -> str:
+    """Why a camera configured so sends no frame by itself, as the end of a sentence ("" if it should)."""
+    mode = config.get("trigger_mode")
+    if mode == TriggerMode.SOFTWARE:
+        return (": the camera is in software-trigger mode (trigger_mode=software) and nothing triggered it "
+                "(trigger_mode=free_run streams at fps)")
+    if mode == TriggerMode.EXTERNAL:
+        return ": the camera waits for external trigger pulses (trigger_mode=external) and none came"
+    return ""
 
 
 def _progress(recorder: Recorder, frames: int, dt: float) -> Progress:

@@ -13,7 +13,7 @@ import click
 
 from stereocam.calibration_io import id_text
 from stereocam.recording.reader import Recording
-from stereocam.recording.recorder import SUMMARY
+from stereocam.recording.recorder import SUMMARY, RecordingError
 from stereocam.recording.repair import repair
 from stereocam.tools.camera.capture import save_frame
 from stereocam.tools.options import CONTEXT, epilog
@@ -79,8 +79,14 @@ def info(path: Path, as_json: bool = False) -> None:
 
 
 def export(path: Path, out: Path, start: int, stop: int | None) -> int:
+    """Frames ``start`` .. ``stop - 1`` of ``path`` saved into ``out``; their number. A range that
+    selects no frame of the recording is a RecordingError naming the frames and seconds it has."""
     n = 0
     with Recording(path) as rec:
+        if start >= (len(rec) if stop is None else min(stop, len(rec))):
+            has = f"frames 0..{len(rec) - 1} ({rec.duration_s:.2f} s)" if len(rec) else "no frame"
+            raise RecordingError(f"--start {start}" + ("" if stop is None else f" --stop {stop}")
+                                 + f" selects no frame of {path}, which has {has}")
         for cap in rec.captures(start, stop):
             save_frame(cap.to_frame(), out, f"frame{cap.index:06d}")
             n += 1
@@ -125,6 +131,9 @@ def export_command(file: Path, out: Path, start: int, stop: int | None) -> int:
     if start < 0 or stop is not None and stop < 0:
         raise click.UsageError(f"--start and --stop are frame numbers from 0 (not negative), got --start {start}"
                                + ("" if stop is None else f" --stop {stop}"))
+    if stop is not None and stop <= start:
+        raise click.UsageError(f"--stop is the frame to stop before: it must be after --start, got --start {start} "
+                               f"--stop {stop}")
     n = export(file, out, start, stop)
     click.echo(f"{n} frames exported to {out}")
     return 0

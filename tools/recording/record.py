@@ -17,6 +17,7 @@ import stereocam
 from stereocam.protocol.errors import ConfigError
 from stereocam.presets import POST_PRESETS
 from stereocam.recording.mcapwriter import check_level
+from stereocam.tools.camera.session import writable_dir
 from stereocam.tools.options import CONTEXT, SETTING, epilog
 from stereocam.tools.progress import progress_wanted
 
@@ -28,7 +29,8 @@ from stereocam.tools.progress import progress_wanted
 @click.option("--frames", type=click.IntRange(min=1), default=None, help="Stop after N captures.")
 @click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=None, help="Stop after S seconds.")
 @click.option("--set", "settings", type=SETTING, multiple=True,
-              help="Configure the camera before recording (repeatable), e.g. --set width=1280.")
+              help="Configure the camera before recording (repeatable), e.g. --set width=1280; "
+                   "a value by the name info prints, e.g. --set trigger_mode=software.")
 @click.option("--preset", type=click.Choice(list(POST_PRESETS)), default=None,
               help="A named matching and post-processing preset, applied before any --set.")
 @click.option("--level", type=int, default=1, show_default=True, help="zstd level of the chunks.")
@@ -49,6 +51,10 @@ def command(url: str, out: Path, frames: int | None, seconds: float | None, sett
                                  f"another path", param_hint="--out")
     if not out.parent.is_dir():
         raise click.BadParameter(f"{out.parent} is not a folder", param_hint="--out")
+    try:  # a file written into the folder now: permission bits say nothing to root, /proc takes no file
+        writable_dir(out.parent)
+    except OSError as exc:
+        raise click.BadParameter(exc.strerror or str(exc), param_hint="--out") from exc
 
     bar = tqdm(total=frames or seconds, unit=" frames" if frames else " s", file=sys.stderr,
                disable=quiet or not progress_wanted(), bar_format="{l_bar}{bar}| {n:.%df}/{total:.%df}{unit} [{elapsed}<{remaining}{postfix}]"

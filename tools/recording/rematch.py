@@ -5,6 +5,7 @@ its frames into a part file), and one task per recording joins the parts into DI
 original images, camera infos and capture metadata beside the new disparity, and the new matching
 configuration in the file's configuration (so replaying it resends the new disparity). Tasks are
 retried; outputs are written under temporary names and renamed, so a killed worker loses nothing.
+Two recordings of one file name (their outputs would be one file) are refused before any work.
 
 By default a local cluster of worker processes (nothing to set up); ``--scheduler tcp://HOST:PORT``
 uses a running Dask scheduler (its workers need stereocam installed and must see the same paths).
@@ -54,6 +55,20 @@ def check_workers(workers: object) -> int:
     return workers
 
 
+def check_names(recordings: list[Path], out: Path) -> None:
+    """ConfigError if two recordings would be written to the same ``out``/NAME (outputs keep their
+    inputs' names), before any work: one output would replace the other, its parts clash."""
+    first: dict[str, Path] = {}
+    for p in recordings:
+        other = first.setdefault(p.name, p)
+        if other is p:
+            continue
+        if other.resolve() == p.resolve():
+            raise ConfigError(f"{p} is given twice: each recording is re-matched once")
+        raise ConfigError(f"{other} and {p} would both be written to {out / p.name} (outputs keep their "
+                          f"inputs' names): re-match them into separate --out folders")
+
+
 def check_outputs(recordings: list[Path], out: Path, force: bool) -> None:
     """ConfigError if an output (``out``/NAME of each recording) exists and ``force`` is not given."""
     existing = [str(out / p.name) for p in recordings if os.path.lexists(out / p.name)]
@@ -80,6 +95,7 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
     one) and the recorded settings changed by ``overrides``; returns frames, seconds and the outputs.
     An existing output is a ConfigError unless ``force`` (then it is replaced whole)."""
     check_workers(workers)
+    check_names(recordings, out)
     check_outputs(recordings, out, force)
     if scheduler is not None:
         check_scheduler(scheduler)
@@ -110,7 +126,7 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
             src = str(path.resolve())
             parts, futures = [], []
             for a, b in tasks.plan(src, chunks_per_task):
-                part = str((out / f".{path.stem}.{a:08d}-{b:08d}.part.mcap").resolve())
+                part = str((out / f".{path.name}.{a:08d}-{b:08d}.part.mcap").resolve())  # unique as outputs are
                 parts.append(part)
                 futures.append(client.submit(tasks.rematch_range, src, a, b, overrides, part, retries=RETRIES,
                                              key=f"rematch-{path.stem}-{a}-{b}-{time.time_ns()}"))
@@ -165,6 +181,10 @@ def command(recordings: tuple[Path, ...], out: Path, algorithm: str | None, sett
         raise click.BadParameter("must not be the folder of the input recordings (outputs keep their names)",
                                  param_hint="--out")
     try:  # before any file is read or cluster started
+        check_names(list(recordings), out)
+    except ConfigError as exc:
+        raise click.BadParameter(str(exc), param_hint="RECORDINGS") from exc
+    try:
         check_outputs(list(recordings), out, force)
     except ConfigError as exc:
         raise click.BadParameter(str(exc), param_hint="--out") from None

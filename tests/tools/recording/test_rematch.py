@@ -126,3 +126,22 @@ def test_an_existing_output_is_refused_unless_force(source, tmp_path, capsys):
     with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as client:
         assert rematch([source], out, {"block_size": 21}, client=client, force=True)["frames"] == N
     _check(source, out / "run.mcap", 21)
+
+
+def test_rematch_two_inputs_of_one_name_are_refused_before_any_work(tmp_path, capsys):
+    """Audit: A/run.mcap and A/sub/run.mcap both became OUT/run.mcap: worker tracebacks on the shared
+    part files, exit 2 after the work, one result lost. Outputs keep their names (README), so refused."""
+    a, b = tmp_path / "A" / "run.mcap", tmp_path / "A" / "sub" / "run.mcap"
+    b.parent.mkdir(parents=True)
+    a.write_bytes(b"first")  # never read: the names clash before any file is opened
+    b.write_bytes(b"second")
+    out = tmp_path / "out"
+    assert cli.main(["rematch", str(a), str(b), "--out", str(out), "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and str(a) in err and str(b) in err and "both be written to" in err
+    assert not out.exists()
+    assert cli.main(["rematch", str(a), str(tmp_path / "A" / "sub" / ".." / "run.mcap"), "--out", str(out)]) == 2
+    assert "given twice" in capsys.readouterr().err and not out.exists()
+    with pytest.raises(stereocam.ConfigError, match="both be written to"):
+        rematch([a, b], out, {})
+    assert not out.exists() and a.read_bytes() == b"first" and b.read_bytes() == b"second"
