@@ -28,7 +28,7 @@ from stereocam.transports.announced import announce
 from .boot.factory import DEV_SIGNING_KEY
 from .firmware import SimulatedCamera
 from .links.inprocess import SEED_MAX
-from .links.servers import PtyServer, TcpServer
+from .links.servers import PORT_MAX, PtyServer, TcpServer
 from .rig.lens import LensClass
 from .rig.scene import Scene
 from .shared_line import SharedTriggerLine
@@ -72,21 +72,41 @@ def free_seed() -> Iterator[int]:
         return
 
 
-def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
+def serve_spec(spec: str) -> tuple[str, int] | None:
+    """``--serve``'s value: None for ``pty``, else the (host, port) of ``tcp:HOST:PORT`` with a port
+    0..65535; anything else a usage error (checked before the simulator is built: that is slow)."""
     if spec == "pty":
-        return PtyServer(sim)
+        return None
     if spec.startswith("tcp:"):
         host, _, port = spec[4:].rpartition(":")
-        if not host or not port.isdigit():
+        if not host or not (port.isascii() and port.isdigit()):
             usage_error(f"--serve tcp:HOST:PORT expected, got {spec!r}")
-        return TcpServer(sim, host, int(port))
+        if int(port) > PORT_MAX:
+            usage_error(f"--serve {spec!r}: the port must be 0..{PORT_MAX} (0: any free port), got {port}")
+        return host, int(port)
     usage_error(f"--serve takes 'pty' or 'tcp:HOST:PORT', got {spec!r}")
+
+
+def _check_serve(ctx: click.Context, param: click.Parameter, value: str) -> str:
+    serve_spec(value)
+    return value
+
+
+def build_server(spec: str, sim: SimulatedCamera) -> PtyServer | TcpServer:
+    """The server ``spec`` names, listening; a port that is taken or a host that is not this machine's
+    (OSError from the bind) is a usage error too."""
+    address = serve_spec(spec)
+    try:
+        return PtyServer(sim) if address is None else TcpServer(sim, *address)
+    except OSError as exc:
+        raise click.UsageError(f"--serve {spec!r}: cannot listen there: {exc.strerror or exc}") from exc
 
 
 @click.command("sim", context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
                epilog="Exit codes: 0 stopped by SIGINT/SIGTERM; 2 bad usage (a --serve, --scene, --trigger-line "
                       "or --vendor-key that cannot be used).")
-@click.option("--serve", required=True, metavar="pty|tcp:HOST:PORT", help="Where to serve the unit.")
+@click.option("--serve", required=True, metavar="pty|tcp:HOST:PORT", callback=_check_serve,
+              help="Where to serve the unit (PORT 0..65535; 0: any free port).")
 @click.option("--seed", type=click.IntRange(0, SEED_MAX), default=None,
               help="Which simulated unit (its serial is SIM<seed>).  [default: the lowest no other simulator "
                    "served on this machine has, so serials are unique]")
@@ -148,19 +168,21 @@ def serve(args: SimpleNamespace) -> int:
             log.write(f"{seq} {t!r}\n")
 
         sim.truth.on_exposure = log_exposure
-    server = build_server(args.serve, sim)
-
-    def stop(signum, frame):
-        server.shutdown()
-
-    signal.signal(signal.SIGINT, stop)
-    signal.signal(signal.SIGTERM, stop)
-    print(server.url, flush=True)
+    server: PtyServer | TcpServer | None = None
     try:
+        server = listening = build_server(args.serve, sim)
+
+        def stop(signum, frame):
+            listening.shutdown()
+
+        signal.signal(signal.SIGINT, stop)
+        signal.signal(signal.SIGTERM, stop)
+        print(server.url, flush=True)
         with announce(server.url, sim.serial, sim.model, sim.firmware_version, "pty" if args.serve == "pty" else "tcp"):
             server.serve_forever()
     finally:
-        server.close()
+        if server is not None:
+            server.close()
         sim.close()
         if line is not None:
             line.close()

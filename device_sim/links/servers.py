@@ -15,7 +15,7 @@ import time
 import tty
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.errors import ErrorCode
+from stereocam.protocol.errors import ConfigError, ErrorCode
 
 from ..firmware import SimulatedCamera
 
@@ -23,6 +23,7 @@ READ_CHUNK = 65536
 SEND_TIMEOUT_S = 5.0
 REFUSE_LINGER_S = 0.5  # a refused client's bytes are read and discarded this long, so the NACK is not reset away
 WAIT_FOR_SLOT_S = 2.0  # a second TCP client waits this long for the host to leave before it is refused
+PORT_MAX = 65535
 
 
 class PtyServer:
@@ -159,6 +160,8 @@ class TcpServer:
 
     def __init__(self, sim: SimulatedCamera, host: str = "127.0.0.1", port: int = 0,
                  send_timeout: float = SEND_TIMEOUT_S):
+        if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= PORT_MAX:
+            raise ConfigError(f"TCP port must be an integer 0..{PORT_MAX} (0: any free port), got {port!r}")
         self.sim = sim
         self.send_timeout = send_timeout
         self._sock = socket.create_server((host, port))

@@ -41,6 +41,8 @@ the printed board; the tag corners are Kalibr's points: a (2·ROWS) x (2·COLS) 
 """
 from __future__ import annotations
 
+import math
+import numbers
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -54,6 +56,34 @@ from stereocam.tools.calibration import detection_cache
 _SUBPIX = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
 MIN_CHARUCO_CORNERS = 8
 MIN_TAG_PX = 16  # AprilGrid tags seen smaller (side, px) give no sub-pixel corners
+MAX_BOARD_SIDE = 100  # squares (ChArUco), inner corners (chessboard) or tags (AprilGrid) along a side
+MIN_IMAGE_PX = 16  # an image side under this holds no board (cv2.findChessboardCorners asserts under 15)
+MIN_SQUARE_PX = 2  # a chessboard, wholly in view, needs at least this many px a square
+
+
+def _positive(value: float, what: str) -> float:
+    """``value`` if it is a finite number > 0; else ValueError naming ``what``."""
+    if isinstance(value, bool) or not (isinstance(value, numbers.Real) and math.isfinite(value) and value > 0):
+        raise ValueError(f"{what} must be a finite number > 0, got {value!r}")
+    return float(value)
+
+
+def _side(text: str, what: str, low: int) -> int:
+    """A board's count along a side from the --board text, low..MAX_BOARD_SIDE; else ValueError."""
+    if len(text.lstrip("0")) > 3 or not low <= int(text) <= MAX_BOARD_SIDE:
+        raise ValueError(f"board {what} must be {low}..{MAX_BOARD_SIDE}, got {text}")
+    return int(text)
+
+
+def _number(text: str, what: str) -> float:
+    """A length or ratio of the --board text: a finite number > 0; else ValueError naming ``what``."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"board {what} must be a finite number > 0, got {text!r}")
+    return value
 
 
 @dataclass(frozen=True)
@@ -79,10 +109,18 @@ class CharucoSpec:
     _detectors: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
-        if self.cols < 3 or self.rows < 3 or not 0 < self.marker_m < self.square_m:
-            raise ValueError(f"bad ChArUco board {self.cols}x{self.rows} square {self.square_m} marker {self.marker_m}")
+        _positive(self.square_m, "ChArUco square size")
+        _positive(self.marker_m, "ChArUco marker size")
+        if not 3 <= self.cols <= MAX_BOARD_SIDE or not 3 <= self.rows <= MAX_BOARD_SIDE \
+                or not self.marker_m < self.square_m:
+            raise ValueError(f"bad ChArUco board {self.cols}x{self.rows} square {self.square_m} marker {self.marker_m} "
+                             f"(3..{MAX_BOARD_SIDE} squares a side, the marker smaller than the square)")
         if not self.dictionary.startswith("DICT_") or not hasattr(cv2.aruco, self.dictionary):
             raise ValueError(f"unknown ArUco dictionary {self.dictionary!r} (e.g. DICT_4X4_250)")
+        held = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary)).bytesList.shape[0]
+        if self.cols * self.rows // 2 > held:
+            raise ValueError(f"a {self.cols}x{self.rows} ChArUco board needs {self.cols * self.rows // 2} markers; "
+                             f"{self.dictionary} has {held}")
 
     def describe(self) -> str:
         return f"charuco:{self.cols}x{self.rows}:{self.square_m:g}:{self.marker_m:g}:{self.dictionary}"
@@ -116,7 +154,9 @@ class AprilGridSpec:
     _detector: "cv2.aruco.ArucoDetector | None" = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        if self.cols < 1 or self.rows < 1 or self.cols * self.rows < 2 or self.tag_m <= 0 or not 0 < self.spacing < 5:
+        _positive(self.tag_m, "AprilGrid tag size")
+        _positive(self.spacing, "AprilGrid tag spacing")
+        if self.cols < 1 or self.rows < 1 or self.cols * self.rows < 2 or not self.spacing < 5:
             raise ValueError(f"bad AprilGrid {self.cols}x{self.rows} tag {self.tag_m} spacing {self.spacing}")
         if self.cols * self.rows > 587:
             raise ValueError(f"an AprilGrid of tag36h11 has at most 587 tags, not {self.cols * self.rows}")
@@ -189,21 +229,25 @@ def describe(board: Board) -> str:
 
 
 def parse_board(text: str, square_size: float | None) -> Board:
-    """Parse the --board syntax of the module docstring; raises ValueError."""
+    """Parse the --board syntax of the module docstring; raises ValueError (a length that is not a
+    finite number > 0, over MAX_BOARD_SIDE a side, a ChArUco board its dictionary is too small for)."""
+    if square_size is not None:
+        _positive(square_size, "--square-size")
     m = re.fullmatch(r"(\d+)[xX](\d+)", text)
     if m:
         if square_size is None:
             raise ValueError("--square-size is required with a chessboard")
-        return BoardSpec(int(m.group(1)), int(m.group(2)), square_size)
+        return BoardSpec(_side(m.group(1), "COLS", 2), _side(m.group(2), "ROWS", 2), square_size)
     m = re.fullmatch(r"charuco:(\d+)[xX](\d+):([0-9.eE+-]+):([0-9.eE+-]+):(\w+)", text, re.IGNORECASE)
     if m:
-        square, marker = float(m.group(3)), float(m.group(4))
+        square, marker = _number(m.group(3), "SQUARE"), _number(m.group(4), "MARKER")
         if square_size is not None and square_size != square:  # --square-size rescales the board
             marker, square = marker * square_size / square, square_size
-        return CharucoSpec(int(m.group(1)), int(m.group(2)), square, marker, m.group(5).upper())
+        return CharucoSpec(_side(m.group(1), "COLS", 3), _side(m.group(2), "ROWS", 3), square, marker, m.group(5).upper())
     m = re.fullmatch(r"aprilgrid:(\d+)[xX](\d+):([0-9.eE+-]+):([0-9.eE+-]+)", text, re.IGNORECASE)
     if m:
-        return AprilGridSpec(int(m.group(1)), int(m.group(2)), float(m.group(3)), float(m.group(4)))
+        return AprilGridSpec(_side(m.group(1), "COLS", 1), _side(m.group(2), "ROWS", 1), _number(m.group(3), "TAG_SIZE"),
+                             _number(m.group(4), "SPACING"))
     if text.lower().endswith((".yaml", ".yml")):
         return read_kalibr_target(Path(text))
     raise ValueError(f"board must be COLSxROWS inner corners (e.g. 9x6), charuco:COLSxROWS:SQUARE:MARKER:DICT, "
@@ -217,23 +261,49 @@ def read_kalibr_target(path: Path) -> Board:
 
     try:
         doc = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise ValueError(f"cannot read the target yaml {path}: {exc}") from exc
     if not isinstance(doc, dict):
         raise ValueError(f"{path}: not a Kalibr target yaml")
     kind = str(doc.get("target_type", "")).strip("'\"")
+    if kind not in ("aprilgrid", "checkerboard"):
+        raise ValueError(f"{path}: target_type {kind!r} is not supported (aprilgrid or checkerboard)")
     try:
         if kind == "aprilgrid":
-            return AprilGridSpec(int(doc["tagCols"]), int(doc["tagRows"]), float(doc["tagSize"]),
-                                 float(doc["tagSpacing"]))
-        if kind == "checkerboard":
-            row, col = float(doc["rowSpacingMeters"]), float(doc["colSpacingMeters"])
-            if abs(row - col) > 1e-9 * max(row, col):
-                raise ValueError(f"{path}: only square checkerboard cells are supported ({col} x {row} m)")
-            return BoardSpec(int(doc["targetCols"]), int(doc["targetRows"]), col)
+            return AprilGridSpec(_yaml_count(doc, "tagCols"), _yaml_count(doc, "tagRows"),
+                                 _yaml_number(doc, "tagSize"), _yaml_number(doc, "tagSpacing"))
+        row, col = _yaml_number(doc, "rowSpacingMeters"), _yaml_number(doc, "colSpacingMeters")
+        if abs(row - col) > 1e-9 * max(row, col):
+            raise ValueError(f"only square checkerboard cells are supported ({col} x {row} m)")
+        return BoardSpec(_yaml_count(doc, "targetCols"), _yaml_count(doc, "targetRows"), col)
     except KeyError as exc:
         raise ValueError(f"{path}: {kind} target without {exc.args[0]}") from None
-    raise ValueError(f"{path}: target_type {kind!r} is not supported (aprilgrid or checkerboard)")
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from exc
+
+
+def _yaml_number(doc: dict, key: str) -> float:
+    """A length or ratio field of a Kalibr target yaml: a finite number > 0 (KeyError where missing)."""
+    value = doc[key]
+    try:
+        number = float(value) if isinstance(value, (int, float, str)) and not isinstance(value, bool) else math.nan
+    except (ValueError, OverflowError):
+        number = math.nan
+    if not (math.isfinite(number) and number > 0):
+        raise ValueError(f"{key} must be a finite number > 0, got {value!r}")
+    return number
+
+
+def _yaml_count(doc: dict, key: str) -> int:
+    """A count field of a Kalibr target yaml: a whole number 1..MAX_BOARD_SIDE (KeyError where missing)."""
+    value = doc[key]
+    try:
+        number = _yaml_number(doc, key)
+    except ValueError:
+        number = math.nan
+    if not (number.is_integer() and 1 <= number <= MAX_BOARD_SIDE):
+        raise ValueError(f"{key} must be a whole number 1..{MAX_BOARD_SIDE}, got {value!r}")
+    return int(number)
 
 
 def gray(img: np.ndarray) -> np.ndarray:
@@ -316,9 +386,24 @@ SUBPIXEL_FIRST = ("classic", *REFINED.values())
 rectified views' vertical disparity), not a solve (solve.py chooses per set)."""
 
 
+def too_small(shape: tuple[int, ...], board: Board) -> str | None:
+    """Why an image of ``shape`` (H, W, ...) cannot hold ``board``, or None: a side under MIN_IMAGE_PX,
+    or (a chessboard, only found wholly in view) under MIN_SQUARE_PX px a square along a side."""
+    h, w = shape[:2]
+    need = [MIN_IMAGE_PX, MIN_IMAGE_PX]
+    if isinstance(board, BoardSpec):
+        need = [max(MIN_IMAGE_PX, MIN_SQUARE_PX * n) for n in sorted((board.cols + 1, board.rows + 1))]
+    if min(w, h) < need[0] or max(w, h) < need[1]:
+        return f"{w}x{h} px is too small to hold the {describe(board)} board (at least {need[1]}x{need[0]} px)"
+    return None
+
+
 def detect_all(img: np.ndarray, board: Board) -> dict[str, Detection]:
-    """The board's corners in one image by each detector that finds it ({} when none does)."""
+    """The board's corners in one image by each detector that finds it ({} when none does, or when
+    the image is too small to hold the board: too_small)."""
     g = gray(img)
+    if too_small(g.shape, board) is not None:  # OpenCV's detectors assert on such images
+        return {}
     if isinstance(board, CharucoSpec):
         found = detect_charuco(g, board)
         if found is None:

@@ -47,6 +47,7 @@ captured or written; every attempt is recorded in the factory database (tools/fa
 """
 from __future__ import annotations
 
+import math
 import socket
 import sys
 from collections.abc import Iterator
@@ -78,6 +79,7 @@ from stereocam.tools.calibration.solve import (
 )
 from stereocam.tools.camera.session import writable_dir
 from stereocam.tools.exit_codes import EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXIT_SAVE, EXIT_USAGE
+from stereocam.tools.factory.cli import db_url
 from stereocam.tools.factory.db import GATE_FAILED, FactoryDB, FactoryDBError, default_url
 from stereocam.tools.factory.record import make_attempt, now_utc
 from stereocam.tools.options import CONTEXT, SIZE, epilog
@@ -102,7 +104,20 @@ class Range(click.ParamType):
             lo, hi = (float(v) for v in str(value).split(":"))
         except ValueError:
             self.fail(f"expected MIN:MAX, got {value!r}", param, ctx)
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            self.fail(f"MIN and MAX must be finite numbers, got {value!r}", param, ctx)
         return lo, hi
+
+
+class Finite(click.FloatRange):
+    """A click.FloatRange that also refuses NaN and infinities (a NaN passes every bound, and a NaN
+    gate would pass every head)."""
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> float:
+        number: float = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return number
 
 
 _DOC = __doc__.replace("``", "")
@@ -129,31 +144,31 @@ _D, _O = SolveConfig(), OutlierRules()
 @click.option("--size", type=SIZE, default=None, help="Device mode: capture format.  [default: the full sensor]")
 @click.option("--lens-model", type=click.Choice(["auto", *ALIASES]), default="auto", show_default=True,
               help="Lens model; auto: chosen by held-out error, the simpler wins ties.")
-@click.option("--max-stereo-rms", type=float, default=_D.max_stereo_rms_px, show_default=True,
+@click.option("--max-stereo-rms", type=Finite(min=0, min_open=True), default=_D.max_stereo_rms_px, show_default=True,
               help="Gate: stereo RMS, px.")
-@click.option("--max-epipolar", type=float, default=_D.max_epipolar_rms_px, show_default=True,
+@click.option("--max-epipolar", type=Finite(min=0, min_open=True), default=_D.max_epipolar_rms_px, show_default=True,
               help="Gate: held-out epipolar RMS, px.")
-@click.option("--max-pixel-aspect", type=float, default=_D.max_pixel_aspect, show_default=True,
+@click.option("--max-pixel-aspect", type=Finite(min=1), default=_D.max_pixel_aspect, show_default=True,
               help="Gate: fy/fx must lie within [1/A, A].")
 @click.option("--baseline-range", type=Range(), default=f"{_D.min_baseline_m}:{_D.max_baseline_m}", show_default=True,
               help="Gate: plausible baseline, metres.")
 @click.option("--min-views", type=int, default=_D.min_views, show_default=True,
               help="Device mode: distinct views needed.")
-@click.option("--max-views", type=int, default=_D.max_views, show_default=True,
+@click.option("--max-views", type=click.IntRange(min=1), default=_D.max_views, show_default=True,
               help="Device mode: stop after this many views.")
 @click.option("--min-pairs", type=int, default=_D.min_pairs, show_default=True,
               help="Offline: pairs with the board (outliers removed) needed.")
 @click.option("--holdout-every", type=int, default=_D.holdout_every, show_default=True,
               help="Hold out every N-th pair for the lens-model choice and the epipolar check.")
-@click.option("--model-tie", type=float, default=_D.model_tie, show_default=True,
+@click.option("--model-tie", type=Finite(min=0), default=_D.model_tie, show_default=True,
               help="Relative held-out score difference within which the simpler lens model wins.")
-@click.option("--outlier-k", type=float, default=_O.k, show_default=True,
+@click.option("--outlier-k", type=Finite(min=0), default=_O.k, show_default=True,
               help="Outlier: > median + k x 1.4826 MAD ...")
-@click.option("--outlier-ratio", type=float, default=_O.ratio, show_default=True, help="... and > ratio x median.")
-@click.option("--outlier-rounds", type=int, default=_O.rounds, show_default=True, help="Outlier removal rounds.")
-@click.option("--max-drop-fraction", type=float, default=_O.max_drop_fraction, show_default=True,
+@click.option("--outlier-ratio", type=Finite(min=0), default=_O.ratio, show_default=True, help="... and > ratio x median.")
+@click.option("--outlier-rounds", type=click.IntRange(min=0), default=_O.rounds, show_default=True, help="Outlier removal rounds.")
+@click.option("--max-drop-fraction", type=Finite(0, 1), default=_O.max_drop_fraction, show_default=True,
               help="Most pairs removed as outliers, fraction.")
-@click.option("--db", default=default_url(), show_default=True,
+@click.option("--db", default=default_url(), show_default=True, callback=db_url,
               help="Factory database for the record of this attempt: SQLite path or postgresql://...")
 @click.option("--station", default=socket.gethostname(), show_default=True, help="Station name in the factory record.")
 @click.option("--serial", default=None,
@@ -214,13 +229,15 @@ def calibrate(args: SimpleNamespace) -> int:
         return _fail(EXIT_USAGE, f"--square-size is in metres (0 < s <= 1), got {args.square_size}")
     if args.holdout_every < 2 or args.min_views < 3 or args.min_pairs < 4:
         return _fail(EXIT_USAGE, "--holdout-every must be >= 2, --min-views >= 3 and --min-pairs >= 4")
+    if args.url is not None and args.max_views < args.min_views:  # device mode would never have enough views
+        return _fail(EXIT_USAGE, f"--max-views ({args.max_views}) must be >= --min-views ({args.min_views})")
     if args.max_pixel_aspect < 1 or not 0 < args.baseline_range[0] < args.baseline_range[1]:
         return _fail(EXIT_USAGE, "--max-pixel-aspect must be >= 1 and --baseline-range 0 < MIN < MAX")
     try:
         args.board = parse_board(args.board, args.square_size)
-    except ValueError as exc:
+        config = _config(args)
+    except ValueError as exc:  # ConfigError too: a rule the engine cannot apply
         return _fail(EXIT_USAGE, str(exc))
-    config = _config(args)
     try:  # made and written to before anything is captured or written to a camera
         writable_dir(args.out, keep=False)
     except OSError as exc:

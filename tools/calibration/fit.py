@@ -23,12 +23,15 @@ kept; its held-out epipolar RMS is the chosen model's on the held-out pairs.
 """
 from __future__ import annotations
 
+import math
+import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from stereocam.protocol.calibration import StereoCalibration
+from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.calibration_limits import check_rectifiable
 from stereocam.protocol.rectification import RectifiedGeometry, stereo_rectify
 from stereocam.tools.calibration.lens import (
@@ -93,6 +96,23 @@ class OutlierRules:
     rounds: int = 3
     max_drop_fraction: float = 0.3
     floor_px: float = 0.1
+
+    def __post_init__(self) -> None:
+        """Raises ConfigError for a rule that cannot be applied (NaN, negative, a fraction outside 0..1)."""
+        for name in ("k", "ratio", "floor_px"):
+            check_finite(getattr(self, name), f"outlier {name}", 0.0)
+        check_finite(self.max_drop_fraction, "outlier max_drop_fraction", 0.0, 1.0)
+        if isinstance(self.rounds, bool) or not isinstance(self.rounds, numbers.Integral) or self.rounds < 0:
+            raise ConfigError(f"outlier rounds must be a whole number >= 0, got {self.rounds!r}")
+
+
+def check_finite(value: float, what: str, low: float, high: float = math.inf) -> float:
+    """``value`` if it is a finite number within [low, high]; else ConfigError naming ``what``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (
+            math.isfinite(value) and low <= value <= high):
+        bounds = f">= {low:g}" if high == math.inf else f"within {low:g}..{high:g}"
+        raise ConfigError(f"{what} must be a finite number {bounds}, got {value!r}")
+    return float(value)
 
 
 def fit_head(model: str, pairs: Sequence[PairPoints], size: tuple[int, int], start: HeadFit | None = None,
@@ -244,7 +264,9 @@ def choose_model(models: Sequence[str], train: list[PairPoints], held: list[Pair
                  size: tuple[int, int], tie: float) -> ModelChoice:
     """Fit each model on `train` on its own terms (a plumb_bob fit, where there is one, is one more
     start for the others, also where plumb_bob is not among `models`) and score it on `held`; a model that fails is listed, never fatal while
-    another one fits. Raises NoFitError when none fits."""
+    another one fits. Raises NoFitError when none fits, ConfigError for a `tie` that is not a finite
+    number >= 0."""
+    check_finite(tie, "model tie", 0.0)
     scores: dict[str, float] = {}
     errors: dict[str, dict[str, np.ndarray]] = {}
     fits: dict[str, HeadFit] = {}

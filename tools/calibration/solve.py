@@ -37,6 +37,7 @@ the device's raw stream in device mode — and returns a CalibrationResult.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
@@ -44,16 +45,18 @@ from typing import Literal
 import numpy as np
 
 from stereocam.protocol.rectification import RectifiedGeometry
-from stereocam.tools.calibration.boards import REFINED, Board, Detection, describe, detect_all, gray, match_pair
+from stereocam.tools.calibration.boards import (
+    REFINED, Board, Detection, describe, detect_all, gray, match_pair, too_small,
+)
 from stereocam.tools.calibration.coverage import CoverageSelector, view_params
 from stereocam.tools.calibration.fit import (
-    CROSS_START_RATIO, HeadFit, ModelChoice, NoFitError, OutlierRules, PairPoints, UnrectifiableFitError, choose_model, epipolar_dy,
-    fit_head, held_out_errors, rms, robust_fit,
+    CROSS_START_RATIO, HeadFit, ModelChoice, NoFitError, OutlierRules, PairPoints, UnrectifiableFitError, check_finite,
+    choose_model, epipolar_dy, fit_head, held_out_errors, rms, robust_fit,
 )
 from stereocam.tools.calibration.lens import MODELS, LensSolveError, calibrate_mono
 from stereocam.tools.calibration.sync import SyncReport, check_sync
 from stereocam.protocol.calibration import CalibrationQuality, StereoCalibration
-from stereocam.protocol.errors import StereoCamError
+from stereocam.protocol.errors import ConfigError, StereoCamError
 
 ViewStatus = Literal["used", "dropped", "redundant", "no_board"]
 
@@ -101,6 +104,17 @@ class SolveConfig:
     max_pixel_aspect: float = 1.5
     min_baseline_m: float = 1e-4
     max_baseline_m: float = 100.0
+
+    def __post_init__(self) -> None:
+        """Raises ConfigError for a NaN gate threshold (it would pass every head), a model_tie that
+        is not a finite number >= 0, or max_views under 1."""
+        for name in ("max_stereo_rms_px", "max_epipolar_rms_px", "max_pixel_aspect", "min_baseline_m",
+                     "max_baseline_m"):
+            if math.isnan(getattr(self, name)):
+                raise ConfigError(f"gate {name} must be a number, got NaN")
+        check_finite(self.model_tie, "model_tie", 0.0)
+        if self.max_views < 1:
+            raise ConfigError(f"max_views must be >= 1, got {self.max_views}")
 
 
 @dataclass
@@ -180,9 +194,10 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray | None, np.ndarray | None]]
                     progress: Callable[[Progress], None] | None = None, select: bool = True) -> CalibrationResult:
     """Calibrate a stereo head from raw image pairs of `board` (see the module docstring).
 
-    A pair given as None (an image that could not be read) or whose sizes differ from each other or
-    from the first pair's is dropped with its reason. Raises BoardNotFoundError / TooFewViewsError
-    when no solution can be computed; a solution that fails the gate is returned with `failures` set.
+    A pair given as None (an image that could not be read), whose sizes differ from each other or
+    from the first pair's, or too small to hold the board (boards.too_small) is dropped with its
+    reason. Raises BoardNotFoundError / TooFewViewsError when no solution can be computed; a
+    solution that fails the gate is returned with `failures` set.
     """
     selector = CoverageSelector(config.min_distance)
     views: list[ViewRecord] = []
@@ -193,6 +208,8 @@ def calibrate_pairs(pairs: Iterable[tuple[np.ndarray | None, np.ndarray | None]]
     for index, (left, right) in enumerate(pairs):
         label = labels[index] if labels is not None else f"pair {index}"
         why = _unusable(left, right, size)
+        if why is None and left is not None:  # an image too small for the board: dropped, said why
+            why = too_small(left.shape, board)
         if why is not None:  # one bad file or odd size does not sink the set: dropped, named, said why
             views.append(ViewRecord(index, label, "dropped", reason=why))
             if progress is not None:

@@ -11,6 +11,8 @@ from typing import Callable
 
 import click
 
+from stereocam.arguments import timeout_arg
+from stereocam.protocol.errors import ConfigError
 from stereocam.tools.options import CONTEXT, epilog
 
 from . import report
@@ -19,6 +21,16 @@ from .runner import run_suite
 
 ALWAYS = ("identity.connect", "session.restored")
 """Results every run reports, whatever -k selects."""
+MAX_TIMEOUT = 60.0  # s: the longest reply deadline (SPEC §7 holds a device to well inside 1 s)
+
+
+def _timeout(ctx: click.Context, param: click.Parameter, value: float) -> float:
+    """``--timeout`` as the transports take it: finite (FloatRange lets nan through), checked by the
+    same rule as ``stereocam.open``'s timeout."""
+    try:
+        return timeout_arg(value)
+    except ConfigError as exc:
+        raise click.BadParameter(str(exc)) from exc
 
 
 def _pattern(ctx: click.Context, param: click.Parameter, value: str | None) -> Callable[[str], bool] | None:
@@ -38,8 +50,8 @@ def _pattern(ctx: click.Context, param: click.Parameter, value: str | None) -> C
 @click.option("--junit", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write the results as JUnit XML to this file.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of text.")
-@click.option("--timeout", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True,
-              help="Reply deadline the device is held to, seconds (SPEC §7: well inside 1 s).")
+@click.option("--timeout", type=click.FloatRange(0, MAX_TIMEOUT, min_open=True), default=1.0, show_default=True,
+              callback=_timeout, help="Reply deadline the device is held to, seconds (SPEC §7: well inside 1 s).")
 @click.option("-k", "only", metavar="REGEX", default=None, callback=_pattern,
               help="Run only the checks whose name matches.  [default: every check]")
 def command(url: str, junit: Path | None, as_json: bool, timeout: float, only: Callable[[str], bool] | None) -> int:

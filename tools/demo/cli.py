@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,7 +14,7 @@ from tqdm import tqdm
 from stereocam.camera import Camera
 from stereocam.device_sim import SimulatedCamera
 from stereocam.device_sim.ground_truth import GROUND_TRUTH_KEEP
-from stereocam.device_sim.links.inprocess import InProcessTransport
+from stereocam.device_sim.links.inprocess import SEED_MAX, InProcessTransport
 
 from stereocam.tools.camera.capture import save_frame
 from stereocam.tools.camera.session import output_dir
@@ -23,6 +24,7 @@ from stereocam.tools.progress import progress_wanted
 from . import group as demo_group
 
 KEEP_UP = 0.9  # below this share of the asked frame rate the summary says the machine fell short
+MAX_SECONDS = 24 * 3600.0  # the longest demo
 
 
 def depth_errors(frame, truth) -> tuple[float, float, float]:
@@ -64,13 +66,21 @@ def keep_up_note(fps: float, asked: int, dropped: int) -> str:
             f"programs running")
 
 
+def _finite(ctx: click.Context, param: click.Parameter, value: float) -> float:
+    """A float option's value if finite (click's FloatRange lets nan through: it compares false)."""
+    if not math.isfinite(value):
+        raise click.BadParameter(f"{value!r} is not a finite number")
+    return value
+
+
 @click.command("demo", epilog=epilog(), context_settings=CONTEXT)
 @click.option("--out", type=click.Path(path_type=Path), default=Path("out"), show_default=True,
               help="Directory for the outputs (images, disparity with a depth colour bar, point cloud).")
-@click.option("--seconds", type=click.FloatRange(0, min_open=True), default=4.0, show_default=True,
-              help="How long to stream.")
+@click.option("--seconds", type=click.FloatRange(0, MAX_SECONDS, min_open=True), default=4.0, show_default=True,
+              callback=_finite, help="How long to stream.")
 @click.option("--fps", type=click.IntRange(1, 120), default=15, show_default=True, help="Frame rate to ask for.")
-@click.option("--seed", type=int, default=1, show_default=True, help="Which simulated unit.")
+@click.option("--seed", type=click.IntRange(0, SEED_MAX), default=1, show_default=True,
+              help="Which simulated unit (with --heads N: the first; the others take the next N-1 seeds).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object instead of lines.")
 @click.option("--heads", type=click.IntRange(1, 8), default=1, show_default=True,
               help="Several heads on one trigger line, streamed as matched sets (CameraGroup).")
@@ -81,6 +91,9 @@ def command(out: Path, seconds: float, fps: int, seed: int, as_json: bool, heads
     """Stream from an in-process simulated camera at 640x480, save the last frame's outputs and print a
     summary: frame rate (and whether this machine kept up), drops, link errors, depth accuracy against
     the simulator's ground truth."""
+    if seed + heads - 1 > SEED_MAX:
+        raise click.BadParameter(f"{heads} heads take the seeds {seed}..{seed + heads - 1}: at most {SEED_MAX}",
+                                 param_hint="'--seed'")
     output_dir(out)
     if heads > 1:
         return demo_group.run(heads, seconds, fps, seed, out, dict(settings))
@@ -100,7 +113,7 @@ def command(out: Path, seconds: float, fps: int, seed: int, as_json: bool, heads
         frames = 0
         t0 = time.monotonic()
         with tqdm(total=round(seconds * fps), unit="frame", desc="demo", disable=not progress_wanted()) as bar:
-            while time.monotonic() - t0 < seconds:
+            while not frames or time.monotonic() - t0 < seconds:  # at least one frame, however short
                 recent = (recent + [cam.get_frame(timeout=5.0)])[-GROUND_TRUTH_KEEP // 2:]
                 first_seq = recent[-1].sequence if first_seq is None else first_seq
                 frames += 1
@@ -108,7 +121,7 @@ def command(out: Path, seconds: float, fps: int, seed: int, as_json: bool, heads
         elapsed = time.monotonic() - t0
         host_stats, dev = cam.stats, cam.status().counters
         cam.stop()
-        assert first_seq is not None  # the loop ran at least once: seconds > 0
+        assert first_seq is not None  # the loop takes at least one frame
         drops = Drops.of(first_seq, recent[-1].sequence, frames, dev["frames_dropped"] - dev0["frames_dropped"],
                          host_stats["queue_overflow"] - host0["queue_overflow"])
         stats = [depth_errors(f, sim.ground_truth(f.sequence)) for f in recent]  # truth after timing

@@ -14,6 +14,7 @@ import numpy as np
 
 import stereocam
 from stereocam.device_sim import SimulatedCamera, TriggerLine
+from stereocam.frame_sets import MatchedSet
 
 from stereocam.tools.camera.capture import save_frame
 
@@ -30,9 +31,10 @@ def run(heads: int, seconds: float, fps: int, seed: int, out: Path, settings: di
                                    timeout=30.0) as group:
             print(f"{heads} heads on one trigger line at {fps} fps, {sims[0].serial} drives it: "
                   + ", ".join(f"{s.serial} drift {s.clock.drift * 1e6:+.1f} ppm" for s in sims))
-            sets, last = [], None
+            sets: list[MatchedSet] = []
+            last = None
             t0 = time.monotonic()
-            while time.monotonic() - t0 < seconds:
+            while not sets or time.monotonic() - t0 < seconds:  # at least one set, however short
                 s = group.get_set()
                 sets.append(s)
                 if s.complete:

@@ -137,13 +137,21 @@ def _since(ctx: click.Context, param: click.Parameter, value: str | None) -> str
     return value
 
 
+def db_url(ctx: click.Context, param: click.Parameter, value: str) -> str:
+    """The --db callback (calibrate's too): an empty URL is a usage error, never the default database."""
+    if not value.strip():
+        raise click.BadParameter("must name a database (a SQLite path, sqlite:///PATH or postgresql://...), "
+                                 "got an empty value")
+    return value
+
+
 @click.group("factory", epilog=epilog(), context_settings=CONTEXT)
 def command() -> None:
     """The factory record: every calibration attempt, in a SQLite file or on PostgreSQL."""
 
 
 @command.command("report", epilog=epilog())
-@click.option("--db", default=default_url(), show_default=True, help="SQLite path / sqlite:///PATH or postgresql://...")
+@click.option("--db", default=default_url(), show_default=True, callback=db_url, help="SQLite path / sqlite:///PATH or postgresql://...")
 @click.option("--since", default=None, callback=_since,
               help="Only attempts from this ISO date (UTC), e.g. 2026-11-01.  [default: all]")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path), default=None,

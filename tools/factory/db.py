@@ -123,8 +123,8 @@ def attempt_from_row(d: dict[str, Any]) -> Attempt:
 
 
 def default_url() -> str:
-    return os.environ.get("STEREOCAM_FACTORY_DB",
-                          str(Path.home() / ".local" / "share" / "stereocam" / "factory.sqlite"))
+    """$STEREOCAM_FACTORY_DB (unset or empty: ~/.local/share/stereocam/factory.sqlite)."""
+    return os.environ.get("STEREOCAM_FACTORY_DB") or str(Path.home() / ".local" / "share" / "stereocam" / "factory.sqlite")
 
 
 class FactoryDB:
@@ -134,7 +134,9 @@ class FactoryDB:
         """``create``: a station recording attempts makes the database (file, folder, tables) where
         it is missing; a reader (report, export) does not: a mistyped path is an error, and a file
         that is not a factory database is left as it was."""
-        self.url = url or default_url()
+        self.url = default_url() if url is None else url
+        if not self.url.strip():
+            raise FactoryDBError("factory database: an empty URL (give a SQLite path, sqlite:///PATH or postgresql://...)")
         self.unreadable: list[str] = []  # rows the last ``attempts()`` skipped, and why
         self._conn: sqlite3.Connection | psycopg.Connection[TupleRow]
         scheme = self.url.split("://", 1)[0] if "://" in self.url else ""

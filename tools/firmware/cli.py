@@ -183,6 +183,13 @@ def status(args: SimpleNamespace) -> int:
     return 0
 
 
+def _file_name(ctx: click.Context, param: click.Parameter, value: Path | None) -> Path | None:
+    """An ``--out`` that names a file: an empty path names none (click's Path lets '' through as '.')."""
+    if value is not None and not value.name:
+        raise click.BadParameter("the path is empty: give the file to write")
+    return value
+
+
 @click.group("firmware", epilog=epilog(), context_settings=CONTEXT)
 def command() -> None:
     """Signed firmware images: make a signing key, sign a build, update a camera, show its slots."""
@@ -193,7 +200,7 @@ _TIMEOUT = click.option("--timeout", type=click.FloatRange(min=0, min_open=True)
 
 
 @command.command("keygen", epilog=epilog())
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True, callback=_file_name,
               help="The private key file KEY; its public half goes to KEY.pub.")
 @click.option("--force", is_flag=True, help="Replace an existing KEY and KEY.pub (the old private key is lost for good).")
 def keygen_command(**params: object) -> int:
@@ -206,7 +213,8 @@ def keygen_command(**params: object) -> int:
 @click.option("--key", type=click.Path(path_type=Path), required=True, help="The private key (PEM).")
 @click.option("--version", default=None,
               help="The version the image must have: refused unless BUILD says the same.  [default: BUILD's version]")
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True, help="The image file to write.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True, callback=_file_name,
+              help="The image file to write.")
 @click.option("--security-counter", type=int, default=None,
               help="Anti-rollback counter. A unit refuses an image below the highest counter it has confirmed, and "
                    "confirming raises that floor for good: a rollback image takes the NEXT counter (the unit's, "

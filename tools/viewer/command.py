@@ -22,8 +22,26 @@ from .server import ViewerServer
 from .session import ViewerSession
 
 
+RERUN_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")  # what rerun-sdk connects to
+
+
 def _interrupt(signum: int, frame: object) -> None:  # noqa: ARG001
     raise KeyboardInterrupt
+
+
+def _rerun_save(ctx: click.Context, param: click.Parameter, value: Path | None) -> Path | None:
+    """``--rerun-save``: a file in a folder that exists (Rerun creates the file, never the folder)."""
+    if value is not None and not value.parent.is_dir():
+        raise click.BadParameter(f"{value.parent} is not a folder")
+    return value
+
+
+def _rerun_connect(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """``--rerun-connect``: a URL of a scheme Rerun connects to."""
+    if value is not None and not value.startswith(RERUN_SCHEMES):
+        raise click.BadParameter(f"expected a URL starting {', '.join(RERUN_SCHEMES)}, e.g. "
+                                 f"rerun+http://127.0.0.1:9876/proxy, got {value!r}")
+    return value
 
 
 @click.command("view", context_settings=CONTEXT,
@@ -52,8 +70,8 @@ def _interrupt(signum: int, frame: object) -> None:  # noqa: ARG001
               help="Also stream the images, depth with the pinhole model, point cloud and counters to Rerun "
                    "(rerun-sdk): to a Rerun viewer it starts, unless --rerun-save or --rerun-connect.")
 @click.option("--rerun-save", type=click.Path(dir_okay=False, writable=True, path_type=Path), default=None,
-              metavar="FILE.rrd", help="Stream to Rerun into this .rrd file (implies --rerun).")
-@click.option("--rerun-connect", default=None, metavar="URL",
+              callback=_rerun_save, metavar="FILE.rrd", help="Stream to Rerun into this .rrd file (implies --rerun).")
+@click.option("--rerun-connect", default=None, metavar="URL", callback=_rerun_connect,
               help="Stream to the Rerun viewer at URL, e.g. rerun+http://127.0.0.1:9876/proxy (implies --rerun).")
 def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_config: bool,
             record_dir: Path, master: str, allow_hosts: tuple[str, ...], token: str | None,
@@ -84,7 +102,11 @@ def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_
         if settings:
             cam.configure(**dict(settings))
         session = ViewerSession(cam, record_dir)
-        bridge = RerunBridge(session, rerun_save, rerun_connect) if rerun else None
+        try:
+            bridge = RerunBridge(session, rerun_save, rerun_connect) if rerun else None
+        except BaseException:  # Rerun refused the sink (RerunSinkError: exit 1): no grab thread left behind
+            session.close()
+            raise
         try:
             _serve(session, host, port, no_browser, cam.start, access)
         finally:

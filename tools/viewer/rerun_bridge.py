@@ -14,11 +14,18 @@ from typing import Any
 
 import numpy as np
 
+from stereocam.protocol.errors import StereoCamError
+
 from .cloud import sampled_points
 from .session import ViewerSession
 
 APPLICATION_ID = "stereocam_view"
 POINT_STEP = 2  # every 2nd pixel's point in each direction (a quarter of the frame)
+
+
+class RerunSinkError(StereoCamError):
+    """Rerun refused the recording's sink: an .rrd file it cannot create, an endpoint it cannot use,
+    a viewer it cannot start (the message says which, with Rerun's reason)."""
 
 
 def rerun_available() -> bool:
@@ -40,12 +47,17 @@ class RerunBridge:
         self._rr = rr
         self.session = session
         self.rec = rr.RecordingStream(APPLICATION_ID)
-        if save is not None:
-            self.rec.save(str(save))
-        elif connect is not None:
-            self.rec.connect_grpc(connect)
-        else:
-            self.rec.spawn()
+        try:
+            if save is not None:
+                self.rec.save(str(save))
+            elif connect is not None:
+                self.rec.connect_grpc(connect)
+            else:
+                self.rec.spawn()
+        except RuntimeError as exc:  # rerun-sdk's errors from its Rust core
+            sink = (f"save to {save}" if save is not None else f"stream to {connect}" if connect is not None
+                    else "start a Rerun viewer")
+            raise RerunSinkError(f"rerun: cannot {sink}: {exc}") from exc
         self.rec.log("world", rr.ViewCoordinates.RDF, static=True)
         self.frames = 0  # frames logged
         self._stop = threading.Event()

@@ -281,3 +281,17 @@ def test_leaves_a_unit_with_a_user_record_as_found(tcp_sim):
     finally:
         with stereocam.open(tcp_sim.url) as cam:
             cam.restore_factory_calibration()
+
+
+@pytest.mark.parametrize("timeout, words", [
+    ("nan", "timeout must be finite"), ("inf", "not in the range"), ("1e20", "not in the range"),
+    ("0", "not in the range"), ("-1", "not in the range"), ("61", "0<x<=60")])
+def test_a_timeout_that_cannot_be_waited_is_a_usage_error(monkeypatch, capsys, timeout: str, words: str):
+    """Refused before the camera is opened (nan is no device failure, inf no overflow deep in a transport)."""
+    def opened(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the camera was opened")
+
+    monkeypatch.setattr("stereocam.tools.conformance.cli.run_suite", opened)
+    rc, out = _run_cli(["socket://127.0.0.1:9", "--timeout", timeout])
+    err = capsys.readouterr().err
+    assert rc == 2 and words in err and "'--timeout'" in err and "Traceback" not in err and not out

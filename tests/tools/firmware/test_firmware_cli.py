@@ -280,3 +280,11 @@ def test_a_missing_input_file_is_a_usage_error_exit_2(tmp_path, capsys):
         assert cli.main(argv) == 2, argv
         err = capsys.readouterr().err
         assert "nonexistent" in err and "does not exist" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("command", [["keygen"], ["sign", "--key", "vendor.pem", "build.json"]])
+def test_an_empty_out_path_is_a_usage_error(capsys, command: list[str]) -> None:
+    """``--out ''`` (click's Path makes it '.', a path without a file name): a usage error, no traceback."""
+    assert cli.main(["firmware", *command, "--out", ""]) == 2
+    err = capsys.readouterr().err
+    assert "'--out'" in err and "the path is empty" in err and "Traceback" not in err

@@ -1,6 +1,8 @@
 """The CI-sized soak (issue 9): each fuzz and the faulty-link stream, short; the long run is `make soak`."""
 from __future__ import annotations
 
+import pytest
+
 from stereocam.tools import cli
 from stereocam.tools.soak import cli as soak
 from stereocam.tools.soak.group import lying_head_group
@@ -60,3 +62,19 @@ def test_lying_head_group_stage_short():
     f = rep.figures
     assert rep.crashes == rep.hangs == 0 and f["sets"] > 10 and f["liar named"].startswith("LIAR3-1 ")
     assert "memory goal" not in f and not soak._failed(rep)
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--latency", "nan"], "nan is not a finite number"), (["--latency", "inf"], "not in the range"),
+    (["--latency", "1e300"], "not in the range"), (["--seconds", "nan"], "nan is not a finite number"),
+    (["--seconds", "inf"], "inf is not a finite number"), (["--flip", "1e-4", "--flip", "nan"], "not a finite number"),
+    (["--drop", "nan"], "not a finite number"), (["--group-seconds", "inf"], "not a finite number"),
+    (["--seed", "-1"], "not in the range")])
+def test_values_a_soak_cannot_run_with_are_usage_errors_before_any_stage(monkeypatch, capsys, argv, words):
+    def ran(*args: object, **kwargs: object) -> None:
+        raise AssertionError("a stage ran")
+
+    monkeypatch.setattr(soak, "fuzz_decoder", ran)
+    assert cli.main(["soak", *argv]) == 2
+    err = capsys.readouterr().err
+    assert words in err and "Traceback" not in err
