@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import functools
+import math
 import operator
 import re
 from typing import Any
@@ -53,6 +54,17 @@ def _value_names(name: str) -> dict[str, int]:
 
 
 SETTING = Setting()
+
+
+class Finite(click.FloatRange):
+    """A click.FloatRange that also refuses NaN and infinities (a NaN passes every bound: a NaN gate
+    would pass everything, a NaN duration never ends)."""
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> float:
+        number: float = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return number
 
 
 def epilog(own: str = "") -> str:

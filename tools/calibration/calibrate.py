@@ -82,7 +82,7 @@ from stereocam.tools.exit_codes import EXIT_GATE, EXIT_NO_SOLUTION, EXIT_OK, EXI
 from stereocam.tools.factory.cli import db_url
 from stereocam.tools.factory.db import GATE_FAILED, FactoryDB, FactoryDBError, default_url
 from stereocam.tools.factory.record import make_attempt, now_utc
-from stereocam.tools.options import CONTEXT, SIZE, epilog
+from stereocam.tools.options import CONTEXT, SIZE, Finite, epilog
 
 
 
@@ -107,17 +107,6 @@ class Range(click.ParamType):
         if not (math.isfinite(lo) and math.isfinite(hi)):
             self.fail(f"MIN and MAX must be finite numbers, got {value!r}", param, ctx)
         return lo, hi
-
-
-class Finite(click.FloatRange):
-    """A click.FloatRange that also refuses NaN and infinities (a NaN passes every bound, and a NaN
-    gate would pass every head)."""
-
-    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> float:
-        number: float = super().convert(value, param, ctx)
-        if not math.isfinite(number):
-            self.fail(f"{value!r} is not a finite number", param, ctx)
-        return number
 
 
 _DOC = __doc__.replace("``", "")

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +17,7 @@ from stereocam.device_sim.links.inprocess import SEED_MAX, InProcessTransport
 
 from stereocam.tools.camera.capture import save_frame
 from stereocam.tools.camera.session import output_dir
-from stereocam.tools.options import CONTEXT, SETTING, epilog
+from stereocam.tools.options import CONTEXT, SETTING, Finite, epilog
 from stereocam.tools.progress import progress_wanted
 
 from . import group as demo_group
@@ -66,18 +65,11 @@ def keep_up_note(fps: float, asked: int, dropped: int) -> str:
             f"programs running")
 
 
-def _finite(ctx: click.Context, param: click.Parameter, value: float) -> float:
-    """A float option's value if finite (click's FloatRange lets nan through: it compares false)."""
-    if not math.isfinite(value):
-        raise click.BadParameter(f"{value!r} is not a finite number")
-    return value
-
-
 @click.command("demo", epilog=epilog(), context_settings=CONTEXT)
 @click.option("--out", type=click.Path(path_type=Path), default=Path("out"), show_default=True,
               help="Directory for the outputs (images, disparity with a depth colour bar, point cloud).")
-@click.option("--seconds", type=click.FloatRange(0, MAX_SECONDS, min_open=True), default=4.0, show_default=True,
-              callback=_finite, help="How long to stream.")
+@click.option("--seconds", type=Finite(0, MAX_SECONDS, min_open=True), default=4.0, show_default=True,
+              help="How long to stream.")
 @click.option("--fps", type=click.IntRange(1, 120), default=15, show_default=True, help="Frame rate to ask for.")
 @click.option("--seed", type=click.IntRange(0, SEED_MAX), default=1, show_default=True,
               help="Which simulated unit (with --heads N: the first; the others take the next N-1 seeds).")

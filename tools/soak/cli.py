@@ -16,13 +16,12 @@ flipped, 50 % at 1 in 10^4).
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from functools import partial
 
 import click
 
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog
 
 from stereocam.device_sim.links.inprocess import SEED_MAX
 
@@ -38,16 +37,6 @@ def _print(rep: Report) -> None:
 
 
 MAX_LATENCY = 10.0  # s: the most delay per chunk (a frame's chunks must arrive within the host's deadlines)
-
-
-def _finite(ctx: click.Context, param: click.Parameter,
-            value: float | tuple[float, ...]) -> float | tuple[float, ...]:
-    """A float option's value (each of a repeatable one's) if finite: click's FloatRange lets nan
-    through (it compares false) and inf past an open top."""
-    for number in value if isinstance(value, tuple) else (value,):
-        if not math.isfinite(number):
-            raise click.BadParameter(f"{number!r} is not a finite number")
-    return value
 
 
 DELIVERY_GOALS = {1e-5: 0.95, 1e-4: 0.50}  # byte flip rate -> share of the frames sent that must arrive
@@ -92,14 +81,14 @@ def _memory_goal(rep: Report, limit_mib: int) -> Report:
               help="Mutated frame streams fed to fresh decoders.")
 @click.option("--device-inputs", type=click.IntRange(min=0), default=5_000, show_default=True,
               help="CRC-valid requests with mutated payloads sent to the device.")
-@click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=120.0, show_default=True,
-              callback=_finite, help="Streaming time per flip rate.")
-@click.option("--flip", "flips", type=click.FloatRange(0, 1), multiple=True, callback=_finite,
+@click.option("--seconds", type=Finite(min=0, min_open=True), default=120.0, show_default=True,
+              help="Streaming time per flip rate.")
+@click.option("--flip", "flips", type=Finite(0, 1), multiple=True,
               help="Byte flip rate (repeatable).  [default: 1e-5 and 1e-4]")
-@click.option("--drop", type=click.FloatRange(0, 1), default=1e-6, show_default=True, callback=_finite,
+@click.option("--drop", type=Finite(0, 1), default=1e-6, show_default=True,
               help="Byte loss rate.")
-@click.option("--latency", type=click.FloatRange(0, MAX_LATENCY), default=0.001, show_default=True,
-              callback=_finite, help="Most delay per chunk, seconds.")
+@click.option("--latency", type=Finite(0, MAX_LATENCY), default=0.001, show_default=True,
+              help="Most delay per chunk, seconds.")
 @click.option("--split", type=click.IntRange(min=1), default=16, show_default=True,
               help="Split host writes into pieces of 1..N bytes.")
 @click.option("--chunk", type=click.IntRange(min=0), default=1024, show_default=True,
@@ -108,8 +97,8 @@ def _memory_goal(rep: Report, limit_mib: int) -> Report:
               help="Hostile recordings (3 compression bombs, then fuzzed files; 0: skip the stage).")
 @click.option("--max-memory-mib", type=click.IntRange(min=1), default=2048, show_default=True,
               help="Peak memory the hostile-recording stage may reach.")
-@click.option("--group-seconds", type=click.FloatRange(min=0), default=60.0, show_default=True,
-              callback=_finite, help="Lying-head group stage (0: skip).")
+@click.option("--group-seconds", type=Finite(min=0), default=60.0, show_default=True,
+              help="Lying-head group stage (0: skip).")
 @click.option("--seed", type=click.IntRange(0, SEED_MAX - (HEADS - 1)), default=0, show_default=True,
               help="Seed of every random choice.")
 def command(url: str, decoder_inputs: int, device_inputs: int, seconds: float, flips: tuple[float, ...], drop: float,

@@ -9,7 +9,7 @@ from stereocam.tools.demo import cli as demo
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--seconds", "nan"], "nan is not a finite number"),
+    (["--seconds", "nan"], "'nan' is not a finite number"),
     (["--seconds", "inf"], "not in the range"), (["--seconds", "1e20"], "not in the range"),
     (["--seconds", "-inf"], "not in the range"), (["--heads", "2", "--seconds", "nan"], "not a finite number"),
     (["--heads", "2", "--seconds", "inf"], "not in the range"),

@@ -65,9 +65,9 @@ def test_lying_head_group_stage_short():
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--latency", "nan"], "nan is not a finite number"), (["--latency", "inf"], "not in the range"),
-    (["--latency", "1e300"], "not in the range"), (["--seconds", "nan"], "nan is not a finite number"),
-    (["--seconds", "inf"], "inf is not a finite number"), (["--flip", "1e-4", "--flip", "nan"], "not a finite number"),
+    (["--latency", "nan"], "'nan' is not a finite number"), (["--latency", "inf"], "not in the range"),
+    (["--latency", "1e300"], "not in the range"), (["--seconds", "nan"], "'nan' is not a finite number"),
+    (["--seconds", "inf"], "'inf' is not a finite number"), (["--flip", "1e-4", "--flip", "nan"], "not a finite number"),
     (["--drop", "nan"], "not a finite number"), (["--group-seconds", "inf"], "not a finite number"),
     (["--seed", "-1"], "not in the range")])
 def test_values_a_soak_cannot_run_with_are_usage_errors_before_any_stage(monkeypatch, capsys, argv, words):
