@@ -15,7 +15,9 @@ schemes whose package is already imported. Anything else (a device path, ``socke
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import logging
+import pkgutil
 import threading
 from types import ModuleType
 from typing import TYPE_CHECKING
@@ -71,12 +73,27 @@ def open_transport(url: str, timeout: float = 1.0) -> Transport:
         raise TransportError(f"a camera URL must be a non-empty string, got {url!r}")
     split_url(url)
     module = scheme_module(url)
+    scheme = scheme_of(url)
+    if scheme and module.__name__ == SERIAL_MODULE and not (scheme.isascii() and scheme.isidentifier() and (
+            importlib.util.find_spec(f"serial.urlhandler.protocol_{scheme}") is not None)):  # pyserial: "not known"
+        raise ConfigError(f"{url!r}: no transport for {scheme}://; known: {', '.join(known_schemes())}, "
+                          f"or a serial device path (a TCP camera: socket://HOST:PORT)")
     try:
         return module.open_transport(url, timeout)
     except StereoCamError:
         raise
     except ValueError as exc:  # a scheme module's parsing (UnicodeError included): typed, naming the URL
         raise ConfigError(f"{url!r} is not a valid camera URL: {type(exc).__name__}: {exc}") from exc
+
+
+def known_schemes() -> list[str]:
+    """Every scheme ``open_transport`` routes: the table's, the entry points', pyserial's URL handlers."""
+    import serial.urlhandler
+    with _lock:
+        ours = [*SCHEMES]
+    theirs = [m.name.removeprefix("protocol_") for m in pkgutil.iter_modules(serial.urlhandler.__path__)
+              if m.name.startswith("protocol_")]
+    return sorted({*ours, *plugins.declared(ENTRY_POINT_GROUP), *theirs})
 
 
 def reopen_url(url: str, serial: str) -> str:

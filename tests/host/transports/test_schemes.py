@@ -99,3 +99,12 @@ def test_the_info_tool_says_what_is_wrong_with_a_malformed_url_without_a_traceba
     r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "info", "socket://[::1"],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode != 0 and "Traceback" not in r.stderr and "socket://[::1" in r.stderr
+
+
+@pytest.mark.parametrize("url", ["tcp://127.0.0.1:5555", "foo://x", "a.b://x", "a-b://x"])
+def test_a_scheme_nothing_handles_is_a_config_error_listing_the_known_ones(url):
+    with pytest.raises(stereocam.ConfigError, match=r"known: .*sim, socket, .*usb.*socket://HOST:PORT"):
+        stereocam.open(url, timeout=0.2)
+    r = subprocess.run([sys.executable, "-m", "stereocam.tools.cli", "info", url],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "no transport for" in r.stderr
