@@ -80,9 +80,11 @@ class Size(click.ParamType):
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> tuple[int, int]:
         if isinstance(value, tuple):
             return value
-        m = re.fullmatch(r"(\d+)[xX](\d+)", str(value))
+        m = re.fullmatch(r"(\d{1,6})[xX](\d{1,6})", str(value))
         if not m:
             self.fail(f"expected WxH, e.g. 640x480, got {value!r}", param, ctx)
+        if int(m.group(1)) < 1 or int(m.group(2)) < 1:
+            self.fail(f"both sides must be at least 1 px, got {value!r}", param, ctx)
         return int(m.group(1)), int(m.group(2))
 
 

@@ -29,3 +29,11 @@ def test_a_setting_takes_an_integer_or_the_name_info_prints(text: str, want: tup
 def test_a_setting_of_no_known_value_names_the_ones_there_are(text: str, word: str) -> None:
     with pytest.raises(click.BadParameter, match=word):
         SETTING.convert(text, None, None)
+
+
+@pytest.mark.parametrize("text", ["0x0", "640x0", "1234567x480", "640*480", "-640x480"])
+def test_a_size_is_two_positive_sides(text: str) -> None:
+    from stereocam.tools.options import SIZE
+    with pytest.raises(click.BadParameter, match="WxH|at least 1 px"):
+        SIZE.convert(text, None, None)
+    assert SIZE.convert("640X480", None, None) == (640, 480)
