@@ -14,6 +14,9 @@ metadata indexes, statistics and summary offsets) with three differences that re
 from __future__ import annotations
 
 import collections
+import contextlib
+import numbers
+import os
 import struct
 import zlib
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -36,6 +39,7 @@ DEFAULT_CHUNK_BYTES = 4 << 20
 MAX_CHUNK_BYTES = 64 << 20  # a reader refuses a chunk larger than this plus one capture (chunks.py)
 DEFAULT_LEVEL = 1
 MIN_LEVEL, MAX_LEVEL = -(1 << 17), zstandard.MAX_COMPRESSION_LEVEL  # zstd's ZSTD_minCLevel() .. ZSTD_maxCLevel()
+MAX_THREADS = 64  # compression threads: more only wait for the file (chunks are written in order)
 
 
 Buffers = Sequence[Union[bytes, memoryview]]
@@ -61,6 +65,17 @@ def check_level(level: object) -> int:
     return level
 
 
+def int_option(value: object, name: str, lo: int, hi: int | None = None) -> int:
+    """``value`` as an int from ``lo`` to ``hi`` (numpy integers too; bool, floats and strings
+    refused), else ConfigError naming ``name`` and the range."""
+    if not isinstance(value, bool) and isinstance(value, numbers.Integral):
+        number = int(value)
+        if lo <= number and (hi is None or number <= hi):
+            return number
+    allowed = f"from {lo} to {hi}" if hi is not None else f"of at least {lo}"
+    raise ConfigError(f"{name} must be an integer {allowed}, got {value!r}")
+
+
 def _compress(pieces: Buffers, level: int) -> tuple[bytes, int]:
     """zstd frame and CRC-32 of the concatenated ``pieces`` (zstd and zlib release the GIL). One
     join, then zstd in one shot: faster than streaming the pieces through a compressor object."""
@@ -74,16 +89,28 @@ class ChunkedWriter:
     def __init__(self, path: str | Path, *, profile: str = Profile.ROS2, library: str = "stereocam",
                  chunk_bytes: int = DEFAULT_CHUNK_BYTES, level: int = DEFAULT_LEVEL, threads: int = 2,
                  exclusive: bool = False):
-        """``exclusive``: never replace a file (FileExistsError if ``path`` exists)."""
-        check_level(level)  # before the file is touched: a bad level would otherwise fail at the first chunk
-        if isinstance(chunk_bytes, bool) or not isinstance(chunk_bytes, int) or not 1 <= chunk_bytes <= MAX_CHUNK_BYTES:
-            raise ConfigError(f"chunk_bytes must be an integer from 1 to {MAX_CHUNK_BYTES}, got {chunk_bytes!r}")
+        """``exclusive``: never replace a file (FileExistsError if ``path`` exists). Every option
+        is checked (ConfigError) before the file is touched; a file created here and not started
+        (a write failed) is removed again."""
+        level = check_level(level)  # a bad level would otherwise fail at the first chunk
+        chunk_bytes = int_option(chunk_bytes, "chunk_bytes", 1, MAX_CHUNK_BYTES)
+        threads = int_option(threads, "threads", 1, MAX_THREADS)
         self._out: BinaryIO = open(path, "xb" if exclusive else "wb")  # closed by finish()
+        try:
+            self._start(profile, library, chunk_bytes, level, threads)
+        except BaseException:
+            self._out.close()
+            if exclusive:  # ours: nothing of it is worth keeping
+                with contextlib.suppress(OSError):
+                    os.unlink(path)
+            raise
+
+    def _start(self, profile: str, library: str, chunk_bytes: int, level: int, threads: int) -> None:
         self._pos = 0
         self._chunk_bytes = chunk_bytes
         self._level = level
-        self._pool = ThreadPoolExecutor(max(1, threads), thread_name_prefix="mcap-zstd")
-        self._max_pending = 2 * max(1, threads)
+        self._pool = ThreadPoolExecutor(threads, thread_name_prefix="mcap-zstd")
+        self._max_pending = 2 * threads
         self._pending: collections.deque[tuple[Future, _OpenChunk, int]] = collections.deque()
         self._chunk = _OpenChunk()
         self.schemas: dict[int, Schema] = {}

@@ -7,6 +7,7 @@ carries all those counters so far, and the summary metadata the final ones.
 from __future__ import annotations
 
 import collections
+import contextlib
 import threading
 import time
 from dataclasses import asdict, dataclass, field
@@ -21,7 +22,8 @@ from stereocam.frames import Frame
 from stereocam.protocol.errors import StereoCamError
 
 from . import convert, schemas
-from .mcapwriter import DEFAULT_CHUNK_BYTES, DEFAULT_LEVEL, ChunkedWriter
+from .mcapwriter import DEFAULT_CHUNK_BYTES, DEFAULT_LEVEL, MAX_CHUNK_BYTES, MAX_THREADS, ChunkedWriter, check_level, \
+    int_option
 
 DEFAULT_QUEUE_BYTES = 512 << 20
 FRAME_INDEX = "stereocam/frame_index"  # attachment: int64 log time (ns) of every capture, in order
@@ -66,6 +68,14 @@ class RecorderStats:
     counters: convert.LinkCounters = field(default_factory=convert.LinkCounters)
 
 
+def check_options(*, queue_bytes: object = DEFAULT_QUEUE_BYTES, level: object = DEFAULT_LEVEL, threads: object = 2,
+                  chunk_bytes: object = DEFAULT_CHUNK_BYTES) -> dict[str, int]:
+    """The recorder's options as ints, each checked (ConfigError naming the option and its range)."""
+    return {"queue_bytes": int_option(queue_bytes, "queue_bytes", 1), "level": check_level(level),
+            "threads": int_option(threads, "threads", 1, MAX_THREADS),
+            "chunk_bytes": int_option(chunk_bytes, "chunk_bytes", 1, MAX_CHUNK_BYTES)}
+
+
 def _frame_bytes(frame: Frame) -> int:
     return sum(p.nbytes for p in (frame.left, frame.right, frame.disparity, frame.confidence) if p is not None)
 
@@ -79,16 +89,31 @@ class Recorder:
         """``clock_offset_ns``: host wall clock minus monotonic clock for the stamps (default: now;
         re-writing a recording passes the original's so every stamp stays the same)."""
         self.path = Path(path)
-        self._chunk_bytes = chunk_bytes
+        options = check_options(queue_bytes=queue_bytes, level=level, threads=threads, chunk_bytes=chunk_bytes)
+        self._chunk_bytes = options["chunk_bytes"]
         try:  # never over an existing file (a failed recording must not cost the one it replaced);
             # written in place, not renamed at the end: a killed recorder leaves a file to repair
-            self._writer = ChunkedWriter(self.path, library=f"stereocam {stereocam.__version__}", level=level,
-                                         threads=threads, chunk_bytes=chunk_bytes, exclusive=True)
+            self._writer = ChunkedWriter(self.path, library=f"stereocam {stereocam.__version__}",
+                                         level=options["level"], threads=options["threads"],
+                                         chunk_bytes=self._chunk_bytes, exclusive=True)
         except FileExistsError as exc:
             raise RecordingError(f"{self.path} already exists: a recording never replaces a file; remove it "
                                  f"or give another path") from exc
         except OSError as exc:
             raise RecordingError(f"cannot write {self.path}: {exc}") from exc
+        try:
+            self._start(unit, options["queue_bytes"], clock_offset_ns, extra_metadata)
+        except BaseException as exc:  # no recorder, no file: the path is free for another try
+            self._writer.abandon()
+            with contextlib.suppress(OSError):
+                self.path.unlink()
+            if isinstance(exc, OSError):
+                raise RecordingError(f"cannot write {self.path}: {exc}") from exc
+            raise
+
+    def _start(self, unit: UnitDescription, queue_bytes: int, clock_offset_ns: int | None,
+               extra_metadata: dict[str, dict[str, str]] | None) -> None:
+        """The file's head (schemas, channels, the unit), then the writer thread."""
         self.unit = unit
         self.stats = RecorderStats()
         self.clock_offset_ns = time.time_ns() - time.monotonic_ns() if clock_offset_ns is None else clock_offset_ns

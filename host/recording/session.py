@@ -16,8 +16,7 @@ from stereocam.protocol.params import TriggerMode
 from ..arguments import count_arg, timeout_arg
 from ..frame_types import Frame
 from .convert import LinkCounters
-from .mcapwriter import check_level
-from .recorder import Recorder, RecorderStats, RecordingError, UnitDescription
+from .recorder import Recorder, RecorderStats, RecordingError, UnitDescription, check_options
 
 RECORDER_OPTIONS = frozenset({"queue_bytes", "level", "threads", "chunk_bytes"})  # what record() passes on
 
@@ -107,8 +106,9 @@ def record(camera: "Camera", path: str | Path, *, frames: int | None = None, sec
     unknown = sorted(set(recorder_options) - RECORDER_OPTIONS)
     if unknown:
         raise ConfigError(f"unknown recorder option {', '.join(unknown)}; known: {', '.join(sorted(RECORDER_OPTIONS))}")
-    if "level" in recorder_options:
-        check_level(recorder_options["level"])
+    check_options(**recorder_options)  # all before the file is made or the camera asked
+    if progress is not None and not callable(progress):
+        raise ConfigError(f"progress must be a callable taking a Progress, or None, got {progress!r}")
     if os.path.lexists(path):  # the Recorder refuses too (exclusive create); said here before the camera is asked
         raise RecordingError(f"{path} already exists: a recording never replaces a file; remove it or give "
                              f"another path")
