@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import unicodedata
 from collections.abc import Mapping
 
 import numpy as np
@@ -13,6 +14,7 @@ from stereocam.protocol.params import BY_NAME, INT32_MAX, INT32_MIN
 
 
 LONGEST_WAIT = 1e9  # s (31 years): longer waits are cut to this (the OS's timed waits end near 2.9e11 s)
+MAX_RETRIES = 100  # resends of one request: more only hides a dead link
 
 
 def timeout_arg(value: object, name: str = "timeout", minimum: float = 0.0) -> float:
@@ -24,6 +26,32 @@ def timeout_arg(value: object, name: str = "timeout", minimum: float = 0.0) -> f
     if not math.isfinite(seconds) or seconds < minimum:
         raise ConfigError(f"{name} must be finite and at least {minimum:g} s, got {value!r}")
     return min(seconds, LONGEST_WAIT)
+
+
+def request_timeout_arg(value: object, name: str = "timeout") -> float:
+    """A request's reply timeout: ``timeout_arg`` that must also be > 0 (0 would mean no wait at all)."""
+    seconds = timeout_arg(value, name)
+    if seconds <= 0:
+        raise ConfigError(f"{name} must be more than 0 s (the wait for each reply), got {value!r}")
+    return seconds
+
+
+def retries_arg(value: object, name: str = "retries") -> int:
+    """A request's resend count: an integer in 0..MAX_RETRIES."""
+    count = count_arg(value, name)
+    if count > MAX_RETRIES:
+        raise ConfigError(f"{name} must be at most {MAX_RETRIES}, got {value!r}")
+    return count
+
+
+def url_arg(value: object) -> str:
+    """A camera URL: a non-empty str without control characters, else ConfigError naming it."""
+    if not isinstance(value, str) or not value:
+        raise ConfigError(f"a camera URL must be a non-empty string, got {value!r}")
+    bad = next((c for c in value if unicodedata.category(c) == "Cc"), None)
+    if bad is not None:
+        raise ConfigError(f"camera URL {value!r} contains a control character ({bad!r})")
+    return value
 
 
 def count_arg(value: object, name: str, minimum: int = 0) -> int:

@@ -2,7 +2,10 @@
 the link's reader; its queue drops the oldest frame when the callbacks fall behind.
 
 A callback that raises is logged, counted and kept: ``FrameCallbacks.check()`` re-raises the first
-such error as a CallbackError (its cause is the callback's exception). Nothing is swallowed.
+such error as a CallbackError (its cause is the callback's exception). Nothing is swallowed, and
+nothing a callback raises ends delivery: SystemExit and KeyboardInterrupt included (signals reach
+only the main thread, so on this thread they come from the callback itself, and escaping would
+only end this thread, not the program).
 """
 from __future__ import annotations
 
@@ -17,6 +20,7 @@ from .frame_types import Frame
 
 FrameCallback = Callable[[Frame], object]
 _log = logging.getLogger(__name__)
+CLOSE_WAIT = 2.0  # seconds close() waits for a running callback to return
 
 
 class FrameCallbacks:
@@ -30,6 +34,7 @@ class FrameCallbacks:
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self.errors = 0  # callback calls that raised
         self.first_error: BaseException | None = None
+        self._running: tuple[FrameCallback, int] | None = None  # the callback being called, and its frame
         self._thread.start()
 
     def add(self, fn: FrameCallback) -> None:
@@ -59,14 +64,19 @@ class FrameCallbacks:
             with self._lock:
                 callbacks = list(self._callbacks)
             for fn in callbacks:
+                if self._stop.is_set():  # closed: no callback is called any more
+                    return
+                self._running = (fn, frame.sequence)
                 try:
                     fn(frame)
-                except Exception as exc:  # reported, counted and re-raisable via check()
+                except BaseException as exc:  # reported, counted and re-raisable via check()
                     _log.error("frame callback %r raised on frame %d: %r", fn, frame.sequence, exc,
                                exc_info=exc)
                     if self.first_error is None:
                         self.first_error = exc
                     self.errors += 1
+                finally:
+                    self._running = None
 
     def check(self) -> None:
         """Raise CallbackError from the first exception a callback raised, if any (and forget it)."""
@@ -74,7 +84,17 @@ class FrameCallbacks:
         if exc is not None:
             raise CallbackError(f"a frame callback raised {exc!r} ({self.errors} failed calls so far)") from exc
 
-    def close(self) -> None:
+    def close(self, timeout: float = CLOSE_WAIT) -> bool:
+        """Call no callback any more; wait up to ``timeout`` s for a running one to return (not when
+        called from a callback). True if the thread has ended; else a WARNING names the callback still
+        running, and the thread ends as soon as it returns (a thread cannot be stopped from outside)."""
         self._stop.set()
-        if threading.current_thread() is not self._thread:
-            self._thread.join(timeout=2)
+        if threading.current_thread() is self._thread:
+            return False
+        self._thread.join(timeout)
+        running = self._running
+        if self._thread.is_alive() and running is not None:
+            _log.warning("frame callback %r still runs on frame %d after %.3g s: close() returns without it; "
+                         "its thread (%s) ends when it returns", running[0], running[1], timeout,
+                         self._thread.name)
+        return not self._thread.is_alive()

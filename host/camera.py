@@ -6,15 +6,15 @@ import threading
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Callable, Iterator
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.calibration import StereoCalibration
-from stereocam.protocol.errors import ConfigError, StereoCamError, StreamStoppedError
+from stereocam.protocol.errors import ConfigError, StereoCamError, StreamStoppedError, TransportError
 from stereocam.protocol.params import BY_NAME
 
 from . import calibration_io, firmware_update
-from .arguments import count_arg, flag_arg, timeout_arg
+from .arguments import count_arg, flag_arg, request_timeout_arg, retries_arg, timeout_arg, url_arg
 from .calibration_io import StoredCalibration
 from .callbacks import FrameCallbacks
 from .camera_frames import FrameDelivery
@@ -222,8 +222,18 @@ class Camera(CameraSettings, FrameDelivery):
 
     @property
     def streaming(self) -> bool:
-        """Whether this Camera started the stream (and has not stopped it)."""
-        return self._streaming
+        """Whether this Camera started the stream (and has neither stopped it nor been closed)."""
+        return self._streaming and not self.connection.closed
+
+    def __iter__(self) -> Iterator[Frame]:
+        """FrameDelivery's iteration, which also ends (StopIteration) once ``close()`` was called,
+        from any thread: the closed link's error is the end of the stream then, not a failure. A link
+        lost to a fault while the camera is open still raises (DisconnectedError, ...)."""
+        try:
+            yield from super().__iter__()
+        except TransportError:
+            if not self.connection.closed:
+                raise
 
     def status(self) -> DeviceStatus:
         """The device's state, asked for now (HEARTBEAT)."""
@@ -252,6 +262,10 @@ class Camera(CameraSettings, FrameDelivery):
         return self.counters().as_dict()
 
     def close(self) -> None:
+        """Stop the stream and end the link; idempotent. A frame callback still running is waited for
+        up to ``callbacks.CLOSE_WAIT`` s (not when close() is called from a callback); if it runs
+        longer a WARNING names it, no callback is called after close(), and the callbacks' thread
+        ends when that one returns."""
         if self.connection.closed:
             return
         if self._callbacks is not None:
@@ -273,9 +287,12 @@ class Camera(CameraSettings, FrameDelivery):
 def open(url: str, timeout: float = 1.0, **kwargs) -> Camera:  # the builtin open's name, as serial_for_url
     """Open the camera at ``url`` (sim://, usb://, socket://host:port, a device path, ...); the
     keyword arguments are ``Camera``'s (retries, heartbeat_interval, queue_depth, ...)."""
-    timeout = timeout_arg(timeout)
+    url = url_arg(url)
+    timeout = request_timeout_arg(timeout)
     unknown = sorted(set(kwargs) - OPEN_OPTIONS)
     if unknown:
         raise ConfigError(f"unknown option{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
                           f"known: timeout, {', '.join(sorted(OPEN_OPTIONS))}")
+    if "retries" in kwargs:
+        retries_arg(kwargs["retries"])  # before the transport opens (Connection checks it again)
     return Camera(open_transport(url, timeout), timeout=timeout, **kwargs)

@@ -14,11 +14,12 @@ from dataclasses import dataclass, replace
 from typing import Callable
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.errors import DisconnectedError, StereoCamError, TransportError, VersionMismatchError
+from stereocam.protocol.errors import (ConfigError, DisconnectedError, StereoCamError, TransportError,
+                                       VersionMismatchError)
 from stereocam.protocol.framing import VERSION_MAJOR, DecoderStats
 from stereocam.protocol.params import TriggerMode
 
-from .arguments import count_arg, timeout_arg
+from .arguments import count_arg, request_timeout_arg, retries_arg, timeout_arg
 from .clock import ArrivalStamp, ClockMap, SyncSample
 from .device_types import DeviceInfo, DeviceStatus
 from .frame_repair import RepairWorker
@@ -70,9 +71,13 @@ class Connection:
                  timeout: float, retries: int, heartbeat_interval: float, deliver_incomplete: bool):
         """``on_status(status, asked_at)`` gets every heartbeat's STATUS and when it was asked for."""
         self.url = transport.url
-        self.timeout = timeout
-        self._retries = retries
-        self._heartbeat_interval = timeout_arg(heartbeat_interval, "heartbeat_interval", MIN_HEARTBEAT_INTERVAL)
+        try:
+            self.timeout = request_timeout_arg(timeout)
+            self._retries = retries_arg(retries)
+            self._heartbeat_interval = timeout_arg(heartbeat_interval, "heartbeat_interval", MIN_HEARTBEAT_INTERVAL)
+        except ConfigError:
+            transport.close()  # the caller handed it over: nothing else will close it
+            raise
         self._on_status = on_status
         self.clock = ClockMap()
         self.assembler = FrameAssembler(self.clock, on_frame, deliver_incomplete)

@@ -31,7 +31,8 @@ import time
 from typing import Iterator, Mapping, Sequence
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.errors import CameraTimeoutError, ConfigError, SilentHeadsError, StereoCamError
+from stereocam.protocol.errors import (CameraTimeoutError, ConfigError, SilentHeadsError, StereoCamError,
+                                      TransportError)
 from stereocam.protocol.params import TriggerMode
 
 from .arguments import flag_arg, timeout_arg
@@ -155,8 +156,14 @@ class CameraGroup:
 
     def close(self) -> None:
         """Stop every camera (the master first: the line goes quiet), put back what the group changed
-        (unless ``keep_config``) and close them. A camera that cannot be reached is logged and closed."""
-        self._closed.set()
+        (unless ``keep_config``) and close them. A camera that cannot be reached is logged and closed.
+        Idempotent: a second call (or one while another thread closes) does nothing. ``get_set`` calls
+        waiting in other threads raise at once (TransportError: closed)."""
+        with self._cond:
+            if self._closed.is_set():
+                return
+            self._closed.set()
+            self._cond.notify_all()
         for t in self._threads:
             t.join(timeout=2)
         names = list(self.cameras)
@@ -231,6 +238,8 @@ class CameraGroup:
         deadline = time.monotonic() + wait
         with self._cond:
             while True:
+                if self._closed.is_set():
+                    raise TransportError(f"CameraGroup {', '.join(self.cameras) or ', '.join(self.urls)} is closed")
                 if self._matcher is None:
                     raise StereoCamError("CameraGroup is not open (use it as a context manager or call open())")
                 for s in self._matcher.pop_ready(time.monotonic()):
@@ -282,11 +291,15 @@ class CameraGroup:
                                    tuple(new))
 
     def __iter__(self) -> Iterator[MatchedSet]:
-        """Sets as they come, until none arrives within ``timeout``."""
+        """Sets as they come, until none arrives within ``timeout`` or the group is closed."""
         while True:
             try:
                 yield self.get_set()
             except CameraTimeoutError:
+                return
+            except TransportError:
+                if not self._closed.is_set():
+                    raise
                 return
 
     @property

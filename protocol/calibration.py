@@ -36,6 +36,8 @@ binary64.
 """
 from __future__ import annotations
 
+import math
+import numbers
 import struct
 from dataclasses import asdict, dataclass, fields
 from typing import Any
@@ -78,6 +80,27 @@ def _matrix(name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
     return arr.reshape(shape)
 
 
+def _image_size(value: Any) -> tuple[int, int]:
+    """``value`` as (width, height): two integers (integer-valued floats too) in 1..65535."""
+    problem = f"image_size must be two integers in 1..65535, got {value!r}"
+    if not isinstance(value, (tuple, list, np.ndarray)) or getattr(value, "ndim", 1) != 1 or len(value) != 2:
+        raise CalibrationFormatError(problem)
+    size = []
+    for v in value:
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+            raise CalibrationFormatError(problem)
+        if isinstance(v, numbers.Integral):
+            size.append(int(v))
+        elif math.isfinite(v) and float(v).is_integer():
+            size.append(int(float(v)))
+        else:
+            raise CalibrationFormatError(problem)
+    w, h = size
+    if not (0 < w < 65536 and 0 < h < 65536):
+        raise CalibrationFormatError(problem)
+    return w, h
+
+
 @dataclass
 class CalibrationQuality:
     """Optional quality metrics and status stored next to the geometry in calibration.json."""
@@ -113,13 +136,16 @@ class StereoCalibration:
     lens_model: str = "plumb_bob"
 
     def __post_init__(self) -> None:
-        if self.lens_model not in N_DIST:
+        self.validate()
+
+    def validate(self) -> None:
+        """Check every field (CalibrationFormatError naming it) and normalise them: image_size to two
+        ints, matrices to float64 arrays of their shapes. Serialising calls it again, so a calibration
+        changed after construction is checked before it is written anywhere."""
+        if not isinstance(self.lens_model, str) or self.lens_model not in N_DIST:
             raise CalibrationFormatError(f"unknown lens model {self.lens_model!r}; known: {', '.join(LENS_MODELS)}")
         n_dist = N_DIST[self.lens_model]
-        w, h = (int(v) for v in self.image_size)
-        if not (0 < w < 65536 and 0 < h < 65536):
-            raise CalibrationFormatError(f"image_size must be two integers in 1..65535, got {self.image_size}")
-        self.image_size = (w, h)
+        self.image_size = _image_size(self.image_size)
         for side in ("left", "right"):
             K = _matrix(f"K_{side}", getattr(self, f"K_{side}"), (3, 3))
             if K[0, 1] != 0 or K[1, 0] != 0 or not np.array_equal(K[2], [0.0, 0.0, 1.0]):
@@ -153,6 +179,7 @@ class StereoCalibration:
 
     def to_json_dict(self, quality: CalibrationQuality | None = None) -> dict[str, Any]:
         """calibration.json content: geometry keys, then the quality keys that are set."""
+        self.validate()
         d: dict[str, Any] = {"image_size": list(self.image_size)}
         for key in GEOMETRY_KEYS[1:]:
             d[key] = getattr(self, key).tolist()
@@ -174,7 +201,8 @@ class StereoCalibration:
         return cls((size[0], size[1]), **geometry, lens_model=d.get("lens_model", "plumb_bob"))
 
     def to_bytes(self) -> bytes:
-        """The version-2 binary body described in the module docstring."""
+        """The version-2 binary body described in the module docstring (the fields checked first)."""
+        self.validate()
         w, h = self.image_size
         values: list[float] = []
         for K, D in ((self.K_left, self.D_left), (self.K_right, self.D_right)):

@@ -170,3 +170,37 @@ def test_depth_of_a_frame_without_disparity_is_a_typed_error():
         with pytest.raises(stereocam.MissingPlaneError, match="no disparity"):
             method()
     assert issubclass(stereocam.MissingPlaneError, ValueError)
+
+
+@pytest.mark.parametrize("url", [None, 5, b"sim://", ""])
+def test_a_url_that_is_not_a_non_empty_string_is_a_config_error(url):
+    with pytest.raises(stereocam.ConfigError, match="non-empty string"):
+        stereocam.open(url)
+
+
+@pytest.mark.parametrize("url", ["sim://\x00", "sim://?seed=3\n", "sim://\x7f"])
+def test_a_url_with_a_control_character_is_refused_naming_it(url):
+    with pytest.raises(stereocam.ConfigError, match="control character") as err:
+        returns_within(5, stereocam.open, url)
+    assert repr(url) in str(err.value)
+
+
+@pytest.mark.parametrize("option, value", [("timeout", 0), ("timeout", 0.0), ("retries", 10**20), ("retries", 101)])
+def test_open_refuses_a_zero_request_timeout_and_absurd_retries(option, value):
+    with pytest.raises(stereocam.ConfigError, match=option):
+        returns_within(5, stereocam.open, "sim://?seed=5", **{option: value})
+
+
+def test_a_camera_on_a_transport_checks_its_request_timeout_and_closes_the_transport():
+    from stereocam.camera import Camera
+    from stereocam.device_sim import SimulatedCamera
+    from stereocam.device_sim.links.inprocess import InProcessTransport
+
+    for kw in (dict(timeout=0), dict(retries=1000)):
+        transport = InProcessTransport(SimulatedCamera(seed=8))
+        with pytest.raises(stereocam.ConfigError, match=next(iter(kw))):
+            Camera(transport, **kw)
+        with pytest.raises(stereocam.DisconnectedError, match="is closed"):  # not left open
+            transport.write(b"x")
+    with stereocam.open("sim://?seed=8", retries=100, timeout=0.5) as camera:  # the limits themselves are fine
+        assert camera.info().serial == "SIM00008"

@@ -15,6 +15,7 @@ from stereocam.device_sim import SimulatedCamera
 from stereocam.camera import Camera
 from stereocam.device_sim.links.inprocess import InProcessTransport
 from stereocam.protocol import messages as m
+from stereocam.protocol.calibration import CalibrationFormatError
 from stereocam.protocol.errors import ErrorCode
 
 from tests.support.faults import FaultyTransport, PacketFilter
@@ -199,3 +200,25 @@ def test_host_depth_uses_the_calibration_read_from_the_device(tmp_path):
         f = one_frame(cam)
     assert cam.geometry_mismatches == 1
     assert f.geometry.focal_px == pytest.approx(expect.focal_px)  # the stored calibration wins
+
+
+@pytest.mark.parametrize("size", [("a", 3), None, (1, 2, 3), (1280.9, 960.2), "ab", (True, 1), (0, 960)])
+def test_a_malformed_image_size_is_a_calibration_format_error_naming_it(size):
+    good = SimulatedCamera(seed=66).true_calibration()
+    with pytest.raises(CalibrationFormatError, match="image_size"):
+        dataclasses.replace(good, image_size=size)
+    assert dataclasses.replace(good, image_size=(np.int64(640), 480.0)).image_size == (640, 480)
+
+
+@pytest.mark.parametrize("field, value, problem", [
+    ("K_left", "garbage", "K_left"), ("image_size", (70000, 1), "image_size"), ("D_left", np.zeros(2), "D_left"),
+    ("lens_model", "xx", "lens model"), ("T", np.array([np.nan, 0.0, 0.0]), "T"), ("R", np.zeros((3, 3)), "R"),
+])
+def test_a_calibration_changed_after_construction_is_checked_before_it_is_written(unit, field, value, problem):
+    cam, sim = unit
+    before = cam.read_calibration().body, cam.read_calibration("user")
+    calib = shifted(sim.true_calibration())
+    setattr(calib, field, value)
+    with pytest.raises(CalibrationFormatError, match=problem):
+        cam.write_calibration(calib)
+    assert (cam.read_calibration().body, cam.read_calibration("user")) == before  # nothing was sent

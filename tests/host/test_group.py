@@ -4,7 +4,9 @@ process)."""
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
+import threading
 import time
 from pathlib import Path
 
@@ -204,3 +206,32 @@ def test_a_head_lying_about_trigger_ids_is_named_and_costs_the_group_bounded_wor
     assert max(took) < 5 and [s.trigger_id for s in sets] == list(range(sets[0].trigger_id, sets[0].trigger_id + 6))
     assert [s.missing for s in sets[2:]] == [(sims[1].serial,)] * 4
     assert stats.implausible == {sims[1].serial: 4} and stats.incomplete == 4
+
+
+def test_a_closed_group_says_so_at_once_and_closes_quietly_again(heads, caplog):
+    """get_set waited its whole timeout, then blamed the trigger line; a second close() warned about
+    every camera ("could not be stopped and put back as found: link closed")."""
+    _, sims = heads
+    group = stereocam.CameraGroup(group_urls(sims), config=SMALL, master=None, settle=0.1).open()
+    waiting: list[BaseException] = []
+
+    def wait_for_a_set() -> None:
+        try:
+            group.get_set(timeout=600)  # nobody pulses the line: only close() ends this
+        except BaseException as exc:
+            waiting.append(exc)
+
+    waiter = threading.Thread(target=wait_for_a_set)
+    waiter.start()
+    group.close()
+    waiter.join(budget(10))
+    assert not waiter.is_alive()
+    assert isinstance(waiting[0], stereocam.TransportError) and "closed" in str(waiting[0])
+    t0 = time.monotonic()
+    with pytest.raises(stereocam.TransportError, match="is closed"):
+        group.get_set(timeout=600)
+    assert list(group) == []
+    assert time.monotonic() - t0 < budget(1.0)
+    with caplog.at_level(logging.WARNING, logger="stereocam"):
+        group.close()
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import sys
 import threading
 import time
 
@@ -100,6 +101,74 @@ def test_iteration_raises_on_a_stall(device_cam):
 def test_iterating_a_stopped_camera_says_so(device_cam):
     with pytest.raises(stereocam.StereoCamError, match="start"):
         next(iter(device_cam))
+
+
+def test_iteration_ends_when_closed_from_another_thread(device_cam):
+    """It raised TransportError('link closed') most times; and ``streaming`` stayed True."""
+    device_cam.start()
+    device_cam.get_frame(timeout=30)
+    closer = threading.Thread(target=device_cam.close)
+    frames = []
+    for frame in device_cam:  # ends, raises nothing
+        frames.append(frame)
+        if len(frames) == 2:
+            closer.start()
+    closer.join(budget(10))
+    assert len(frames) >= 2 and not closer.is_alive()
+    assert not device_cam.streaming and repr(device_cam).endswith(" closed>")
+    assert list(device_cam) == []  # a closed camera's stream is over
+
+
+def test_iteration_still_raises_when_the_link_fails():
+    with stereocam.open("sim://?seed=3") as cam:
+        cam.configure(**SMALL)
+        cam.start()
+        cam.get_frame(timeout=30)
+        cam.connection.link.fail(RuntimeError("injected"))
+        with pytest.raises(stereocam.DisconnectedError, match="injected"):
+            for _ in cam:
+                pass
+        assert cam.streaming  # the user's stream, not closed: reconnect() resumes it
+
+
+def test_a_callback_raising_system_exit_is_reported_and_delivery_goes_on():
+    """SystemExit ended the callbacks thread: not counted, later callbacks got nothing."""
+    with stereocam.open("sim://?seed=3") as cam:
+        cam.configure(**SMALL, fps=30)
+
+        def leave(frame):
+            sys.exit("from a callback")
+
+        cam.on_frame(leave)
+        cam.start()
+        wait_until(lambda: cam.callback_errors >= 2, 30, "SystemExit counted twice")
+        with pytest.raises(stereocam.CallbackError) as info:
+            cam.check_callbacks()
+        assert isinstance(info.value.__cause__, SystemExit)
+        cam.remove_callback(leave)
+        got = threading.Event()
+        cam.on_frame(lambda frame: got.set())
+        assert got.wait(budget(10))
+        with pytest.raises(stereocam.StereoCamError, match="callbacks"):
+            cam.get_frame(timeout=0)
+
+
+def test_close_waits_for_a_running_callback():
+    """close() left the callbacks thread running a slow callback."""
+    cam = stereocam.open("sim://?seed=3")
+    cam.configure(**SMALL, fps=30)
+    running, release = threading.Event(), threading.Event()
+
+    def slow(frame):
+        running.set()
+        release.wait(budget(10))
+
+    cam.on_frame(slow)
+    cam.start()
+    assert running.wait(budget(30))
+    threading.Timer(0.1, release.set).start()  # well within close()'s wait (callbacks.CLOSE_WAIT)
+    cam.close()
+    assert not cam._callbacks._thread.is_alive()
 
 
 def test_frame_repr_is_short(device_cam):
