@@ -28,7 +28,8 @@ import numpy as np
 from stereocam.protocol.calibration import N_DIST, StereoCalibration
 from stereocam.protocol.rectification import stereo_rectify
 from stereocam.tools import cli
-from stereocam.tools.calibration.boards import detect_all, parse_board
+from stereocam.tools.calibration.board_text import parse_board
+from stereocam.tools.calibration.boards import detect_all
 from stereocam.tools.calibration.files import find_pairs
 from stereocam.tools.calibration.fit import HeadFit, PairPoints, epipolar_dy, rms
 from stereocam.tools.calibration.lens import SOLVE, calibrate_mono, calibrate_stereo

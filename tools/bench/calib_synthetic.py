@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from stereocam.device_sim.calibration import lens_views as views
-from stereocam.tools.calibration.boards import parse_board
+from stereocam.tools.calibration.board_text import parse_board
 from stereocam.tools.calibration.solve import CalibrationError, CalibrationResult, SolveConfig, calibrate_pairs
 from stereocam.tools.options import CONTEXT, epilog
 

@@ -59,7 +59,8 @@ import click
 import cv2
 import numpy as np
 
-from stereocam.tools.calibration.boards import describe, parse_board
+from stereocam.tools.calibration.board_text import parse_board
+from stereocam.tools.calibration.boards import describe
 from stereocam.tools.calibration.camera_info import stream_sizes
 from stereocam.tools.calibration.files import find_pairs
 from stereocam.tools.calibration.fit import OutlierRules

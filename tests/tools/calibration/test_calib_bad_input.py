@@ -12,7 +12,8 @@ import pytest
 
 from stereocam.protocol.errors import ConfigError
 from stereocam.tools import cli
-from stereocam.tools.calibration.boards import detect_all, parse_board
+from stereocam.tools.calibration.board_text import parse_board
+from stereocam.tools.calibration.boards import detect_all
 from stereocam.tools.calibration.fit import OutlierRules, choose_model
 from stereocam.tools.calibration.solve import SolveConfig
 from stereocam.tools.exit_codes import EXIT_USAGE

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 import yaml
 
-from stereocam.tools.calibration.boards import AprilGridSpec, CharucoSpec, Detection, match_pair, parse_board
+from stereocam.tools.calibration.board_text import parse_board
+from stereocam.tools.calibration.boards import AprilGridSpec, CharucoSpec, Detection, match_pair
 from stereocam.tools.calibration.fit import PairPoints, UnrectifiableFitError, fit_head
 from stereocam.tools.calibration.lens import calibrate_mono, calibrate_stereo
 from stereocam.tools.calibration.outputs import write_outputs

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from stereocam.tools.calibration import boards
-from stereocam.tools.calibration.boards import detect_all, parse_board
+from stereocam.tools.calibration.board_text import parse_board
+from stereocam.tools.calibration.boards import detect_all
 from stereocam.tools.calibration.detection_cache import ENV
 from tests.support.paths import DATA
 
