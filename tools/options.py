@@ -5,6 +5,7 @@ import functools
 import math
 import operator
 import re
+from pathlib import Path
 from typing import Any
 
 import click
@@ -65,6 +66,26 @@ class Finite(click.FloatRange):
         if not math.isfinite(number):
             self.fail(f"{value!r} is not a finite number", param, ctx)
         return number
+
+
+def output_file(ctx: click.Context, param: click.Parameter, value: str | None) -> Path | None:
+    """Callback of an option naming a file written after the work (``type=click.Path(path_type=str)``:
+    click turns '' into '.'): a non-empty name in a folder that exists and takes a file now, else a
+    usage error before any work."""
+    from stereocam.tools.camera.session import writable_dir
+
+    if value is None:
+        return None
+    if not value.strip():
+        raise click.BadParameter("must name a file, got an empty value")
+    path = Path(value)
+    if not path.parent.is_dir():
+        raise click.BadParameter(f"{path.parent} is not a folder")
+    try:  # a file written into the folder now: permission bits say nothing to root, /proc takes no file
+        writable_dir(path.parent)
+    except OSError as exc:
+        raise click.BadParameter(exc.strerror or str(exc)) from exc
+    return path
 
 
 def epilog(own: str = "") -> str:

@@ -10,6 +10,7 @@ the original beside it (``FILE.damaged``), so a repair never loses a byte.
 """
 from __future__ import annotations
 
+import errno
 import os
 import uuid
 from dataclasses import dataclass
@@ -181,6 +182,8 @@ def repair(path: str | Path, out: str | Path | None = None) -> RepairReport:
     in_place = out == path or path.exists() and out.exists() and os.path.samefile(path, out)
     if not in_place and os.path.lexists(out):
         raise RecordingError(f"{out} already exists: repair writes a new file (or give no --out to repair in place)")
+    if not in_place and not out.parent.is_dir():  # before the input is read; named as given, not by the temporary file
+        raise FileNotFoundError(errno.ENOENT, f"no folder {str(out.parent)!r} to write into", str(out))
     # a name of its own, created exclusively: an existing file (or a link) there is never written or removed
     tmp = out.with_name(f".{out.name}.{uuid.uuid4().hex[:12]}.repair-tmp")
     rewrite = _Rewrite()
@@ -195,10 +198,12 @@ def repair(path: str | Path, out: str | Path | None = None) -> RepairReport:
             rewrite.finish()
         kept = _keep(path) if in_place else None
         os.replace(tmp, out)
-    except BaseException:
+    except BaseException as exc:
         if rewrite.writer is not None:  # the temporary file is ours only if the writer created it
             rewrite.writer.abandon()
             tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError) and not isinstance(exc, FileExistsError) and str(exc.filename) == str(tmp):
+            raise type(exc)(exc.errno, exc.strerror, str(out)) from exc  # the folder refused it: named as given
         raise
     return RepairReport(len(rewrite.log_times), rewrite.dropped, scan.size, out.stat().st_size, scan.complete,
                         scan.damaged_chunks, scan.damaged_records, scan.cut_short, scan.stopped_at,

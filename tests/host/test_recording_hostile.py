@@ -407,3 +407,26 @@ def test_a_zstd_header_claim_allocates_nothing_under_an_address_space_limit(clai
             "    print('refused:', exc)\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and r.stdout.startswith("refused: a chunk"), r.stdout + r.stderr[-2000:]
+
+
+# -- audit: an --out that cannot be written is named as given, not by the temporary file's name ------
+def test_an_out_in_no_folder_is_named_as_given_before_the_input_is_read(tmp_path, capsys):
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not read: the folder is checked first")
+    out = tmp_path / "nodir" / "o.mcap"
+    with pytest.raises(FileNotFoundError, match="no folder .*nodir' to write into") as refused:
+        repair(bad, out)
+    assert refused.value.filename == str(out)
+    rc, err = _run(["recording", "repair", str(bad), "--out", "/proc/x/o.mcap"], capsys)
+    assert rc == 2 and "no folder '/proc/x' to write into: '/proc/x/o.mcap'" in err and "repair-tmp" not in err
+    assert not out.parent.exists()
+
+
+def test_a_folder_that_refuses_the_output_is_named_by_the_path_given(tmp_path, capsys):
+    header_only = tmp_path / "h.mcap"
+    with open(header_only, "wb") as f:  # an MCAP header: the repair gets as far as creating its file
+        writer = Writer(f)
+        writer.start(profile="ros2", library="test")
+        writer.finish()
+    rc, err = _run(["recording", "repair", str(header_only), "--out", "/proc/o.mcap"], capsys)
+    assert rc == 2 and "'/proc/o.mcap'" in err and "repair-tmp" not in err

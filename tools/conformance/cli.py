@@ -13,7 +13,7 @@ import click
 
 from stereocam.arguments import timeout_arg
 from stereocam.protocol.errors import ConfigError
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, epilog, output_file
 
 from . import report
 from .results import CheckResult
@@ -47,7 +47,7 @@ def _pattern(ctx: click.Context, param: click.Parameter, value: str | None) -> C
                epilog=epilog("Exit codes: 0 every applicable check passed; 1 a check failed or the camera could "
                              "not be reached; 2 bad usage (also a -k that selects no check)."))
 @click.argument("url")
-@click.option("--junit", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--junit", type=click.Path(dir_okay=False, path_type=str), default=None, callback=output_file,
               help="Also write the results as JUnit XML to this file.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of text.")
 @click.option("--timeout", type=click.FloatRange(0, MAX_TIMEOUT, min_open=True), default=1.0, show_default=True,

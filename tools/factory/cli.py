@@ -25,7 +25,7 @@ from stereocam.tools.factory.db import (
     FactoryDBError,
     default_url,
 )
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, epilog, output_file
 
 METRICS = ("rms_stereo", "epipolar_rms_px", "baseline_m")
 
@@ -154,7 +154,7 @@ def command() -> None:
 @click.option("--db", default=default_url(), show_default=True, callback=db_url, help="SQLite path / sqlite:///PATH or postgresql://...")
 @click.option("--since", default=None, callback=_since,
               help="Only attempts from this ISO date (UTC), e.g. 2026-11-01.  [default: all]")
-@click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=str), default=None, callback=output_file,
               help="Also write every attempt to this CSV file.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object: yield and metrics per day and station.")
 def report(db: str, since: str | None, csv_path: Path | None, as_json: bool) -> int:

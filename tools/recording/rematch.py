@@ -23,6 +23,7 @@ from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.params import BY_NAME
 from stereocam.recording.reader import Recording
 from stereocam.stereo import engines
+from stereocam.stereo.post.params import POST_CONFIG
 from stereocam.presets import POST_PRESETS, preset_values
 from stereocam.tools.options import CONTEXT, SETTING, epilog
 from stereocam.tools.recording import rematch_tasks as tasks
@@ -46,6 +47,22 @@ def check_scheduler(address: str) -> str:
     except (ValueError, TypeError) as exc:
         raise ConfigError(f"scheduler {address!r} is not an address like tcp://HOST:PORT: {exc}") from exc
     return address
+
+
+def matching_names() -> list[str]:
+    """The parameters re-matching applies, in the protocol's order: ``algorithm``, every engine's and
+    the post-processing chain's. The others (size, rate, exposure...) made the recorded frames."""
+    used = {"algorithm"} | {f.key for e in engines.ENGINES.values() for f in e.config} | {f.key for f in POST_CONFIG}
+    return [name for name in BY_NAME if name in used]
+
+
+def check_matching(names: list[str]) -> None:
+    """ConfigError naming those of ``names`` that re-matching cannot change, and the ones it can."""
+    allowed = matching_names()
+    fixed = [n for n in dict.fromkeys(names) if n not in allowed]
+    if fixed:
+        raise ConfigError(f"{', '.join(fixed)}: not {'a matching parameter' if len(fixed) == 1 else 'matching parameters'}"
+                          f" (rematch re-runs matching on the recorded frames); it takes {', '.join(allowed)}")
 
 
 def check_workers(workers: object) -> int:
@@ -104,6 +121,7 @@ def rematch(recordings: list[Path], out: Path, overrides: dict[str, int], *, alg
     unknown = set(overrides) - set(BY_NAME)
     if unknown:
         raise ConfigError(f"unknown parameter(s) {sorted(unknown)}")
+    check_matching(list(overrides))
     why = [w for k, v in overrides.items() if (w := BY_NAME[k].check(v))]
     if why:
         raise ConfigError("; ".join(why))
@@ -149,6 +167,15 @@ def _join_after(done: list[tuple[int, float]], source: str, parts: list[str], ou
     return tasks.join(source, parts, out, provenance, replace)
 
 
+def _settings(ctx: click.Context, param: click.Parameter,
+              value: tuple[tuple[str, int], ...]) -> tuple[tuple[str, int], ...]:
+    try:
+        check_matching([name for name, _ in value])
+    except ConfigError as exc:
+        raise click.BadParameter(str(exc)) from None
+    return value
+
+
 def _scheduler(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
     try:
         return None if value is None else check_scheduler(value)
@@ -162,7 +189,7 @@ def _scheduler(ctx: click.Context, param: click.Parameter, value: str | None) ->
               help="Folder for the re-matched recordings (not the inputs' folder: outputs keep their names).")
 @click.option("--algorithm", type=click.Choice(engines.names()), default=None,
               help="Matcher: bm (block matching) or sgm (semi-global).  [default: the recorded one]")
-@click.option("--set", "settings", type=SETTING, multiple=True,
+@click.option("--set", "settings", type=SETTING, multiple=True, callback=_settings,
               help="Matching parameter to change from the recorded configuration (repeatable).")
 @click.option("--preset", type=click.Choice(list(POST_PRESETS)), default=None,
               help="A named matching and post-processing preset; --set and --algorithm change it further.")

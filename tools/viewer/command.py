@@ -44,6 +44,13 @@ def _rerun_connect(ctx: click.Context, param: click.Parameter, value: str | None
     return value
 
 
+def _token(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """``--token``: some text ('auto': a random one); an empty one would turn the check off."""
+    if value is not None and not value.strip():
+        raise click.BadParameter("must not be empty: give the token, or 'auto' for a random one")
+    return value
+
+
 @click.command("view", context_settings=CONTEXT,
                epilog=epilog("Exit codes: 0 stopped with Ctrl-C once serving (130 if interrupted before); 2 also "
                              "a port that is taken."))
@@ -61,7 +68,7 @@ def _rerun_connect(ctx: click.Context, param: click.Parameter, value: str | None
 @click.option("--allow-host", "allow_hosts", multiple=True, metavar="NAME",
               help="A host name the viewer answers to besides localhost and IP addresses (repeatable; "
                    "for a viewer reached by name over a network).")
-@click.option("--token", default=None, metavar="TEXT|auto",
+@click.option("--token", default=None, metavar="TEXT|auto", callback=_token,
               help="Answer only requests that carry this token ('auto': a random one); the printed "
                    "address carries it. Advised with --host 0.0.0.0.")
 @click.option("--set", "settings", type=SETTING, multiple=True,
@@ -87,6 +94,7 @@ def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_
     capture times, each head's clock-map error and the sets a head missed, with start/stop, one
     set on demand and settings for every head. The first line printed is the viewer's address.
     Runs until Ctrl-C; then each camera's configuration is put back as found unless --keep-config."""
+    master_index = _master_index(master, len(urls))  # with one URL too: 0 or 'none', else a usage error
     access = Access(allow_hosts, secrets.token_urlsafe(18) if token == "auto" else token)
     rerun = rerun_spawn or rerun_save is not None or rerun_connect is not None
     if rerun and len(urls) > 1:
@@ -94,7 +102,7 @@ def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_
     if rerun and not rerun_available():
         raise click.UsageError("--rerun needs rerun-sdk: pip install 'stereocam[viewer]'")
     if len(urls) > 1:
-        return _view_group(list(urls), port, host, no_browser, keep_config, _master_index(master, len(urls)),
+        return _view_group(list(urls), port, host, no_browser, keep_config, master_index,
                            access, dict(settings))
     output_dir(record_dir, "--record-dir")  # made and written into now, not when Record is pressed
     with stereocam.open(urls[0], timeout=2.0) as cam, \
@@ -118,7 +126,7 @@ def command(urls: tuple[str, ...], port: int, host: str, no_browser: bool, keep_
 def _master_index(text: str, cameras: int) -> int | None:
     if text.strip().lower() == "none":
         return None
-    if not text.strip().isdigit() or int(text) >= cameras:
+    if not text.strip().isdecimal() or int(text) >= cameras:
         raise click.BadParameter(f"expected 0..{cameras - 1} (a camera's place among the URLs) or 'none', got {text!r}",
                                  param_hint="'--master'")
     return int(text)

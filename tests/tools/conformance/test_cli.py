@@ -295,3 +295,17 @@ def test_a_timeout_that_cannot_be_waited_is_a_usage_error(monkeypatch, capsys, t
     rc, out = _run_cli(["socket://127.0.0.1:9", "--timeout", timeout])
     err = capsys.readouterr().err
     assert rc == 2 and words in err and "'--timeout'" in err and "Traceback" not in err and not out
+
+
+@pytest.mark.parametrize("junit, words", [("", "must name a file, got an empty value"),
+                                          ("{tmp}/nodir/r.xml", "nodir is not a folder"),
+                                          ("/proc/r.xml", "cannot write into directory '/proc'")])
+def test_a_junit_path_that_cannot_be_written_is_refused_before_any_check(monkeypatch, capsys, tmp_path, junit, words):
+    """Audit: --junit was checked only after the whole suite had run; --junit '' said "Is a directory: '.'"."""
+    def ran(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the suite ran")
+
+    monkeypatch.setattr("stereocam.tools.conformance.cli.run_suite", ran)
+    rc, out = _run_cli(["socket://127.0.0.1:9", "--junit", junit.replace("{tmp}", str(tmp_path))])
+    err = capsys.readouterr().err
+    assert rc == 2 and words in err and "'--junit'" in err and "Traceback" not in err and not out

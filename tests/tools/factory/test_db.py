@@ -256,3 +256,17 @@ def test_a_report_counts_each_failure_by_kind_and_shows_the_latest_whole():
     lines = report_lines(rows)
     assert "failed    2 x  gate: stereo RMS  (latest: stereo RMS 0.634 px > 0.5 px)" in lines
     assert "failed    1 x  board not found in any of 14 pairs: is it in view and lit?" in lines
+
+
+@pytest.mark.parametrize("csv_path, words", [("", "must name a file, got an empty value"),
+                                             ("{tmp}/nodir/r.csv", "nodir is not a folder"),
+                                             ("{tmp}/a-file/r.csv", "a-file is not a folder"),
+                                             ("/proc/r.csv", "cannot write into directory '/proc'")])
+def test_a_csv_path_that_cannot_be_written_is_refused_before_the_report(tmp_path, capsys, csv_path, words):
+    """Audit: --csv was checked only after the report was printed; --csv '' said "Is a directory: '.'"."""
+    url = str(tmp_path / "f.sqlite")
+    _one(url)
+    (tmp_path / "a-file").write_text("x")
+    assert cli.main(["factory", "report", "--db", url, "--csv", csv_path.replace("{tmp}", str(tmp_path))]) == 2
+    out, err = capsys.readouterr()
+    assert "'--csv'" in err and words in err and "Traceback" not in err and not out  # no report: nothing done

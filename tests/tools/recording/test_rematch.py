@@ -145,3 +145,30 @@ def test_rematch_two_inputs_of_one_name_are_refused_before_any_work(tmp_path, ca
     with pytest.raises(stereocam.ConfigError, match="both be written to"):
         rematch([a, b], out, {})
     assert not out.exists() and a.read_bytes() == b"first" and b.read_bytes() == b"second"
+
+
+@pytest.mark.parametrize("settings, named", [(["width=64"], "width: not a matching parameter"),
+                                             (["fps=5"], "fps: not a matching parameter"),
+                                             (["block_size=21", "exposure_us=100", "gain=4"],
+                                              "exposure_us, gain: not matching parameters"),
+                                             (["no_such=1"], "no_such: not a matching parameter")])
+def test_settings_that_made_the_recorded_frames_are_refused_naming_what_rematch_takes(tmp_path, capsys, settings,
+                                                                                      named):
+    """Audit: --set width=64 or fps=5 were accepted, though re-matching cannot change recorded frames."""
+    from stereocam.stereo.post.params import POST_CONFIG
+    from stereocam.tools.recording.rematch import matching_names
+
+    run = tmp_path / "run.mcap"
+    run.write_bytes(b"never read")  # refused with the options, before any file is opened
+    out = tmp_path / "out"
+    argv = ["rematch", str(run), "--out", str(out), "--workers", "1"]
+    assert cli.main([*argv, *(a for s in settings for a in ("--set", s))]) == 2
+    err = capsys.readouterr().err
+    assert "'--set'" in err and named in err and "Traceback" not in err and not out.exists()
+    assert "it takes num_disparities, block_size" in err and "sgm_paths" in err and "median_size" in err
+    names = matching_names()
+    assert {"width", "height", "fps", "gain", "outputs", "rectify"}.isdisjoint(names)
+    assert {f.key for f in POST_CONFIG} | {"algorithm", "block_size", "sgm_p1", "census_width"} <= set(names)
+    with pytest.raises(stereocam.ConfigError, match=named.split(":")[0]):  # the API refuses them too
+        rematch([run], out, {k: int(v) for k, v in (s.split("=") for s in settings)})
+    assert not out.exists()

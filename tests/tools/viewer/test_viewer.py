@@ -538,3 +538,27 @@ def test_bad_presets_and_ranges_are_refused_with_the_reason(viewer):
     assert code == 200 and doc["span"] == {"near_m": 0.5, "far_m": 4.0}
     code, doc = _post(viewer.url + "api/range", {"near_m": None, "far_m": None})
     assert code == 200 and viewer.session.span_m is None
+
+
+# -- audit: --master and --token values that name no camera or turn the token off -----------------
+@pytest.mark.parametrize("argv, words", [
+    (["sim://?seed=9", "--master", "5"], "expected 0..0 (a camera's place among the URLs) or 'none', got '5'"),
+    (["sim://?seed=9", "--master", "abc"], "got 'abc'"),
+    (["sim://?seed=9", "--master", "-1"], "got '-1'"),
+    (["sim://?seed=9", "--master", "²"], "got '²'"),  # a digit to str.isdigit, not to int()
+    (["sim://?seed=9", "sim://?seed=10", "--master", "2"], "expected 0..1"),
+    (["sim://?seed=9", "--token", ""], "must not be empty: give the token, or 'auto' for a random one"),
+    (["sim://?seed=9", "--token", "  "], "must not be empty"),
+    (["sim://?seed=9", "sim://?seed=10", "--token", ""], "must not be empty")])
+def test_a_master_or_token_that_cannot_work_is_a_usage_error_before_any_camera(monkeypatch, capsys, argv, words):
+    from stereocam.tools import cli
+
+    def opened(*args: object, **kwargs: object) -> None:
+        raise AssertionError("a camera was opened")
+
+    monkeypatch.setattr("stereocam.tools.viewer.command.stereocam.open", opened)
+    monkeypatch.setattr("stereocam.tools.viewer.command.stereocam.CameraGroup", opened)
+    assert cli.main(["view", "--no-browser", *argv]) == 2
+    err = capsys.readouterr().err
+    option = "'--token'" if "--token" in argv else "'--master'"
+    assert words in err and option in err and "Traceback" not in err
