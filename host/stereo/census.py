@@ -1,7 +1,8 @@
 """Census transform of a stereo pair (numba, parallel over row stripes, or row by row).
 
-Bit per window neighbour (centre excluded): neighbour darker than the centre; the image is
-extended by edge replication. With a margin t > 0 a bit is kept only where the 3x3 binomial
+Bit per window neighbour (centre excluded; sparse, the default: only the neighbours an odd
+number of steps away, |dx| + |dy| odd, a chessboard's other colour): neighbour darker than the
+centre; the image is extended by edge replication. With a margin t > 0 a bit is kept only where the 3x3 binomial
 smoothing of the image differs between neighbour and centre by more than t: on flat,
 noise-dominated areas the codes are then mostly zero in both eyes, so the matching cost is flat
 there and the paths carry the disparity in from the edges instead of summing noise.
@@ -20,7 +21,7 @@ import numba as nb
 import numpy as np
 
 from .jit import C_ARITHMETIC
-from .sgm_params import MARGIN_DIVISOR
+from .sgm_params import MARGIN_DIVISOR, census_neighbours
 from .census_simd import census_codes, census_codes_masked
 
 _JIT = C_ARITHMETIC
@@ -152,11 +153,12 @@ def census_pair(left: np.ndarray, right: np.ndarray, cw: int, ch: int, tl: int, 
             _census_row(padr, y, offs, cl.shape[2], crr[y], True, spadr, y, tr)
 
 
-def census_offsets(cw: int, ch: int, stride: int) -> np.ndarray:
+def census_offsets(cw: int, ch: int, sparse: bool, stride: int) -> np.ndarray:
     """census_codes' table for a cw x ch window over rows of ``stride`` bytes: the centre's
-    offset, then the neighbours' in window order (row by row, the centre skipped)."""
+    offset, then the neighbours' (census_neighbours: row by row, the centre skipped; sparse:
+    only those an odd number of steps away)."""
     rx, ry = cw // 2, ch // 2
-    nbrs = [i * stride + j for i in range(ch) for j in range(cw) if (i, j) != (ry, rx)]
+    nbrs = [(ry + dy) * stride + rx + dx for dy, dx in census_neighbours(cw, ch, sparse)]
     return np.array([ry * stride + rx, *nbrs], np.int64)
 
 

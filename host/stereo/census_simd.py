@@ -10,6 +10,8 @@ from numba.extending import intrinsic
 from .simd import LANES, _call, _chunked, _ix, _ptr, _splat, _u8_arrays, _vload, _vstore
 
 _I32 = ir.IntType(32)
+PLANES = 8  # byte planes of a census code (64 bits)
+FEW_PLANES = 4  # a census of at most 32 comparisons (the sparse 9x7) keeps only these
 _SAT = ("llvm.uadd.sat.v64i8", "llvm.usub.sat.v64i8")  # saturating a + b, a - b
 
 
@@ -65,7 +67,9 @@ def _census_codegen(masked: bool):
                     bit = builder.select(ok, ir.Constant(u8, 1 << b), ir.Constant(u8, 0))
                     a = builder.or_(a, builder.select(hit, _splat(builder, bit, vty), zero))
                 _store_plane(context, builder, a, g, x0, wv, args[5], st[5], args[6])
-            with cgutils.for_range_slice(builder, groups, ir.Constant(ncv.type, 8),
+            planes = cgutils.unpack_tuple(builder, context.make_array(st[5])(
+                context, builder, args[5]).shape)[0]
+            with cgutils.for_range_slice(builder, groups, planes,  # both intp
                                          ir.Constant(ncv.type, 1)) as (g, _):
                 _store_plane(context, builder, zero, g, x0, wv, args[5], st[5], args[6])
         return context.get_dummy_value()
@@ -98,7 +102,7 @@ def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
     src[base + offs[0] + x] as int8, n < ncmp <= 64 (uint8 src holding an image XOR 0x80,
     census.py's padded rows: its order as uint8, compared in one signed instruction on x86,
     where an unsigned compare takes two), as byte planes: its byte b into out[b, x] (uint8
-    (8, >= w); rev: out[b, w - 1 - x]). Per 64 pixels a loop over the planes, each plane's
+    (planes, >= w), planes >= ncmp / 8, those past ncmp zero; rev: out[b, w - 1 - x]). Per 64 pixels a loop over the planes, each plane's
     eight comparisons in a byte vector (in registers), stored as it is."""
     if not _census_types(src, offs, out, rev):
         return None
@@ -120,9 +124,10 @@ def census_codes_masked(typingctx, src, base, offs, ncmp, w, out, rev, ssrc, sba
 @intrinsic
 def cost_run(typingctx, left, li, right, base, out, oi, nd):
     """out[oi+k] = popcount(L ^ R[base+k]) for k < nd (census codes; out uint8), L the code
-    li of ``left`` and R those of ``right``, both byte planes (census_codes'). Per chunk
-    eight XORs against a broadcast byte of L and byte popcounts, summed: no 64-bit popcount
-    to pack into bytes (LLVM's takes 30 shuffles per 32 codes below AVX-512)."""
+    li of ``left`` and R those of ``right``, both byte planes (census_codes'), FEW_PLANES or
+    PLANES of them (left.shape[0]). Per chunk a XOR per plane against a broadcast byte of L
+    and byte popcounts, summed: no 64-bit popcount to pack into bytes (LLVM's takes 30
+    shuffles per 32 codes below AVX-512)."""
     if not (_planes(left, right) and _u8_arrays(out)):
         return None
 
@@ -130,22 +135,33 @@ def cost_run(typingctx, left, li, right, base, out, oi, nd):
         st = sig.args
         u8 = ir.IntType(8)
         liv, bv, oiv, ndv = (_ix(context, builder, sig, args, i) for i in (1, 3, 5, 6))
-        lbytes = [builder.load(_ptr(context, builder, st[0], args[0],
-                                    [ir.Constant(liv.type, b), liv])) for b in range(8)]
+        planes = cgutils.unpack_tuple(builder, context.make_array(st[0])(
+            context, builder, args[0]).shape)[0]
 
-        def body(j0, n):
-            vty = ir.VectorType(u8, n)
-            total = None
-            for b in range(8):
-                x = _vload(builder, _ptr(context, builder, st[2], args[2],
-                                         [ir.Constant(bv.type, b), builder.add(bv, j0)]), vty)
-                pc = _call(builder, f"llvm.ctpop.v{n}i8", vty,
-                           [builder.xor(x, _splat(builder, lbytes[b], vty))])
-                total = pc if total is None else builder.add(total, pc)
-            _vstore(builder, total,
-                    _ptr(context, builder, st[4], args[4], [builder.add(oiv, j0)]))
+        def run(count):  # the chunks with ``count`` planes, unrolled
+            lbytes = [builder.load(_ptr(context, builder, st[0], args[0],
+                                        [ir.Constant(liv.type, b), liv])) for b in range(count)]
 
-        _chunked(builder, ndv, body, LANES)
+            def body(j0, n):
+                vty = ir.VectorType(u8, n)
+                total = None
+                for b in range(count):
+                    x = _vload(builder, _ptr(context, builder, st[2], args[2],
+                                             [ir.Constant(bv.type, b), builder.add(bv, j0)]), vty)
+                    pc = _call(builder, f"llvm.ctpop.v{n}i8", vty,
+                               [builder.xor(x, _splat(builder, lbytes[b], vty))])
+                    total = pc if total is None else builder.add(total, pc)
+                _vstore(builder, total,
+                        _ptr(context, builder, st[4], args[4], [builder.add(oiv, j0)]))
+
+            _chunked(builder, ndv, body, LANES)
+
+        few = builder.icmp_signed("<=", planes, ir.Constant(planes.type, FEW_PLANES))
+        with builder.if_else(few) as (then, otherwise):
+            with then:
+                run(FEW_PLANES)
+            with otherwise:
+                run(PLANES)
         return context.get_dummy_value()
 
     return types.none(left, li, right, base, out, oi, nd), codegen

@@ -35,12 +35,18 @@ PACKAGE = Path(__file__).resolve().parent
 """This package's folder: its kernels call each other across modules."""
 
 
+INLINES_PACKAGE = "STEREO_KERNELS_INLINED"
+"""A module outside the package whose cached kernels call the package's sets this global to
+True (tools/bench/sgm_profile.py): its kernels are stamped with the package's digest too."""
+
+
 def _stamp_with_package(locator_cls: Any) -> Any:
     """locator_cls whose source stamp also covers every module of the package."""
     class PackageLocator(locator_cls):
         @classmethod
         def from_function(cls, py_func: Any, py_file: str) -> Any:
-            if PACKAGE not in Path(py_file).resolve().parents:
+            if PACKAGE not in Path(py_file).resolve().parents \
+                    and py_func.__globals__.get(INLINES_PACKAGE) is not True:
                 return None
             return super().from_function(py_func, py_file)
 

@@ -12,6 +12,7 @@ from . import cpus
 from . import sgm as _sgm
 from . import sgm_one_pass as _one
 from .census import census_offsets, census_pair, noise_margin
+from .census_simd import FEW_PLANES, PLANES
 from .matcher import STRIPES_PER_THREAD, _aligned, _stripes, frame_shape, prepared_pair
 from .postfilter import filter_speckles
 from .sgm_params import SGMGeometry, SGMParams, sgm_geometry
@@ -53,11 +54,13 @@ class SGMMatcher:
             self.padr = np.zeros(padded, np.uint8)
             self.spadl = np.zeros(padded, np.uint8)  # census margin: the smoothed pair
             self.spadr = np.zeros(padded, np.uint8)
-        self.census_offs = census_offsets(p.census_width, p.census_height, padded[1])
+        self.census_offs = census_offsets(p.census_width, p.census_height, p.census_sparse,
+                                          padded[1])
         wc = (w + 63) & ~63  # census codes per row (census.census_pair)
-        self.cl = np.empty((h, 8, wc), np.uint8)  # the left codes as byte planes (census_pair)
+        planes = FEW_PLANES if p.max_cost <= 8 * FEW_PLANES else PLANES  # (census_simd.cost_run)
+        self.cl = np.empty((h, planes, wc), np.uint8)  # the left codes as byte planes (census_pair)
         # the right codes as byte planes (census.census_pair), + codes left of the image (unused)
-        self.crr = np.zeros((h, 8, wc + nd), np.uint8)
+        self.crr = np.zeros((h, planes, wc + nd), np.uint8)
         cfg = np.zeros(_sgm.C_LEN, np.int64)
         cfg[[_sgm.C_ND, _sgm.C_MIND, _sgm.C_P1, _sgm.C_URATIO, _sgm.C_LRDIFF, _sgm.C_X0,
              _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV, _sgm.C_MAXC, _sgm.C_CW, _sgm.C_CH,

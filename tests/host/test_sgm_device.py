@@ -41,7 +41,10 @@ def test_device_table_defaults_are_the_library_defaults():
     sgm = params_from_config({**defaults(), "algorithm": Algorithm.SEMI_GLOBAL})
     assert (sgm.p1, sgm.p2, sgm.p2_adapt, sgm.paths, sgm.census_width, sgm.census_height) == (
         d.p1, d.p2, d.p2_adapt, d.paths, d.census_width, d.census_height)
-    assert BY_NAME["sgm_p2"].hi + d.max_cost == 255  # every census window the table allows
+    # every census window the table allows, the dense census's 62 bits too (the default sparse
+    # one's 32 leave room)
+    assert BY_NAME["sgm_p2"].hi + SGMParams(census_sparse=False).max_cost == 255
+    assert d.max_cost == 32
     for w in range(3, 10, 2):
         for h in range(1, 8, 2):
             params_from_config({**defaults(), "algorithm": Algorithm.SEMI_GLOBAL, "census_width": w,

@@ -28,6 +28,19 @@ def test_every_cached_kernel_is_stamped_with_the_whole_package(name: str) -> Non
         assert type(k._cache._impl.locator).__name__.startswith("Package"), (name, k)
 
 
+def test_kernels_outside_the_package_that_inline_it_are_stamped_too() -> None:
+    """tools/bench/sgm_profile.py's kernels call sgm.py's: keyed on their own file alone, a
+    cached one kept the old census planes after the package changed, and crashed."""
+    from stereocam.tools.bench import sgm_profile
+
+    assert getattr(sgm_profile, jit.INLINES_PACKAGE) is True
+    kernels = [v for v in vars(sgm_profile).values()
+               if isinstance(v, numba.core.registry.CPUDispatcher)]
+    assert len(kernels) >= 5
+    for k in kernels:
+        assert type(k._cache._impl.locator).__name__.startswith("Package"), k
+
+
 CALLER = '''
 import numba as nb
 from .jit import KERNEL

@@ -190,11 +190,14 @@ def test_thread_count_and_reuse_do_not_change_output(paths: int) -> None:
 @pytest.mark.parametrize("kw, msg", [
     (dict(num_disparities=24), "multiple of 16"),
     (dict(census_width=8), "census window"),
-    (dict(census_width=11, census_height=7), "census window"),
+    (dict(census_width=11, census_height=7, census_sparse=False), "census window"),  # 76 bits
+    (dict(census_width=13, census_height=11), "census window .*sparse"),  # 71 of the sparse's
+    (dict(census_sparse=1), "census_sparse must be True or False"),
     (dict(paths=6), "paths"),
     (dict(p1=256), "p1: sgm_p1=256 outside 0..255"),
     (dict(p2=-1), "p2 -1 out of range"),
-    (dict(p2=194), "p2 194 out of range"),
+    (dict(p2=194, census_sparse=False), "p2 194 out of range"),  # 62 bits + 194 > 255
+    (dict(p2=224), "p2 224 out of range"),  # the sparse census's 32 bits + 224 > 255
     (dict(census_width=3, census_height=1, p2=254), "p2 254 out of range"),
     (dict(uniqueness_ratio=-1), "uniqueness_ratio"),
     (dict(speckle_range=-1), "speckle_range"),

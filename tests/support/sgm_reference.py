@@ -3,7 +3,8 @@
 Every step is written for reading, not speed. Notation: the matched columns are X = x0 + x for
 x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k in [0, N).
 
-1. census: per pixel one bit per window neighbour (width x height, centre excluded), set when
+1. census: per pixel one bit per window neighbour (width x height, centre excluded; with
+   census_sparse only the neighbours (dy, dx) with |dx| + |dy| odd), in row order, set when
    the neighbour is darker than the centre; the image is extended by edge replication. With a
    margin t > 0 a bit is kept only where S, the image's 3x3 binomial smoothing ((sum + 8) >> 4,
    edges replicated), differs between neighbour and centre by more than t (also edge-replicated).
@@ -72,7 +73,7 @@ def smooth(img: np.ndarray) -> np.ndarray:
     return ((s + 8) >> 4).astype(np.uint8)
 
 
-def census(img: np.ndarray, width: int, height: int, t: int = 0) -> np.ndarray:
+def census(img: np.ndarray, width: int, height: int, t: int = 0, sparse: bool = False) -> np.ndarray:
     rx, ry = width // 2, height // 2
     h, w = img.shape
     padded = np.pad(img, ((ry, ry), (rx, rx)), mode="edge")
@@ -82,7 +83,7 @@ def census(img: np.ndarray, width: int, height: int, t: int = 0) -> np.ndarray:
     bit = 0
     for dy in range(-ry, ry + 1):
         for dx in range(-rx, rx + 1):
-            if dy == 0 and dx == 0:
+            if dy == 0 and dx == 0 or sparse and (abs(dx) + abs(dy)) % 2 == 0:
                 continue
             neighbour = padded[ry + dy:ry + dy + h, rx + dx:rx + dx + w]
             on = neighbour < img
@@ -95,8 +96,8 @@ def census(img: np.ndarray, width: int, height: int, t: int = 0) -> np.ndarray:
 
 def cost_volume(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray:
     g = sgm_geometry(*left.shape, p)
-    cl = census(left, p.census_width, p.census_height, margin(left, p))
-    cr = census(right, p.census_width, p.census_height, margin(right, p))
+    cl = census(left, p.census_width, p.census_height, margin(left, p), p.census_sparse)
+    cr = census(right, p.census_width, p.census_height, margin(right, p), p.census_sparse)
     cost = np.empty((g.height, g.cols, p.num_disparities), np.int32)
     xs = np.arange(g.x0, g.x1)
     for k in range(p.num_disparities):

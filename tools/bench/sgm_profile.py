@@ -16,6 +16,9 @@ from stereocam.stereo import sgm as _sgm
 from stereocam.stereo import sgm_one_pass as _one
 from stereocam.stereo.census import census_row_pair
 
+STEREO_KERNELS_INLINED = True  # stereo/jit.py: these kernels inline the package's, so its
+# digest keys their disk cache too (numba's own key, this file, kept a stale cost_run: a crash)
+
 SINGLE_PASS_STAGES = ("census rows", "cost row + kept path", "four paths + sum",
                       "wta+uniq+subpix+lr")
 
