@@ -70,7 +70,7 @@ class PostChain:
         if p.hole_fill == 1:
             fill_nearest(disp, inv)
         elif p.hole_fill == 2:
-            fill_background(disp, inv, np.empty((8, *disp.shape), np.int16))
+            fill_background(disp, inv, np.empty((2, *disp.shape), np.int16))
         t = self._took("hole_fill", t)
         if p.spatial_alpha:
             spatial_filter(disp, p.spatial_alpha, p.spatial_delta, p.spatial_iterations, inv)

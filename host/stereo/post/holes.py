@@ -3,7 +3,8 @@
 nearest: the nearest valid pixel of the row (left or right; a tie takes the smaller disparity).
 background: Hirschmueller's interpolation (SGM paper, 2008) — the first valid disparity along each
 of 8 paths, the second smallest of those found (the background, robust to one stray value), the
-only one when just one path finds one; pixels no path reaches stay invalid.
+only one when just one path finds one; pixels no path reaches stay invalid. Branch-free selects
+throughout: on a map of small holes every pixel's branch would be a coin toss.
 """
 from __future__ import annotations
 
@@ -40,46 +41,74 @@ def fill_nearest(disp: np.ndarray, invalid: int) -> None:
                 disp[y, x] = min(disp[y, lx], disp[y, nxt])
 
 
-@nb.njit(**KERNEL)
-def _seen(disp: np.ndarray, invalid: int, dy: int, dx: int, out: np.ndarray) -> None:
-    """out[y, x]: the first valid disparity from (y, x) stepping (dy, dx) (invalid: none)."""
-    h, w = disp.shape
-    ys = range(h - 1, -1, -1) if dy > 0 else range(h)
-    for y in ys:
-        py = y + dy
-        row_in = 0 <= py < h
-        xs = range(w - 1, -1, -1) if dx > 0 else range(w)
-        for x in xs:
-            v = disp[y, x]
-            if v == invalid:
-                px = x + dx
-                if row_in and 0 <= px < w:
-                    v = out[py, px]
-            out[y, x] = v
+NONE = 32767  # no disparity found along a path (above every disparity an int16 map holds * 16)
 
 
 @nb.njit(**KERNEL)
-def fill_background(disp: np.ndarray, invalid: int, seen: np.ndarray) -> None:
-    """In place: Hirschmueller background interpolation. Scratch: seen int16 (8, h, w)."""
-    h, w = disp.shape
-    dys = (0, 0, 1, -1, 1, 1, -1, -1)
-    dxs = (1, -1, 0, 0, 1, -1, 1, -1)
-    for k in range(8):
-        _seen(disp, invalid, dys[k], dxs[k], seen[k])
-    vals = np.empty(8, np.int32)
-    for y in range(h):
+def _low2(m1: np.int32, m2: np.int32, v: np.int32) -> tuple[np.int32, np.int32]:
+    """The two smallest of m1 <= m2 and v."""
+    return min(m1, v), min(m2, max(m1, v))
+
+
+@nb.njit(**KERNEL)
+def _paths_from(disp: np.ndarray, y: int, invalid: int, along_row: bool, prev: np.ndarray,
+                cur: np.ndarray, left: np.ndarray, right: np.ndarray) -> None:
+    """Row y's first valid disparity (the pixel's own, else its path's) along the paths from the
+    row before: cur[d, 1 + x] from prev (d = 0, 1, 2: straight, from the left, from the right;
+    NONE padded at both ends), and with along_row the row's own (left[x]: from the left, right[x]:
+    from the right)."""
+    w = disp.shape[1]
+    row = disp[y]
+    for x in range(w):
+        v = np.int32(row[x])
+        ok = v != invalid
+        cur[0, 1 + x] = v if ok else prev[0, 1 + x]
+        cur[1, 1 + x] = v if ok else prev[1, x]
+        cur[2, 1 + x] = v if ok else prev[2, 2 + x]
+    if along_row:
+        seen = np.int32(NONE)
         for x in range(w):
-            if disp[y, x] != invalid:
-                continue
-            n = 0
-            for k in range(8):
-                v = np.int32(seen[k, y, x])
-                if v != invalid:
-                    j = n  # insertion sort: at most 8 values
-                    while j > 0 and vals[j - 1] > v:
-                        vals[j] = vals[j - 1]
-                        j -= 1
-                    vals[j] = v
-                    n += 1
-            if n > 0:
-                disp[y, x] = vals[min(n, 2) - 1]
+            v = np.int32(row[x])
+            seen = v if v != invalid else seen
+            left[x] = seen
+        seen = np.int32(NONE)
+        for x in range(w - 1, -1, -1):
+            v = np.int32(row[x])
+            seen = v if v != invalid else seen
+            right[x] = seen
+
+
+@nb.njit(**KERNEL)
+def fill_background(disp: np.ndarray, invalid: int, low: np.ndarray) -> None:
+    """In place: Hirschmueller background interpolation. Scratch: low int16 (2, h, w).
+
+    Two passes, no plane per path: top-down the paths from above and along the row, whose two
+    smallest disparities each pixel keeps in low; then bottom-up the paths from below, and the
+    second smallest of all (the only one when one path found one) fills each invalid pixel."""
+    h, w = disp.shape
+    bufs = np.full((2, 3, w + 2), NONE, np.int32)  # per pass: the previous and this row's paths
+    left = np.empty(w, np.int32)
+    right = np.empty(w, np.int32)
+    for y in range(h):
+        prev, cur = bufs[y & 1], bufs[1 - (y & 1)]
+        _paths_from(disp, y, invalid, True, prev, cur, left, right)
+        for x in range(w):
+            m1, m2 = _low2(np.int32(NONE), np.int32(NONE), cur[0, 1 + x])
+            m1, m2 = _low2(m1, m2, cur[1, 1 + x])
+            m1, m2 = _low2(m1, m2, cur[2, 1 + x])
+            m1, m2 = _low2(m1, m2, left[x])
+            m1, m2 = _low2(m1, m2, right[x])
+            low[0, y, x] = m1
+            low[1, y, x] = m2
+    bufs[:] = NONE
+    for y in range(h - 1, -1, -1):
+        prev, cur = bufs[y & 1], bufs[1 - (y & 1)]
+        _paths_from(disp, y, invalid, False, prev, cur, left, right)
+        row = disp[y]
+        for x in range(w):
+            m1, m2 = _low2(np.int32(low[0, y, x]), np.int32(low[1, y, x]), cur[0, 1 + x])
+            m1, m2 = _low2(m1, m2, cur[1, 1 + x])
+            m1, m2 = _low2(m1, m2, cur[2, 1 + x])
+            v = np.int32(row[x])
+            fill = m2 if m2 != NONE else m1 if m1 != NONE else v
+            row[x] = fill if v == invalid else v
