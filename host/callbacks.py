@@ -38,8 +38,10 @@ class FrameCallbacks:
         self._thread.start()
 
     def add(self, fn: FrameCallback) -> None:
+        """Register ``fn``; one already registered stays registered once (called once per frame)."""
         with self._lock:
-            self._callbacks.append(fn)
+            if fn not in self._callbacks:
+                self._callbacks.append(fn)
 
     def remove(self, fn: FrameCallback) -> bool:
         """False if ``fn`` was not registered."""

@@ -120,6 +120,8 @@ class FrameDelivery:
         (dispatch.py, its own size and drop policy), a RecordingListener, ... (python-can's Notifier)."""
         if not callable(getattr(listener, "put", None)):
             raise ConfigError(f"a frame listener has a put(frame) method, got {listener!r}")
+        if self.connection.closed:
+            raise TransportError(f"{self.url}: camera closed")
         self._dispatcher.add(listener)
 
     def remove_listener(self, listener: Listener) -> None:
@@ -129,7 +131,7 @@ class FrameDelivery:
         """Call ``fn(frame)`` for every frame, on a thread of this Camera's (not the link's reader).
         While any callback is registered frames go to the callbacks, not to ``get_frame``. A callback
         that raises is logged and counted (``callback_errors``); ``check_callbacks()`` re-raises it.
-        Returns ``fn``, so it also works as a decorator."""
+        Registering ``fn`` again changes nothing. Returns ``fn``, so it also works as a decorator."""
         if not callable(fn):
             raise ConfigError(f"a frame callback must be callable, got {fn!r}")
         if self.connection.closed:

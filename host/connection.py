@@ -211,8 +211,11 @@ class Connection:
         serial = self.info.serial
         url = reopen_url(self.url, serial)
         deadline = time.monotonic() + timeout
-        _log.log(logging.INFO if expected else logging.WARNING, "%s: link lost (%s); reconnecting to serial %s via %s",
-                 self.url, self.link.error, serial, url)
+        if self.link.alive:  # asked for while the link is up: nothing was lost
+            _log.info("%s: reconnecting to serial %s via %s (the link was up)", self.url, serial, url)
+        else:
+            _log.log(logging.INFO if expected else logging.WARNING, "%s: link lost (%s); reconnecting to serial %s "
+                     "via %s", self.url, self.link.error, serial, url)
         self.link.close()
         while True:
             try:

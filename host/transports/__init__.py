@@ -23,7 +23,7 @@ from types import ModuleType
 from typing import TYPE_CHECKING
 from urllib.parse import SplitResult, urlsplit
 
-from ..protocol.errors import ConfigError, StereoCamError, TransportError
+from ..protocol.errors import ConfigError, StereoCamError
 from . import plugins
 from .base import Transport
 
@@ -70,7 +70,7 @@ def scheme_module(url: str) -> ModuleType:
 def open_transport(url: str, timeout: float = 1.0) -> Transport:
     """Open the transport that ``url`` names."""
     if not isinstance(url, str) or not url:
-        raise TransportError(f"a camera URL must be a non-empty string, got {url!r}")
+        raise ConfigError(f"a camera URL must be a non-empty string, got {url!r}")
     split_url(url)
     module = scheme_module(url)
     scheme = scheme_of(url)

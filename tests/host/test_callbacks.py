@@ -97,3 +97,20 @@ def test_close_from_within_a_callback_returns_at_once(callbacks):
     callbacks.put(frame(1))
     assert returned.wait(budget(10))
     wait_until(lambda: not callbacks._thread.is_alive(), 10, "the thread ends after the callback")
+
+
+def test_a_callback_registered_twice_is_called_once_per_frame(callbacks):
+    seen: list[int] = []
+
+    def keep(f):
+        seen.append(f.sequence)
+
+    callbacks.add(keep)
+    callbacks.add(keep)
+    callbacks.put(frame(1))
+    callbacks.put(frame(2))
+    wait_until(lambda: len(seen) >= 2, 10, "both frames delivered")
+    callbacks.put(frame(3))
+    wait_until(lambda: 3 in seen, 10, "the third frame delivered")
+    assert seen == [1, 2, 3]
+    assert callbacks.remove(keep) and not callbacks.remove(keep)  # once registered, once removed

@@ -9,6 +9,7 @@ import pytest
 import stereocam.device_sim.usb as simusb
 import stereocam
 from stereocam.device_sim import SimulatedCamera
+from stereocam.dispatch import FrameQueue
 from stereocam.tools.conformance.budget import budget
 
 pytestmark = pytest.mark.sim_only("pulls the simulated unit's USB plug")
@@ -137,3 +138,31 @@ def test_auto_reconnect_rides_through_an_unplug():
     finally:
         cam.close()
         handles[-1].unplug()
+
+
+def test_a_reconnect_asked_for_on_a_healthy_link_says_so_and_not_link_lost(caplog):
+    sim = SimulatedCamera(serial="RECON-9", seed=59)
+    handle = simusb.plug(sim)
+    cam = stereocam.open("usb://?serial=RECON-9", timeout=1.0)
+    try:
+        with caplog.at_level("INFO", logger="stereocam"):
+            cam.reconnect(timeout=budget(10))
+        assert "the link was up" in caplog.text and "link lost" not in caplog.text
+        assert cam.info().serial == "RECON-9"
+    finally:
+        cam.close()
+        handle.unplug()
+        sim.close()
+
+
+def test_a_listener_added_after_close_is_refused():
+    sim = SimulatedCamera(serial="RECON-8", seed=58)
+    handle = simusb.plug(sim)
+    cam = stereocam.open("usb://?serial=RECON-8", timeout=1.0)
+    cam.close()
+    try:
+        with pytest.raises(stereocam.TransportError, match="camera closed"):
+            cam.add_listener(FrameQueue("late"))
+    finally:
+        handle.unplug()
+        sim.close()

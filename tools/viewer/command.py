@@ -18,7 +18,7 @@ from stereocam.tools.options import CONTEXT, SETTING, epilog
 
 from .group_session import GroupViewerSession
 from .rerun_bridge import RerunBridge, rerun_available
-from .server import ViewerServer
+from .server import ViewerServer, token_problem
 from .session import ViewerSession
 
 
@@ -45,9 +45,13 @@ def _rerun_connect(ctx: click.Context, param: click.Parameter, value: str | None
 
 
 def _token(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
-    """``--token``: some text ('auto': a random one); an empty one would turn the check off."""
+    """``--token``: some text ('auto': a random one); an empty one would turn the check off, and one
+    with a space, ';' or '&' would not survive the printed address or the cookie."""
     if value is not None and not value.strip():
         raise click.BadParameter("must not be empty: give the token, or 'auto' for a random one")
+    why = None if value is None else token_problem(value)
+    if why:
+        raise click.BadParameter(why)
     return value
 
 

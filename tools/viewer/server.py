@@ -57,6 +57,20 @@ _log = logging.getLogger(__name__)
 
 LOOPBACK_NAMES = ("localhost", "127.0.0.1", "[::1]")
 TOKEN_COOKIE = "stereocam_viewer_token"
+TOKEN_CHARS = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-._~")
+"""What a token may hold: it travels unquoted in the printed address's query and in a cookie, where
+a space, ';', '&', '%' or '=' would cut or change it (secrets.token_urlsafe's alphabet is within)."""
+
+
+def token_problem(token: str) -> str | None:
+    """Why ``token`` cannot work (None: it can)."""
+    if not token:
+        return "must not be empty"
+    bad = sorted({c for c in token if c not in TOKEN_CHARS})
+    if bad:
+        return (f"may hold only letters, digits, '-', '.', '_' and '~' (it goes into the address and a "
+                f"cookie as it is), got {''.join(bad)!r}")
+    return None
 CONNECTION_TIMEOUT_S = 15.0  # a connection silent this long (half-sent request, idle keep-alive) is closed
 MAX_CONNECTIONS = 32  # connections served at once; more are answered 503 and closed
 REFUSAL_LINGER_S = 0.2  # how long a refused connection's request is read before it is closed
@@ -75,6 +89,9 @@ class ViewerServer(ThreadingHTTPServer):
         """``allowed_hosts``: host names (besides loopback names and IP addresses) a request's Host
         may carry, for a viewer reachable from a network; ``token``: if given, every request must
         carry it (``?token=`` once, then the cookie the page gets; or ``Authorization: Bearer``)."""
+        why = None if token is None else token_problem(token)
+        if why:
+            raise ValueError(f"token {why}")
         self.session = session
         self.allowed_hosts = {h.lower() for h in (*LOOPBACK_NAMES, *allowed_hosts)}
         self.token = token

@@ -66,8 +66,9 @@ def test_a_discovery_source_that_fails_does_not_hide_the_others(monkeypatch):
 
 
 @pytest.mark.parametrize("url", ["", None, 5])
-def test_a_url_that_is_not_a_string_is_a_transport_error(url):
-    with pytest.raises(stereocam.TransportError):
+def test_a_url_that_is_not_a_string_is_a_config_error(url):
+    """A usage mistake, as stereocam.open calls it (a TransportError is a link's failure)."""
+    with pytest.raises(stereocam.ConfigError, match="non-empty string"):
         transports.open_transport(url)
 
 

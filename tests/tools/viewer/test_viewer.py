@@ -462,6 +462,14 @@ def test_a_viewer_on_all_addresses_answers_only_its_own_names(tmp_path):
         _close(server)
 
 
+def test_a_token_that_the_address_or_cookie_would_cut_is_refused():
+    from stereocam.tools.viewer.server import ViewerServer
+
+    for bad in ("a b", "x;y", "", "é"):
+        with pytest.raises(ValueError, match="token"):
+            ViewerServer(None, token=bad)  # type: ignore[arg-type]  # refused before the session is used
+
+
 def test_a_viewer_with_a_token_answers_only_requests_that_carry_it(tmp_path):
     server = _network_viewer(tmp_path, token="s3cret")
     host = f"127.0.0.1:{server.server_address[1]}"
@@ -549,7 +557,10 @@ def test_bad_presets_and_ranges_are_refused_with_the_reason(viewer):
     (["sim://?seed=9", "sim://?seed=10", "--master", "2"], "expected 0..1"),
     (["sim://?seed=9", "--token", ""], "must not be empty: give the token, or 'auto' for a random one"),
     (["sim://?seed=9", "--token", "  "], "must not be empty"),
-    (["sim://?seed=9", "sim://?seed=10", "--token", ""], "must not be empty")])
+    (["sim://?seed=9", "sim://?seed=10", "--token", ""], "must not be empty"),
+    (["sim://?seed=9", "--token", "my token"], "may hold only letters, digits"),  # the printed address
+    (["sim://?seed=9", "--token", "a;b&c"], "got '&;'"),  # ';' cut the cookie, '&' the query
+    (["sim://?seed=9", "--token", "50%"], "got '%'")])
 def test_a_master_or_token_that_cannot_work_is_a_usage_error_before_any_camera(monkeypatch, capsys, argv, words):
     from stereocam.tools import cli
 
