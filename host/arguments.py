@@ -1,6 +1,7 @@
 """Checks on what a caller passes in: timeouts and integer parameters, with errors naming the argument."""
 from __future__ import annotations
 
+import decimal
 import math
 import numbers
 import unicodedata
@@ -69,11 +70,14 @@ def flag_arg(value: object, name: str) -> bool:
 
 
 def int32_arg(value: object, name: str) -> int:
-    """``value`` as an int32: any integral number (numpy's included) or an integer-valued float."""
+    """``value`` as an int32: any integral number (numpy's included) or an integer-valued float,
+    Fraction or Decimal."""
     if isinstance(value, bool):
         raise ConfigError(f"{name} must be an integer, got {value!r}")
     if isinstance(value, numbers.Integral):
         number = int(value)
+    elif isinstance(value, decimal.Decimal) and value.is_finite() and value == value.to_integral_value():
+        number = int(value)  # not a numbers.Real; float() of a signalling NaN raises
     elif isinstance(value, numbers.Real) and float(value).is_integer():
         number = int(float(value))
     else:

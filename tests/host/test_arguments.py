@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import math
+from decimal import Decimal
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -51,7 +53,14 @@ def test_configure_accepts_numpy_integers(cam):
     assert cam.configure(width=np.int64(320), height=np.uint16(240))["width"] == 320
 
 
-@pytest.mark.parametrize("value", [np.float64(1.5), "640", None, True, 640.5])
+def test_configure_takes_whole_fractions_and_decimals_alike(cam):
+    """Fraction(30) was taken and Decimal('30') refused (Decimal is not a numbers.Real)."""
+    assert cam.configure(fps=Fraction(30), exposure_us=Decimal("5000"))["fps"] == 30
+    assert cam.config()["exposure_us"] == 5000
+
+
+@pytest.mark.parametrize("value", [np.float64(1.5), "640", None, True, 640.5, Fraction(1, 2), Decimal("640.5"),
+                                   Decimal("NaN"), Decimal("sNaN"), Decimal("Infinity")])
 def test_configure_refuses_non_integers_naming_the_parameter(cam, value):
     with pytest.raises(stereocam.ConfigError, match="width"):
         cam.configure(width=value)
