@@ -102,8 +102,9 @@ def census_codes(typingctx, src, base, offs, ncmp, w, out, rev):
     src[base + offs[0] + x] as int8, n < ncmp <= 64 (uint8 src holding an image XOR 0x80,
     census.py's padded rows: its order as uint8, compared in one signed instruction on x86,
     where an unsigned compare takes two), as byte planes: its byte b into out[b, x] (uint8
-    (planes, >= w), planes >= ncmp / 8, those past ncmp zero; rev: out[b, w - 1 - x]). Per 64 pixels a loop over the planes, each plane's
-    eight comparisons in a byte vector (in registers), stored as it is."""
+    (planes, >= w), planes >= ncmp / 8, those past ncmp zero; rev: out[b, w - 1 - x]). Per 64
+    pixels a loop over the planes, each plane's eight comparisons in a byte vector (in
+    registers), stored as it is."""
     if not _census_types(src, offs, out, rev):
         return None
     return types.none(src, base, offs, ncmp, w, out, rev), _census_codegen(False)
