@@ -1,6 +1,7 @@
 """Unplug, replug (same serial), reconnect: the configuration comes back and streaming resumes."""
 from __future__ import annotations
 
+import contextlib
 import time
 
 import numpy as np
@@ -140,29 +141,32 @@ def test_auto_reconnect_rides_through_an_unplug():
         handles[-1].unplug()
 
 
-def test_a_reconnect_asked_for_on_a_healthy_link_says_so_and_not_link_lost(caplog):
-    sim = SimulatedCamera(serial="RECON-9", seed=59)
+@contextlib.contextmanager
+def _plugged(serial: str, seed: int):
+    """A Camera on a simulated unit plugged in over USB; closed, unplugged and ended afterwards."""
+    sim = SimulatedCamera(serial=serial, seed=seed)
     handle = simusb.plug(sim)
-    cam = stereocam.open("usb://?serial=RECON-9", timeout=1.0)
     try:
+        cam = stereocam.open(f"usb://?serial={serial}", timeout=1.0)
+        try:
+            yield cam
+        finally:
+            cam.close()
+    finally:
+        handle.unplug()
+        sim.close()
+
+
+def test_a_reconnect_asked_for_on_a_healthy_link_says_so_and_not_link_lost(caplog):
+    with _plugged("RECON-9", 59) as cam:
         with caplog.at_level("INFO", logger="stereocam"):
             cam.reconnect(timeout=budget(10))
         assert "the link was up" in caplog.text and "link lost" not in caplog.text
         assert cam.info().serial == "RECON-9"
-    finally:
-        cam.close()
-        handle.unplug()
-        sim.close()
 
 
 def test_a_listener_added_after_close_is_refused():
-    sim = SimulatedCamera(serial="RECON-8", seed=58)
-    handle = simusb.plug(sim)
-    cam = stereocam.open("usb://?serial=RECON-8", timeout=1.0)
-    cam.close()
-    try:
+    with _plugged("RECON-8", 58) as cam:
+        cam.close()
         with pytest.raises(stereocam.TransportError, match="camera closed"):
             cam.add_listener(FrameQueue("late"))
-    finally:
-        handle.unplug()
-        sim.close()
