@@ -2,8 +2,8 @@
 
 Bit per window neighbour (centre excluded; sparse, the default: only the neighbours an odd
 number of steps away, |dx| + |dy| odd, a chessboard's other colour): neighbour darker than the
-centre; the image is extended by edge replication. With a margin t > 0 a bit is kept only where the 3x3 binomial
-smoothing of the image differs between neighbour and centre by more than t: on flat,
+centre; the image is extended by edge replication. With a margin t > 0 a bit is kept only where
+the 3x3 binomial smoothing of the image differs between neighbour and centre by more than t: on flat,
 noise-dominated areas the codes are then mostly zero in both eyes, so the matching cost is flat
 there and the paths carry the disparity in from the edges instead of summing noise.
 ``noise_margin`` picks t from the image's own noise (median |3x3 Laplacian| //

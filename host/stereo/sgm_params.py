@@ -57,11 +57,12 @@ class SGMParams:
 
     num_disparities: int = 128  # disparities min_disparity .. min_disparity + N - 1
     min_disparity: int = 0
-    census_width: int = _default("census_width")  # census window (odd, width * height - 1 <= 64 bits)
+    census_width: int = _default("census_width")  # census window (odd sides, at most 64 comparisons)
     census_height: int = _default("census_height")
     census_sparse: bool = True  # compare the centre with the neighbours an odd number of steps
     # away only (|dx| + |dy| odd: 32 of a 9x7 window's 62): half the census bits, matched in
-    # about 10 % less time, as accurate on the bench's scenes at the sparse p1 / p2
+    # about 10 % less time; at the same p1 / p2 bad-2.0 as low or lower on the bench's scenes
+    # but noise (README)
     census_margin: int = -1  # census bits only where the 3x3-smoothed neighbour and centre differ
     # by more than this many DN (flat, noisy areas get a flat cost); -1: from each image's noise
     # (census.noise_margin), 0: plain census
@@ -93,8 +94,7 @@ class SGMParams:
         cw, ch = self.census_width, self.census_height
         if not isinstance(self.census_sparse, bool):
             raise ConfigError(f"census_sparse must be True or False, got {self.census_sparse!r}")
-        if cw < 1 or ch < 1 or cw % 2 == 0 or ch % 2 == 0 \
-                or not 1 <= len(census_neighbours(cw, ch, self.census_sparse)) <= CENSUS_BITS:
+        if cw < 1 or ch < 1 or cw % 2 == 0 or ch % 2 == 0 or not 1 <= self.max_cost <= CENSUS_BITS:
             raise ConfigError(f"census window must be odd by odd with 1..{CENSUS_BITS} comparisons"
                               f"{' (sparse: the neighbours an odd number of steps away)' if self.census_sparse else ''}"
                               f", got {cw}x{ch}")
@@ -117,7 +117,11 @@ class SGMParams:
     @property
     def max_cost(self) -> int:
         """Largest matching cost: the number of census comparison bits."""
-        return len(census_neighbours(self.census_width, self.census_height, self.census_sparse))
+        cw, ch = self.census_width, self.census_height
+        if not self.census_sparse:
+            return cw * ch - 1
+        ex, ey = cw // 4 * 2 + 1, ch // 4 * 2 + 1  # even offsets -r..r of an odd side (r = side // 2)
+        return ex * (ch - ey) + (cw - ex) * ey  # |dx| + |dy| odd: one of them odd (census_neighbours)
 
     @property
     def p1_ground_step(self) -> int:

@@ -193,6 +193,7 @@ def test_thread_count_and_reuse_do_not_change_output(paths: int) -> None:
     (dict(census_width=11, census_height=7, census_sparse=False), "census window"),  # 76 bits
     (dict(census_width=13, census_height=11), "census window .*sparse"),  # 71 of the sparse's
     (dict(census_sparse=1), "census_sparse must be True or False"),
+    (dict(census_width=200001, census_height=200001), "census window"),  # counted, not listed
     (dict(paths=6), "paths"),
     (dict(p1=256), "p1: sgm_p1=256 outside 0..255"),
     (dict(p2=-1), "p2 -1 out of range"),

@@ -73,3 +73,19 @@ def test_margins_past_the_signed_byte_range_match_the_reference(margin: int) -> 
     np.testing.assert_array_equal(_codes(m.cl[:, :, :w]), want)
     np.testing.assert_array_equal(_codes(m.crr[:, :, wc - w:wc][:, :, ::-1]),
                                   ref.census(right, 9, 7, margin, True))
+
+
+@pytest.mark.parametrize("sparse", [True, False])
+def test_the_bit_count_is_the_neighbours_counted(sparse: bool) -> None:
+    """max_cost (the largest cost, and the p2 limit) is counted arithmetically, so a huge window is
+    refused without listing it; it equals the neighbours census_offsets lists."""
+    from stereocam.stereo.sgm_params import census_neighbours
+
+    for cw in range(1, 12, 2):
+        for ch in range(1, 12, 2):
+            if 2 <= cw * ch <= 129 and (not sparse or cw * ch > 1):
+                try:
+                    p = SGMParams(num_disparities=16, census_width=cw, census_height=ch, census_sparse=sparse)
+                except ValueError:
+                    continue  # more than 64 comparisons
+                assert p.max_cost == len(census_neighbours(cw, ch, sparse)), (cw, ch)
