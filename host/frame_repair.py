@@ -2,11 +2,10 @@
 and the worker that asks the device to send them again without blocking the reader thread."""
 from __future__ import annotations
 
+import bisect
 import queue
 import threading
 from typing import Callable
-
-import numpy as np
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.errors import StereoCamError
@@ -20,24 +19,46 @@ Ranges = tuple[tuple[int, int, int], ...]
 
 
 class Coverage:
-    """Which bytes of each plane have arrived (duplicates from resends count once)."""
+    """Which bytes of each plane have arrived (duplicates from resends count once): per plane the
+    sorted, disjoint runs [start, end) received. Chunks come in order, so a chunk nearly always
+    extends the last run: no per-byte bookkeeping (a VGA capture is over a megabyte)."""
 
     def __init__(self, sizes: dict[int, int]):
-        self._have = {p: np.zeros(n, dtype=bool) for p, n in sizes.items()}
+        self._sizes = dict(sizes)
+        self._runs: dict[int, list[list[int]]] = {p: [] for p in sizes}
 
     def add(self, plane: int, offset: int, length: int) -> None:
-        self._have[plane][offset:offset + length] = True
+        end = min(offset + length, self._sizes[plane])
+        offset = max(offset, 0)
+        if end <= offset:
+            return
+        runs = self._runs[plane]
+        if not runs or offset > runs[-1][1]:  # after the last run: a new one
+            runs.append([offset, end])
+        elif offset >= runs[-1][0]:  # in order: extends (or repeats) the last run
+            runs[-1][1] = max(runs[-1][1], end)
+        else:  # a resent piece further back: merge every run it touches
+            starts = [r[0] for r in runs]
+            lo = bisect.bisect_right(starts, offset)
+            if lo > 0 and runs[lo - 1][1] >= offset:
+                lo -= 1
+            hi = bisect.bisect_right(starts, end)  # runs[lo:hi] touch [offset, end)
+            if lo < hi:
+                offset, end = min(offset, runs[lo][0]), max(end, runs[hi - 1][1])
+            runs[lo:hi] = [[offset, end]]
 
     def complete(self) -> bool:
-        return all(h.all() for h in self._have.values())
+        return all(n == 0 or self._runs[p] == [[0, n]] for p, n in self._sizes.items())
 
     def missing(self, limit: int = m.MAX_RESEND_RANGES) -> Ranges:
         """Up to ``limit`` (plane, offset, length) runs of bytes not yet received, in order."""
         out: list[tuple[int, int, int]] = []
-        for plane, have in self._have.items():
-            edges = np.diff((~have).astype(np.int8), prepend=0, append=0)
-            starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-            out += [(plane, int(a), int(b - a)) for a, b in zip(starts, ends)]
+        for plane, size in self._sizes.items():
+            at = 0
+            for start, end in [*self._runs[plane], [size, size]]:
+                if start > at:
+                    out.append((plane, at, start - at))
+                at = end
             if len(out) >= limit:
                 break
         return tuple(out[:limit])

@@ -6,7 +6,10 @@ import dataclasses
 
 import time
 
+import numpy as np
 import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 from stereocam.camera import Camera
 from stereocam.device_sim import SimulatedCamera
@@ -31,6 +34,26 @@ def test_coverage_lists_missing_runs_in_order():
     c.add(1, 5, 20)
     c.add(4, 30, 20)
     assert c.complete() and c.missing() == ()
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from([1, 4]), st.integers(0, 120), st.integers(0, 40)), max_size=25),
+       st.integers(1, 12))
+@example([(4, 0, 10), (4, 20, 30), (4, 10, 10), (1, 0, 100)], 4)  # a resend that closes the gap between two runs
+def test_coverage_agrees_with_a_byte_map(chunks, limit):
+    """Runs kept as intervals answer as a per-byte map does, for chunks in any order, repeated,
+    overlapping, touching or running past the plane's end."""
+    sizes = {1: 100, 4: 50}
+    c, have = Coverage(sizes), {p: np.zeros(n, bool) for p, n in sizes.items()}
+    for plane, offset, length in chunks:
+        c.add(plane, offset, length)
+        have[plane][offset:offset + length] = True
+        runs = []
+        for p, h in have.items():
+            edges = np.diff((~h).astype(np.int8), prepend=0, append=0)
+            runs += [(p, int(a), int(b - a)) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+        assert c.missing(limit) == tuple(runs[:limit])
+        assert c.complete() == all(h.all() for h in have.values())
 
 
 def as_v1_1_device(sim: SimulatedCamera) -> None:
