@@ -2,6 +2,7 @@
 
     stereocam bench matching [--threads 2] [--repeat 15] [--quick] [--profile]
                              [--cold-jit] [--algorithm bm|sgm] [--scenes NAME ...] [--busy]
+                             [--vertical-error PX]
 
 ``--algorithm sgm`` prints matching_report.py's tables instead (every engine on Motorcycle and every
 simulator scene class; with ``--profile``, sgm.py's stage profile and CPU table).
@@ -34,7 +35,7 @@ from stereocam.stereo import engines
 from stereocam.tools.bench.stereobm_oracle import opencv_stereobm
 from stereocam.tools.options import CONTEXT, epilog
 
-from .matching_report import MOTORCYCLE, BenchScene, class_scene, motorcycle_scene, report
+from .matching_report import MOTORCYCLE, BenchScene, class_scene, misaligned, motorcycle_scene, report
 
 
 def synthetic_scene(h: int = 480, w: int = 640, seed: int = 0):
@@ -131,6 +132,10 @@ def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
 SCENE_CHOICES = [MOTORCYCLE, *CLASSES]
 
 
+def _moved(load: Callable[[], BenchScene], dy: float) -> BenchScene:
+    return misaligned(load(), dy)
+
+
 def sgm_report(args: SimpleNamespace) -> int:
     """The per-scene tables of matching_report.py for the scenes asked."""
     names = list(args.scene_names) or SCENE_CHOICES
@@ -148,6 +153,8 @@ def sgm_report(args: SimpleNamespace) -> int:
             scenes.append(motorcycle_scene)
         else:
             scenes.append(functools.partial(class_scene, name, w, h, args.seed, args.sparse_truth))
+    if args.vertical_error:
+        scenes = [functools.partial(_moved, load, args.vertical_error) for load in scenes]
     report(scenes, args.threads, args.repeat, args.busy)
     return 0
 
@@ -170,6 +177,9 @@ def sgm_report(args: SimpleNamespace) -> int:
               help="sgm: score the scene classes on a LiDAR-like 7 % of their truth, mostly in the lower image "
                    "and none from the sky (KITTI-style; for driving).")
 @click.option("--busy", is_flag=True, help="sgm: run beside a competing busy process (one core spinning).")
+@click.option("--vertical-error", type=click.FloatRange(-8, 8), default=0.0, show_default=True, metavar="PX",
+              help="sgm: move every right image down by PX pixels (bilinear; negative: up) before matching, "
+                   "as the residual of a real unit's rectification would.")
 def command(**params: Any) -> int:
     """Benchmark the device matching core against cv2.StereoBM in one process; --algorithm sgm: every
     engine on Motorcycle and every simulator scene class, one table per scene."""

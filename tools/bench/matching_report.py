@@ -14,6 +14,7 @@ round, so a ratio compares two methods on the same machine state.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import importlib
 import os
 import platform
@@ -206,6 +207,20 @@ def measure(scene: BenchScene, kinds: list[Method], repeat: int) -> list[Row]:
         ratio = statistics.median(t / r for t, r in zip(ts, ref)) if ref else float("nan")
         rows.append(Row(k.name, *sc, statistics.median(ts), max(ts) - min(ts), ratio))
     return rows
+
+
+def misaligned(scene: BenchScene, dy: float) -> BenchScene:
+    """``scene`` with its right image moved down by ``dy`` px (bilinear, edges replicated; up when
+    negative): the vertical residual a real unit's rectification leaves, which the simulator's
+    scenes (rectified exactly) and Motorcycle do not have. The truth, the left image's, is kept."""
+    if dy == 0:
+        return scene
+    import cv2
+
+    h, w = scene.right.shape
+    right = cv2.warpAffine(scene.right, np.float32([[1, 0, 0], [0, 1, dy]]), (w, h), flags=cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE)
+    return dataclasses.replace(scene, name=f"{scene.name} right {dy:+g} px", right=right)
 
 
 def format_table(scene: BenchScene, rows: list[Row]) -> str:

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from stereocam.tools.bench.matching_report import (CV2_INVALID, COLUMNS, LIDAR_FRACTION, LIDAR_MIN_PX, REFERENCE,
-                                                   SGBM_MODES, class_scene, lidar_subset, report, score)
+                                                   SGBM_MODES, class_scene, lidar_subset, misaligned, report,
+                                                   score)
 from tests.tools.test_cli import stereocam as run
 
 NAME_W, CELL_W = 24, 11  # format_table's column widths
@@ -77,12 +78,23 @@ def test_lidar_subset_keeps_a_sparse_share_mostly_low_in_the_image_and_nothing_f
     assert not np.array_equal(kept, np.isfinite(lidar_subset(truth, seed=4)))
 
 
-def test_cli_scores_driving_on_its_range_and_on_a_sparse_truth():
+def test_cli_scores_driving_on_its_range_and_on_a_sparse_truth_with_a_vertical_error():
     r = run("bench", "matching", "--algorithm", "sgm", "--scenes", "driving", "--size", "160", "120",
-            "--repeat", "1", "--threads", "1", "--sparse-truth")
+            "--repeat", "1", "--threads", "1", "--sparse-truth", "--vertical-error", "1")
     assert r.returncode == 0, r.stderr
-    assert "== driving 160x120 sparse, 32 disparities, truth on 7 % of 160x120 ==" in r.stdout
-    assert "ours sgm 5 paths" in parse_tables(r.stdout)["driving 160x120 sparse"]
+    assert "== driving 160x120 sparse right +1 px, 32 disparities, truth on 7 % of 160x120 ==" in r.stdout
+    assert "ours sgm 5 paths" in parse_tables(r.stdout)["driving 160x120 sparse right +1 px"]
+
+
+def test_a_vertical_error_moves_the_right_image_and_keeps_the_truth():
+    scene = class_scene("slanted", 96, 64, seed=0)
+    down, up = misaligned(scene, 1.0), misaligned(scene, -2.0)
+    assert np.array_equal(down.right[1:], scene.right[:-1]) and np.array_equal(down.right[0], scene.right[0])
+    assert np.array_equal(up.right[:-2], scene.right[2:]) and np.array_equal(up.right[-1], scene.right[-1])
+    half = misaligned(scene, 0.5).right.astype(int)  # bilinear: between the rows, rounded
+    assert np.abs(half[1:] - (scene.right[1:].astype(int) + scene.right[:-1]) / 2).max() <= 0.5
+    assert down.left is scene.left and down.truth is scene.truth and down.name == "slanted 96x64 right +1 px"
+    assert misaligned(scene, 0.0) is scene
 
 
 def test_cli_names_an_unknown_scene():
