@@ -218,7 +218,7 @@ def misaligned(scene: BenchScene, dy: float) -> BenchScene:
     import cv2
 
     h, w = scene.right.shape
-    right = cv2.warpAffine(scene.right, np.float32([[1, 0, 0], [0, 1, dy]]), (w, h), flags=cv2.INTER_LINEAR,
+    right = cv2.warpAffine(scene.right, np.array([[1, 0, 0], [0, 1, dy]], np.float32), (w, h), flags=cv2.INTER_LINEAR,
                            borderMode=cv2.BORDER_REPLICATE)
     return dataclasses.replace(scene, name=f"{scene.name} right {dy:+g} px", right=right)
 
