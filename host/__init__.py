@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from stereocam.protocol.calibration import StereoCalibration
-    from stereocam.protocol.errors import (CallbackError, CameraTimeoutError, ConfigError, DeviceError,
+    from stereocam.protocol.errors import (CallbackError, CameraTimeoutError, ConfigError, ConfigRefused, DeviceError,
                                           DisconnectedError, ErrorCode, LinkFailedError, MissingPlaneError,
                                           ProtocolError, StereoCamError, StreamStalledError, StreamStoppedError,
                                           TransportError, VerificationError, VersionMismatchError,
@@ -28,7 +28,8 @@ if TYPE_CHECKING:
     from .group import CameraGroup
     from .pointcloud import write_ply
 
-_ERRORS = ("StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError", "ErrorCode",
+_ERRORS = ("StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError", "ConfigRefused",
+           "ErrorCode",
            "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError", "CameraTimeoutError",
            "VerificationError", "StreamStalledError", "CallbackError", "MissingPlaneError", "SilentHeadsError",
            "EndOfRecordingError")
@@ -52,7 +53,7 @@ __all__ = [
     "open", "list_devices", "DeviceEntry", "Camera", "CameraGroup", "DeviceInfo", "DeviceStatus", "Frame",
     "FrameStatus", "DisparityFormat", "StereoGeometry", "StereoCalibration", "StoredCalibration", "TriggerMode",
     "Output", "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError",
-    "ErrorCode", "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError", "CameraTimeoutError",
+    "ConfigRefused", "ErrorCode", "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError", "CameraTimeoutError",
     "VerificationError", "StreamStalledError", "CallbackError", "MissingPlaneError", "SilentHeadsError",
     "EndOfRecordingError",
 ]

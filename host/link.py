@@ -12,8 +12,9 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from stereocam.protocol import messages as m
-from stereocam.protocol.errors import (CameraTimeoutError, DeviceError, DisconnectedError, LinkFailedError,
-                                      ProtocolError, StereoCamError, TransportError)
+from stereocam.protocol.errors import (CONFIG_REFUSALS, CameraTimeoutError, ConfigRefused, DeviceError,
+                                      DisconnectedError, LinkFailedError, ProtocolError, StereoCamError,
+                                      TransportError)
 from stereocam.protocol.framing import FLAG_RESEND, HOST_MESSAGE_TIMEOUT, Decoder, Packet
 from stereocam.protocol.params import BY_ID
 
@@ -210,7 +211,9 @@ class Link:
                 pending.error = bad
             elif isinstance(msg, m.Nack):
                 param = BY_ID[msg.param_id].name if msg.param_id in BY_ID else None
-                pending.error = DeviceError(msg.code, msg.message, param, msg.request_type)
+                refused = (ConfigRefused if msg.request_type == m.MsgType.SET_CONFIG and msg.code in CONFIG_REFUSALS
+                           else DeviceError)
+                pending.error = refused(msg.code, msg.message, param, msg.request_type)
             else:
                 pending.reply = msg
             pending.event.set()

@@ -51,6 +51,16 @@ class ConfigError(StereoCamError, ValueError):
     """A configuration request that cannot be expressed (unknown parameter name, wrong type)."""
 
 
+class ConfigRefused(DeviceError, ConfigError):
+    """The device refused a configuration (its NACK of SET_CONFIG: an unknown parameter, a value out
+    of range, one that cannot change while streaming): a DeviceError with the device's code, parameter
+    and text, and a ConfigError, as ``Camera.check_config``'s verdict on the same values is."""
+
+
+CONFIG_REFUSALS = frozenset({ErrorCode.UNKNOWN_PARAM, ErrorCode.OUT_OF_RANGE, ErrorCode.BAD_STATE})
+"""The NACK codes of SET_CONFIG that say the configuration itself was refused (ConfigRefused)."""
+
+
 class TransportError(StereoCamError):
     """The link to the device failed (I/O error, cannot open)."""
 

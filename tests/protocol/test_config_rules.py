@@ -73,8 +73,9 @@ def test_host_check_and_device_agree(cam, params) -> None:
     try:
         expected = cam.check_config(**params)
     except ConfigRejected as exc:
-        with pytest.raises(stereocam.DeviceError) as err:
+        with pytest.raises(stereocam.ConfigRefused) as err:  # a DeviceError and a ConfigError, as exc is
             cam.configure(**params)
+        assert isinstance(err.value, stereocam.DeviceError) and isinstance(err.value, stereocam.ConfigError)
         assert (err.value.code, err.value.param) == (exc.code, exc.param)
     else:
         assert cam.configure(**params) == expected

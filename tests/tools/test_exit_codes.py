@@ -28,6 +28,8 @@ def test_the_codes_named_here_are_the_documented_ones():
     (["record", "sim://?seed=2", "--out", "/nonexistent/x.mcap", "--frames", "1"], EXIT_USAGE, "--out"),
     (["record", "sim://?seed=2", "--out", "{tmp}/x.mcap", "--frames", "0"], EXIT_USAGE, "--frames"),
     (["record", "sim://?seed=2", "--out", "{tmp}/x.mcap"], EXIT_USAGE, "--frames"),
+    (["record", "sim://?seed=2", "--out", "{tmp}/x.mcap", "--frames", "1", "--set", "block_size=16"], EXIT_USAGE,
+     "OUT_OF_RANGE [block_size]"),  # a setting the camera refuses (ConfigRefused)
     (["conformance", "sim://?seed=2", "-k", "zzz"], EXIT_USAGE, "selects no check"),
     (["conformance", "sim://?seed=2", "-k", "("], EXIT_USAGE, "not a regular expression"),
     (["recording", "info", "/nonexistent/x.mcap"], EXIT_USAGE, "does not exist"),
