@@ -53,7 +53,8 @@ __all__ = [
     "open", "list_devices", "DeviceEntry", "Camera", "CameraGroup", "DeviceInfo", "DeviceStatus", "Frame",
     "FrameStatus", "DisparityFormat", "StereoGeometry", "StereoCalibration", "StoredCalibration", "TriggerMode",
     "Output", "write_ply", "StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError",
-    "ConfigRefused", "ErrorCode", "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError", "CameraTimeoutError",
+    "ConfigRefused", "ErrorCode", "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError",
+    "CameraTimeoutError",
     "VerificationError", "StreamStalledError", "CallbackError", "MissingPlaneError", "SilentHeadsError",
     "EndOfRecordingError",
 ]
