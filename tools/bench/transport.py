@@ -164,6 +164,11 @@ def rates(seconds: float) -> dict[str, float]:
             print(f"  {case.label:<30} {kind:<9} {case.fps:>5} {r.fps:6.1f} {r.drops:6d} {r.p50_ms:7.1f} "
                   f"{r.p99_ms:7.1f}", flush=True)
             out[f"{kind}_{case.label}_fps"] = r.fps
+            if r.stages and r.cpu_ms is not None:  # the device in this process: where a frame's time goes
+                print(f"  {'':<30} {'':<9} device stages, ms per frame (wall): "
+                      + ", ".join(f"{k} {v:.1f}" for k, v in r.stages.items())
+                      + f" (render: the simulated sensor); CPU {r.cpu_ms:.1f} ms per frame, device and host",
+                      flush=True)
     print(f"load average at the end: {os.getloadavg()[0]:.2f}")
     return out
 
