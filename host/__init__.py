@@ -29,10 +29,9 @@ if TYPE_CHECKING:
     from .pointcloud import write_ply
 
 _ERRORS = ("StereoCamError", "ProtocolError", "VersionMismatchError", "DeviceError", "ConfigError", "ConfigRefused",
-           "ErrorCode",
-           "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError", "CameraTimeoutError",
-           "VerificationError", "StreamStalledError", "CallbackError", "MissingPlaneError", "SilentHeadsError",
-           "EndOfRecordingError")
+           "ErrorCode", "TransportError", "DisconnectedError", "LinkFailedError", "StreamStoppedError",
+           "CameraTimeoutError", "VerificationError", "StreamStalledError", "CallbackError", "MissingPlaneError",
+           "SilentHeadsError", "EndOfRecordingError")
 _EXPORTS: dict[str, str] = {
     **dict.fromkeys(_ERRORS, "stereocam.protocol.errors"),
     "StereoCalibration": "stereocam.protocol.calibration",

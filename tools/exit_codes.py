@@ -9,5 +9,6 @@ EXIT_NO_CALIBRATION = 3
 EXIT_CODES = """Exit codes: 0 success; 1 the camera or a file failed (unreachable, refused, timed out; a
 recording, image or key that is damaged or refused); 2 bad usage, checked before any camera is
 touched where it can be (unknown option, a bad value, a URL without a port, a path that cannot be
-written or is missing; a configuration the camera refuses is a bad value too); 3-7 calibrate's own (see its --help); 130 interrupted (Ctrl-C); 141 output
-closed before everything was written (a reader such as head that exits early)."""
+written or is missing; a configuration the camera refuses is a bad value too); 3-7 calibrate's own
+(see its --help); 130 interrupted (Ctrl-C); 141 output closed before everything was written (a
+reader such as head that exits early)."""
