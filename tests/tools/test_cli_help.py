@@ -9,6 +9,7 @@ import click
 import pytest
 
 from stereocam.tools.cli import COMMANDS
+from stereocam.tools.options import Finite
 
 
 def _tree(name: str, command: click.Command) -> Iterator[tuple[str, click.Command]]:
@@ -35,3 +36,14 @@ def test_help_has_a_description_exit_codes_and_defaults(name, command):
         assert option.help, f"{name} {option.opts[0]}: no help"
         has_default = not option.required and option.default not in (None, (), UNSET)
         assert not has_default or option.show_default, f"{name} {option.opts[0]}: default {option.default!r} not shown"
+
+
+@pytest.mark.parametrize("name, command", COMMAND_TREE, ids=[name for name, _ in COMMAND_TREE])
+def test_every_number_option_refuses_nan_and_infinities(name, command):
+    """click.FloatRange lets NaN through every bound (a NaN duration never ends, a NaN shift is
+    garbage): each float option is options.Finite, which refuses NaN and infinities at parse time."""
+    for option in command.params:
+        if isinstance(option.type, click.FloatRange):
+            assert isinstance(option.type, Finite), f"{name} {option.opts[0]}: a bare FloatRange"
+            with pytest.raises(click.BadParameter, match="not a finite number"):
+                option.type.convert("nan", option, None)

@@ -28,7 +28,7 @@ from stereocam.tools.calibration.solve import (
     SolveConfig,
     calibrate_pairs,
 )
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog
 
 MAX_REL_ERROR = 0.002
 MAX_EPIPOLAR_PX = 0.1
@@ -88,7 +88,7 @@ def run_seed(seed: int, size: tuple[int, int], board: BoardSpec, views: int, noi
 @click.option("--views", type=click.IntRange(min=1), default=100, show_default=True, help="Board poses rendered per unit.")
 @click.option("--width", type=click.IntRange(min=1), default=1280, show_default=True, help="Image width, px.")
 @click.option("--height", type=click.IntRange(min=1), default=960, show_default=True, help="Image height, px.")
-@click.option("--noise", type=click.FloatRange(min=0), default=1.0, show_default=True, help="Sensor noise sigma, DN.")
+@click.option("--noise", type=Finite(min=0), default=1.0, show_default=True, help="Sensor noise sigma, DN.")
 @click.option("--supersample", type=click.IntRange(min=1), default=1, show_default=True, help="Render supersampling.")
 def command(**params: Any) -> int:
     """Calibration accuracy benchmark: calibrate simulated units from rendered views, compare to truth."""

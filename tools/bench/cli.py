@@ -9,7 +9,7 @@ import numpy as np
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import Decoder
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog
 
 
 def bench_protocol(seconds: float = 2.0) -> dict[str, float]:
@@ -87,7 +87,7 @@ def command(ctx: click.Context) -> int | None:
 
 
 @command.command("protocol", epilog=EPILOG)
-@click.option("--seconds", type=click.FloatRange(0, min_open=True), default=2.0, show_default=True,
+@click.option("--seconds", type=Finite(0, min_open=True), default=2.0, show_default=True,
               help="Decoding time.")
 def protocol(seconds: float) -> int:
     """Decoder throughput (MB/s): 640x480 frame messages fed in 64 KiB chunks."""
@@ -96,7 +96,7 @@ def protocol(seconds: float) -> int:
 
 
 @command.command("all", epilog=EPILOG)
-@click.option("--seconds", type=click.FloatRange(0, min_open=True), default=5.0, show_default=True,
+@click.option("--seconds", type=Finite(0, min_open=True), default=5.0, show_default=True,
               help="Capture time per transport.")
 @click.pass_context
 def run_all(ctx: click.Context, seconds: float) -> int:

@@ -17,7 +17,7 @@ import numpy as np
 
 from stereocam.protocol import messages as m
 from stereocam.protocol.framing import MAGIC, MAX_PAYLOAD, Decoder
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog
 
 READ = 65536
 
@@ -92,7 +92,7 @@ def cost_per_byte(stream: bytes, repeat: int = 1) -> float:
 
 
 @click.command("decoder", context_settings=CONTEXT, epilog=epilog())
-@click.option("--mib", type=click.FloatRange(min=0, min_open=True), default=4.0, show_default=True,
+@click.option("--mib", type=Finite(min=0, min_open=True), default=4.0, show_default=True,
               help="Stream size per shape, MiB.")
 def command(**params: Any) -> int:
     """The decoder's cost per input byte on clean and adversarial streams."""

@@ -33,7 +33,7 @@ from stereocam.device_sim.rig.scene_classes import CLASSES
 from stereocam.protocol.params import BY_NAME
 from stereocam.stereo import engines
 from stereocam.tools.bench.stereobm_oracle import opencv_stereobm
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog
 
 from .matching_report import MOTORCYCLE, BenchScene, class_scene, misaligned, motorcycle_scene, report
 
@@ -177,7 +177,7 @@ def sgm_report(args: SimpleNamespace) -> int:
               help="sgm: score the scene classes on a LiDAR-like 7 % of their truth, mostly in the lower image "
                    "and none from the sky (KITTI-style; for driving).")
 @click.option("--busy", is_flag=True, help="sgm: run beside a competing busy process (one core spinning).")
-@click.option("--vertical-error", type=click.FloatRange(-8, 8), default=0.0, show_default=True, metavar="PX",
+@click.option("--vertical-error", type=Finite(-8, 8), default=0.0, show_default=True, metavar="PX",
               help="sgm: move every right image down by PX pixels (bilinear; negative: up) before matching, "
                    "as the residual of a real unit's rectification would.")
 def command(**params: Any) -> int:

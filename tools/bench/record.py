@@ -22,7 +22,7 @@ import zstandard
 import stereocam
 from stereocam.recording import Recorder, UnitDescription, convert, describe
 from stereocam.recording.reader import Recording
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog
 
 YARDSTICK_MBPS = 1280 * 960 * 3 * 30 / 1e6  # the "1280x960, three planes, 30 fps"
 
@@ -127,7 +127,7 @@ def bench_seek(frames: int, out_dir: Path, probes: int = 20) -> dict[str, float]
 
 
 @click.command("record", context_settings=CONTEXT, epilog=epilog())
-@click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=5.0, show_default=True,
+@click.option("--seconds", type=Finite(min=0, min_open=True), default=5.0, show_default=True,
               help="Time per measurement.")
 @click.option("--level", type=int, default=1, show_default=True, help="zstd level of the chunks.")
 @click.option("--threads", type=click.IntRange(min=1), default=2, show_default=True, help="Compression threads.")

@@ -29,7 +29,7 @@ from stereocam.device_sim import SimulatedCamera, TriggerLine
 from stereocam.device_sim.process import ServedSimulator
 from stereocam.frame_sets import MatchedSet
 from stereocam.protocol.params import Output
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog
 
 SEEDS = (4, 14, 25)  # units with large drifts of both signs (-46, +50, +45 ppm)
 CONFIG = dict(width=160, height=120, outputs=int(Output.LEFT))  # timing, not imaging: keep the CPU for it
@@ -122,12 +122,12 @@ def report(kind: str, run: Run, truth: Callable[[str, int], float | None]) -> di
 
 
 @click.command("sync", context_settings=CONTEXT, epilog=epilog())
-@click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=120.0, show_default=True,
+@click.option("--seconds", type=Finite(min=0, min_open=True), default=120.0, show_default=True,
               help="Capture time per transport.")
 @click.option("--fps", type=click.IntRange(1, 120), default=30, show_default=True, help="The master head's frame rate.")
 @click.option("--transports", default="inprocess,tcp,pty", show_default=True,
               help="Comma-separated: inprocess, tcp, pty.")
-@click.option("--deadline", type=click.FloatRange(min=0, min_open=True), default=0.5, show_default=True,
+@click.option("--deadline", type=Finite(min=0, min_open=True), default=0.5, show_default=True,
               help="Seconds a set waits for its last head; a head is silent after no frame for this long "
                    "(at least 1 s). A busy host may need more.")
 def command(**params: Any) -> dict[str, dict[str, float]]:

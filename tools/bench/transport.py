@@ -25,7 +25,7 @@ import numpy as np
 from tqdm import tqdm
 
 from stereocam.stereo import engines
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog
 from stereocam.tools.progress import progress_wanted
 
 if TYPE_CHECKING:
@@ -178,7 +178,7 @@ def rates(seconds: float) -> dict[str, float]:
               help="Matching engine on the device (repeatable).  [default: bm]")
 @click.option("--transport", "kinds", type=click.Choice(KINDS), multiple=True,
               help="Transport to measure (repeatable).  [default: all]")
-@click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=5.0, show_default=True,
+@click.option("--seconds", type=Finite(min=0, min_open=True), default=5.0, show_default=True,
               help="Capture time per transport.")
 @click.option("--rates", is_flag=True, help="The pipeline rate targets over sim and TCP: VGA BM at 60 fps, "
                                             "VGA SGM (64 disparities) at 30 fps, SGM + post-processing chain.")

@@ -16,7 +16,7 @@ import usb.core
 
 import stereocam.device_sim.usb as simusb
 from stereocam.device_sim.usb.testdevices import SourceDevice
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog
 from stereocam.transports import usb as usb_transport
 
 MB = 1e6
@@ -81,7 +81,7 @@ def bench_camera(frames: int, fps: int) -> tuple[float, float]:
 
 
 @click.command("usb", context_settings=CONTEXT, epilog=epilog())
-@click.option("--mb", type=click.FloatRange(min=0, min_open=True), default=256, show_default=True,
+@click.option("--mb", type=Finite(min=0, min_open=True), default=256, show_default=True,
               help="MB to stream per raw test.")
 @click.option("--chunk", type=click.IntRange(min=1), default=640 * 480 * 2, show_default=True,
               help="Bytes per device IN transfer (one 640x480 16-bit plane).")

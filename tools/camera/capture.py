@@ -10,7 +10,7 @@ import numpy as np
 from tqdm import tqdm
 
 import stereocam
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog
 from stereocam.tools.progress import progress_wanted
 
 from .pictures import save_disparity_png
@@ -39,7 +39,7 @@ def save_frame(frame: stereocam.Frame, out: Path, stem: str = "frame") -> dict[s
 @click.option("--out", type=click.Path(path_type=Path), required=True,
               help="Directory for the files; created if missing (checked before the camera is opened).")
 @click.option("--count", type=click.IntRange(min=1), default=1, show_default=True, help="Frames to save (at least 1).")
-@click.option("--timeout", type=click.FloatRange(0, min_open=True), default=30.0, show_default=True,
+@click.option("--timeout", type=Finite(0, min_open=True), default=30.0, show_default=True,
               help="Seconds to wait for each frame (the first pays the matcher's warm-up).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON array (sequence and files per frame) at the end.")
 def command(url: str, out: Path, count: int, timeout: float, as_json: bool) -> int:

@@ -10,7 +10,7 @@ import stereocam
 from stereocam.calibration_io import id_text
 from stereocam.protocol.messages import Capability
 from stereocam.protocol.params import VALUE_NAMES, Output
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog
 
 
 def value_name(name: str, value: int) -> str | int:
@@ -53,7 +53,7 @@ def format_text(doc: dict[str, Any]) -> str:
 @click.command("info", epilog=epilog(), context_settings=CONTEXT)
 @click.argument("url")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of lines.")
-@click.option("--timeout", type=click.FloatRange(0, min_open=True), default=2.0, show_default=True,
+@click.option("--timeout", type=Finite(0, min_open=True), default=2.0, show_default=True,
               help="Seconds to wait for each reply.")
 def command(url: str, as_json: bool, timeout: float) -> int:
     """Print a camera's identity, calibration (id, source, generation), configuration (enumerations

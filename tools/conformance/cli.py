@@ -13,7 +13,7 @@ import click
 
 from stereocam.arguments import timeout_arg
 from stereocam.protocol.errors import ConfigError
-from stereocam.tools.options import CONTEXT, epilog, output_file
+from stereocam.tools.options import CONTEXT, Finite, epilog, output_file
 
 from . import report
 from .results import CheckResult
@@ -25,8 +25,8 @@ MAX_TIMEOUT = 60.0  # s: the longest reply deadline (SPEC §7 holds a device to 
 
 
 def _timeout(ctx: click.Context, param: click.Parameter, value: float) -> float:
-    """``--timeout`` as the transports take it: finite (FloatRange lets nan through), checked by the
-    same rule as ``stereocam.open``'s timeout."""
+    """``--timeout`` as the transports take it: checked by the same rule as ``stereocam.open``'s
+    timeout (after Finite's range)."""
     try:
         return timeout_arg(value)
     except ConfigError as exc:
@@ -50,7 +50,7 @@ def _pattern(ctx: click.Context, param: click.Parameter, value: str | None) -> C
 @click.option("--junit", type=click.Path(dir_okay=False, path_type=str), default=None, callback=output_file,
               help="Also write the results as JUnit XML to this file.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of text.")
-@click.option("--timeout", type=click.FloatRange(0, MAX_TIMEOUT, min_open=True), default=1.0, show_default=True,
+@click.option("--timeout", type=Finite(0, MAX_TIMEOUT, min_open=True), default=1.0, show_default=True,
               callback=_timeout, help="Reply deadline the device is held to, seconds (SPEC §7: well inside 1 s).")
 @click.option("-k", "only", metavar="REGEX", default=None, callback=_pattern,
               help="Run only the checks whose name matches.  [default: every check]")

@@ -30,7 +30,7 @@ from stereocam.protocol.firmware_image import (MAX_IMAGE_BYTES, MAX_KEY_BYTES, T
                                                load_private_key, private_key_pem, public_key_pem)
 from stereocam.protocol.params import BY_NAME
 from stereocam.tools.exit_codes import EXIT_USAGE
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog
 from stereocam.tools.progress import progress_wanted
 
 DEFAULT_TARGET = "STOC-SIM"
@@ -195,7 +195,7 @@ def command() -> None:
     """Signed firmware images: make a signing key, sign a build, update a camera, show its slots."""
 
 
-_TIMEOUT = click.option("--timeout", type=click.FloatRange(min=0, min_open=True), default=2.0, show_default=True,
+_TIMEOUT = click.option("--timeout", type=Finite(min=0, min_open=True), default=2.0, show_default=True,
                         help="Seconds to wait for each reply.")
 
 

@@ -18,7 +18,7 @@ from stereocam.protocol.errors import ConfigError
 from stereocam.presets import POST_PRESETS
 from stereocam.recording.mcapwriter import check_level
 from stereocam.tools.camera.session import writable_dir
-from stereocam.tools.options import CONTEXT, SETTING, epilog
+from stereocam.tools.options import CONTEXT, SETTING, Finite, epilog
 from stereocam.tools.progress import progress_wanted
 
 
@@ -27,7 +27,7 @@ from stereocam.tools.progress import progress_wanted
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="The .mcap file to write (never replaced: it must not exist).")
 @click.option("--frames", type=click.IntRange(min=1), default=None, help="Stop after N captures.")
-@click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=None, help="Stop after S seconds.")
+@click.option("--seconds", type=Finite(min=0, min_open=True), default=None, help="Stop after S seconds.")
 @click.option("--set", "settings", type=SETTING, multiple=True,
               help="Configure the camera before recording (repeatable), e.g. --set width=1280; "
                    "a value by the name info prints, e.g. --set trigger_mode=software.")
