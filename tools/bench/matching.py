@@ -36,6 +36,7 @@ from stereocam.tools.bench.stereobm_oracle import opencv_stereobm
 from stereocam.tools.options import CONTEXT, Finite, epilog
 
 from .matching_report import MOTORCYCLE, BenchScene, class_scene, misaligned, motorcycle_scene, report
+from .pair_files import pair_scene
 
 
 def synthetic_scene(h: int = 480, w: int = 640, seed: int = 0):
@@ -130,6 +131,13 @@ def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
 
 
 SCENE_CHOICES = [MOTORCYCLE, *CLASSES]
+_FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
+
+
+def _multiple_of_16(ctx: click.Context, param: click.Parameter, value: int | None) -> int | None:
+    if value is not None and value % 16:
+        raise click.BadParameter(f"{value} is not a multiple of 16")
+    return value
 
 
 def _moved(load: Callable[[], BenchScene], dy: float) -> BenchScene:
@@ -138,9 +146,13 @@ def _moved(load: Callable[[], BenchScene], dy: float) -> BenchScene:
 
 def sgm_report(args: SimpleNamespace) -> int:
     """The per-scene tables of matching_report.py for the scenes asked."""
-    names = list(args.scene_names) or SCENE_CHOICES
+    names = list(args.scene_names) or ([] if args.pairs else SCENE_CHOICES)
     w, h = (320, 240) if args.quick else args.size
     scenes: list[Callable[[], BenchScene]] = []
+    truths = list(args.truths) or [None] * len(args.pairs)
+    for (left, right), truth in zip(args.pairs, truths):  # read now: a bad file fails before any timing
+        scene = pair_scene(left, right, truth, args.num_disparities, args.truth_scale)
+        scenes.append(functools.partial(lambda s: s, scene))
     for name in names:
         if name == MOTORCYCLE:
             if args.quick:
@@ -177,13 +189,35 @@ def sgm_report(args: SimpleNamespace) -> int:
               help="sgm: score the scene classes on a LiDAR-like 7 % of their truth, mostly in the lower image "
                    "and none from the sky (KITTI-style; for driving).")
 @click.option("--busy", is_flag=True, help="sgm: run beside a competing busy process (one core spinning).")
+@click.option("--pair", "pairs", type=(_FILE, _FILE), multiple=True, metavar="LEFT RIGHT",
+              help="sgm: a rectified pair of image files (colour turned grey) to measure instead of the built-in "
+                   "scenes (repeatable; --scenes adds those).")
+@click.option("--truth", "truths", type=_FILE, multiple=True, metavar="FILE",
+              help="sgm: the left image's disparity truth of each --pair, in order: PFM (inf unknown), a 16-bit "
+                   "PNG (KITTI: value / 256, 0 unknown) or .npy (non-finite unknown).  [default: none: density and "
+                   "time only]")
+@click.option("--num-disparities", type=click.IntRange(min=16), default=None, callback=_multiple_of_16,
+              help="sgm: disparities searched on the --pair scenes (a multiple of 16).  [default: past the truth's "
+                   "largest, else 128]")
+@click.option("--truth-scale", type=Finite(min=0, min_open=True), default=None, metavar="S",
+              help="sgm: disparity = truth value / S (an 8-bit PNG needs it).  [default: 256 for a 16-bit PNG, "
+                   "else 1]")
 @click.option("--vertical-error", type=Finite(-8, 8), default=0.0, show_default=True, metavar="PX",
               help="sgm: move every right image down by PX pixels (bilinear; negative: up) before matching, "
                    "as the residual of a real unit's rectification would.")
 def command(**params: Any) -> int:
     """Benchmark the device matching core against cv2.StereoBM in one process; --algorithm sgm: every
-    engine on Motorcycle and every simulator scene class, one table per scene."""
+    engine on Motorcycle and every simulator scene class, or on pairs of files, one table per scene."""
     args = SimpleNamespace(**params)
+    if args.pairs or args.truths or args.num_disparities or args.truth_scale:
+        if args.algorithm != "sgm" or args.profile:
+            raise click.UsageError("--pair, --truth, --num-disparities and --truth-scale go with --algorithm sgm "
+                                   "(without --profile)")
+        if not args.pairs:
+            raise click.UsageError("--truth, --num-disparities and --truth-scale need --pair")
+        if args.truths and len(args.truths) != len(args.pairs):
+            raise click.UsageError(f"{len(args.truths)} --truth for {len(args.pairs)} --pair: give one per pair "
+                                   "(in the same order) or none")
     if args.algorithm == "sgm":
         if args.repeat is None:
             args.repeat = 5

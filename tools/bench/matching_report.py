@@ -75,9 +75,12 @@ class Row:
 
 
 def score(disp: np.ndarray, invalid: int, truth: np.ndarray) -> tuple[float, float, float, float]:
-    """(density %, bad-2.0 all %, bad-2.0 reported %, EPE px) of an int16 disparity * 16."""
+    """(density %, bad-2.0 all %, bad-2.0 reported %, EPE px) of an int16 disparity * 16; NaN for
+    the three that need truth where there is none."""
     valid = disp != invalid
     known = np.isfinite(truth)
+    if not known.any():
+        return 100.0 * float(valid.mean()), float("nan"), float("nan"), float("nan")
     err = np.abs(disp.astype(np.float32) / 16.0 - np.where(known, truth, 0))
     reported = known & valid
     bad = err > BAD_PX
@@ -229,9 +232,12 @@ def format_table(scene: BenchScene, rows: list[Row]) -> str:
     head = f"{COLUMNS[0]:<24}" + "".join(f"{c:>11}" for c in COLUMNS[1:])
     lines = [f"== {scene.name}, {scene.num_disparities} disparities, truth on "
              f"{100 * np.isfinite(scene.truth).mean():.0f} % of {w}x{h} ==", head, "-" * len(head)]
+    def cell(v: float, digits: int) -> str:
+        return f"{'-' if np.isnan(v) else f'{v:.{digits}f}':>11}"
+
     for r in rows:
-        lines.append(f"{r.method:<24}{r.density:>11.1f}{r.bad_all:>11.1f}{r.bad_reported:>11.1f}{r.epe:>11.2f}"
-                     f"{r.ms:>11.1f}{r.spread_ms:>11.1f}{r.ratio:>11.2f}")
+        lines.append(f"{r.method:<24}{cell(r.density, 1)}{cell(r.bad_all, 1)}{cell(r.bad_reported, 1)}"
+                     f"{cell(r.epe, 2)}{cell(r.ms, 1)}{cell(r.spread_ms, 1)}{cell(r.ratio, 2)}")
     return "\n".join(lines)
 
 

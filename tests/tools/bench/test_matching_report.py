@@ -26,8 +26,8 @@ def parse_tables(text: str) -> dict[str, dict[str, list[float]]]:
             for row in lines[i + 3:]:
                 if not row.strip() or row.startswith(("==", "load average", "(")):
                     break
-                rows[row[:NAME_W].strip()] = [float(row[NAME_W + CELL_W * k:NAME_W + CELL_W * (k + 1)])
-                                              for k in range(len(COLUMNS) - 1)]
+                cells = [row[NAME_W + CELL_W * k:NAME_W + CELL_W * (k + 1)].strip() for k in range(len(COLUMNS) - 1)]
+                rows[row[:NAME_W].strip()] = [float("nan") if c == "-" else float(c) for c in cells]
     return tables
 
 
