@@ -21,9 +21,13 @@ def check_pair(left: np.ndarray, right: np.ndarray) -> None:
         if not isinstance(img, np.ndarray):
             raise ValueError(f"{name} image must be a numpy array, got {type(img).__name__}")
         if img.ndim != 2:
-            raise ValueError(f"{name} image must be 2-D (grey), got shape {img.shape}")
+            hint = (": turn colour grey first, e.g. cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)"
+                    if img.ndim == 3 and img.shape[2] in (3, 4) else "")
+            raise ValueError(f"{name} image must be 2-D (grey), got shape {img.shape}{hint}")
         if img.dtype != np.uint8:
-            raise ValueError(f"{name} image must be uint8, got {img.dtype}")
+            hint = (": scale it to 8 bits first, e.g. (img >> 8).astype(np.uint8) for 16-bit data"
+                    if img.dtype == np.uint16 else "")
+            raise ValueError(f"{name} image must be uint8, got {img.dtype}{hint}")
     if left.shape != right.shape:
         raise ValueError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
 

@@ -217,10 +217,14 @@ def test_bad_images() -> None:
     p = MatchParams(num_disparities=16, block_size=9)
     with pytest.raises(ValueError, match="differ in shape"):
         match(img, np.zeros((64, 95), np.uint8), p)
-    with pytest.raises(ValueError, match="uint8"):
+    with pytest.raises(ValueError, match="uint8, got uint16: scale it to 8 bits"):
         match(img.astype(np.uint16), img.astype(np.uint16), p)
-    with pytest.raises(ValueError, match="2-D"):
+    with pytest.raises(ValueError, match="uint8, got float32$"):
+        match(img.astype(np.float32), img, p)
+    with pytest.raises(ValueError, match=r"2-D \(grey\), got shape \(64, 96, 3\): turn colour grey"):
         match(np.zeros((64, 96, 3), np.uint8), np.zeros((64, 96, 3), np.uint8), p)
+    with pytest.raises(ValueError, match=r"right image must be 2-D \(grey\), got shape \(1, 64, 96\)$"):
+        match(img, img[None], p)
     with pytest.raises(ValueError, match="numpy array"):
         match(img.tolist(), img, p)
     with pytest.raises(ValueError, match="block_size"):  # window larger than the image
