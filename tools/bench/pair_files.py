@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from stereocam.protocol.errors import InputFileError
+from stereocam.stereo import MatchParams, SGMParams, geometry, sgm_geometry
 
 from .matching_report import BenchScene
 
@@ -84,5 +85,8 @@ def pair_scene(left: Path, right: Path, truth_path: Path | None, num_disparities
             raise InputFileError(f"{truth_path} is {truth.shape[1]}x{truth.shape[0]} but the images are "
                                  f"{a.shape[1]}x{a.shape[0]}")
     nd = num_disparities or range_for(truth)
+    h, w = a.shape
+    geometry(h, w, MatchParams(num_disparities=nd, block_size=9))  # the bench's block matcher
+    sgm_geometry(h, w, SGMParams(num_disparities=nd))  # ConfigError now, not after the warm-up
     known = truth if truth is not None else np.full(a.shape, np.nan, np.float32)
     return BenchScene(left.name, a, b, known, nd)

@@ -103,6 +103,7 @@ def test_a_pair_without_truth_gets_density_and_time_only(tmp_path: Path) -> None
     (["--algorithm", "bm"], 2, "go with --algorithm sgm"),
     (["--truth", "{t}"], 1, "needs --truth-scale"),
     (["--truth", "{missing}"], 2, "does not exist"),
+    (["--num-disparities", "64"], 2, "leaves no column of width 64"),  # before the JIT warm-up
 ])
 def test_cli_mistakes_exit_with_a_message(tmp_path: Path, extra: list[str], code: int, words: str) -> None:
     left, truth = tmp_path / "l.png", tmp_path / "t.png"
