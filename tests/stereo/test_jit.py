@@ -3,6 +3,7 @@ a kernel that inlined another module's function is rebuilt when that module chan
 from __future__ import annotations
 
 import importlib
+import os
 import shutil
 import subprocess
 import sys
@@ -53,8 +54,9 @@ def kernel():
 
 
 def _run(root: Path) -> str:
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}  # the cache beside the module
     out = subprocess.run([sys.executable, "-c", "import pk.caller as c; print(c.kernel())"],
-                         cwd=root, capture_output=True, text=True, timeout=120)
+                         cwd=root, capture_output=True, text=True, timeout=120, env=env)
     assert out.returncode == 0, out.stderr
     return out.stdout.strip()
 
