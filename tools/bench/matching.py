@@ -140,6 +140,10 @@ def _multiple_of_16(ctx: click.Context, param: click.Parameter, value: int | Non
     return value
 
 
+def _given(scene: BenchScene) -> BenchScene:
+    return scene
+
+
 def _moved(load: Callable[[], BenchScene], dy: float) -> BenchScene:
     return misaligned(load(), dy)
 
@@ -152,7 +156,7 @@ def sgm_report(args: SimpleNamespace) -> int:
     truths = list(args.truths) or [None] * len(args.pairs)
     for (left, right), truth in zip(args.pairs, truths):  # read now: a bad file fails before any timing
         scene = pair_scene(left, right, truth, args.num_disparities, args.truth_scale)
-        scenes.append(functools.partial(lambda s: s, scene))
+        scenes.append(functools.partial(_given, scene))
     for name in names:
         if name == MOTORCYCLE:
             if args.quick:
@@ -196,7 +200,7 @@ def sgm_report(args: SimpleNamespace) -> int:
               help="sgm: the left image's disparity truth of each --pair, in order: PFM (inf unknown), a 16-bit "
                    "PNG (KITTI: value / 256, 0 unknown) or .npy (non-finite unknown).  [default: none: density and "
                    "time only]")
-@click.option("--num-disparities", type=click.IntRange(min=16), default=None, callback=_multiple_of_16,
+@click.option("--num-disparities", type=click.IntRange(min=16), default=None, callback=_multiple_of_16, metavar="D",
               help="sgm: disparities searched on the --pair scenes (a multiple of 16).  [default: past the truth's "
                    "largest, else 128]")
 @click.option("--truth-scale", type=Finite(min=0, min_open=True), default=None, metavar="S",
