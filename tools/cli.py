@@ -26,6 +26,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "list": ("stereocam.tools.camera.list_devices", "list cameras: USB, serial ports, served and in-process simulators"),
     "info": ("stereocam.tools.camera.info", "print a camera's identity, calibration, configuration and counters"),
     "capture": ("stereocam.tools.camera.capture", "save frames: left/right PNG, disparity PNG + .npy, point cloud .ply"),
+    "match": ("stereocam.tools.match", "a disparity map from two rectified image files: PNG (KITTI), PFM or .npy"),
     "calibrate": ("stereocam.tools.calibration.calibrate", "factory stereo calibration: from a camera (written + verified) or images"),
     "calibration": ("stereocam.tools.calibration.export", "calibration export URL --size WxH: ROS camera_info from a unit"),
     "factory": ("stereocam.tools.factory.cli", "factory record: yield and metric distributions per day and station"),

@@ -1,0 +1,133 @@
+"""``stereocam match LEFT RIGHT --out FILE``: a disparity map from two rectified image files, made by
+the camera's own engines and post-processing presets (the same code the simulated device runs), and
+written in a format other tools read: a 16-bit PNG as KITTI's (disparity x 256, 0 no match, so a zero
+disparity is written as 1 / 256 px), PFM as
+Middlebury's (inf no match) or .npy (float32, NaN no match). The bench reads all three back as truth
+(``bench matching --pair ... --truth``)."""
+from __future__ import annotations
+
+from pathlib import Path
+import click
+import numpy as np
+
+from stereocam.protocol.errors import ConfigError, InputFileError
+from stereocam.protocol.params import defaults
+from stereocam.stereo import engines
+from stereocam.stereo.config_map import config_of
+from stereocam.stereo.post import POST_PRESETS, postprocess, post_params_from_config, preset_config
+from stereocam.tools.options import CONTEXT, epilog, output_file
+
+FORMATS = (".png", ".pfm", ".npy")
+KITTI_SCALE = 256  # a 16-bit PNG holds disparity x 256, 0 where there is no match
+
+
+def read_pair(left: Path, right: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Both images as grey levels (colour turned grey); InputFileError naming a file OpenCV cannot
+    read or sizes that differ."""
+    import cv2
+
+    images = []
+    for path in (left, right):
+        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            raise InputFileError(f"{path}: not an image that OpenCV can read")
+        images.append(img)
+    a, b = images
+    if a.shape != b.shape:
+        raise InputFileError(f"{left} is {a.shape[1]}x{a.shape[0]} but {right} is {b.shape[1]}x{b.shape[0]}: "
+                             "a rectified pair has one size")
+    return a, b
+
+
+def match_config(algorithm: str | None, preset: str, num_disparities: int, min_disparity: int) -> dict[str, int]:
+    """The device configuration ``match`` runs: with no preset the engine's library defaults (as
+    ``match(left, right, SGMParams(num_disparities=...))`` and the bench's raw rows), with one the
+    preset as a device applies it (as the bench's preset rows)."""
+    settings = preset_config(preset)
+    name = algorithm or (engines.engine_for(settings["algorithm"]).name if preset != "off" else "sgm")
+    engine = engines.engine_named(name)
+    if preset != "off":
+        return {**defaults(), **settings, "algorithm": engine.algorithm, "num_disparities": num_disparities,
+                "min_disparity": min_disparity}
+    try:
+        params = engine.params(num_disparities=num_disparities, min_disparity=min_disparity)
+    except ValueError as exc:  # the parameter classes name the value
+        raise ConfigError(str(exc)) from exc
+    return {**defaults(), **settings, **config_of(params, engine.config), "algorithm": engine.algorithm}
+
+
+def disparity_map(left: np.ndarray, right: np.ndarray, config: dict[str, int]) -> np.ndarray:
+    """Disparity in pixels (float32, NaN where there is no match) of a device configuration:
+    its engine, then its post-processing chain."""
+    params = engines.params_from_config(config)
+    matcher = engines.matcher_for(config, left.shape)
+    raw = matcher.match(left, right)
+    out = postprocess(raw, left, post_params_from_config(config), right, params)
+    return np.where(out == params.invalid_value, np.nan, out.astype(np.float32) / 16).astype(np.float32)
+
+
+def write_disparity(path: Path, disparity: np.ndarray) -> None:
+    """``disparity`` (float32 px, NaN no match) in the format ``path``'s suffix names (FORMATS)."""
+    import cv2
+
+    suffix = path.suffix.lower()
+    known = np.isfinite(disparity)
+    if suffix == ".npy":
+        np.save(path, disparity)
+        return
+    if suffix == ".pfm":
+        ok = cv2.imwrite(str(path), np.where(known, disparity, np.inf).astype(np.float32))
+    else:
+        if np.nanmin(disparity, initial=0.0) < 0:
+            raise ConfigError("a 16-bit PNG holds no negative disparity: write .pfm or .npy")
+        # 0 means no match in this format: a zero disparity (a point at infinity) is kept as 1 / 256 px
+        code = np.where(known, np.maximum(np.rint(disparity * KITTI_SCALE), 1), 0)
+        ok = cv2.imwrite(str(path), np.clip(code, 0, 65535).astype(np.uint16))
+    if not ok:
+        raise OSError(f"{path}: OpenCV could not write it")
+
+
+def _format(ctx: click.Context, param: click.Parameter, value: str | None) -> Path | None:
+    path = output_file(ctx, param, value)
+    if path is not None and path.suffix.lower() not in FORMATS:
+        raise click.BadParameter(f"{path.name}: the suffix names the format, one of {', '.join(FORMATS)}")
+    return path
+
+
+def _multiple_of_16(ctx: click.Context, param: click.Parameter, value: int) -> int:
+    if value % 16:
+        raise click.BadParameter(f"{value} is not a multiple of 16")
+    return value
+
+
+_FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
+
+
+@click.command("match", context_settings=CONTEXT, epilog=epilog())
+@click.argument("left", type=_FILE)
+@click.argument("right", type=_FILE)
+@click.option("--out", required=True, type=click.Path(path_type=str), callback=_format, metavar="FILE",
+              help="The disparity map: .png (16-bit, disparity x 256, 0 no match: KITTI's), .pfm (float, inf no "
+                   "match: Middlebury's) or .npy (float32, NaN no match).")
+@click.option("--algorithm", type=click.Choice(engines.names()), default=None,
+              help="The engine.  [default: the preset's, else sgm]")
+@click.option("--num-disparities", type=click.IntRange(min=16), default=128, show_default=True,
+              callback=_multiple_of_16, metavar="D", help="Disparities searched (a multiple of 16).")
+@click.option("--min-disparity", type=int, default=0, show_default=True, metavar="D",
+              help="The smallest disparity searched.")
+@click.option("--preset", type=click.Choice(list(POST_PRESETS)), default="off", show_default=True,
+              help="Post-processing preset (the engine settings and chain it names): high_density fills every "
+                   "pixel, high_accuracy keeps the surer ones.")
+def command(left: Path, right: Path, out: Path, algorithm: str | None, num_disparities: int, min_disparity: int,
+            preset: str) -> None:
+    """A disparity map from two rectified image files (colour turned grey), by the camera's engines."""
+    if out.suffix.lower() == ".png" and min_disparity < 0:
+        raise click.BadParameter("a 16-bit PNG holds no negative disparity: write .pfm or .npy",
+                                 param_hint="'--min-disparity'")
+    a, b = read_pair(left, right)
+    config = match_config(algorithm, preset, num_disparities, min_disparity)
+    disparity = disparity_map(a, b, config)
+    write_disparity(out, disparity)
+    share = 100.0 * float(np.isfinite(disparity).mean())
+    click.echo(f"{out}: {a.shape[1]}x{a.shape[0]}, {engines.engine_for(config['algorithm']).name}, preset {preset}, "
+               f"{share:.1f} % of pixels matched")
