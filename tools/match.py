@@ -11,11 +11,11 @@ import click
 import numpy as np
 
 from stereocam.protocol.errors import ConfigError, InputFileError
-from stereocam.protocol.params import defaults
+from stereocam.protocol.params import BY_NAME, defaults
 from stereocam.stereo import engines
 from stereocam.stereo.config_map import config_of
 from stereocam.stereo.post import POST_PRESETS, postprocess, post_params_from_config, preset_config
-from stereocam.tools.options import CONTEXT, epilog, output_file
+from stereocam.tools.options import CONTEXT, SETTING, epilog, output_file
 
 FORMATS = (".png", ".pfm", ".npy")
 KITTI_SCALE = 256  # a 16-bit PNG holds disparity x 256, 0 where there is no match
@@ -59,8 +59,11 @@ def match_config(algorithm: str | None, preset: str, num_disparities: int, min_d
 def disparity_map(left: np.ndarray, right: np.ndarray, config: dict[str, int]) -> np.ndarray:
     """Disparity in pixels (float32, NaN where there is no match) of a device configuration:
     its engine, then its post-processing chain."""
-    params = engines.params_from_config(config)
-    matcher = engines.matcher_for(config, left.shape)
+    try:
+        params = engines.params_from_config(config)
+        matcher = engines.matcher_for(config, left.shape)
+    except ValueError as exc:  # the parameter classes name the value
+        raise ConfigError(str(exc)) from exc
     raw = matcher.match(left, right)
     out = postprocess(raw, left, post_params_from_config(config), right, params)
     return np.where(out == params.invalid_value, np.nan, out.astype(np.float32) / 16).astype(np.float32)
@@ -94,6 +97,18 @@ def _format(ctx: click.Context, param: click.Parameter, value: str | None) -> Pa
     return path
 
 
+def _matching_settings(ctx: click.Context, param: click.Parameter,
+                       value: tuple[tuple[str, int], ...]) -> tuple[tuple[str, int], ...]:
+    allowed = engines.matching_names()
+    for name, number in value:
+        if name not in allowed:
+            raise click.BadParameter(f"{name}: not a matching parameter; it takes {', '.join(allowed)}")
+        why = BY_NAME[name].check(number)
+        if why:
+            raise click.BadParameter(why)
+    return value
+
+
 def _multiple_of_16(ctx: click.Context, param: click.Parameter, value: int) -> int:
     if value % 16:
         raise click.BadParameter(f"{value} is not a multiple of 16")
@@ -118,14 +133,17 @@ _FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
 @click.option("--preset", type=click.Choice(list(POST_PRESETS)), default="off", show_default=True,
               help="Post-processing preset (the engine settings and chain it names): high_density fills every "
                    "pixel, high_accuracy keeps the surer ones.")
+@click.option("--set", "settings", type=SETTING, multiple=True, callback=_matching_settings,
+              help="A matching or post-processing parameter (as `info` prints them, e.g. block_size=9, sgm_p2=128, "
+                   "hole_fill=1), applied last (repeatable).")
 def command(left: Path, right: Path, out: Path, algorithm: str | None, num_disparities: int, min_disparity: int,
-            preset: str) -> None:
+            preset: str, settings: tuple[tuple[str, int], ...]) -> None:
     """A disparity map from two rectified image files (colour turned grey), by the camera's engines."""
     if out.suffix.lower() == ".png" and min_disparity < 0:
         raise click.BadParameter("a 16-bit PNG holds no negative disparity: write .pfm or .npy",
                                  param_hint="'--min-disparity'")
     a, b = read_pair(left, right)
-    config = match_config(algorithm, preset, num_disparities, min_disparity)
+    config = {**match_config(algorithm, preset, num_disparities, min_disparity), **dict(settings)}
     disparity = disparity_map(a, b, config)
     write_disparity(out, disparity)
     share = 100.0 * float(np.isfinite(disparity).mean())

@@ -20,7 +20,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from stereocam.protocol.errors import ConfigError
-from stereocam.protocol.params import Algorithm
+from stereocam.protocol.params import BY_NAME, Algorithm
 
 from . import config_map
 from .config_map import ConfigField
@@ -97,6 +97,15 @@ def engine_named(name: str) -> Engine:
         if engine.name == name:
             return engine
     raise ConfigError(f"unknown algorithm {name!r}; known: {', '.join(names())}")
+
+
+def matching_names() -> list[str]:
+    """The configuration keys matching reads, in the protocol's order: ``algorithm``, every
+    engine's and the post-processing chain's (the others, size, rate, exposure..., make the frames)."""
+    from .post.params import POST_CONFIG
+
+    used = {"algorithm"} | {f.key for e in ENGINES.values() for f in e.config} | {f.key for f in POST_CONFIG}
+    return [name for name in BY_NAME if name in used]
 
 
 def names() -> list[str]:

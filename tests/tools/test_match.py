@@ -49,9 +49,9 @@ def test_every_format_holds_the_engines_map(files, tmp_path: Path) -> None:
 def test_block_matching_and_a_preset(files, tmp_path: Path) -> None:
     left, right, a, b = files
     r = run("match", str(left), str(right), "--out", str(tmp_path / "bm.npy"), "--algorithm", "bm",
-            "--num-disparities", "32")
+            "--num-disparities", "32", "--set", "block_size=9", "--set", "uniqueness_ratio=5")
     assert r.returncode == 0, r.stderr
-    p = MatchParams(num_disparities=32)
+    p = MatchParams(num_disparities=32, block_size=9, uniqueness_ratio=5)
     np.testing.assert_array_equal(np.load(tmp_path / "bm.npy"), _px(match(a, b, p), p.invalid_value))
     r = run("match", str(left), str(right), "--out", str(tmp_path / "hd.npy"), "--preset", "high_density",
             "--num-disparities", "32")
@@ -70,6 +70,9 @@ def test_block_matching_and_a_preset(files, tmp_path: Path) -> None:
     (["--out", "{t}/d.npy", "--num-disparities", "40"], 2, "40 is not a multiple of 16"),
     (["--out", "{t}/d.npy", "--num-disparities", "256"], 2, "disparity range"),
     (["--out", "{t}/none/d.npy"], 2, "is not a folder"),
+    (["--out", "{t}/d.npy", "--set", "exposure_us=100"], 2, "exposure_us: not a matching parameter"),
+    (["--out", "{t}/d.npy", "--set", "block_size=8"], 2, "block_size"),
+    (["--out", "{t}/d.npy", "--set", "sgm_p2=999"], 2, "sgm_p2"),
 ])
 def test_mistakes_exit_with_a_message(files, tmp_path: Path, extra: list[str], code: int, words: str) -> None:
     left, right, _, _ = files

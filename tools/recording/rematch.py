@@ -23,7 +23,7 @@ from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.params import BY_NAME
 from stereocam.recording.reader import Recording
 from stereocam.stereo import engines
-from stereocam.stereo.post.params import POST_CONFIG
+from stereocam.stereo.engines import matching_names
 from stereocam.presets import POST_PRESETS, preset_values
 from stereocam.tools.options import CONTEXT, SETTING, epilog
 from stereocam.tools.recording import rematch_tasks as tasks
@@ -47,13 +47,6 @@ def check_scheduler(address: str) -> str:
     except (ValueError, TypeError) as exc:
         raise ConfigError(f"scheduler {address!r} is not an address like tcp://HOST:PORT: {exc}") from exc
     return address
-
-
-def matching_names() -> list[str]:
-    """The parameters re-matching applies, in the protocol's order: ``algorithm``, every engine's and
-    the post-processing chain's. The others (size, rate, exposure...) made the recorded frames."""
-    used = {"algorithm"} | {f.key for e in engines.ENGINES.values() for f in e.config} | {f.key for f in POST_CONFIG}
-    return [name for name in BY_NAME if name in used]
 
 
 def check_matching(names: list[str]) -> None:
