@@ -54,9 +54,11 @@ def test_block_matching_and_a_preset(files, tmp_path: Path) -> None:
     p = MatchParams(num_disparities=32, block_size=9, uniqueness_ratio=5)
     np.testing.assert_array_equal(np.load(tmp_path / "bm.npy"), _px(match(a, b, p), p.invalid_value))
     r = run("match", str(left), str(right), "--out", str(tmp_path / "hd.npy"), "--preset", "high_density",
-            "--num-disparities", "32")
+            "--num-disparities", "32", "--preview", str(tmp_path / "hd.png"))
     assert r.returncode == 0, r.stderr
-    assert "100.0 % of pixels matched" in r.stdout
+    assert "100.0 % of pixels matched" in r.stdout and " ms (one run, " in r.stdout
+    picture = cv2.imread(str(tmp_path / "hd.png"))
+    assert picture.shape == (96, 128, 3) and len(np.unique(picture.reshape(-1, 3), axis=0)) > 10
     cfg = {**defaults(), **POST_PRESETS["high_density"], "num_disparities": 32}
     ep = engines.params_from_config(cfg)
     want = postprocess(match(a, b, ep), a, post_params_from_config(cfg), b, ep)

@@ -18,8 +18,13 @@ def disparity_range(frame: stereocam.Frame) -> tuple[float, float]:
 def colorize(frame: stereocam.Frame, span: tuple[float, float] | None = None) -> np.ndarray:
     """Disparity as a TURBO colour map (near = warm), BGR uint8, invalid pixels black; ``span``:
     the disparities (px) at the map's ends, else the searched range."""
-    d = frame.disparity_px()
-    lo, hi = span or disparity_range(frame)
+    return colorize_px(frame.disparity_px(), span or disparity_range(frame))
+
+
+def colorize_px(d: np.ndarray, span: tuple[float, float]) -> np.ndarray:
+    """Disparities ``d`` (px, NaN no match) as a TURBO colour map from span[0] to span[1], BGR uint8,
+    no match black."""
+    lo, hi = span
     norm = np.nan_to_num((d - lo) / max(hi - lo, 1), nan=0.0)
     img = cv2.applyColorMap((np.clip(norm, 0, 1) * 255).astype(np.uint8), cv2.COLORMAP_TURBO)
     img[np.isnan(d)] = 0
