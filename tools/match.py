@@ -12,34 +12,17 @@ import click
 import numba
 import numpy as np
 
-from stereocam.protocol.errors import ConfigError, InputFileError
+from stereocam.protocol.errors import ConfigError
 from stereocam.protocol.params import BY_NAME, defaults
 from stereocam.stereo import engines
 from stereocam.stereo.config_map import config_of
 from stereocam.stereo.post import POST_PRESETS, postprocess, post_params_from_config, preset_config
 from stereocam.tools.camera.pictures import colorize_px
+from stereocam.tools.image_files import read_pair
 from stereocam.tools.options import CONTEXT, SETTING, epilog, output_file
 
 FORMATS = (".png", ".pfm", ".npy")
 KITTI_SCALE = 256  # a 16-bit PNG holds disparity x 256, 0 where there is no match
-
-
-def read_pair(left: Path, right: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Both images as grey levels (colour turned grey); InputFileError naming a file OpenCV cannot
-    read or sizes that differ."""
-    import cv2
-
-    images = []
-    for path in (left, right):
-        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-        if img is None:
-            raise InputFileError(f"{path}: not an image that OpenCV can read")
-        images.append(img)
-    a, b = images
-    if a.shape != b.shape:
-        raise InputFileError(f"{left} is {a.shape[1]}x{a.shape[0]} but {right} is {b.shape[1]}x{b.shape[0]}: "
-                             "a rectified pair has one size")
-    return a, b
 
 
 def match_config(algorithm: str | None, preset: str, num_disparities: int, min_disparity: int) -> dict[str, int]:

@@ -2,6 +2,7 @@
 post-processing, written as KITTI PNG, PFM or .npy and read back by the bench's truth loader."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -86,10 +87,11 @@ def test_mistakes_exit_with_a_message(files, tmp_path: Path, extra: list[str], c
 
 def test_damaged_and_mismatched_images_exit_1(files, tmp_path: Path) -> None:
     left, _, a, _ = files
-    fake, small = tmp_path / "fake.png", tmp_path / "small.png"
+    fake, small, fifo = tmp_path / "fake.png", tmp_path / "small.png", tmp_path / "fifo.png"
     fake.write_text("not an image")
     cv2.imwrite(str(small), a[:, :100])
-    for other, words in ((fake, "fake.png: not an image"), (small, "128x96 but")):
+    os.mkfifo(fifo)  # would block a plain read for ever
+    for other, words in ((fake, "fake.png: not an image"), (small, "128x96 but"), (fifo, "not a regular file")):
         r = run("match", str(left), str(other), "--out", str(tmp_path / "d.npy"))
         assert r.returncode == 1 and words in r.stderr and "Traceback" not in r.stderr, r.stderr
         assert not (tmp_path / "d.npy").exists()

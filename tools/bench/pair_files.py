@@ -2,33 +2,27 @@
 from files as a bench scene, so the table can be made on one's own data (KITTI, Middlebury, ETH3D,
 a unit's own recordings), beside the simulator's scenes.
 
-Images: whatever cv2.imread reads, colour turned grey (cv2.IMREAD_GRAYSCALE). Truth, the left
+Images: whatever OpenCV decodes, colour turned grey (cv2.IMREAD_GRAYSCALE). Truth, the left
 image's disparity in pixels: PFM (Middlebury, ETH3D; inf or NaN where unknown), a 16-bit PNG
 (KITTI: value / 256, 0 unknown), .npy (float; non-finite unknown). ``scale`` replaces a PNG's
 divisor (an 8-bit PNG, which no format fixes, needs one) and divides a PFM's or .npy's values too.
 """
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
 
+from stereocam.input_files import read_regular
 from stereocam.protocol.errors import InputFileError
 from stereocam.stereo import MatchParams, SGMParams, geometry, sgm_geometry
 
+from ..image_files import MAX_IMAGE_BYTES, decode, read_pair
 from .matching_report import BenchScene
 
 DEFAULT_DISPARITIES = 128  # with no truth to take the range from
 KITTI_SCALE = 256.0
-
-
-def _image(path: Path) -> np.ndarray:
-    import cv2
-
-    img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    if img is None:
-        raise InputFileError(f"{path}: not an image that OpenCV can read")
-    return img
 
 
 def load_truth(path: Path, scale: float | None) -> np.ndarray:
@@ -38,16 +32,14 @@ def load_truth(path: Path, scale: float | None) -> np.ndarray:
     suffix = path.suffix.lower()
     if suffix == ".npy":
         try:
-            raw = np.load(path, allow_pickle=False)
+            raw = np.load(io.BytesIO(read_regular(path, what="truth", limit=MAX_IMAGE_BYTES)), allow_pickle=False)
         except (OSError, ValueError) as exc:
             raise InputFileError(f"{path}: not a numpy array file ({exc})") from exc
         if raw.ndim != 2 or raw.dtype.kind not in "fiu":
             raise InputFileError(f"{path}: a disparity array must be 2-D numbers, got {raw.dtype} {raw.shape}")
         truth = raw.astype(np.float32) / np.float32(scale or 1.0)
     else:
-        raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if raw is None:
-            raise InputFileError(f"{path}: not a disparity image that OpenCV can read (PFM, PNG)")
+        raw = decode(path, cv2.IMREAD_UNCHANGED, "disparity image")
         if raw.ndim != 2:
             raise InputFileError(f"{path}: a disparity image must have one channel, got {raw.shape[2]}")
         if raw.dtype.kind == "f":  # PFM
@@ -74,10 +66,7 @@ def range_for(truth: np.ndarray | None) -> int:
 def pair_scene(left: Path, right: Path, truth_path: Path | None, num_disparities: int | None,
                scale: float | None) -> BenchScene:
     """The bench scene of one pair (name: the left file's name)."""
-    a, b = _image(left), _image(right)
-    if a.shape != b.shape:
-        raise InputFileError(f"{left} is {a.shape[1]}x{a.shape[0]} but {right} is {b.shape[1]}x{b.shape[0]}: "
-                             "a rectified pair has one size")
+    a, b = read_pair(left, right)
     truth = None
     if truth_path is not None:
         truth = load_truth(truth_path, scale)

@@ -2,6 +2,7 @@
 their unknowns, sizes checked, and the same table as the built-in scene the files were written from."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +54,9 @@ def test_damaged_and_mismatched_files_are_refused_naming_them(tmp_path: Path) ->
     np.save(tmp_path / "c.npy", np.zeros((64, 96, 3), np.float32))
     with pytest.raises(InputFileError, match="2-D"):
         pair_scene(left, right, tmp_path / "c.npy", None, None)
+    os.mkfifo(tmp_path / "f.npy")
+    with pytest.raises(InputFileError, match="not a regular file"):
+        pair_scene(left, right, tmp_path / "f.npy", None, None)
     (tmp_path / "x.npy").write_bytes(b"\x93NUMPY garbage")
     with pytest.raises(InputFileError, match="x.npy: not a numpy array file"):
         pair_scene(left, right, tmp_path / "x.npy", None, None)
