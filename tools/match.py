@@ -19,7 +19,7 @@ from stereocam.stereo.config_map import config_of
 from stereocam.stereo.post import POST_PRESETS, postprocess, post_params_from_config, preset_config
 from stereocam.tools.camera.pictures import colorize_px
 from stereocam.tools.image_files import read_pair
-from stereocam.tools.options import CONTEXT, SETTING, epilog, output_file
+from stereocam.tools.options import CONTEXT, SETTING, epilog, multiple_of_16, output_file
 
 FORMATS = (".png", ".pfm", ".npy")
 KITTI_SCALE = 256  # a 16-bit PNG holds disparity x 256, 0 where there is no match
@@ -95,12 +95,6 @@ def _matching_settings(ctx: click.Context, param: click.Parameter,
     return value
 
 
-def _multiple_of_16(ctx: click.Context, param: click.Parameter, value: int) -> int:
-    if value % 16:
-        raise click.BadParameter(f"{value} is not a multiple of 16")
-    return value
-
-
 _FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
 
 
@@ -113,7 +107,7 @@ _FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
 @click.option("--algorithm", type=click.Choice(engines.names()), default=None,
               help="The engine.  [default: the preset's, else sgm]")
 @click.option("--num-disparities", type=click.IntRange(min=16), default=128, show_default=True,
-              callback=_multiple_of_16, metavar="D", help="Disparities searched (a multiple of 16).")
+              callback=multiple_of_16, metavar="D", help="Disparities searched (a multiple of 16).")
 @click.option("--min-disparity", type=int, default=0, show_default=True, metavar="D",
               help="The smallest disparity searched.")
 @click.option("--preset", type=click.Choice(list(POST_PRESETS)), default="off", show_default=True,

@@ -57,6 +57,13 @@ def _value_names(name: str) -> dict[str, int]:
 SETTING = Setting()
 
 
+def multiple_of_16(ctx: click.Context, param: click.Parameter, value: int | None) -> int | None:
+    """Callback of a disparity count option: a multiple of 16 (the engines' unit), or a usage error."""
+    if value is not None and value % 16:
+        raise click.BadParameter(f"{value} is not a multiple of 16")
+    return value
+
+
 class Finite(click.FloatRange):
     """A click.FloatRange that also refuses NaN and infinities (a NaN passes every bound: a NaN gate
     would pass everything, a NaN duration never ends)."""

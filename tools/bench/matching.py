@@ -33,7 +33,7 @@ from stereocam.device_sim.rig.scene_classes import CLASSES
 from stereocam.protocol.params import BY_NAME
 from stereocam.stereo import engines
 from stereocam.tools.bench.stereobm_oracle import opencv_stereobm
-from stereocam.tools.options import CONTEXT, Finite, epilog
+from stereocam.tools.options import CONTEXT, Finite, epilog, multiple_of_16
 
 from .matching_report import MOTORCYCLE, BenchScene, class_scene, misaligned, motorcycle_scene, report
 from .pair_files import pair_scene
@@ -134,12 +134,6 @@ SCENE_CHOICES = [MOTORCYCLE, *CLASSES]
 _FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
 
 
-def _multiple_of_16(ctx: click.Context, param: click.Parameter, value: int | None) -> int | None:
-    if value is not None and value % 16:
-        raise click.BadParameter(f"{value} is not a multiple of 16")
-    return value
-
-
 def _given(scene: BenchScene) -> BenchScene:
     return scene
 
@@ -200,7 +194,7 @@ def sgm_report(args: SimpleNamespace) -> int:
               help="sgm: the left image's disparity truth of each --pair, in order: PFM (inf unknown), a 16-bit "
                    "PNG (KITTI: value / 256, 0 unknown) or .npy (non-finite unknown).  [default: none: density and "
                    "time only]")
-@click.option("--num-disparities", type=click.IntRange(min=16), default=None, callback=_multiple_of_16, metavar="D",
+@click.option("--num-disparities", type=click.IntRange(min=16), default=None, callback=multiple_of_16, metavar="D",
               help="sgm: disparities searched on the --pair scenes (a multiple of 16).  [default: past the truth's "
                    "largest, else 128]")
 @click.option("--truth-scale", type=Finite(min=0, min_open=True), default=None, metavar="S",
