@@ -1,13 +1,17 @@
 """``stereocam match LEFT RIGHT --out FILE``: a disparity map from two rectified image files, made by
 the camera's own engines and post-processing presets (the same code the simulated device runs), and
-written in a format other tools read: a 16-bit PNG as KITTI's (disparity x 256, 0 no match, so a zero
-disparity is written as 1 / 256 px), PFM as
-Middlebury's (inf no match) or .npy (float32, NaN no match). The bench reads all three back as truth
-(``bench matching --pair ... --truth``)."""
+written in a format other tools read: a 16-bit PNG as KITTI's (disparity x 256, 0 no match, so a
+zero disparity is written as 1 / 256 px), PFM as Middlebury's (inf no match) or .npy (float32, NaN no
+match). The bench reads all three back as truth (``bench matching --pair ... --truth``). A file is
+written whole or not at all: an existing one is replaced only once the new one is complete."""
 from __future__ import annotations
 
+import os
 import time
+import uuid
+from collections.abc import Callable
 from pathlib import Path
+
 import click
 import numba
 import numpy as np
@@ -55,31 +59,54 @@ def disparity_map(left: np.ndarray, right: np.ndarray, config: dict[str, int]) -
     return np.where(out == params.invalid_value, np.nan, out.astype(np.float32) / 16).astype(np.float32)
 
 
+def write_whole(path: Path, write: Callable[[Path], None]) -> None:
+    """``write(tmp)`` to a new file beside ``path`` (same suffix: OpenCV picks its encoder by it), then
+    that file renamed over ``path``; on any failure the new file is removed and ``path`` is untouched."""
+    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:12]}{path.suffix}")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _imwrite(image: np.ndarray) -> Callable[[Path], None]:
+    def write(path: Path) -> None:
+        import cv2
+
+        if not cv2.imwrite(str(path), image):
+            raise OSError(f"{path}: OpenCV could not write it")
+    return write
+
+
 def write_disparity(path: Path, disparity: np.ndarray) -> None:
     """``disparity`` (float32 px, NaN no match) in the format ``path``'s suffix names (FORMATS)."""
-    import cv2
-
     suffix = path.suffix.lower()
     known = np.isfinite(disparity)
     if suffix == ".npy":
-        np.save(path, disparity)
-        return
-    if suffix == ".pfm":
-        ok = cv2.imwrite(str(path), np.where(known, disparity, np.inf).astype(np.float32))
+        write_whole(path, lambda tmp: np.save(tmp, disparity))
+    elif suffix == ".pfm":
+        write_whole(path, _imwrite(np.where(known, disparity, np.inf).astype(np.float32)))
     else:
         if np.nanmin(disparity, initial=0.0) < 0:
             raise ConfigError("a 16-bit PNG holds no negative disparity: write .pfm or .npy")
         # 0 means no match in this format: a zero disparity (a point at infinity) is kept as 1 / 256 px
         code = np.where(known, np.maximum(np.rint(disparity * KITTI_SCALE), 1), 0)
-        ok = cv2.imwrite(str(path), np.clip(code, 0, 65535).astype(np.uint16))
-    if not ok:
-        raise OSError(f"{path}: OpenCV could not write it")
+        write_whole(path, _imwrite(np.clip(code, 0, 65535).astype(np.uint16)))
 
 
 def _format(ctx: click.Context, param: click.Parameter, value: str | None) -> Path | None:
     path = output_file(ctx, param, value)
     if path is not None and path.suffix.lower() not in FORMATS:
         raise click.BadParameter(f"{path.name}: the suffix names the format, one of {', '.join(FORMATS)}")
+    return path
+
+
+def _picture(ctx: click.Context, param: click.Parameter, value: str | None) -> Path | None:
+    path = output_file(ctx, param, value)
+    if path is not None and path.suffix.lower() not in (".png", ".jpg", ".jpeg"):
+        raise click.BadParameter(f"{path.name}: a picture is .png or .jpg")
     return path
 
 
@@ -113,7 +140,7 @@ _FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
 @click.option("--preset", type=click.Choice(list(POST_PRESETS)), default="off", show_default=True,
               help="Post-processing preset (the engine settings and chain it names): high_density fills every "
                    "pixel, high_accuracy keeps the surer ones.")
-@click.option("--preview", type=click.Path(path_type=str), callback=output_file, default=None, metavar="PNG",
+@click.option("--preview", type=click.Path(path_type=str), callback=_picture, default=None, metavar="PNG",
               help="Also a picture to look at: the disparities colour-mapped over the searched range, no match "
                    "black.")
 @click.option("--set", "settings", type=SETTING, multiple=True, callback=_matching_settings,
@@ -134,11 +161,8 @@ def command(left: Path, right: Path, out: Path, algorithm: str | None, num_dispa
     ms = (time.perf_counter() - t0) * 1e3
     write_disparity(out, disparity)
     if preview is not None:
-        import cv2
-
         lo = float(config["min_disparity"])
-        if not cv2.imwrite(str(preview), colorize_px(disparity, (lo, lo + config["num_disparities"]))):
-            raise OSError(f"{preview}: OpenCV could not write it")
+        write_whole(preview, _imwrite(colorize_px(disparity, (lo, lo + config["num_disparities"]))))
     share = 100.0 * float(np.isfinite(disparity).mean())
     click.echo(f"{out}: {a.shape[1]}x{a.shape[0]}, {engine.name}, preset {preset}, {share:.1f} % of pixels "
                f"matched, {ms:.1f} ms (one run, {numba.get_num_threads()} threads)")

@@ -12,10 +12,12 @@ cv2 = pytest.importorskip("cv2")
 
 from stereocam.stereo import MatchParams, SGMParams, match  # noqa: E402
 from stereocam.stereo.post import POST_PRESETS, postprocess, post_params_from_config  # noqa: E402
+from stereocam.protocol.errors import ConfigError  # noqa: E402
 from stereocam.protocol.params import defaults  # noqa: E402
 from stereocam.stereo import engines  # noqa: E402
 from stereocam.tools.bench.matching_report import class_scene  # noqa: E402
 from stereocam.tools.bench.pair_files import load_truth  # noqa: E402
+from stereocam.tools.match import write_disparity, write_whole  # noqa: E402
 from tests.tools.test_cli import stereocam as run  # noqa: E402
 
 
@@ -74,6 +76,7 @@ def test_block_matching_and_a_preset(files, tmp_path: Path) -> None:
     (["--out", "{t}/d.npy", "--num-disparities", "256"], 2, "disparity range"),
     (["--out", "{t}/none/d.npy"], 2, "is not a folder"),
     (["--out", "{t}/d.npy", "--set", "exposure_us=100"], 2, "exposure_us: not a matching parameter"),
+    (["--out", "{t}/d.npy", "--preview", "{t}/d.txt"], 2, "a picture is .png or .jpg"),
     (["--out", "{t}/d.npy", "--set", "block_size=8"], 2, "block_size"),
     (["--out", "{t}/d.npy", "--set", "sgm_p2=999"], 2, "sgm_p2"),
 ])
@@ -83,6 +86,24 @@ def test_mistakes_exit_with_a_message(files, tmp_path: Path, extra: list[str], c
     assert r.returncode == code, r.stderr
     assert words in r.stderr and "Traceback" not in r.stderr
     assert not list(tmp_path.glob("d.*"))
+
+
+def test_a_failed_write_keeps_the_file_there(tmp_path: Path) -> None:
+    old = tmp_path / "d.png"
+    old.write_bytes(b"the previous map")
+    with pytest.raises(ConfigError, match="negative"):  # refused after matching, before the file is touched
+        write_disparity(old, np.array([[-1.0, 2.0]], np.float32))
+    boom = np.zeros((2, 2), np.float32)
+
+    def failing(path: Path) -> None:
+        path.write_bytes(b"half")
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        write_whole(old, failing)
+    assert old.read_bytes() == b"the previous map" and [p.name for p in tmp_path.iterdir()] == ["d.png"]
+    write_disparity(old, boom)  # a good write replaces it whole
+    assert load_truth(old, None).shape == (2, 2) and [p.name for p in tmp_path.iterdir()] == ["d.png"]
 
 
 def test_damaged_and_mismatched_images_exit_1(files, tmp_path: Path) -> None:
