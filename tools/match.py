@@ -1,15 +1,10 @@
 """``stereocam match LEFT RIGHT --out FILE``: a disparity map from two rectified image files, made by
 the camera's own engines and post-processing presets (the same code the simulated device runs), and
-written in a format other tools read: a 16-bit PNG as KITTI's (disparity x 256, 0 no match, so a
-zero disparity is written as 1 / 256 px), PFM as Middlebury's (inf no match) or .npy (float32, NaN no
-match). The bench reads all three back as truth (``bench matching --pair ... --truth``). A file is
-written whole or not at all: an existing one is replaced only once the new one is complete."""
+written whole in a format other tools read (tools/image_files.py: a 16-bit PNG as KITTI's, PFM as
+Middlebury's, .npy), which the bench reads back as truth (``bench matching --pair ... --truth``)."""
 from __future__ import annotations
 
-import os
 import time
-import uuid
-from collections.abc import Callable
 from pathlib import Path
 
 import click
@@ -22,11 +17,9 @@ from stereocam.stereo import engines
 from stereocam.stereo.config_map import config_of
 from stereocam.stereo.post import POST_PRESETS, postprocess, post_params_from_config, preset_config
 from stereocam.tools.camera.pictures import colorize_px
-from stereocam.tools.image_files import read_pair
+from stereocam.tools.image_files import DISPARITY_FORMATS, imwrite, read_pair, write_disparity, write_whole
 from stereocam.tools.options import CONTEXT, SETTING, epilog, multiple_of_16, output_file
 
-FORMATS = (".png", ".pfm", ".npy")
-KITTI_SCALE = 256  # a 16-bit PNG holds disparity x 256, 0 where there is no match
 
 
 def match_config(algorithm: str | None, preset: str, num_disparities: int, min_disparity: int) -> dict[str, int]:
@@ -59,47 +52,10 @@ def disparity_map(left: np.ndarray, right: np.ndarray, config: dict[str, int]) -
     return np.where(out == params.invalid_value, np.nan, out.astype(np.float32) / 16).astype(np.float32)
 
 
-def write_whole(path: Path, write: Callable[[Path], None]) -> None:
-    """``write(tmp)`` to a new file beside ``path`` (same suffix: OpenCV picks its encoder by it), then
-    that file renamed over ``path``; on any failure the new file is removed and ``path`` is untouched."""
-    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:12]}{path.suffix}")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def _imwrite(image: np.ndarray) -> Callable[[Path], None]:
-    def write(path: Path) -> None:
-        import cv2
-
-        if not cv2.imwrite(str(path), image):
-            raise OSError(f"{path}: OpenCV could not write it")
-    return write
-
-
-def write_disparity(path: Path, disparity: np.ndarray) -> None:
-    """``disparity`` (float32 px, NaN no match) in the format ``path``'s suffix names (FORMATS)."""
-    suffix = path.suffix.lower()
-    known = np.isfinite(disparity)
-    if suffix == ".npy":
-        write_whole(path, lambda tmp: np.save(tmp, disparity))
-    elif suffix == ".pfm":
-        write_whole(path, _imwrite(np.where(known, disparity, np.inf).astype(np.float32)))
-    else:
-        if np.nanmin(disparity, initial=0.0) < 0:
-            raise ConfigError("a 16-bit PNG holds no negative disparity: write .pfm or .npy")
-        # 0 means no match in this format: a zero disparity (a point at infinity) is kept as 1 / 256 px
-        code = np.where(known, np.maximum(np.rint(disparity * KITTI_SCALE), 1), 0)
-        write_whole(path, _imwrite(np.clip(code, 0, 65535).astype(np.uint16)))
-
-
 def _format(ctx: click.Context, param: click.Parameter, value: str | None) -> Path | None:
     path = output_file(ctx, param, value)
-    if path is not None and path.suffix.lower() not in FORMATS:
-        raise click.BadParameter(f"{path.name}: the suffix names the format, one of {', '.join(FORMATS)}")
+    if path is not None and path.suffix.lower() not in DISPARITY_FORMATS:
+        raise click.BadParameter(f"{path.name}: the suffix names the format, one of {', '.join(DISPARITY_FORMATS)}")
     return path
 
 
@@ -162,7 +118,7 @@ def command(left: Path, right: Path, out: Path, algorithm: str | None, num_dispa
     write_disparity(out, disparity)
     if preview is not None:
         lo = float(config["min_disparity"])
-        write_whole(preview, _imwrite(colorize_px(disparity, (lo, lo + config["num_disparities"]))))
+        write_whole(preview, imwrite(colorize_px(disparity, (lo, lo + config["num_disparities"]))))
     share = 100.0 * float(np.isfinite(disparity).mean())
     click.echo(f"{out}: {a.shape[1]}x{a.shape[0]}, {engine.name}, preset {preset}, {share:.1f} % of pixels "
                f"matched, {ms:.1f} ms (one run, {numba.get_num_threads()} threads)")

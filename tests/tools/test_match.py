@@ -16,8 +16,8 @@ from stereocam.protocol.errors import ConfigError  # noqa: E402
 from stereocam.protocol.params import defaults  # noqa: E402
 from stereocam.stereo import engines  # noqa: E402
 from stereocam.tools.bench.matching_report import class_scene  # noqa: E402
-from stereocam.tools.bench.pair_files import load_truth  # noqa: E402
-from stereocam.tools.match import write_disparity, write_whole  # noqa: E402
+from stereocam.tools.image_files import read_disparity  # noqa: E402
+from stereocam.tools.image_files import write_disparity, write_whole  # noqa: E402
 from tests.tools.test_cli import stereocam as run  # noqa: E402
 
 
@@ -43,7 +43,7 @@ def test_every_format_holds_the_engines_map(files, tmp_path: Path) -> None:
         r = run("match", str(left), str(right), "--out", str(tmp_path / name), "--num-disparities", "32")
         assert r.returncode == 0, r.stderr
         assert f"{name}: 128x96, sgm, preset off" in r.stdout
-        got = np.load(tmp_path / name) if name.endswith(".npy") else load_truth(tmp_path / name, None)
+        got = np.load(tmp_path / name) if name.endswith(".npy") else read_disparity(tmp_path / name, None)
         exact = np.where(want == 0, 1 / 256, want) if name.endswith(".png") else want  # PNG: 0 is no match
         np.testing.assert_array_equal(got, exact)  # 1/16 px steps are exact in every format
     assert (want == 0).any()  # the zero disparity case was met
@@ -103,7 +103,7 @@ def test_a_failed_write_keeps_the_file_there(tmp_path: Path) -> None:
         write_whole(old, failing)
     assert old.read_bytes() == b"the previous map" and [p.name for p in tmp_path.iterdir()] == ["d.png"]
     write_disparity(old, boom)  # a good write replaces it whole
-    assert load_truth(old, None).shape == (2, 2) and [p.name for p in tmp_path.iterdir()] == ["d.png"]
+    assert read_disparity(old, None).shape == (2, 2) and [p.name for p in tmp_path.iterdir()] == ["d.png"]
 
 
 def test_damaged_and_mismatched_images_exit_1(files, tmp_path: Path) -> None:

@@ -232,6 +232,7 @@ def format_table(scene: BenchScene, rows: list[Row]) -> str:
     head = f"{COLUMNS[0]:<24}" + "".join(f"{c:>11}" for c in COLUMNS[1:])
     lines = [f"== {scene.name}, {scene.num_disparities} disparities, truth on "
              f"{100 * np.isfinite(scene.truth).mean():.0f} % of {w}x{h} ==", head, "-" * len(head)]
+
     def cell(v: float, digits: int) -> str:
         return f"{'-' if np.isnan(v) else f'{v:.{digits}f}':>11}"
 

@@ -12,7 +12,8 @@ cv2 = pytest.importorskip("cv2")
 
 from stereocam.protocol.errors import InputFileError  # noqa: E402
 from stereocam.tools.bench.matching_report import class_scene  # noqa: E402
-from stereocam.tools.bench.pair_files import DEFAULT_DISPARITIES, load_truth, pair_scene, range_for  # noqa: E402
+from stereocam.tools.bench.pair_files import DEFAULT_DISPARITIES, pair_scene, range_for  # noqa: E402
+from stereocam.tools.image_files import read_disparity  # noqa: E402
 from tests.tools.bench.test_matching_report import parse_tables  # noqa: E402
 from tests.tools.test_cli import stereocam as run  # noqa: E402
 
@@ -22,18 +23,18 @@ TRUTH = np.array([[10.25, np.inf, 3.5], [np.nan, 47.75, 0.5]], np.float32)
 def test_truth_from_pfm_kitti_png_and_npy_with_their_unknowns(tmp_path: Path) -> None:
     want = np.where(np.isfinite(TRUTH), TRUTH, np.nan)
     assert cv2.imwrite(str(tmp_path / "d.pfm"), TRUTH)
-    np.testing.assert_array_equal(load_truth(tmp_path / "d.pfm", None), want)
+    np.testing.assert_array_equal(read_disparity(tmp_path / "d.pfm", None), want)
     np.save(tmp_path / "d.npy", TRUTH)
-    np.testing.assert_array_equal(load_truth(tmp_path / "d.npy", None), want)
-    np.testing.assert_array_equal(load_truth(tmp_path / "d.npy", 2.0), want / 2)
+    np.testing.assert_array_equal(read_disparity(tmp_path / "d.npy", None), want)
+    np.testing.assert_array_equal(read_disparity(tmp_path / "d.npy", 2.0), want / 2)
     kitti = np.where(np.isfinite(TRUTH), TRUTH * 256, 0).astype(np.uint16)  # 0: no LiDAR return
     assert cv2.imwrite(str(tmp_path / "d.png"), kitti)
-    np.testing.assert_array_equal(load_truth(tmp_path / "d.png", None), want)
+    np.testing.assert_array_equal(read_disparity(tmp_path / "d.png", None), want)
     eight = np.array([[40, 0], [8, 200]], np.uint8)  # Middlebury 2003: disparity x 4, 0 unknown
     assert cv2.imwrite(str(tmp_path / "e.png"), eight)
     with pytest.raises(InputFileError, match="--truth-scale"):
-        load_truth(tmp_path / "e.png", None)
-    np.testing.assert_array_equal(load_truth(tmp_path / "e.png", 4.0), [[10, np.nan], [2, 50]])
+        read_disparity(tmp_path / "e.png", None)
+    np.testing.assert_array_equal(read_disparity(tmp_path / "e.png", 4.0), [[10, np.nan], [2, 50]])
 
 
 def test_damaged_and_mismatched_files_are_refused_naming_them(tmp_path: Path) -> None:
