@@ -18,7 +18,7 @@ from stereocam.stereo.config_map import config_of
 from stereocam.stereo.post import POST_PRESETS, postprocess, post_params_from_config, preset_config
 from stereocam.tools.camera.pictures import colorize_px
 from stereocam.tools.image_files import DISPARITY_FORMATS, imwrite, read_pair, write_disparity, write_whole
-from stereocam.tools.options import CONTEXT, SETTING, epilog, multiple_of_16, output_file
+from stereocam.tools.options import CONTEXT, INPUT_FILE, SETTING, epilog, multiple_of_16, output_file
 
 
 
@@ -78,12 +78,11 @@ def _matching_settings(ctx: click.Context, param: click.Parameter,
     return value
 
 
-_FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
 
 
 @click.command("match", context_settings=CONTEXT, epilog=epilog())
-@click.argument("left", type=_FILE)
-@click.argument("right", type=_FILE)
+@click.argument("left", type=INPUT_FILE)
+@click.argument("right", type=INPUT_FILE)
 @click.option("--out", required=True, type=click.Path(path_type=str), callback=_format, metavar="FILE",
               help="The disparity map: .png (16-bit, disparity x 256, 0 no match: KITTI's), .pfm (float, inf no "
                    "match: Middlebury's) or .npy (float32, NaN no match).")

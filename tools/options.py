@@ -57,6 +57,10 @@ def _value_names(name: str) -> dict[str, int]:
 SETTING = Setting()
 
 
+INPUT_FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
+"""An input file argument or option: it must exist and not be a folder, given as a Path."""
+
+
 def multiple_of_16(ctx: click.Context, param: click.Parameter, value: int | None) -> int | None:
     """Callback of a disparity count option: a multiple of 16 (the engines' unit), or a usage error."""
     if value is not None and value % 16:

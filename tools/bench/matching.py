@@ -33,7 +33,7 @@ from stereocam.device_sim.rig.scene_classes import CLASSES
 from stereocam.protocol.params import BY_NAME
 from stereocam.stereo import engines
 from stereocam.tools.bench.stereobm_oracle import opencv_stereobm
-from stereocam.tools.options import CONTEXT, Finite, epilog, multiple_of_16
+from stereocam.tools.options import CONTEXT, INPUT_FILE, Finite, epilog, multiple_of_16
 
 from .matching_report import MOTORCYCLE, BenchScene, class_scene, misaligned, motorcycle_scene, report
 from .pair_files import pair_scene
@@ -131,7 +131,6 @@ def profile_stages(m, left, right, repeat: int) -> dict[str, float]:
 
 
 SCENE_CHOICES = [MOTORCYCLE, *CLASSES]
-_FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
 
 
 def _given(scene: BenchScene) -> BenchScene:
@@ -187,10 +186,10 @@ def sgm_report(args: SimpleNamespace) -> int:
               help="sgm: score the scene classes on a LiDAR-like 7 % of their truth, mostly in the lower image "
                    "and none from the sky (KITTI-style; for driving).")
 @click.option("--busy", is_flag=True, help="sgm: run beside a competing busy process (one core spinning).")
-@click.option("--pair", "pairs", type=(_FILE, _FILE), multiple=True, metavar="LEFT RIGHT",
+@click.option("--pair", "pairs", type=(INPUT_FILE, INPUT_FILE), multiple=True, metavar="LEFT RIGHT",
               help="sgm: a rectified pair of image files (colour turned grey) to measure instead of the built-in "
                    "scenes (repeatable; --scenes adds those).")
-@click.option("--truth", "truths", type=_FILE, multiple=True, metavar="FILE",
+@click.option("--truth", "truths", type=INPUT_FILE, multiple=True, metavar="FILE",
               help="sgm: the left image's disparity truth of each --pair, in order: PFM (inf unknown), a 16-bit "
                    "PNG (KITTI: value / 256, 0 unknown) or .npy (non-finite unknown).  [default: none: density and "
                    "time only]")

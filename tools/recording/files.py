@@ -16,7 +16,7 @@ from stereocam.recording.reader import Recording
 from stereocam.recording.recorder import SUMMARY, RecordingError
 from stereocam.recording.repair import repair
 from stereocam.tools.camera.capture import save_frame
-from stereocam.tools.options import CONTEXT, epilog
+from stereocam.tools.options import CONTEXT, INPUT_FILE, epilog
 
 
 DROP_KEYS = ("link_lost", "link_incomplete", "host_queue_overflow", "device_dropped", "recorder_dropped")
@@ -98,11 +98,10 @@ def command() -> None:
     """Look into, fix and unpack MCAP recordings."""
 
 
-_FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
 
 
 @command.command("info", epilog=epilog())
-@click.argument("file", type=_FILE)
+@click.argument("file", type=INPUT_FILE)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of lines.")
 def info_command(file: Path, as_json: bool) -> int:
     """Duration, frames, topics, drops, the unit and its calibration."""
@@ -111,7 +110,7 @@ def info_command(file: Path, as_json: bool) -> int:
 
 
 @command.command("repair", epilog=epilog())
-@click.argument("file", type=_FILE)
+@click.argument("file", type=INPUT_FILE)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write here.  [default: FILE, in place]")
 def repair_command(file: Path, out: Path | None) -> int:
@@ -122,7 +121,7 @@ def repair_command(file: Path, out: Path | None) -> int:
 
 
 @command.command("export", epilog=epilog())
-@click.argument("file", type=_FILE)
+@click.argument("file", type=INPUT_FILE)
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True, help="Folder to write to.")
 @click.option("--start", type=int, default=0, show_default=True, help="First frame (from 0).")
 @click.option("--stop", type=int, default=None, help="Frame to stop before.  [default: the end]")

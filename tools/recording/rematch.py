@@ -25,7 +25,7 @@ from stereocam.recording.reader import Recording
 from stereocam.stereo import engines
 from stereocam.stereo.engines import matching_names
 from stereocam.presets import POST_PRESETS, preset_values
-from stereocam.tools.options import CONTEXT, SETTING, epilog
+from stereocam.tools.options import CONTEXT, INPUT_FILE, SETTING, epilog
 from stereocam.tools.recording import rematch_tasks as tasks
 
 RETRIES = 3
@@ -177,7 +177,7 @@ def _scheduler(ctx: click.Context, param: click.Parameter, value: str | None) ->
 
 
 @click.command("rematch", epilog=epilog(), context_settings=CONTEXT)
-@click.argument("recordings", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("recordings", nargs=-1, required=True, type=INPUT_FILE)
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
               help="Folder for the re-matched recordings (not the inputs' folder: outputs keep their names).")
 @click.option("--algorithm", type=click.Choice(engines.names()), default=None,
