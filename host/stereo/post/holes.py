@@ -46,37 +46,65 @@ NONE = 32767  # no disparity found along a path: above every disparity * 16 of t
 
 
 @nb.njit(**KERNEL)
-def _low2(m1: np.int32, m2: np.int32, v: np.int32) -> tuple[np.int32, np.int32]:
-    """The two smallest of m1 <= m2 and v."""
-    return min(m1, v), min(m2, max(m1, v))
+def _path(row: np.ndarray, invalid: np.int16, prev: np.ndarray, cur: np.ndarray, off: int) -> None:
+    """cur[1 + x]: row[x] where valid, else prev[off + x] (off 1: the path straight down, 0: from
+    the left, 2: from the right). Both values loaded, then selected: a load under a branch would
+    not vectorise."""
+    for x in range(row.shape[0]):
+        v = row[x]
+        p = prev[off + x]
+        cur[1 + x] = v if v != invalid else p
 
 
 @nb.njit(**KERNEL)
-def _paths_from(disp: np.ndarray, y: int, invalid: int, along_row: bool, prev: np.ndarray,
-                cur: np.ndarray, left: np.ndarray, right: np.ndarray) -> None:
-    """Row y's first valid disparity (the pixel's own, else its path's) along the paths from the
-    row before: cur[d, 1 + x] from prev (d = 0, 1, 2: straight, from the left, from the right;
-    NONE padded at both ends), and with along_row the row's own (left[x]: from the left, right[x]:
-    from the right)."""
-    w = disp.shape[1]
-    row = disp[y]
-    for x in range(w):
-        v = np.int32(row[x])
-        ok = v != invalid
-        cur[0, 1 + x] = v if ok else prev[0, 1 + x]
-        cur[1, 1 + x] = v if ok else prev[1, x]
-        cur[2, 1 + x] = v if ok else prev[2, 2 + x]
+def _paths_from(row: np.ndarray, invalid: np.int16, prev: np.ndarray, cur: np.ndarray, along_row: bool) -> None:
+    """Row ``row``'s first valid disparity (the pixel's own, else its path's) along the paths from the
+    row before: cur[d, 1 + x] from prev (d = 0, 1, 2: straight, from the left, from the right; NONE
+    padded at both ends), and with along_row the row's own in cur[3] (from the left) and cur[4]
+    (from the right)."""
+    _path(row, invalid, prev[0], cur[0], 1)
+    _path(row, invalid, prev[1], cur[1], 0)
+    _path(row, invalid, prev[2], cur[2], 2)
     if along_row:
-        seen = np.int32(NONE)
+        w = row.shape[0]
+        seen = np.int16(NONE)
         for x in range(w):
-            v = np.int32(row[x])
+            v = row[x]
             seen = v if v != invalid else seen
-            left[x] = seen
-        seen = np.int32(NONE)
+            cur[3, 1 + x] = seen
+        seen = np.int16(NONE)
         for x in range(w - 1, -1, -1):
-            v = np.int32(row[x])
+            v = row[x]
             seen = v if v != invalid else seen
-            right[x] = seen
+            cur[4, 1 + x] = seen
+
+
+@nb.njit(**KERNEL)
+def _low_from_above(cur: np.ndarray, low: np.ndarray, y: int) -> None:
+    """low[:, y]: the two smallest of the five paths' values in cur (m1 <= m2)."""
+    for x in range(low.shape[2]):
+        a, b = cur[0, 1 + x], cur[1, 1 + x]
+        m1, m2 = min(a, b), max(a, b)
+        for k in range(2, 5):
+            v = cur[k, 1 + x]
+            m1, m2 = min(m1, v), min(m2, max(m1, v))
+        low[0, y, x] = m1
+        low[1, y, x] = m2
+
+
+@nb.njit(**KERNEL)
+def _fill_row(cur: np.ndarray, low: np.ndarray, y: int, row: np.ndarray, invalid: np.int16) -> None:
+    """Each invalid pixel of row y takes the second smallest of all eight paths' values (low[:, y]
+    and the three from below in cur), the only one when one path found one."""
+    none = np.int16(NONE)
+    for x in range(row.shape[0]):
+        m1, m2 = low[0, y, x], low[1, y, x]
+        for k in range(3):
+            v = cur[k, 1 + x]
+            m1, m2 = min(m1, v), min(m2, max(m1, v))
+        d = row[x]
+        fill = m2 if m2 != none else m1 if m1 != none else d
+        row[x] = fill if d == invalid else d
 
 
 @nb.njit(**KERNEL)
@@ -85,31 +113,18 @@ def fill_background(disp: np.ndarray, invalid: int, low: np.ndarray) -> None:
 
     Two passes, no plane per path: top-down the paths from above and along the row, whose two
     smallest disparities each pixel keeps in low; then bottom-up the paths from below, and the
-    second smallest of all (the only one when one path found one) fills each invalid pixel."""
+    second smallest of all (the only one when one path found one) fills each invalid pixel. The
+    paths' values are int16 rows of one array per pass direction (each loop touches two or three
+    arrays, few enough for the vectoriser's overlap checks)."""
     h, w = disp.shape
-    bufs = np.full((2, 3, w + 2), NONE, np.int32)  # per pass: the previous and this row's paths
-    left = np.empty(w, np.int32)
-    right = np.empty(w, np.int32)
+    inv = np.int16(invalid)
+    bufs = np.full((2, 5, w + 2), np.int16(NONE), np.int16)  # the previous and this row's paths
     for y in range(h):
         prev, cur = bufs[y & 1], bufs[1 - (y & 1)]
-        _paths_from(disp, y, invalid, True, prev, cur, left, right)
-        for x in range(w):
-            m1, m2 = _low2(np.int32(NONE), np.int32(NONE), cur[0, 1 + x])
-            m1, m2 = _low2(m1, m2, cur[1, 1 + x])
-            m1, m2 = _low2(m1, m2, cur[2, 1 + x])
-            m1, m2 = _low2(m1, m2, left[x])
-            m1, m2 = _low2(m1, m2, right[x])
-            low[0, y, x] = m1
-            low[1, y, x] = m2
+        _paths_from(disp[y], inv, prev, cur, True)
+        _low_from_above(cur, low, y)
     bufs[:] = NONE
     for y in range(h - 1, -1, -1):
         prev, cur = bufs[y & 1], bufs[1 - (y & 1)]
-        _paths_from(disp, y, invalid, False, prev, cur, left, right)
-        row = disp[y]
-        for x in range(w):
-            m1, m2 = _low2(np.int32(low[0, y, x]), np.int32(low[1, y, x]), cur[0, 1 + x])
-            m1, m2 = _low2(m1, m2, cur[1, 1 + x])
-            m1, m2 = _low2(m1, m2, cur[2, 1 + x])
-            v = np.int32(row[x])
-            fill = m2 if m2 != NONE else m1 if m1 != NONE else v
-            row[x] = fill if v == invalid else v
+        _paths_from(disp[y], inv, prev, cur, False)
+        _fill_row(cur, low, y, disp[y], inv)

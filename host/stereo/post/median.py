@@ -14,22 +14,34 @@ def _med3(a: np.int16, b: np.int16, c: np.int16) -> np.int16:
 
 
 @nb.njit(**KERNEL)
-def _median3(padded: np.ndarray, out: np.ndarray) -> None:
+def _sort_columns(above: np.ndarray, row: np.ndarray, below: np.ndarray, s: np.ndarray) -> None:
+    """s[0 / 1 / 2, 1 + x]: the smallest / middle / largest of column x's three values; the ends
+    replicated into s[:, 0] and s[:, w + 1] (the image edge). One scratch array: few enough arrays
+    for the vectoriser's overlap checks."""
+    w = row.shape[0]
+    for x in range(w):
+        a, b, c = above[x], row[x], below[x]
+        s[0, 1 + x] = min(a, b, c)
+        s[1, 1 + x] = _med3(a, b, c)
+        s[2, 1 + x] = max(a, b, c)
+    for k in range(3):
+        s[k, 0] = s[k, 1]
+        s[k, w + 1] = s[k, w]
+
+
+@nb.njit(**KERNEL)
+def _median3(disp: np.ndarray, out: np.ndarray) -> None:
     """3 x 3: each column's three values sorted, then the median of (the largest low, the middle
-    middle, the smallest high) of three neighbouring columns, which is the median of the nine."""
+    middle, the smallest high) of three neighbouring columns, which is the median of the nine; the
+    rows above and below clamped to the image (the edge replicated)."""
     h, w = out.shape
+    s = np.empty((3, w + 2), np.int16)
     for y in range(h):
-        lo = np.empty(w + 2, np.int16)
-        mid = np.empty(w + 2, np.int16)
-        hi = np.empty(w + 2, np.int16)
-        for x in range(w + 2):
-            a, b, c = padded[y, x], padded[y + 1, x], padded[y + 2, x]
-            lo[x] = min(a, b, c)
-            hi[x] = max(a, b, c)
-            mid[x] = _med3(a, b, c)
+        _sort_columns(disp[max(y - 1, 0)], disp[y], disp[min(y + 1, h - 1)], s)
+        o = out[y]
         for x in range(w):
-            out[y, x] = _med3(max(lo[x], lo[x + 1], lo[x + 2]), _med3(mid[x], mid[x + 1], mid[x + 2]),
-                              min(hi[x], hi[x + 1], hi[x + 2]))
+            o[x] = _med3(max(s[0, x], s[0, x + 1], s[0, x + 2]), _med3(s[1, x], s[1, x + 1], s[1, x + 2]),
+                         min(s[2, x], s[2, x + 1], s[2, x + 2]))
 
 
 @nb.njit(**KERNEL)
@@ -64,8 +76,7 @@ def _median(padded: np.ndarray, size: int, out: np.ndarray) -> None:
 
 def median_filter(disp: np.ndarray, size: int, out: np.ndarray) -> None:
     """out = the median of each size x size window of disp (edge replicated)."""
-    padded = np.pad(disp, size // 2, mode="edge")
     if size == 3:
-        _median3(padded, out)
+        _median3(disp, out)
     else:
-        _median(padded, size, out)
+        _median(np.pad(disp, size // 2, mode="edge"), size, out)

@@ -114,6 +114,23 @@ def test_spatial_filter_matches_reference(alpha: int, delta: int, iterations: in
     assert_same(ours, ref.spatial(disp, alpha, delta, iterations, inv))
 
 
+@pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (2, 3), (15, 40), (16, 7), (17, 23), (33, 64), (48, 5)])
+def test_spatial_and_median_match_the_reference_on_any_shape(shape: tuple[int, int]) -> None:
+    """Single rows and columns, and heights below, at and past the spatial filter's strips of 16
+    rows (the last strip partial or whole); values near both ends of int16."""
+    rng = np.random.default_rng(shape[0] * 100 + shape[1])
+    inv = invalid_disparity(0)
+    disp = rng.integers(-16, 32767, shape).astype(np.int16)
+    disp[rng.random(shape) < 0.5] = rng.integers(32000, 32767)  # near plateaus: steps within delta
+    disp[rng.random(shape) < 0.15] = inv
+    ours = disp.copy()
+    spatial_filter(ours, 77, 1024, 2, inv)
+    assert_same(ours, ref.spatial(disp, 77, 1024, 2, inv))
+    out = np.empty_like(disp)
+    median_filter(disp, 3, out)
+    assert_same(out, ref.median(disp, 3))
+
+
 def test_spatial_filter_smooths_noise_and_keeps_edges() -> None:
     disp = noisy_map(4, 0, holes=0.0)
     ours = disp.copy()
