@@ -10,7 +10,7 @@ import numba as nb
 import numpy as np
 
 from ..jit import KERNEL
-from .spatial import _blend
+from .spatial import _step
 
 
 @dataclass
@@ -27,23 +27,27 @@ class TemporalState:
 
 
 @nb.njit(**KERNEL)
+def _temporal_row(disp: np.ndarray, last: np.ndarray, history: np.ndarray, alpha: np.int32, delta: np.int32,
+                  window: np.uint8, invalid: np.int32) -> None:
+    """One row, branch-free (selects; the loop vectorises): a valid pixel steps towards its last
+    output as the spatial filter's sweep does; an invalid one holds a valid last output while its
+    history has a valid frame in the window."""
+    for x in range(disp.shape[0]):
+        cur, prev, past = np.int32(disp[x]), np.int32(last[x]), history[x]
+        valid = cur != invalid
+        hold = (prev != invalid) & ((past & window) != 0)
+        out = _step(cur, prev, alpha, delta, invalid) if valid else (prev if hold else cur)
+        history[x] = np.uint8((past << np.uint8(1)) | np.uint8(valid))
+        disp[x] = out
+        last[x] = out
+
+
+@nb.njit(**KERNEL)
 def _temporal(disp: np.ndarray, last: np.ndarray, history: np.ndarray, alpha: int, delta: int,
               persistence: int, invalid: int) -> None:
-    h, w = disp.shape
-    window = (1 << persistence) - 1
-    for y in range(h):
-        for x in range(w):
-            cur, prev = np.int32(disp[y, x]), np.int32(last[y, x])
-            past = history[y, x]
-            if cur != invalid:
-                if prev != invalid and abs(cur - prev) <= delta:
-                    disp[y, x] = _blend(cur, prev, alpha)
-                history[y, x] = ((past << 1) | 1) & 0xFF
-            else:
-                if prev != invalid and past & window:
-                    disp[y, x] = prev
-                history[y, x] = (past << 1) & 0xFF
-            last[y, x] = disp[y, x]
+    window = np.uint8((1 << persistence) - 1)
+    for y in range(disp.shape[0]):
+        _temporal_row(disp[y], last[y], history[y], np.int32(alpha), np.int32(delta), window, np.int32(invalid))
 
 
 def temporal_filter(disp: np.ndarray, state: TemporalState, alpha: int, delta: int, persistence: int,
