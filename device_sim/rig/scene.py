@@ -8,7 +8,8 @@ never a device parameter:
 "board" — a chessboard a fixture moves through varied poses (rendered by ``calibration.board``;
     ``sensor.BOARD*`` give its size, pose count and dwell time);
 and the scene classes of ``scene_classes`` (slanted, curved, thin, low-texture, repetitive, exposure,
-vignetting, noise, motion-blur, driving, clutter), each with its own photometry, at placement seed 0.
+vignetting, noise, motion-blur, driving, clutter, misaligned), each with its own photometry (and the
+misaligned one with its right imager turned off the pose its calibration holds), at placement seed 0.
 """
 from __future__ import annotations
 
@@ -43,6 +44,7 @@ class Scene(str, enum.Enum):
     MOTION_BLUR = "motion-blur"
     DRIVING = "driving"
     CLUTTER = "clutter"
+    MISALIGNED = "misaligned"
 
     @classmethod
     def parse(cls, name: "str | Scene") -> "Scene":
@@ -68,6 +70,12 @@ def moving_primitives(scene: Scene) -> np.ndarray:
 def photometry(scene: Scene) -> Photometry:
     """The scene's light beyond the shared exposure (the plain one for lab, wall and board)."""
     return CLASSES[scene.value].photometry if scene.value in CLASSES else PLAIN
+
+
+def right_turn(scene: Scene) -> np.ndarray:
+    """How far the right imager is turned off the pose its calibration holds (3x3; the identity
+    but for a misaligned class)."""
+    return CLASSES[scene.value].right_turn() if scene.value in CLASSES else np.eye(3)
 
 
 def primitives(scene: Scene, t: float) -> np.ndarray:

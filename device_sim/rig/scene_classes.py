@@ -14,6 +14,8 @@ driving      a street at 1:8 scale (the rig 20 cm above the road, as a car's 1.6
              baseline): asphalt seen at a grazing angle, disparity growing downwards to ~100 px,
              lane marks, kerbs, facades along the street, cars, poles, far trees, a bright sky
 clutter      forty boxes, boards, balls and tubes at 0.7-3.5 m in front of each other
+misaligned   the everyday scene with the right imager turned off its rectified pose (pitch and roll, as
+             a unit whose calibration drifted): its rows 0.2-1.0 px off the left's at 640x480
 
 Depths keep every disparity below ``SceneClass.disparities`` (64 but for driving's 128) at 640x480
 on the ideal rig of ``stereo_pair`` (f = 480 px, B = 8 cm). ``build(t, seed)`` gives the rows at
@@ -38,7 +40,8 @@ X, Y, Z = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
 
 @dataclass(frozen=True)
 class SceneClass:
-    """One class: its rows as a function of (time, seed), which of them move, and its photometry."""
+    """One class: its rows as a function of (time, seed), which of them move, its photometry, and
+    how far the right imager is turned off its rectified pose."""
 
     name: str
     summary: str
@@ -46,6 +49,14 @@ class SceneClass:
     moving: tuple[int, ...] = ()
     photometry: Photometry = field(default=PLAIN)
     disparities: int = 64  # a matcher's disparity range for the class at DISPARITIES_WIDTH (scales with the width)
+    right_turn_rad: tuple[float, float] = (0.0, 0.0)  # the right imager's pitch (about x) and roll (about z)
+
+    def right_turn(self) -> np.ndarray:
+        """The right imager's rotation off its rectified pose (its camera frame -> the rectified
+        one), 3x3 float64: the identity for every class but a misaligned one."""
+        pitch, roll = self.right_turn_rad
+        cp, sp, cr, sr = math.cos(pitch), math.sin(pitch), math.cos(roll), math.sin(roll)
+        return np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]]) @ np.array([[cr, -sr, 0], [sr, cr, 0], [0, 0, 1]])
 
     def build(self, t: float, seed: int = 0) -> np.ndarray:
         """The primitive table at scene time ``t`` for placement ``seed``, (N, PRIM_FIELDS) float64."""
@@ -239,5 +250,8 @@ CLASSES: dict[str, SceneClass] = {c.name: c for c in (
     SceneClass("driving", "a street: road at a grazing angle, cars, poles, facades, sky", _driving,
                photometry=Photometry(right_gain=1.06, right_offset=-3 / 255, vignetting=0.3), disparities=128),
     SceneClass("clutter", "forty objects at many depths in front of each other", _cluttered),
+    # 0.6 px at the centre (f = 480 px at 640x480), +-0.4 px more at the left and right edges
+    SceneClass("misaligned", "the right imager's rows 0.2-1.0 px off (calibration drift)", _everyday,
+               right_turn_rad=(0.6 / 480, 0.4 / 320)),
 )}
 """name -> class; the simulator's ``Scene`` has one member per entry (scene.py)."""

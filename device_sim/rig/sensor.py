@@ -152,7 +152,8 @@ class SensorRig:
         scale = 255.0 * exposure_us / EXPOSURE_REF_US * 10.0 ** (gain / 200.0)
         tables = [scene.primitives(view, ti) for ti in photo.instants(t)]  # blur: the path over the exposure
         images = []
-        for eye, (origin, rot) in enumerate(self._poses):
+        for eye in range(2):
+            origin, rot = self._pose(eye, view)
             rad = np.zeros(self._rays[eye].shape[:2], np.float32)
             for prims in tables:
                 layer = self._static_layer(eye, view, prims, moving)
@@ -166,6 +167,15 @@ class SensorRig:
             images.append(img)
         return images[0], images[1]
 
+    def _pose(self, eye: int, view: scene.Scene) -> tuple[np.ndarray, np.ndarray]:
+        """Eye's centre and camera -> world rotation looking at ``view``: the right eye turned off
+        the pose its calibration holds in a misaligned scene class (a unit whose calibration drifted)."""
+        origin, rot = self._poses[eye]
+        turn = scene.right_turn(view)
+        if eye == 1 and not np.array_equal(turn, np.eye(3)):
+            rot = np.ascontiguousarray(rot @ turn)
+        return origin, rot
+
     def _static_layer(self, eye: int, view: scene.Scene, prims: np.ndarray, moving: np.ndarray) -> _StaticLayer:
         """One eye's view of the scene's static primitives, rendered once per format (again only if
         they changed: the key is their exact values)."""
@@ -175,7 +185,7 @@ class SensorRig:
         if layer is None or layer.key != key:
             h, w = self._rays[eye].shape[:2]
             layer = _StaticLayer(key, np.empty((h, w), np.float32), np.empty((h, w)), np.empty((h, w), np.int64))
-            origin, rot = self._poses[eye]
+            origin, rot = self._pose(eye, view)
             render.render_layer(self._rays[eye], origin, rot, prims, static, self.texture, self.tex_offsets,
                                 self.tex_side, LIGHT, layer.rad, layer.t, layer.hit)
             self._layers[(eye, view)] = layer

@@ -5,7 +5,9 @@ scaled to the width), centred principal points and a ``PAIR_BASELINE_M`` baselin
 images are rectified by construction and the truth needs no resampling: a left pixel that sees a
 surface at depth z has disparity f * B / z, exactly (the ray caster's hit). It is *occluded* when the
 right camera does not see that same surface point: another surface is nearer along the right
-camera's ray to it, or it falls outside the right image.
+camera's ray to it, or it falls outside the right image. A misaligned class turns the right camera
+off that pose (``SceneClass.right_turn``): its rows no longer meet the left's, and the truth is the
+horizontal part of where the point lands in the right image, x - x_right.
 """
 from __future__ import annotations
 
@@ -56,25 +58,28 @@ def render_pair(name: str, width: int = 640, height: int = 480, seed: int = 0, t
     """Scene class ``name`` at placement ``seed`` and scene time ``t`` (the middle of the exposure)."""
     cls = scene_class(name)
     prims = [cls.build(ti, seed) for ti in cls.photometry.instants(t)]
-    return render_primitives(name, prims, cls.build(t, seed), cls.photometry, ideal_geometry(width, height), seed)
+    return render_primitives(name, prims, cls.build(t, seed), cls.photometry, ideal_geometry(width, height), seed,
+                             cls.right_turn())
 
 
 def render_primitives(name: str, exposure: list[np.ndarray], at_t: np.ndarray, photometry: Photometry,
-                      geometry: Geometry, seed: int) -> StereoPair:
+                      geometry: Geometry, seed: int, right_turn: np.ndarray | None = None) -> StereoPair:
     """The pair for primitive tables ``exposure`` (one per sub-instant the exposure averages) and
-    the truth of ``at_t`` (the table at the exposure's middle)."""
+    the truth of ``at_t`` (the table at the exposure's middle); ``right_turn``: the right camera's
+    rotation off the rectified pose (None: none)."""
     rays = geometry.rays()
     tex = (*texture.pack_pyramid(texture.make_texture(seed, TEXTURE_SIDE)), TEXTURE_SIDE)
     right_origin = np.array([geometry.baseline_m, 0.0, 0.0])
     origins = (np.zeros(3), right_origin)
-    eye_rot = np.eye(3)
+    turned = right_turn is not None and not np.array_equal(right_turn, np.eye(3))
+    eye_rots = (np.eye(3), np.ascontiguousarray(right_turn, np.float64) if turned else np.eye(3))
     shape = (geometry.height, geometry.width)
     images = []
     for eye, origin in enumerate(origins):
         rad = np.zeros(shape, np.float32)
         for prims in exposure:
             sub, depth = np.empty(shape, np.float32), np.empty(shape, np.float32)
-            render.render_radiance(rays, origin, eye_rot, prims, *tex, LIGHT, sub, depth)
+            render.render_radiance(rays, origin, eye_rots[eye], prims, *tex, LIGHT, sub, depth)
             rad += sub
         rad = photometry.apply(rad / np.float32(len(exposure)), rays, eye)
         img = np.empty(shape, np.uint8)
@@ -82,7 +87,12 @@ def render_primitives(name: str, exposure: list[np.ndarray], at_t: np.ndarray, p
         images.append(img)
     depth = _depth(rays, np.zeros(3), np.eye(3), at_t, tex)
     seen = np.isfinite(depth)
-    disparity = np.where(seen, geometry.focal_px * geometry.baseline_m / np.where(seen, depth, 1.0), np.nan)
+    if turned:  # the horizontal part of the correspondence: x minus the point's column in the right image
+        point = rays.astype(np.float64) * np.where(seen, depth, 1.0)[..., None]
+        in_right = (point - right_origin) @ eye_rots[1]  # rows: R^T (p - c), R camera -> world
+        disparity = np.where(seen, geometry.focal_px * (rays[..., 0] - in_right[..., 0] / in_right[..., 2]), np.nan)
+    else:
+        disparity = np.where(seen, geometry.focal_px * geometry.baseline_m / np.where(seen, depth, 1.0), np.nan)
     occluded = occlusion(rays, np.eye(3), depth, disparity, right_origin, at_t, tex)
     return StereoPair(name, images[0], images[1], disparity.astype(np.float32), occluded, geometry)
 

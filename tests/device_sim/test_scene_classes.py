@@ -163,6 +163,57 @@ def test_noise_class_is_noisier_and_motion_blur_smears_the_moving_panel():
     assert residual(blurred.left, panel) < 0.8 * residual(sharp.left, panel)
 
 
+def test_misaligned_class_turns_the_right_rows_and_keeps_the_horizontal_truth():
+    """The right image's rows land 0.2-1.0 px below the rectified pose's (more on the left than on
+    the right: pitch plus roll), the left image is the rectified rig's, and the truth is where each
+    left pixel's point lands in the turned right image, column for column."""
+    import cv2
+
+    cls = CLASSES["misaligned"]
+    w, h = 640, 480  # the class's offsets are given at this size
+    turned = render_pair("misaligned", w, h, seed=2)
+    plain = render_primitives("plain", [cls.build(0.0, 2)], cls.build(0.0, 2), PLAIN, ideal_geometry(w, h), seed=2)
+    assert np.array_equal(turned.left, plain.left)
+    shifts = [cv2.phaseCorrelate(plain.right[100:380, x:x + 160].astype(np.float64),
+                                 turned.right[100:380, x:x + 160].astype(np.float64))[0] for x in (0, 240, 480)]
+    dys = [dy for _, dy in shifts]
+    assert 0.75 < dys[0] < 1.1 and 0.45 < dys[1] < 0.75 and 0.1 < dys[2] < 0.45, dys
+    assert all(abs(dx) < 0.1 for dx, _ in shifts), shifts
+    g = ideal_geometry(w, h)
+    seen = np.isfinite(plain.disparity)
+    assert np.array_equal(seen, np.isfinite(turned.disparity))
+    # OpenCV's projection of each seen point into the turned right camera gives the same columns
+    z = g.focal_px * g.baseline_m / plain.disparity[seen]
+    points = (g.rays().astype(np.float64)[seen] * z[:, None]).reshape(-1, 1, 3)
+    rot_w2c = cls.right_turn().T  # world -> the right camera
+    tvec = -rot_w2c @ np.array([g.baseline_m, 0.0, 0.0])
+    k = np.array([[g.focal_px, 0, g.cx], [0, g.focal_px, g.cy], [0, 0, 1]])
+    proj, _ = cv2.projectPoints(points, cv2.Rodrigues(rot_w2c)[0], tvec, k, None)
+    columns = np.nonzero(seen)[1]
+    assert np.max(np.abs(turned.disparity[seen] - (columns - proj[:, 0, 0]))) < 2e-3
+    assert 0.3 < np.nanmax(np.abs(turned.disparity - plain.disparity)) < 0.6  # the drift moves columns too
+
+
+def test_the_live_rig_turns_the_right_eye_in_the_misaligned_scene(monkeypatch: pytest.MonkeyPatch):
+    """The simulated unit looking at the misaligned class: its left image is the one it sees with the
+    right eye where its calibration says; its right image's rows 0.4-0.8 px lower in the middle."""
+    import cv2
+
+    from stereocam.device_sim.rig import scene
+
+    def capture() -> tuple[np.ndarray, np.ndarray]:
+        rig = SensorRig(5, true_calibration(5))
+        rig.set_format(640, 480)
+        return rig.capture(0.0, Scene.MISALIGNED, 4000, 0, 7)
+
+    left, right = capture()
+    monkeypatch.setattr(scene, "right_turn", lambda view: np.eye(3))
+    left0, right0 = capture()
+    assert np.array_equal(left, left0)
+    (dx, dy), _ = cv2.phaseCorrelate(right0[120:360, 240:400].astype(np.float64), right[120:360, 240:400].astype(np.float64))
+    assert 0.4 < dy < 0.8 and abs(dx) < 0.2, (dx, dy)
+
+
 def test_the_simulator_serves_a_class_by_name_with_its_truth():
     import stereocam
     from stereocam.device_sim import SimulatedCamera
