@@ -15,15 +15,10 @@ STRIP = 16
 step of all 16 sweeps is one vector operation (a row's own steps wait on each other)."""
 
 
-@nb.njit(**KERNEL)
-def _blend(cur: np.int32, prev: np.int32, alpha: int) -> np.int32:
-    """(alpha * cur + (256 - alpha) * prev + 128) // 256 (the temporal filter's blend too)."""
-    return (alpha * cur + (ALPHA_ONE - alpha) * prev + ALPHA_ONE // 2) >> 8  # floor of / 256
-
-
 @nb.njit(inline="always")
 def _step(cur: np.int32, prev: np.int32, alpha: np.int32, delta: np.int32, invalid: np.int32) -> np.int32:
-    """cur after one step of a sweep from its filtered predecessor prev: ``_blend`` written as
+    """cur after one step of a sweep from its filtered predecessor prev: the blend
+    (alpha * cur + (256 - alpha) * prev + 128) >> 8 (the temporal filter's too) written as
     prev + (alpha * (cur - prev) + 128) >> 8 (equal: 256 * prev leaves the floor unchanged), every
     operation cast back to 32 bits (numba widens integer arithmetic to 64, which would take
     vectors of 4), and branch-free: a select."""
