@@ -34,8 +34,15 @@ _JIT = C_ARITHMETIC
  C_SPW, C_SPR, C_TL, C_TR, C_P1G, C_LEN) = range(18)
 # C_INV: params.invalid_value; C_MAXC: params.max_cost; C_CW, C_CH: census window; C_SPW,
 # C_SPR: speckle window size (0: no speckle filter) and range; C_TL, C_TR: the frame's census
-# margins of the left and right image (set per frame); C_P1G: params.p1_ground_step
+# margins of the left and right image (set per frame); C_P1G: params.p1_ground_step; after C_LEN
+# the places of the nd sums in split order (sum_places), cfg[C_LEN + 1 + k] for disparity k, 0 at
+# C_LEN and C_LEN + nd + 1 (the winner's neighbours are looked up there, not computed per pixel)
 NO_P2 = 0xFFFFFFFF  # pixel_paths' q of a path's first pixel (no predecessor): P2 255 in each byte
+
+
+def sum_places(nd: int) -> np.ndarray:
+    """The tail of the configuration vector after C_LEN: 0, sum_pos(k, nd) for k < nd, 0."""
+    return np.array([0, *(sum_pos(k, nd) for k in range(nd)), 0], np.int64)
 
 
 @nb.njit(inline="always", **_JIT)
@@ -259,13 +266,7 @@ def _finish_row(y: int, cfg: np.ndarray, acc: np.ndarray, parked: np.ndarray | N
     if lrdiff >= 0:
         for i in range(rmin.shape[0]):
             rmin[i] = 32767
-    # where each disparity's sum sits (split order), looked up for the winner's neighbours instead
-    # of sum_pos's arithmetic per pixel (0-3 % of a frame); pos[1 + k] for k, 0 at both ends
-    pos = np.empty(nd + 2, np.int64)
-    pos[0] = 0
-    pos[nd + 1] = 0
-    for k in range(nd):
-        pos[1 + k] = sum_pos(k, nd)
+    pos = cfg[C_LEN:]  # pos[1 + k]: where disparity k's sum sits (a table: 0-3 % of a frame saved)
     for x in range(cols):
         o = x * nd
         m, k = add_argmin(acc, o, parked, o, nd)

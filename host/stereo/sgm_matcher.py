@@ -68,7 +68,7 @@ class SGMMatcher:
             nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths,
             p.invalid_value, p.max_cost, p.census_width, p.census_height,
             p.speckle_window_size if p.use_speckle else 0, p.speckle_range, p.p1_ground_step]
-        self.cfg = cfg
+        self.cfg = np.concatenate([cfg, _sgm.sum_places(nd)])
         # effective P2 per intensity step dI (at 255 + dI, -255 <= dI <= 255), and (row 1) the
         # same times 0x01010101 as sgm_simd.pixel_paths takes it
         self.p2tab = np.full((2, 511), p.p2, np.int64)
