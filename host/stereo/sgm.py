@@ -30,9 +30,9 @@ from .sgm_simd import add_argmin, count_le, diag_update, path_step, pixel_paths,
 _JIT = C_ARITHMETIC
 
 # layout of the int64 configuration vector passed to sgm_rows
-(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_MAXC, C_CW, C_CH,
+(C_ND, C_MIND, C_P1, C_URATIO, C_LRDIFF, C_X0, C_COLS, C_PATHS, C_INV, C_OUTC, C_CW, C_CH,
  C_SPW, C_SPR, C_TL, C_TR, C_P1G, C_LEN) = range(18)
-# C_INV: params.invalid_value; C_MAXC: params.max_cost; C_CW, C_CH: census window; C_SPW,
+# C_INV: params.invalid_value; C_OUTC: params.outside_cost; C_CW, C_CH: census window; C_SPW,
 # C_SPR: speckle window size (0: no speckle filter) and range; C_TL, C_TR: the frame's census
 # margins of the left and right image (set per frame); C_P1G: params.p1_ground_step; after C_LEN
 # the places of the nd sums in split order (sum_places), cfg[C_LEN + 1 + k] for disparity k, 0 at
@@ -58,14 +58,14 @@ def run_stride(nd: int) -> int:
 @nb.njit(**_JIT)
 def _inside(X: int, md: int, nd: int) -> int:
     """Disparities of left column X whose right pixel is in the image (k <= X - md), rounded
-    up to cost_run's 16 lanes, at most nd: the rest are the constant maxc, not computed."""
+    up to cost_run's 16 lanes, at most nd: the rest are the constant outc, not computed."""
     return min(nd, (X - md + 16) & ~15)
 
 
 @nb.njit(**_JIT)
 def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int, cols: int,
-              maxc: int, out: np.ndarray) -> None:
-    """out[x * nd + k] = popcount(census_L[y, x0 + x] ^ census_R[y, x0 + x - md - k]), or maxc
+              outc: int, out: np.ndarray) -> None:
+    """out[x * nd + k] = popcount(census_L[y, x0 + x] ^ census_R[y, x0 + x - md - k]), or outc
     where that right pixel is left of the image (cl[y], crr[y]: their byte planes, census_R's
     mirrored and running nd codes past it)."""
     w = cl.shape[2]
@@ -73,7 +73,7 @@ def _cost_row(cl: np.ndarray, crr: np.ndarray, y: int, x0: int, md: int, nd: int
         cost_run(cl[y], x0 + x, crr[y], w - 1 - x0 - x + md, out, x * nd,
                  _inside(x0 + x, md, nd))
     for x in range(min(cols, nd - 1 - x0 + md)):  # k > x0 + x - md is outside
-        out[x * nd + x0 + x - md + 1:(x + 1) * nd] = maxc
+        out[x * nd + x0 + x - md + 1:(x + 1) * nd] = outc
 
 
 @nb.njit(**_JIT)
@@ -212,7 +212,7 @@ def _kept_rows(g: int, y0: int, y1: int, hb: int, img: np.ndarray, cl: np.ndarra
     a path step waits on its predecessor's minimum, so one path alone leaves the core idle
     between steps, and the other row's step fills it."""
     nd, md, p1 = cfg[C_ND], cfg[C_MIND], cfg[C_P1]
-    x0, cols, maxc = cfg[C_X0], cfg[C_COLS], cfg[C_MAXC]
+    x0, cols, outc = cfg[C_X0], cfg[C_COLS], cfg[C_OUTC]
     w = cl.shape[2]
     stride = run_stride(nd)
     k0, zero = hb + 3 * stride, hb + 2 * stride
@@ -229,9 +229,9 @@ def _kept_rows(g: int, y0: int, y1: int, hb: int, img: np.ndarray, cl: np.ndarra
         if two:
             cost_run(cl[y1], X, crr[y1], w - 1 - X + md, cost, o1 + x * nd, inside)
         if x < outside:
-            cost[x * nd + X - md + 1:(x + 1) * nd] = maxc
+            cost[x * nd + X - md + 1:(x + 1) * nd] = outc
             if two:
-                cost[o1 + x * nd + X - md + 1:o1 + (x + 1) * nd] = maxc
+                cost[o1 + x * nd + X - md + 1:o1 + (x + 1) * nd] = outc
         if i == 0:
             hm0 = path_step(cost, x * nd, lbuf, zero, k0 + x * stride, 255, 0, p1, nd)
             if two:
@@ -312,7 +312,7 @@ def _group(g: int, img: np.ndarray, cl: np.ndarray, crr: np.ndarray, cfg: np.nda
     nd, md, x0, cols = cfg[C_ND], cfg[C_MIND], cfg[C_X0], cfg[C_COLS]
     for step in range(h):
         y = step if g == 0 else h - 1 - step
-        _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_MAXC], cost)
+        _cost_row(cl, crr, y, x0, md, nd, cols, cfg[C_OUTC], cost)
         _aggregate_row(g, y, step == 0, 2 if cfg[C_PATHS] == 4 else 4, 0, 0,
                        3 * run_stride(nd), step & 1, 1 - (step & 1), 0, cols, img, cfg, p2tab,
                        cost, lbuf, mv, pm, acc)

@@ -63,10 +63,10 @@ class SGMMatcher:
         self.crr = np.zeros((h, planes, wc + nd), np.uint8)
         cfg = np.zeros(_sgm.C_LEN, np.int64)
         cfg[[_sgm.C_ND, _sgm.C_MIND, _sgm.C_P1, _sgm.C_URATIO, _sgm.C_LRDIFF, _sgm.C_X0,
-             _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV, _sgm.C_MAXC, _sgm.C_CW, _sgm.C_CH,
+             _sgm.C_COLS, _sgm.C_PATHS, _sgm.C_INV, _sgm.C_OUTC, _sgm.C_CW, _sgm.C_CH,
              _sgm.C_SPW, _sgm.C_SPR, _sgm.C_P1G]] = [
             nd, p.min_disparity, p.p1, p.uniqueness_ratio, p.lr_max_diff, g.x0, cols, p.paths,
-            p.invalid_value, p.max_cost, p.census_width, p.census_height,
+            p.invalid_value, p.outside_cost, p.census_width, p.census_height,
             p.speckle_window_size if p.use_speckle else 0, p.speckle_range, p.p1_ground_step]
         self.cfg = np.concatenate([cfg, _sgm.sum_places(nd)])
         # effective P2 per intensity step dI (at 255 + dI, -255 <= dI <= 255), and (row 1) the

@@ -168,6 +168,19 @@ def test_left_border_is_matched() -> None:
     assert np.mean(np.abs(border - 6) <= 1) > 0.9
 
 
+@pytest.mark.parametrize("paths", [4, 5, 8])
+@pytest.mark.parametrize("shift", [8, 20])
+def test_columns_whose_match_left_the_right_image_get_the_scene_carried_in(paths: int, shift: int) -> None:
+    """Left of x = shift the scene's right pixel is outside the right image: no cost can find it,
+    the paths from the right carry it in. Those out-of-image disparities cost params.outside_cost
+    (3/8 of the census bits); at the largest cost (all bits) 0-6 % of these pixels came out right."""
+    left, right = pair(40, 200, shift, seed=6)
+    p = SGMParams(num_disparities=32, paths=paths)
+    assert p.outside_cost == 12 and p.max_cost == 32
+    hidden = SGMMatcher(left.shape, p).match(left, right)[2:-2, 2:shift] / 16.0
+    assert np.mean(np.abs(hidden - shift) <= 1) > 0.9
+
+
 @pytest.mark.parametrize("paths", [8, 5])
 def test_thread_count_and_reuse_do_not_change_output(paths: int) -> None:
     """Two threads: two path groups (8) or rows taken in turn, each waiting on the row above (5)."""

@@ -11,8 +11,8 @@ x in [0, cols) (sgm_geometry), disparity d = min_disparity + k for cost index k 
    t = census_margin, or with census_margin < 0 per image median |3x3 Laplacian| //
    MARGIN_DIVISOR (the lower median over the interior pixels of rows 1, 1 + LAPLACIAN_ROW_STEP,
    ...; 0 for images without interior pixels).
-2. cost C[y, x, k] = popcount(census_L[y, X] ^ census_R[y, X - d]) (Hamming distance), or the
-   number of census bits (the largest cost) where X - d < 0, left of the right image.
+2. cost C[y, x, k] = popcount(census_L[y, X] ^ census_R[y, X - d]) (Hamming distance), or
+   (3 * the number of census bits) // 8 where X - d < 0, left of the right image.
 3. for each path direction r = (dy, dx): L_r(p) = C(p) where p - r leaves the matched
    rectangle, else L_r(p, k) = C(p, k) + min(L_r(q, k), L_r(q, k-1) + P1, L_r(q, k+1) + P1,
    m_q + P2') - m_q with q = p - r, m_q = min_k L_r(q, k) and P2' = P2, or with p2_adapt = a > 0
@@ -104,7 +104,7 @@ def cost_volume(left: np.ndarray, right: np.ndarray, p: SGMParams) -> np.ndarray
         d = p.min_disparity + k
         inside = xs - d >= 0
         cost[:, :, k] = np.where(inside, np.bitwise_count(cl[:, xs] ^ cr[:, np.maximum(xs - d, 0)]),
-                                 p.max_cost)
+                                 p.outside_cost)
     return cost
 
 

@@ -28,7 +28,7 @@ def _costs(cl, crr, cfg, cost):
     for _ in range(2):
         for y in range(cl.shape[0]):
             _sgm._cost_row(cl, crr, y, cfg[_sgm.C_X0], cfg[_sgm.C_MIND], cfg[_sgm.C_ND],
-                           cfg[_sgm.C_COLS], cfg[_sgm.C_MAXC], cost)
+                           cfg[_sgm.C_COLS], cfg[_sgm.C_OUTC], cost)
 
 
 @nb.njit(cache=True)
