@@ -11,13 +11,13 @@ from stereocam.protocol.params import Algorithm
 from .params import POST_CONFIG, PostParams
 
 _OFF = {f.key: getattr(PostParams(), f.field) for f in POST_CONFIG}
-_SHARP = {"sgm_p1": 6, "sgm_p2": 55}
-"""Lighter SGM penalties than the defaults' 25 / 190: sharper edges for the left-right check, the
-fill and the speckle filter the presets run. With the sparse census (32 bits), on Motorcycle and
-every scene class (seeds 3 and 5), mean bad-2.0 of high_density 9.86 % (15 / 128: 11.03) and of
-high_accuracy's reported pixels 3.92 % at 79.6 % density (15 / 128: 3.99 at 81.8); the dense
-census's presets at 15 / 128 had 9.85 and 4.01 at 80.8. Lower still (4 / 40) trades low-texture
-for the rest."""
+_SHARP = {"sgm_p1": 25, "sgm_p2": 100}
+"""The default P1 with a lighter P2 than the default 190: sharper edges for the left-right check, the
+fill and the speckle filter the presets run. Measured on Motorcycle and every scene class at seeds 3 and
+5, then 7 and 11 (after the out-of-image cost became 3/8 of the census bits): mean bad-2.0 of
+high_density 7.27 / 7.44 % against 8.87 / 8.99 at the former 6 / 55 and 8.03 / 8.23 at 25 / 190 (P1
+22-26 with P2 80-110 all within 0.3 of it); high_accuracy 83.5 / 83.0 % dense at 3.23 / 3.34 % bad-2.0
+of its pixels, against 80.4 / 79.9 at 3.79 / 3.98 (6 / 55)."""
 
 POST_PRESETS: Mapping[str, Mapping[str, int]] = MappingProxyType({
     # every pixel a disparity: the engine's left-right check (as good as the mirrored pair's here, at
